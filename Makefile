@@ -1,0 +1,29 @@
+# The two commands of the README are `make run` and `make test`; both set up first.
+VENV ?= .venv
+BIN := $(VENV)/bin
+CORES ?= 2
+export MUJOCO_GL ?= egl
+
+.PHONY: setup run report test lint
+
+setup:
+	@bash tools/setup.sh $(VENV)
+
+## Set up, run the whole DAG on the embedded default config, build the report.
+run: setup
+	$(BIN)/snakemake --cores $(CORES)
+	$(BIN)/snakemake --cores 1 --report results/report.html
+	@echo "report: results/report.html"
+
+report:
+	$(BIN)/snakemake --cores 1 --report results/report.html
+
+lint:
+	$(BIN)/ruff check .
+	$(BIN)/ruff format --check .
+	$(BIN)/snakefmt --check Snakefile rules/
+	$(BIN)/snakemake --lint --configfile config/test.yaml
+
+## Set up, lint, run every test (unit, property, hard cases, workflow runs on config/test.yaml).
+test: setup lint
+	$(BIN)/python -m pytest -ra

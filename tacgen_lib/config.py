@@ -1,0 +1,96 @@
+"""Configuration validation: JSON schema first, then the cross-references a schema cannot see.
+
+Errors name the key as a dotted path (`align.taus[1]`) and the file, so a bad value stops the
+run before any job starts with a message that says what to fix.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import jsonschema
+import yaml
+
+__all__ = ["ConfigError", "validate_config", "load_yaml"]
+
+
+class ConfigError(ValueError):
+    """The configuration is invalid; the message names the key."""
+
+
+def load_yaml(path: str | Path) -> Any:
+    with open(path) as fh:
+        return yaml.safe_load(fh)
+
+
+def _key_path(parts) -> str:
+    out = ""
+    for p in parts:
+        out += f"[{p}]" if isinstance(p, int) else (f".{p}" if out else str(p))
+    return out or "(top level)"
+
+
+def _fill_defaults(instance: Any, schema: Mapping, root: Mapping) -> None:
+    """Set `default` values the schema declares for missing object keys (in place)."""
+    if "$ref" in schema:
+        ref = schema["$ref"].split("/")[-1]
+        schema = root["$defs"][ref]
+    if isinstance(instance, dict):
+        for sub in schema.get("allOf", []):
+            cond = sub.get("if")
+            if cond is None or jsonschema.Draft202012Validator(cond).is_valid(instance):
+                _fill_defaults(instance, sub.get("then", sub), root)
+        for key, sub in schema.get("properties", {}).items():
+            if isinstance(sub, dict):
+                if key not in instance and "default" in sub:
+                    instance[key] = sub["default"]
+                if key in instance:
+                    _fill_defaults(instance[key], sub, root)
+        extra = schema.get("additionalProperties")
+        if isinstance(extra, dict):
+            for key, value in instance.items():
+                if key not in schema.get("properties", {}):
+                    _fill_defaults(value, extra, root)
+
+
+def validate_config(config: dict, schema_path: str | Path, *, source: str = "config") -> dict:
+    """Validate `config` in place against the schema, fill defaults, check cross-references.
+
+    Raises ConfigError naming the key (e.g. `align.taus[0]: -0.1 is less than or equal to the
+    minimum of 0`).
+    """
+    schema = load_yaml(schema_path)
+    validator = jsonschema.Draft202012Validator(schema)
+    errors = sorted(
+        validator.iter_errors(config),
+        key=lambda e: (len(e.absolute_path), list(map(str, e.absolute_path))),
+    )
+    if errors:
+        err = jsonschema.exceptions.best_match(errors)
+        lines = [f"{_key_path(err.absolute_path)}: {err.message}"]
+        lines += [f"{_key_path(e.absolute_path)}: {e.message}" for e in errors if e is not err][:4]
+        raise ConfigError(f"{source}: invalid configuration\n  " + "\n  ".join(lines))
+    _fill_defaults(config, schema, schema)
+    scenes_file = Path(config["scenes_file"])
+    scenes = load_yaml(scenes_file) if scenes_file.exists() else None
+    for name, corpus in config["corpora"].items():
+        if corpus["kind"] == "simulated":
+            if scenes is None:
+                raise ConfigError(f"{source}: scenes_file: {scenes_file} does not exist")
+            if corpus["scene"] not in scenes:
+                raise ConfigError(
+                    f"{source}: corpora.{name}.scene: unknown scene {corpus['scene']!r} "
+                    f"(scenes in {scenes_file}: {', '.join(sorted(scenes))})"
+                )
+    for name in config["splits"].get("by_scale", {}):
+        if name not in config["corpora"]:
+            raise ConfigError(
+                f"{source}: splits.by_scale.{name}: unknown corpus {name!r} "
+                f"(corpora: {', '.join(sorted(config['corpora']))})"
+            )
+    fr = config["splits"]["fractions"]
+    if abs(sum(fr.values()) - 1.0) > 1e-9:
+        raise ConfigError(f"{source}: splits.fractions: must sum to 1, got {sum(fr.values()):g}")
+    return config

@@ -1,0 +1,172 @@
+"""Fixed splits and the split guard (DESIGN §5).
+
+Splits are made once, from the fused manifest, before any feature is computed, and stored as an
+edge (`sample_id`, `corpus`, `split`). Two policies:
+
+- `stratified`: per corpus, a stratified random split at a fixed seed (42 in the paper) over the
+  `stratum` column (for SSVTP-style data the top-5 adjective patterns; for the simulated paired
+  corpus shape | hardness | density). Strata too small to stratify are pooled into "rare".
+- `by_scale`: the appearance-controlled corpus is split by object scale (paper: train on
+  s ∈ {0.15, 0.20}, test on s = 0.25); validation rows are a stratified slice of the train scales.
+
+`assert_trainable` is the guard every training rule calls: it refuses any id whose split is not
+allowed for training (held-out `test` rows always; `val` unless the caller allows it).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+
+import numpy as np
+import pandas as pd
+from sklearn.model_selection import train_test_split
+
+__all__ = ["SPLITS", "LeakageError", "make_splits", "assert_trainable", "ids_in_split"]
+
+SPLITS = ("train", "val", "test")
+
+
+class LeakageError(RuntimeError):
+    """A training rule was handed rows that are held out."""
+
+
+def _stratified_split(
+    ids: np.ndarray, strata: np.ndarray, fractions: Mapping[str, float], seed: int
+) -> np.ndarray:
+    """train/val/test labels for `ids`, stratified on `strata` where each stratum allows it."""
+    n = len(ids)
+    out = np.empty(n, dtype=object)
+    if n == 0:
+        return out
+    test_frac = float(fractions.get("test", 0.0))
+    val_frac = float(fractions.get("val", 0.0))
+    strata = pd.Series(strata).fillna("none").astype(str).to_numpy()
+
+    def pooled(labels: np.ndarray, n_parts: int) -> np.ndarray | None:
+        counts = pd.Series(labels).value_counts()
+        labels = np.where(pd.Series(labels).map(counts).to_numpy() < n_parts, "rare", labels)
+        counts = pd.Series(labels).value_counts()
+        return labels if (counts >= n_parts).all() and len(counts) > 1 else None
+
+    idx = np.arange(n)
+    rest, test = idx, np.array([], dtype=int)
+    if test_frac > 0:
+        strat = pooled(strata, 2)
+        n_test = max(1, round(test_frac * n))
+        if strat is not None and n_test < len(set(strat)):
+            strat = None
+        rest, test = train_test_split(idx, test_size=n_test, random_state=seed, stratify=strat)
+    val = np.array([], dtype=int)
+    if val_frac > 0 and len(rest) > 1:
+        n_val = max(1, round(val_frac * n))
+        strat = pooled(strata[rest], 2)
+        if strat is not None and n_val < len(set(strat)):
+            strat = None
+        rest, val = train_test_split(rest, test_size=n_val, random_state=seed + 1, stratify=strat)
+    out[rest] = "train"
+    out[val] = "val"
+    out[test] = "test"
+    return out
+
+
+def make_splits(
+    manifest: pd.DataFrame,
+    *,
+    seed: int = 42,
+    fractions: Mapping[str, float] | None = None,
+    by_scale: Mapping[str, Mapping[str, Sequence[float]]] | None = None,
+) -> pd.DataFrame:
+    """The split edge for a fused manifest.
+
+    manifest: one row per sample with `sample_id`, `corpus`, `stratum` (and `scale` for corpora
+        split by scale).
+    fractions: {"train", "val", "test"} shares for stratified corpora (default 0.7/0.1/0.2).
+    by_scale: corpus -> {"train": [scales], "test": [scales]}; for those corpora rows are split
+        by scale, and `fractions["val"]` of the train-scale rows become validation rows.
+    Returns `sample_id`, `corpus`, `split`, sorted by `sample_id`. Deterministic in `seed`.
+    """
+    fractions = dict(fractions or {"train": 0.7, "val": 0.1, "test": 0.2})
+    total = sum(fractions.values())
+    if any(v < 0 for v in fractions.values()) or not np.isclose(total, 1.0):
+        raise ValueError(f"split fractions must be non-negative and sum to 1, got {fractions}")
+    by_scale = dict(by_scale or {})
+    for col in ("sample_id", "corpus", "stratum"):
+        if col not in manifest.columns:
+            raise ValueError(f"make_splits: the manifest has no column {col!r}")
+    parts = []
+    for corpus, rows in manifest.sort_values("sample_id").groupby("corpus", sort=True):
+        ids = rows["sample_id"].to_numpy(dtype=object)
+        strata = rows["stratum"].to_numpy(dtype=object)
+        if corpus in by_scale:
+            rule = by_scale[corpus]
+            if "scale" not in rows.columns:
+                raise ValueError(
+                    f"make_splits: corpus {corpus!r} is split by scale but has no 'scale' column"
+                )
+            scale = rows["scale"].to_numpy(dtype=float)
+            train_s = np.isin(np.round(scale, 6), np.round(np.asarray(rule["train"], float), 6))
+            test_s = np.isin(np.round(scale, 6), np.round(np.asarray(rule["test"], float), 6))
+            if not train_s.any() or not test_s.any():
+                raise ValueError(
+                    f"make_splits: corpus {corpus!r} has no rows at train scales {list(rule['train'])} "
+                    f"or test scales {list(rule['test'])} (scales present: {sorted(set(scale.round(6)))})"
+                )
+            split = np.full(len(ids), "excluded", dtype=object)
+            split[test_s] = "test"
+            inner = _stratified_split(
+                ids[train_s], strata[train_s], {"val": fractions.get("val", 0.0), "test": 0.0}, seed
+            )
+            split[train_s] = inner
+        else:
+            split = _stratified_split(ids, strata, fractions, seed)
+        parts.append(pd.DataFrame({"sample_id": ids, "corpus": corpus, "split": split}))
+    if not parts:
+        raise ValueError("make_splits: the manifest is empty")
+    return pd.concat(parts, ignore_index=True).sort_values("sample_id", ignore_index=True)
+
+
+def ids_in_split(
+    splits: pd.DataFrame, split: str | Iterable[str], corpus: str | None = None
+) -> np.ndarray:
+    """Sample ids whose split is `split` (one name or several), optionally of one corpus."""
+    names = {split} if isinstance(split, str) else set(split)
+    unknown = names - set(SPLITS)
+    if unknown:
+        raise ValueError(f"unknown split(s) {sorted(unknown)}; splits are {SPLITS}")
+    mask = splits["split"].isin(names)
+    if corpus is not None:
+        mask &= splits["corpus"] == corpus
+    return splits.loc[mask, "sample_id"].to_numpy(dtype=object)
+
+
+def assert_trainable(
+    ids: Iterable[str],
+    splits: pd.DataFrame,
+    *,
+    rule: str,
+    allowed: Iterable[str] = ("train",),
+) -> None:
+    """Refuse to train on any id whose split is not in `allowed` (default: train only).
+
+    Raises LeakageError naming the rule, how many rows leak, and the first offending sample_id.
+    Ids missing from the split edge are refused too: an unsplit row cannot be proven safe.
+    """
+    allowed = set(allowed)
+    if "test" in allowed:
+        raise LeakageError(f"rule {rule}: held-out 'test' rows can never be allowed for training")
+    ids = pd.Index(list(ids))
+    split_of = splits.set_index("sample_id")["split"]
+    found = split_of.reindex(ids)
+    missing = found.isna()
+    if missing.any():
+        raise LeakageError(
+            f"rule {rule}: {int(missing.sum())} training row(s) are not in the split edge, "
+            f"e.g. sample_id {ids[np.flatnonzero(missing.to_numpy())[0]]!r}"
+        )
+    bad = ~found.isin(allowed)
+    if bad.any():
+        first = int(np.flatnonzero(bad.to_numpy())[0])
+        raise LeakageError(
+            f"rule {rule}: refusing to train on {int(bad.sum())} held-out row(s); "
+            f"sample_id {ids[first]!r} is in split {found.iloc[first]!r} (allowed: {sorted(allowed)})"
+        )

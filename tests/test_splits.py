@@ -1,0 +1,120 @@
+"""Fixed splits and the split guard."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from tacgen_lib.manifest import fuse_manifest
+from tacgen_lib.splits import LeakageError, assert_trainable, ids_in_split, make_splits
+
+
+def _manifest(n: int = 200) -> pd.DataFrame:
+    rng = np.random.default_rng(3)
+    strata = rng.choice(
+        ["cube|hard", "sphere|soft", "cyl|hard", "box|soft"], n, p=[0.4, 0.3, 0.2, 0.1]
+    )
+    return pd.DataFrame(
+        {
+            "sample_id": [f"a-{i:05d}" for i in range(n)],
+            "corpus": "a",
+            "stratum": strata,
+            "scale": np.nan,
+        }
+    )
+
+
+def test_stratified_split_is_fixed_and_proportional():
+    m = _manifest()
+    s1 = make_splits(m, seed=42)
+    s2 = make_splits(m.sample(frac=1.0, random_state=1), seed=42)  # input order does not matter
+    pd.testing.assert_frame_equal(s1, s2)
+    assert s1["split"].value_counts().to_dict() == {"train": 140, "val": 20, "test": 40}
+    merged = s1.merge(m, on="sample_id")
+    share = merged.groupby("stratum")["split"].apply(lambda s: (s == "test").mean())
+    assert share.between(0.15, 0.25).all(), share  # every stratum is represented in test
+    assert not make_splits(m, seed=7)["split"].equals(s1["split"])
+
+
+def test_by_scale_split_holds_out_the_test_scale():
+    rows = []
+    for i, (shape, scale) in enumerate(
+        [(sh, sc) for sh in "abcd" for sc in (0.15, 0.2, 0.25) for _ in range(5)]
+    ):
+        rows.append({"sample_id": f"c-{i:04d}", "corpus": "c", "stratum": shape, "scale": scale})
+    m = pd.DataFrame(rows)
+    s = make_splits(m, by_scale={"c": {"train": [0.15, 0.2], "test": [0.25]}}).merge(
+        m, on="sample_id"
+    )
+    assert set(s.loc[s.split == "test", "scale"]) == {0.25}
+    assert set(s.loc[s.split != "test", "scale"]) == {0.15, 0.2}
+    assert (s.split == "val").sum() == round(0.1 * (s.scale < 0.25).sum())  # val share of train scales
+
+
+def test_by_scale_without_the_scale_rows_is_a_clear_error():
+    m = _manifest(20).assign(scale=0.3)
+    with pytest.raises(ValueError, match=r"corpus 'a' has no rows at train scales \[0.15\]"):
+        make_splits(m, by_scale={"a": {"train": [0.15], "test": [0.25]}})
+
+
+def test_tiny_and_singleton_strata_still_split():
+    m = _manifest(12)
+    m.loc[0, "stratum"] = "unique"
+    s = make_splits(m)
+    assert set(s["split"]) == {"train", "val", "test"}
+
+
+def test_guard_refuses_held_out_rows():
+    s = make_splits(_manifest())
+    train = ids_in_split(s, "train")
+    assert_trainable(train, s, rule="train_heads")  # fine
+    leak = [*train[:5], ids_in_split(s, "test")[0]]
+    with pytest.raises(
+        LeakageError,
+        match=r"rule train_heads: refusing to train on 1 held-out row\(s\); sample_id 'a-\d+' is in split 'test'",
+    ):
+        assert_trainable(leak, s, rule="train_heads")
+    with pytest.raises(LeakageError, match="in split 'val'"):
+        assert_trainable([ids_in_split(s, "val")[0]], s, rule="pretrain_backbone")
+    assert_trainable(
+        ids_in_split(s, ["train", "val"]), s, rule="train_heads", allowed=("train", "val")
+    )
+    with pytest.raises(LeakageError, match="can never be allowed"):
+        assert_trainable(train, s, rule="x", allowed=("train", "test"))
+    with pytest.raises(LeakageError, match="not in the split edge, e.g. sample_id 'zzz'"):
+        assert_trainable(["zzz"], s, rule="x")
+
+
+def test_fuse_manifest_unions_columns_and_refuses_duplicate_ids():
+    a = pd.DataFrame(
+        {
+            "sample_id": ["a-1"],
+            "corpus": "a",
+            "sensor_id": "s",
+            "caption": "x",
+            "stratum": "p",
+            "mass": 1.0,
+            "rgb": [b"\x89PNG"],
+        }
+    )
+    b = pd.DataFrame(
+        {
+            "sample_id": ["b-1"],
+            "corpus": "b",
+            "sensor_id": "t",
+            "caption": "y",
+            "stratum": "q",
+            "source_split": "test",
+        }
+    )
+    m = fuse_manifest([b, a])
+    assert list(m["sample_id"]) == ["a-1", "b-1"] and "rgb" not in m.columns
+    assert np.isnan(m.loc[1, "mass"]) and m.loc[1, "source_split"] == "test"
+    with pytest.raises(
+        ValueError,
+        match=r"sample_id 'a-1' appears in more than one place \(corpora: \['a', 'b'\]\)",
+    ):
+        fuse_manifest([a, a.assign(corpus="b")])
+    with pytest.raises(ValueError, match="corpus 'b': samples edge has no column 'stratum'"):
+        fuse_manifest([a, b.drop(columns="stratum")])

@@ -1,0 +1,46 @@
+#!/usr/bin/env bash
+# Set up a machine for TacGen workflow: Debian's Mesa (EGL/OSMesa) for MuJoCo rendering on the
+# CPU, then a virtual environment with the pinned CPU torch and the project installed.
+# Idempotent: a second run checks and returns in seconds.
+#   usage: tools/setup.sh [VENV_DIR]   (default .venv)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+VENV=${1:-.venv}
+PYTHON=${PYTHON:-python3}
+
+# 1. System packages for offscreen MuJoCo rendering (EGL through Mesa llvmpipe; OSMesa fallback).
+APT_PKGS="libegl1 libegl-mesa0 libgl1-mesa-dri libglx-mesa0 libosmesa6"
+missing=""
+for p in $APT_PKGS; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"
+done
+if [ -n "$missing" ]; then
+  echo "setup: installing Debian packages:$missing"
+  if [ "$(id -u)" = 0 ]; then SUDO=""; else SUDO="sudo"; fi
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends $missing
+fi
+
+# 2. Python environment. torch is pinned to the CPU build through constraints.txt.
+if [ ! -x "$VENV/bin/python" ]; then
+  echo "setup: creating $VENV"
+  "$PYTHON" -m venv "$VENV"
+fi
+stamp="$VENV/.tacgen-installed"
+want=$(cat pyproject.toml constraints.txt | sha256sum | cut -c1-16)
+if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
+  echo "setup: installing the project into $VENV"
+  extra=()
+  [ -d /opt/wheels ] && extra+=(--find-links /opt/wheels)  # local CPU torch wheel, where present
+  "$VENV/bin/python" -m pip install -q --upgrade pip
+  "$VENV/bin/python" -m pip install -q "${extra[@]}" -c constraints.txt -e ".[workflow,dev]"
+  echo "$want" > "$stamp"
+fi
+"$VENV/bin/python" - <<'PY'
+import sys
+import torch
+if not torch.__version__.endswith("+cpu"):
+    sys.exit(f"setup: torch {torch.__version__} is not the CPU build; check constraints.txt")
+import mujoco, snakemake  # noqa: F401
+print(f"setup: ok (python {sys.version.split()[0]}, torch {torch.__version__}, mujoco {mujoco.__version__})")
+PY
