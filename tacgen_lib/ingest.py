@@ -1,0 +1,548 @@
+"""Real-corpus ingest: the TVL dataset's SSVTP and HCT folders as corpus edges (DESIGN §1, §3).
+
+This module owns reading the public Touch-Vision-Language (TVL) dataset (Fu et al., 2024) from
+disk and turning it into the two tables every corpus provides: one row per visuo-tactile sample
+(images as PNG bytes, caption, adjectives, hardness label, stratum, source split) and one row
+per tactile sensor background. It also owns the caption vocabulary helpers the paper uses for
+real data: adjective parsing, the hard/soft label and the top-5 adjective-pattern strata that
+SSVTP splits are stratified by.
+
+Layouts (``root`` is the unzipped ``tvl_dataset`` folder holding ``ssvtp/`` and ``hct/``)::
+
+    root/ssvtp/images_rgb/image_{i}_rgb.jpg     camera frame of pair i
+    root/ssvtp/images_tac/image_{i}_tac.jpg     DIGIT frame of pair i
+    root/ssvtp/text/labels_{i}.txt              caption, e.g. "smooth, hard, glossy"
+    root/ssvtp/train.csv, test.csv              optional; first column = the RGB path
+    root/ssvtp/tac_background.png               global sensor background (see below)
+
+    root/hct/<data folder>/train.csv, test.csv  columns vision,tactile,background,caption;
+                                                paths relative to the CSV's folder
+    root/hct/<data folder>/<trajectory>/vision/*.jpg, tactile/*.jpg, background per trajectory
+
+Assumptions, checked against the TVL code release (github.com/Max-Fu/tvl, ``tvl_enc/tacvis.py``):
+
+- SSVTP CSVs: TVL reads only the first column of each row, an RGB path relative to ``ssvtp/``
+  (``images_rgb/image_{i}_rgb.jpg``), and derives the tactile and text paths from the index.
+  Their header names are not documented, so a first row whose first cell is not such a path is
+  taken as a header. Pairs listed in neither CSV are still ingested, with ``source_split`` None.
+- SSVTP background: TVL ships it with the code, not the data (``tvl_enc/data/tac_background.png``).
+  Copy it to ``root/ssvtp/tac_background.png`` or pass ``background=``.
+- HCT CSVs have a header row; TVL unpacks the four columns by position as
+  ``vision, tactile, background, caption``. Here they are looked up by those names (case and
+  surrounding spaces ignored), so a CSV with different names fails and names the column.
+- HCT background: when a row's background file does not exist, TVL falls back to a
+  ``digit_background.png`` higher up the tree; here the nearest ``digit_background.png`` from the
+  background's folder up to ``root/hct`` is used, and its absence is an error.
+- Captions: like TVL, adjectives are comma-separated and periods around them are dropped.
+
+Identifiers: SSVTP ``sample_id`` is ``f"{corpus}-{i:06d}"``; HCT's is
+``f"{corpus}-{data_folder}-{row:05d}"`` with ``row`` counting the data rows of ``train.csv`` then
+``test.csv`` of that folder. SSVTP has one sensor, ``f"{corpus}-bg"``; HCT has one per background
+file, ``f"{corpus}-bg:{path relative to root/hct}"``.
+
+Every image is decoded (JPEG or PNG) and re-encoded as PNG with :func:`tacgen_lib.images.encode_png`
+so all corpora carry the same lossless encoding. Errors name the file and the ``sample_id``; an
+ingest either returns the whole corpus or raises.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import re
+from collections import Counter
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import pandas as pd
+
+from tacgen_lib.images import decode_png, encode_png
+
+__all__ = [
+    "HCT_COLUMNS",
+    "OTHER_STRATUM",
+    "SAMPLE_COLUMNS",
+    "SENSOR_COLUMNS",
+    "SSVTP_BACKGROUND_NAME",
+    "hardness_from_adjectives",
+    "ingest_hct",
+    "ingest_ssvtp",
+    "parse_caption",
+    "top_pattern_strata",
+]
+
+SAMPLE_COLUMNS: tuple[str, ...] = (
+    "sample_id",
+    "corpus",
+    "rgb",
+    "tactile",
+    "sensor_id",
+    "caption",
+    "adjectives",
+    "hardness",
+    "stratum",
+    "source_split",
+    "source_path",
+)
+SENSOR_COLUMNS: tuple[str, ...] = ("sensor_id", "background", "corpus")
+HCT_COLUMNS: tuple[str, ...] = ("vision", "tactile", "background", "caption")
+SSVTP_BACKGROUND_NAME = "tac_background.png"
+HCT_FALLBACK_BACKGROUND = "digit_background.png"
+OTHER_STRATUM = "other"
+
+_SPLIT_CSVS: tuple[tuple[str, str], ...] = (("train", "train.csv"), ("test", "test.csv"))
+_IMAGE_EXT = r"\.(?:jpg|jpeg|png)"
+_SSVTP_RGB = re.compile(rf"image_(\d+)_rgb{_IMAGE_EXT}", re.IGNORECASE)
+_SSVTP_TAC = re.compile(rf"image_(\d+)_tac{_IMAGE_EXT}", re.IGNORECASE)
+_SSVTP_TEXT = re.compile(r"labels_(\d+)\.txt", re.IGNORECASE)
+
+
+# --------------------------------------------------------------------------- captions
+
+
+def parse_caption(text: str) -> list[str]:
+    """Adjectives of a TVL caption: comma (or line) separated, normalised, in order.
+
+    Each piece is lower-cased, inner whitespace is collapsed, surrounding spaces and periods are
+    dropped (TVL removes periods too), empty pieces (trailing commas) are skipped and repeats
+    keep their first position. ``"Smooth,  HARD, smooth., "`` gives ``["smooth", "hard"]``.
+    """
+    adjectives: list[str] = []
+    seen: set[str] = set()
+    for piece in re.split(r"[,\n\r]", text):
+        adjective = " ".join(piece.split()).strip(". ").lower()
+        if adjective and adjective not in seen:
+            seen.add(adjective)
+            adjectives.append(adjective)
+    return adjectives
+
+
+def hardness_from_adjectives(adjs: Iterable[str]) -> str | None:
+    """Binary hardness label of a caption: "hard", "soft" or None.
+
+    Exact adjective match after normalisation ("hard", not "hardened"). A caption with both
+    "hard" and "soft" is contradictory and one with neither says nothing: both give None, so
+    such samples carry no hardness label rather than a guessed one.
+    """
+    words = {" ".join(a.split()).strip(". ").lower() for a in adjs}
+    hard, soft = "hard" in words, "soft" in words
+    if hard and not soft:
+        return "hard"
+    if soft and not hard:
+        return "soft"
+    return None
+
+
+def adjective_pattern(adjs: Sequence[str]) -> str:
+    """The pattern of an adjective list: its distinct adjectives, sorted, joined by "+"."""
+    return "+".join(sorted(set(adjs)))
+
+
+def top_pattern_strata(adjective_lists: Sequence[Sequence[str]], k: int = 5) -> list[str]:
+    """Stratum of every sample: its adjective pattern if among the k most frequent, else "other".
+
+    The paper stratifies SSVTP splits by the top-5 adjective patterns. Patterns are ranked by
+    count (descending), ties broken by pattern name (ascending), so the result does not depend
+    on row order. Returns one stratum per input list, in input order.
+    """
+    if k < 0:
+        raise ValueError(f"top_pattern_strata: k must be >= 0, got {k}")
+    patterns: list[str] = []
+    for position, adjs in enumerate(adjective_lists):
+        if isinstance(adjs, str):
+            raise TypeError(
+                f"top_pattern_strata: item {position} is a string ({adjs!r}); "
+                "pass lists of adjectives (see parse_caption)"
+            )
+        if len(adjs) == 0:
+            raise ValueError(
+                f"top_pattern_strata: adjective list at position {position} is empty; "
+                "every sample needs at least one adjective to have a pattern"
+            )
+        patterns.append(adjective_pattern(adjs))
+    ranked = sorted(Counter(patterns).items(), key=lambda item: (-item[1], item[0]))
+    top = {pattern for pattern, _ in ranked[:k]}
+    return [p if p in top else OTHER_STRATUM for p in patterns]
+
+
+# --------------------------------------------------------------------------- shared helpers
+
+
+@dataclass(frozen=True)
+class _Image:
+    png: bytes
+    shape: tuple[int, ...]
+
+
+@dataclass
+class _Record:
+    sample_id: str
+    rgb: bytes
+    tactile: bytes
+    sensor_id: str
+    caption: str
+    adjectives: list[str]
+    source_split: str | None
+    source_path: str
+
+
+def _load_image(path: Path, *, sample_id: str, role: str) -> _Image:
+    """Read an image file and re-encode it as PNG; errors name the file and the sample."""
+    if not path.is_file():
+        raise FileNotFoundError(
+            f"sample_id '{sample_id}': {role} image not found, expected {path}; "
+            "restore the file or remove the sample from the corpus"
+        )
+    try:
+        data = path.read_bytes()
+    except OSError as err:
+        raise ValueError(
+            f"sample_id '{sample_id}': cannot read {role} image {path}: {err}"
+        ) from err
+    where = f"{role} image {path} (sample_id '{sample_id}')"
+    try:
+        if not data:
+            raise ValueError(f"{where}: file is empty")
+        array = decode_png(data, where=where)
+    except (ValueError, cv2.error) as err:
+        raise ValueError(
+            f"{where} is not a readable image ({err}); re-extract the file from the dataset"
+        ) from err
+    return _Image(png=encode_png(array), shape=tuple(array.shape))
+
+
+def _check_same_shape(
+    tactile: _Image, background: _Image, *, sample_id: str, tactile_path: Path, bg_path: Path
+) -> None:
+    if tactile.shape != background.shape:
+        raise ValueError(
+            f"sample_id '{sample_id}': tactile image {tactile_path} is {tactile.shape[:2]} but its "
+            f"sensor background {bg_path} is {background.shape[:2]}; background subtraction needs "
+            "equal sizes, so pass the background recorded with this sensor"
+        )
+
+
+def _relative(path: Path, root: Path) -> str:
+    """POSIX path of ``path`` relative to ``root`` (absolute when outside it)."""
+    try:
+        return path.relative_to(root).as_posix()
+    except ValueError:
+        return path.as_posix()
+
+
+def _parsed_caption(caption: str, *, where: str, sample_id: str) -> list[str]:
+    adjectives = parse_caption(caption)
+    if not adjectives:
+        raise ValueError(
+            f"{where}: empty caption for sample_id '{sample_id}' ({caption!r} has no adjectives); "
+            "write comma-separated adjectives or remove the sample"
+        )
+    return adjectives
+
+
+def _frames(
+    records: list[_Record], sensors: dict[str, bytes], corpus: str
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Assemble the samples and sensors tables, sorted by their keys."""
+    records = sorted(records, key=lambda r: r.sample_id)
+    ids = [r.sample_id for r in records]
+    if len(set(ids)) != len(ids):
+        dup = next(i for i, c in Counter(ids).items() if c > 1)
+        raise ValueError(f"{corpus}: sample_id '{dup}' occurs more than once")
+    adjective_lists = [r.adjectives for r in records]
+    samples = pd.DataFrame(
+        {
+            "sample_id": ids,
+            "corpus": [corpus] * len(records),
+            "rgb": pd.Series([r.rgb for r in records], dtype=object),
+            "tactile": pd.Series([r.tactile for r in records], dtype=object),
+            "sensor_id": [r.sensor_id for r in records],
+            "caption": [r.caption for r in records],
+            "adjectives": pd.Series(adjective_lists, dtype=object),
+            "hardness": pd.Series(
+                [hardness_from_adjectives(a) for a in adjective_lists], dtype=object
+            ),
+            "stratum": top_pattern_strata(adjective_lists),
+            "source_split": pd.Series([r.source_split for r in records], dtype=object),
+            "source_path": [r.source_path for r in records],
+        },
+        columns=list(SAMPLE_COLUMNS),
+    )
+    sensor_ids = sorted(sensors)
+    sensor_table = pd.DataFrame(
+        {
+            "sensor_id": sensor_ids,
+            "background": pd.Series([sensors[s] for s in sensor_ids], dtype=object),
+            "corpus": [corpus] * len(sensor_ids),
+        },
+        columns=list(SENSOR_COLUMNS),
+    )
+    return samples, sensor_table
+
+
+# --------------------------------------------------------------------------- SSVTP
+
+
+def _index_files(folder: Path, pattern: re.Pattern[str]) -> dict[int, Path]:
+    """Map index -> file for the files in ``folder`` whose whole name matches ``pattern``."""
+    found: dict[int, Path] = {}
+    if not folder.is_dir():
+        return found
+    for path in sorted(folder.iterdir()):
+        match = pattern.fullmatch(path.name)
+        if match is None:
+            continue
+        index = int(match.group(1))
+        if index in found:
+            raise ValueError(
+                f"{folder}: two files for index {index}: {found[index].name} and {path.name}; "
+                "keep one"
+            )
+        found[index] = path
+    return found
+
+
+def _read_ssvtp_split(csv_path: Path) -> dict[int, int]:
+    """Indices listed in an SSVTP split CSV -> the CSV line listing them.
+
+    The first column holds the RGB path (``images_rgb/image_{i}_rgb.jpg``); a first row whose
+    first cell is not such a path is a header.
+    """
+    listed: dict[int, int] = {}
+    with csv_path.open(newline="", encoding="utf-8") as handle:
+        for line, row in enumerate(csv.reader(handle), start=1):
+            if not row or not any(cell.strip() for cell in row):
+                continue
+            cell = row[0].strip()
+            match = _SSVTP_RGB.fullmatch(Path(cell).name)
+            if match is None:
+                if line == 1:
+                    continue  # header row
+                raise ValueError(
+                    f"{csv_path}: line {line}: first column {cell!r} is not an SSVTP RGB path "
+                    "like images_rgb/image_<i>_rgb.jpg; fix the row"
+                )
+            listed.setdefault(int(match.group(1)), line)
+    return listed
+
+
+def ingest_ssvtp(
+    root: Path, *, corpus: str = "ssvtp", background: Path | None = None
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Ingest TVL's SSVTP part (``root/ssvtp``) as (samples, sensors) tables.
+
+    Samples are the union of the indices found in ``images_rgb/``, ``images_tac/``, ``text/`` and
+    the split CSVs; each must have all three files. ``background`` is the global tactile
+    background of the SSVTP sensor (default ``root/ssvtp/tac_background.png``). Columns:
+    :data:`SAMPLE_COLUMNS` and :data:`SENSOR_COLUMNS`; rows sorted by ``sample_id``.
+    """
+    root = Path(root)
+    folder = root / "ssvtp"
+    if not folder.is_dir():
+        raise FileNotFoundError(
+            f"SSVTP folder {folder} not found; pass the unzipped TVL dataset folder that "
+            "holds ssvtp/ and hct/"
+        )
+    sensor_id = f"{corpus}-bg"
+    bg_path = Path(background) if background is not None else folder / SSVTP_BACKGROUND_NAME
+    if not bg_path.is_file():
+        raise FileNotFoundError(
+            f"SSVTP tactile background {bg_path} not found (sensor '{sensor_id}'); copy "
+            f"tvl_enc/data/{SSVTP_BACKGROUND_NAME} from the TVL code release there or pass "
+            "background=<path>"
+        )
+    bg = _load_image(bg_path, sample_id=sensor_id, role="background")
+
+    rgb_files = _index_files(folder / "images_rgb", _SSVTP_RGB)
+    tac_files = _index_files(folder / "images_tac", _SSVTP_TAC)
+    text_files = _index_files(folder / "text", _SSVTP_TEXT)
+    split_of: dict[int, str] = {}
+    listed_in: dict[int, str] = {}
+    for split, name in _SPLIT_CSVS:
+        csv_path = folder / name
+        if not csv_path.is_file():
+            continue
+        for index, line in _read_ssvtp_split(csv_path).items():
+            if index in split_of and split_of[index] != split:
+                raise ValueError(
+                    f"sample_id '{corpus}-{index:06d}' is listed in both {listed_in[index]} and "
+                    f"{csv_path}:{line}; a pair must be in one split only"
+                )
+            split_of[index] = split
+            listed_in[index] = f"{csv_path}:{line}"
+
+    indices = sorted(set(rgb_files) | set(tac_files) | set(text_files) | set(split_of))
+    if not indices:
+        raise ValueError(
+            f"no SSVTP samples under {folder}: expected images_rgb/image_<i>_rgb.jpg, "
+            "images_tac/image_<i>_tac.jpg and text/labels_<i>.txt"
+        )
+
+    records: list[_Record] = []
+    for index in indices:
+        sample_id = f"{corpus}-{index:06d}"
+        rgb_path = rgb_files.get(index, folder / "images_rgb" / f"image_{index}_rgb.jpg")
+        tac_path = tac_files.get(index, folder / "images_tac" / f"image_{index}_tac.jpg")
+        text_path = text_files.get(index, folder / "text" / f"labels_{index}.txt")
+        rgb = _load_image(rgb_path, sample_id=sample_id, role="RGB")
+        tactile = _load_image(tac_path, sample_id=sample_id, role="tactile")
+        _check_same_shape(tactile, bg, sample_id=sample_id, tactile_path=tac_path, bg_path=bg_path)
+        if not text_path.is_file():
+            raise FileNotFoundError(
+                f"sample_id '{sample_id}': caption file not found, expected {text_path}; "
+                "restore it or remove the pair"
+            )
+        try:
+            caption = text_path.read_text(encoding="utf-8").strip()
+        except (OSError, UnicodeDecodeError) as err:
+            raise ValueError(
+                f"sample_id '{sample_id}': cannot read caption {text_path}: {err}"
+            ) from err
+        adjectives = _parsed_caption(caption, where=str(text_path), sample_id=sample_id)
+        records.append(
+            _Record(
+                sample_id=sample_id,
+                rgb=rgb.png,
+                tactile=tactile.png,
+                sensor_id=sensor_id,
+                caption=caption,
+                adjectives=adjectives,
+                source_split=split_of.get(index),
+                source_path=_relative(tac_path, root),
+            )
+        )
+    return _frames(records, {sensor_id: bg.png}, corpus)
+
+
+# --------------------------------------------------------------------------- HCT
+
+
+def _hct_background(path: Path, hct: Path) -> Path | None:
+    """The row's background file, else the nearest digit_background.png up to ``hct``."""
+    if path.is_file():
+        return path
+    folder = path.parent
+    while True:
+        candidate = folder / HCT_FALLBACK_BACKGROUND
+        if candidate.is_file():
+            return candidate
+        if folder == hct or folder == folder.parent or hct not in folder.parents:
+            return None
+        folder = folder.parent
+
+
+def _read_hct_csv(csv_path: Path) -> list[tuple[int, dict[str, str]]]:
+    """(line, row) pairs of an HCT split CSV, keyed by the lower-cased header names."""
+    with csv_path.open(newline="", encoding="utf-8") as handle:
+        reader = csv.reader(handle)
+        header = next(reader, None)
+        if header is None:
+            raise ValueError(
+                f"{csv_path}: empty file; expected a header {','.join(HCT_COLUMNS)} and rows"
+            )
+        names = [cell.strip().lower() for cell in header]
+        for column in HCT_COLUMNS:
+            if column not in names:
+                raise ValueError(
+                    f"{csv_path}: missing column '{column}' (header is {header}); HCT CSVs need "
+                    f"the columns {', '.join(HCT_COLUMNS)}"
+                )
+        position = {column: names.index(column) for column in HCT_COLUMNS}
+        rows: list[tuple[int, dict[str, str]]] = []
+        for line, row in enumerate(reader, start=2):
+            if not row or not any(cell.strip() for cell in row):
+                continue
+            if len(row) < len(names):
+                raise ValueError(
+                    f"{csv_path}: line {line} has {len(row)} fields, the header has {len(names)}"
+                )
+            rows.append((line, {c: row[i].strip() for c, i in position.items()}))
+    return rows
+
+
+def _hct_data_folders(hct: Path) -> list[Path]:
+    folders: list[Path] = []
+    for folder in sorted(p for p in hct.iterdir() if p.is_dir()):
+        has_csv = any((folder / name).is_file() for _, name in _SPLIT_CSVS)
+        if has_csv:
+            folders.append(folder)
+        elif (folder / "contact.json").is_file():
+            raise FileNotFoundError(
+                f"HCT data folder {folder} has contact.json but neither train.csv nor test.csv; "
+                "the captions come from those CSVs, so restore them"
+            )
+    if not folders:
+        raise FileNotFoundError(
+            f"no HCT data folders under {hct}: expected <folder>/train.csv or <folder>/test.csv"
+        )
+    return folders
+
+
+def ingest_hct(root: Path, *, corpus: str = "hct") -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Ingest TVL's HCT part (``root/hct``) as (samples, sensors) tables.
+
+    Every sub-folder of ``root/hct`` with a ``train.csv`` and/or ``test.csv`` is a data folder;
+    each CSV row (vision, tactile, background, caption; paths relative to the CSV's folder) is a
+    sample whose ``source_split`` is the CSV's name. Each distinct background file is a sensor.
+    Columns: :data:`SAMPLE_COLUMNS` and :data:`SENSOR_COLUMNS`; rows sorted by ``sample_id``.
+    """
+    root = Path(root)
+    hct = root / "hct"
+    if not hct.is_dir():
+        raise FileNotFoundError(
+            f"HCT folder {hct} not found; pass the unzipped TVL dataset folder that holds "
+            "ssvtp/ and hct/"
+        )
+    backgrounds: dict[Path, tuple[str, _Image]] = {}
+    records: list[_Record] = []
+    for folder in _hct_data_folders(hct):
+        row_number = 0
+        for split, name in _SPLIT_CSVS:
+            csv_path = folder / name
+            if not csv_path.is_file():
+                continue
+            for line, row in _read_hct_csv(csv_path):
+                sample_id = f"{corpus}-{folder.name}-{row_number:05d}"
+                row_number += 1
+                where = f"{csv_path}:{line}"
+                adjectives = _parsed_caption(row["caption"], where=where, sample_id=sample_id)
+                rgb_path = Path(os.path.normpath(folder / row["vision"]))
+                tac_path = Path(os.path.normpath(folder / row["tactile"]))
+                listed_bg = Path(os.path.normpath(folder / row["background"]))
+                bg_path = _hct_background(listed_bg, hct)
+                if bg_path is None:
+                    raise FileNotFoundError(
+                        f"sample_id '{sample_id}' ({where}): background {listed_bg} not found, "
+                        f"nor a {HCT_FALLBACK_BACKGROUND} between its folder and {hct}; restore "
+                        "the trajectory's background"
+                    )
+                if bg_path not in backgrounds:
+                    sensor_id = f"{corpus}-bg:{_relative(bg_path, hct)}"
+                    backgrounds[bg_path] = (
+                        sensor_id,
+                        _load_image(bg_path, sample_id=sample_id, role="background"),
+                    )
+                sensor_id, bg = backgrounds[bg_path]
+                rgb = _load_image(rgb_path, sample_id=sample_id, role="RGB")
+                tactile = _load_image(tac_path, sample_id=sample_id, role="tactile")
+                _check_same_shape(
+                    tactile, bg, sample_id=sample_id, tactile_path=tac_path, bg_path=bg_path
+                )
+                records.append(
+                    _Record(
+                        sample_id=sample_id,
+                        rgb=rgb.png,
+                        tactile=tactile.png,
+                        sensor_id=sensor_id,
+                        caption=row["caption"],
+                        adjectives=adjectives,
+                        source_split=split,
+                        source_path=_relative(tac_path, root),
+                    )
+                )
+    if not records:
+        raise ValueError(f"no HCT samples under {hct}: the split CSVs have no data rows")
+    sensors = {sensor_id: image.png for sensor_id, image in backgrounds.values()}
+    return _frames(records, sensors, corpus)
