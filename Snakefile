@@ -1,0 +1,33 @@
+"""TacGen workflow: touch carries physical properties vision cannot see.
+
+Run `snakemake --cores 2` for the embedded default (config/config.yaml), or
+`snakemake --cores 2 --configfile config/test.yaml` for the tiny configuration.
+"""
+
+from snakemake.utils import min_version
+
+min_version("9.0")
+
+
+configfile: "config/config.yaml"
+
+
+report: "workflow/report/workflow.rst"
+
+
+include: "rules/common.smk"
+
+
+wildcard_constraints:
+    corpus="[a-z][a-z0-9_]*",
+    shard=r"\d+",
+
+
+include: "rules/corpus.smk"
+include: "rules/report.smk"
+
+
+rule all:
+    default_target: True
+    input:
+        all_outputs(),

@@ -1,0 +1,63 @@
+"""Config validation and the helpers every rule file uses."""
+
+import os
+import re
+from pathlib import Path
+
+from tacgen_lib.config import validate_config, load_yaml
+
+validate_config(
+    config,
+    Path(workflow.basedir) / "config" / "config.schema.yaml",
+    source=" + ".join(str(f) for f in workflow.configfiles) or "config",
+)
+SCENES = (
+    load_yaml(config["scenes_file"]) if os.path.exists(config["scenes_file"]) else {}
+)
+CORPORA = config["corpora"]
+SIM_CORPORA = sorted(n for n, c in CORPORA.items() if c["kind"] == "simulated")
+REAL_CORPORA = sorted(n for n, c in CORPORA.items() if c["kind"] != "simulated")
+NOTHING = "(?!x)x"  # a regex matching no name (no corpus of that kind)
+
+
+def one_of(names):
+    """Wildcard constraint accepting exactly these names."""
+    return "|".join(map(re.escape, names)) if names else NOTHING
+
+
+def lib(*names):
+    """Inputs naming the tacgen_lib modules a job imports; editing one reruns its jobs.
+
+    A name ending in '/' stands for every module in that sub-package.
+    """
+    root = Path(workflow.basedir) / "tacgen_lib"
+    out = [root / "edges.py", root / "log.py"]
+    for name in names:
+        path = root / name
+        out += sorted(path.glob("*.py")) if name.endswith("/") else [path]
+    return sorted({os.path.relpath(p) for p in out})
+
+
+def corpus_edge(corpus, what="samples"):
+    return f"results/corpus/{corpus}/{what}.parquet"
+
+
+def all_outputs():
+    outs = [
+        "results/corpus/manifest.parquet",
+        "results/corpus/splits.parquet",
+        "results/report/edge_manifest.html",
+    ]
+    outs += expand(
+        "results/report/corpus/{corpus}_examples.png", corpus=sorted(CORPORA)
+    )
+    return outs
+
+
+def all_edges():
+    """Every edge the DAG keeps (the report lists them with their SHA-256)."""
+    out = []
+    for corpus in sorted(CORPORA):
+        out += [corpus_edge(corpus), corpus_edge(corpus, "sensors")]
+    out += ["results/corpus/manifest.parquet", "results/corpus/splits.parquet"]
+    return out

@@ -1,0 +1,128 @@
+"""Corpus stage: simulate (or ingest) corpora, fuse their manifest, fix the splits."""
+
+
+rule simulate_corpus:
+    """One shard of a MuJoCo-simulated corpus: only the effects its scene declares are computed."""
+    input:
+        scenes=config["scenes_file"],
+        code=lib("sim/", "images.py"),
+    output:
+        temp("results/corpus/{corpus}/shards/{shard}.parquet"),
+    log:
+        "results/logs/simulate_corpus/{corpus}/{shard}.log",
+    benchmark:
+        "results/benchmarks/simulate_corpus/{corpus}/{shard}.tsv"
+    wildcard_constraints:
+        corpus=one_of(SIM_CORPORA),
+    conda:
+        "../envs/corpus.yaml"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=30,
+    params:
+        corpus=lambda w: {"name": w.corpus, **CORPORA[w.corpus]},
+        n_shards=lambda w: CORPORA[w.corpus]["shards"],
+    script:
+        "../workflow/scripts/simulate_corpus.py"
+
+
+rule merge_corpus:
+    """Concatenate a simulated corpus's shards and record each sensor's background image."""
+    input:
+        shards=lambda w: expand(
+            "results/corpus/{corpus}/shards/{shard}.parquet",
+            corpus=w.corpus,
+            shard=range(CORPORA[w.corpus]["shards"]),
+        ),
+        scenes=config["scenes_file"],
+        code=lib("sim/", "images.py"),
+    output:
+        samples="results/corpus/{corpus}/samples.parquet",
+        sensors="results/corpus/{corpus}/sensors.parquet",
+    log:
+        "results/logs/merge_corpus/{corpus}.log",
+    benchmark:
+        "results/benchmarks/merge_corpus/{corpus}.tsv"
+    wildcard_constraints:
+        corpus=one_of(SIM_CORPORA),
+    conda:
+        "../envs/corpus.yaml"
+    threads: 1
+    resources:
+        mem_mb=4000,
+        runtime=10,
+    params:
+        corpus=lambda w: {"name": w.corpus, **CORPORA[w.corpus]},
+    script:
+        "../workflow/scripts/merge_corpus.py"
+
+
+rule ingest_tvl:
+    """A real TVL corpus from a local folder (SSVTP or HCT layout) into the corpus edge schema."""
+    input:
+        root=lambda w: CORPORA[w.corpus]["root"],
+        code=lib("ingest.py", "images.py"),
+    output:
+        samples="results/corpus/{corpus}/samples.parquet",
+        sensors="results/corpus/{corpus}/sensors.parquet",
+    log:
+        "results/logs/ingest_tvl/{corpus}.log",
+    benchmark:
+        "results/benchmarks/ingest_tvl/{corpus}.tsv"
+    wildcard_constraints:
+        corpus=one_of(REAL_CORPORA),
+    conda:
+        "../envs/corpus.yaml"
+    threads: 1
+    resources:
+        mem_mb=4000,
+        runtime=30,
+    params:
+        corpus=lambda w: {"name": w.corpus, **CORPORA[w.corpus]},
+    script:
+        "../workflow/scripts/ingest_tvl.py"
+
+
+rule fuse_manifest:
+    """One manifest pool keyed by sample_id across every corpus (labels, captions, no pixels)."""
+    input:
+        samples=expand(corpus_edge("{corpus}"), corpus=sorted(CORPORA)),
+        code=lib(),
+    output:
+        "results/corpus/manifest.parquet",
+    log:
+        "results/logs/fuse_manifest.log",
+    benchmark:
+        "results/benchmarks/fuse_manifest.tsv"
+    conda:
+        "../envs/corpus.yaml"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=5,
+    script:
+        "../workflow/scripts/fuse_manifest.py"
+
+
+rule make_splits:
+    """Fixed train/val/test splits, stratified at a fixed seed, made before any feature exists."""
+    input:
+        manifest="results/corpus/manifest.parquet",
+        code=lib("splits.py"),
+    output:
+        "results/corpus/splits.parquet",
+    log:
+        "results/logs/make_splits.log",
+    benchmark:
+        "results/benchmarks/make_splits.tsv"
+    conda:
+        "../envs/corpus.yaml"
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=5,
+    params:
+        splits=config["splits"],
+    script:
+        "../workflow/scripts/make_splits.py"

@@ -1,0 +1,431 @@
+"""Simulated corpora (paired, appearance-controlled, null), one shard at a time.
+
+A corpus config (config/config.yaml `corpora.<name>`, plus `name`) has the keys
+
+    name, kind: simulated, design: paired | controlled, n, seed, scene, null (bool, default
+    false), sensors (default 4), presses (default 8), image_size [H, W] (default [224, 224]),
+    tactile_size [H, W] (default [120, 160]), shapes (optional subset of the scene's shapes),
+    size_range [min, max] (paired: object size in m, default [0.02, 0.04]),
+    scales (controlled: default [0.15, 0.20, 0.25]), size_per_scale (controlled: metres of
+    object size per unit of scale, default 0.15, so scale 0.20 -> 3 cm),
+    densities (default [500, 2000, 5000] kg/m^3), png_compression (default 1);
+    other keys (e.g. `shards`, used by the workflow) are ignored.
+
+Everything about sample i is drawn from `scene_seed(seed, i)` only, in five independent
+streams (geometry, physics, appearance, jitter, pixels), so shards can run in parallel and
+concatenate to the same corpus for any n_shards. Appearance (colour, texture, yaw) never
+depends on physics (density, hardness, friction): the RGB frame is rendered in the
+presentation pose (object resting on the undeformed gel), before any press.
+
+Labels: mass = density x MuJoCo geom volume; force_normal = MuJoCo contact force in the
+nominal press; force_p05/p50/p95 = percentiles over `presses` repeated presses with seeded
+jitter of the press force (x(1 + jitter_force N(0,1))), placement (N(0, jitter_xy) m) and yaw;
+hardness = the contact-compliance class, stiffness = its effective contact stiffness (N/m).
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+import mujoco
+import numpy as np
+import pandas as pd
+
+from tacgen_lib.images import encode_png
+from tacgen_lib.sim import physics, tactile
+from tacgen_lib.sim.scenes import Scene, compile_scene, validate_scene
+
+__all__ = [
+    "SampleSpec",
+    "simulate_shard",
+    "sensor_backgrounds",
+    "sample_spec",
+    "scene_seed",
+    "null_sources",
+    "render_rgb",
+    "COLUMNS",
+]
+
+COLUMNS = [
+    "sample_id", "corpus", "rgb", "tactile", "sensor_id", "caption", "adjectives", "shape",
+    "scale", "density", "mass", "hardness", "stiffness", "friction", "force_normal",
+    "force_p05", "force_p50", "force_p95", "appearance_id", "scene_seed", "stratum",
+    "null_source", "mass_source", "force_source", "hardness_source",
+]  # fmt: skip
+
+PALETTE: dict[str, tuple[float, float, float]] = {
+    "red": (0.85, 0.15, 0.12),
+    "orange": (0.95, 0.55, 0.1),
+    "yellow": (0.95, 0.88, 0.2),
+    "green": (0.2, 0.7, 0.25),
+    "blue": (0.15, 0.35, 0.9),
+    "purple": (0.55, 0.25, 0.75),
+    "white": (0.92, 0.92, 0.9),
+    "black": (0.12, 0.12, 0.13),
+}
+TEXTURE_WORDS = {"plain": "plain", "checkered": "checkered", "striped": "striped",
+                 "speckled": "speckled"}  # fmt: skip
+SOFT_RANGE = (600.0, 2000.0)  # N/m, contact stiffness of soft objects (log-uniform)
+HARD_RANGE = (8000.0, 25000.0)  # N/m, hard objects
+FRICTION_RANGE = (0.3, 1.2)
+_KNOWN_KEYS = {
+    "name", "kind", "design", "n", "seed", "scene", "null", "sensors", "presses", "image_size",
+    "tactile_size", "shapes", "size_range", "scales", "size_per_scale", "densities",
+    "png_compression", "shards",
+}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class SampleSpec:
+    """Everything drawn for one sample (before simulation)."""
+
+    index: int
+    scene_seed: int
+    obj: physics.ObjectPhysics
+    scale: float
+    hardness: str
+    colour: str
+    texture: str
+    appearance_id: int
+    sensor: int
+    jitter: np.ndarray  # (presses, 4): force factor, dx, dy, dyaw
+    pixel_seed: int
+
+
+def scene_seed(seed: int, i: int) -> int:
+    """The int64 seed of sample i: every random draw of the sample derives from it."""
+    state = np.random.SeedSequence([int(seed), int(i)]).generate_state(2, np.uint32)
+    return int((int(state[0]) << 31) ^ int(state[1])) & ((1 << 63) - 1)
+
+
+def _config(corpus: Mapping[str, Any]) -> dict[str, Any]:
+    name = corpus.get("name", "<unnamed>")
+    for key in ("name", "design", "n", "seed", "scene"):
+        if key not in corpus:
+            raise ValueError(f"corpus {name!r}: missing key {key!r}")
+    bad = sorted(set(corpus) - _KNOWN_KEYS)
+    if bad:
+        raise ValueError(f"corpus {name!r}: unknown key {bad[0]!r} (known: {sorted(_KNOWN_KEYS)})")
+    if corpus["design"] not in ("paired", "controlled"):
+        raise ValueError(f"corpus {name!r}: key 'design' must be 'paired' or 'controlled'")
+    cfg = {
+        "null": False, "sensors": 4, "presses": 8, "image_size": [224, 224],
+        "tactile_size": [120, 160], "size_range": [0.02, 0.04], "scales": [0.15, 0.20, 0.25],
+        "size_per_scale": 0.15, "densities": [500.0, 2000.0, 5000.0], "png_compression": 1,
+    }  # fmt: skip
+    cfg.update(corpus)
+    if int(cfg["n"]) < 1 or int(cfg["sensors"]) < 1 or int(cfg["presses"]) < 1:
+        raise ValueError(f"corpus {name!r}: n, sensors and presses must be >= 1")
+    return cfg
+
+
+def _shapes(cfg: Mapping[str, Any], scene: Scene) -> tuple[str, ...]:
+    shapes = tuple(cfg.get("shapes") or scene.shapes)
+    bad = [s for s in shapes if s not in scene.shapes]
+    if bad:
+        raise ValueError(
+            f"corpus {cfg['name']!r}: shape {bad[0]!r} is not declared by scene {scene.name!r}"
+        )
+    return shapes
+
+
+def sample_spec(cfg: Mapping[str, Any], scene: Scene, i: int) -> SampleSpec:
+    """Draw sample i of a corpus from its scene seed (independent of shards)."""
+    seed = int(cfg["seed"])
+    ss = scene_seed(seed, i)
+    geo, phys, app, jit, pix = (
+        np.random.default_rng(s) for s in np.random.SeedSequence(ss).spawn(5)
+    )
+    shapes = _shapes(cfg, scene)
+    densities = [float(d) for d in cfg["densities"]]
+    if cfg["design"] == "paired":
+        shape = shapes[int(geo.integers(len(shapes)))]
+        lo, hi = (float(v) for v in cfg["size_range"])
+        size = float(geo.uniform(lo, hi))
+        scale = size
+        density = densities[int(phys.integers(len(densities)))]
+        appearance_id = i
+    else:
+        scales = [float(s) for s in cfg["scales"]]
+        cell, d_idx = divmod(i, len(densities))  # densities vary fastest within a group
+        rest, s_idx = divmod(cell, len(scales))
+        rep, sh_idx = divmod(rest, len(shapes))
+        shape, scale, density = shapes[sh_idx], scales[s_idx], densities[d_idx]
+        size = scale * float(cfg["size_per_scale"])
+        appearance_id = cell
+        # Same appearance for every density of a (shape, scale, rep) group.
+        app = np.random.default_rng([seed, 1, sh_idx, s_idx, rep])
+    hardness = "soft" if phys.random() < 0.5 else "hard"
+    lo_k, hi_k = SOFT_RANGE if hardness == "soft" else HARD_RANGE
+    stiffness = float(np.exp(phys.uniform(np.log(lo_k), np.log(hi_k))))
+    friction = float(phys.uniform(*FRICTION_RANGE))
+    colour = list(PALETTE)[int(app.integers(len(PALETTE)))]
+    texture = list(TEXTURE_WORDS)[int(app.integers(len(TEXTURE_WORDS)))]
+    yaw = float(app.uniform(0.0, np.pi / 2))
+    presses = int(cfg["presses"])
+    jitter = np.column_stack(
+        [
+            1.0 + scene.jitter_force * jit.standard_normal(presses),
+            scene.jitter_xy * jit.standard_normal((presses, 2)),
+            scene.jitter_yaw * jit.standard_normal(presses),
+        ]
+    )
+    sensor = int(pix.integers(int(cfg["sensors"])))
+    pixel_seed = int(pix.integers(2**63 - 1))
+    obj = physics.ObjectPhysics(shape, size, density, stiffness, friction, yaw)
+    return SampleSpec(i, ss, obj, scale, hardness, colour, texture, appearance_id, sensor,
+                      jitter, pixel_seed)  # fmt: skip
+
+
+def null_sources(seed: int, n: int) -> np.ndarray:
+    """A seeded derangement of range(n) (Sattolo's algorithm: one n-cycle, no fixed point):
+    sample i of a null corpus takes its tactile frame from sample null_sources(seed, n)[i]."""
+    if n < 2:
+        raise ValueError(f"null corpus: need n >= 2 to derange samples, got n={n}")
+    rng = np.random.default_rng([int(seed), 0x6E756C6C])
+    perm = np.arange(n)
+    for k in range(n - 1, 0, -1):
+        j = int(rng.integers(k))
+        perm[k], perm[j] = perm[j], perm[k]
+    return perm
+
+
+# ---------------------------------------------------------------------------------------------
+# runtime: one compiled scene (and renderer) per process, reused across samples
+
+_RUNTIMES: dict[tuple, dict[str, Any]] = {}
+
+
+def _runtime(scene: Scene, cfg: Mapping[str, Any]) -> dict[str, Any]:
+    key = (repr(scene), tuple(cfg["image_size"]), tuple(cfg["tactile_size"]))
+    if key not in _RUNTIMES:
+        rt = physics.SceneRuntime(scene, compile_scene(scene))
+        optics = tactile.GelOptics(
+            gel_size=scene.gel_size,
+            image_size=(int(cfg["tactile_size"][0]), int(cfg["tactile_size"][1])),
+            camera_distance=scene.gel_camera_distance,
+            saturation=scene.gel_saturation,
+            smoothing=scene.gel_smoothing,
+        )
+        _RUNTIMES[key] = {
+            "rt": rt,
+            "optics": optics,
+            "directions": tactile.ray_directions(optics),
+            "markers": tactile.marker_pattern(optics.image_size) if scene.has("markers") else None,
+            "renderer": None,
+        }
+    return _RUNTIMES[key]
+
+
+def _prefer_headless_egl() -> None:
+    """Use EGL when no display exists and MUJOCO_GL asked for nothing else.
+
+    mujoco picks its GL backend when first imported; if that happened before tacgen_lib.sim
+    could default MUJOCO_GL to egl (e.g. `import mujoco` first), it chose GLFW, which needs
+    an X display. Switch the backend class the renderer will use to EGL in that case.
+    """
+    if os.environ.get("DISPLAY") or os.environ.get("MUJOCO_GL", "egl").lower() != "egl":
+        return
+    from mujoco.rendering.classic import gl_context
+
+    if getattr(gl_context.GLContext, "__module__", "").startswith("mujoco.glfw"):
+        from mujoco import egl
+
+        gl_context.GLContext = egl.GLContext
+
+
+def render_rgb(state: dict[str, Any], image_size: tuple[int, int]) -> np.ndarray:
+    """Render the context camera (uint8 H x W x 3) of the current MuJoCo state; the renderer is
+    created on first use, so scenes without `rgb` never create one."""
+    rt: physics.SceneRuntime = state["rt"]
+    if state["renderer"] is None:
+        _prefer_headless_egl()
+        state["renderer"] = mujoco.Renderer(rt.model, int(image_size[0]), int(image_size[1]))
+        flags = state["renderer"].scene.flags
+        flags[mujoco.mjtRndFlag.mjRND_SHADOW] = int(rt.scene.has("shadows"))
+        flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = 0
+        flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = 0
+    renderer = state["renderer"]
+    renderer.update_scene(rt.data, camera="context0")
+    return renderer.render().copy()
+
+
+@functools.lru_cache(maxsize=64)
+def _background_cached(seed: int, k: int, size: tuple[int, int]) -> np.ndarray:
+    img = tactile.sensor_background([seed, k, 0xB6], size)
+    img.flags.writeable = False
+    return img
+
+
+def _background(cfg: Mapping[str, Any], k: int) -> np.ndarray:
+    """Sensor k's background: seeded from (corpus seed, k) only, cached per process."""
+    size = (int(cfg["tactile_size"][0]), int(cfg["tactile_size"][1]))
+    return _background_cached(int(cfg["seed"]), int(k), size)
+
+
+def _sensor_id(cfg: Mapping[str, Any], k: int) -> str:
+    return f"{cfg['name']}/digit{k}"
+
+
+def _tactile_frame(state, spec_phys: SampleSpec, spec_pix: SampleSpec, cfg, press_force) -> bytes:
+    """Press `spec_phys`'s object and shade its imprint on `spec_pix`'s sensor and noise."""
+    rt: physics.SceneRuntime = state["rt"]
+    scene = rt.scene
+    res = physics.press_object(rt, press_force)
+    frame_id = mujoco.mj_name2id(rt.model, mujoco.mjtObj.mjOBJ_SITE, "gel_frame")
+    raw = tactile.height_field_rays(
+        rt.model, rt.data, rt.active_geom, rt.data.site_xpos[frame_id],
+        rt.data.site_xmat[frame_id], state["optics"], state["directions"],
+    )  # fmt: skip
+    height = np.minimum(raw, max(res.gel_depth, 0.0))
+    noise = np.random.default_rng(spec_pix.pixel_seed) if scene.has("sensor_noise") else None
+    img = tactile.tactile_shading(
+        height, _background(cfg, spec_pix.sensor), state["optics"], noise=noise,
+        markers=state["markers"],
+    )  # fmt: skip
+    return encode_png(img, compression=int(cfg["png_compression"])), res
+
+
+def _adjectives(spec: SampleSpec, cfg: Mapping[str, Any]) -> list[str]:
+    if cfg["design"] == "paired":
+        lo, hi = (float(v) for v in cfg["size_range"])
+        t = (spec.obj.size - lo) / (hi - lo)
+    else:
+        scales = sorted(float(s) for s in cfg["scales"])
+        t = scales.index(spec.scale) / max(len(scales) - 1, 1)
+    size = "small" if t < 1 / 3 else ("medium-sized" if t < 2 / 3 else "large")
+    mass = spec.obj.mass
+    weight = "light" if mass < 0.02 else ("moderately heavy" if mass < 0.1 else "heavy")
+    return [size, spec.colour, TEXTURE_WORDS[spec.texture], spec.hardness, weight]
+
+
+def simulate_shard(
+    corpus: dict,
+    scenes: dict,
+    shard: int,
+    n_shards: int,
+    progress: Callable[[str], None] | None = None,
+) -> pd.DataFrame:
+    """Simulate the samples i of `corpus` with i % n_shards == shard (columns: `COLUMNS`).
+
+    scenes: the scenes.yaml mapping (scene name -> declaration). Raises ValueError for bad
+    configs and physics.PhysicsWarning if MuJoCo warns during any press.
+    """
+    cfg = _config(corpus)
+    if not 0 <= shard < n_shards:
+        raise ValueError(f"corpus {cfg['name']!r}: shard {shard} not in [0, {n_shards})")
+    if cfg["scene"] not in scenes:
+        raise ValueError(f"corpus {cfg['name']!r}: scene {cfg['scene']!r} not in scenes file")
+    scene = validate_scene(cfg["scene"], scenes[cfg["scene"]])
+    if scene.kind != "press":
+        raise ValueError(
+            f"corpus {cfg['name']!r}: scene {scene.name!r} is a {scene.kind!r} scene; corpora "
+            "need a 'press' scene"
+        )
+    state = _runtime(scene, cfg)
+    rt: physics.SceneRuntime = state["rt"]
+    n, name = int(cfg["n"]), str(cfg["name"])
+    perm = null_sources(int(cfg["seed"]), n) if cfg["null"] else None
+    press_force = scene.press_force
+    rows = []
+    t0 = time.perf_counter()
+    indices = range(shard, n, n_shards)
+    for count, i in enumerate(indices):
+        spec = sample_spec(cfg, scene, i)
+        rgba = (*PALETTE[spec.colour], 1.0)
+        physics.apply_object(rt, spec.obj, rgba=rgba, texture=spec.texture)
+        rgb = None
+        if scene.has("rgb"):
+            physics.presentation_pose(rt)
+            rgb = encode_png(render_rgb(state, cfg["image_size"]),
+                             compression=int(cfg["png_compression"]))  # fmt: skip
+        tac, null_source = None, None
+        if scene.has("tactile") and perm is None:
+            tac, res = _tactile_frame(state, spec, spec, cfg, press_force)
+        else:
+            res = physics.press_object(rt, press_force)
+        forces = np.array([res.force_normal])
+        if scene.has("press_jitter"):
+            short = max(scene.settle_steps // 2, scene.measure_steps)
+            forces = np.array([
+                physics.press_object(
+                    rt, press_force * jf, offset_xy=(dx, dy), dyaw=dyaw, settle_steps=short
+                ).force_normal
+                for jf, dx, dy, dyaw in spec.jitter
+            ])  # fmt: skip
+        if perm is not None and scene.has("tactile"):
+            j = int(perm[i])
+            other = sample_spec(cfg, scene, j)
+            physics.apply_object(rt, other.obj)
+            tac, _ = _tactile_frame(state, other, spec, cfg, press_force)
+            null_source = f"{name}-{j:06d}"
+        p05, p50, p95 = np.percentile(forces, [5, 50, 95])
+        adjectives = _adjectives(spec, cfg)
+        shape_word = spec.obj.shape
+        rows.append(
+            {
+                "sample_id": f"{name}-{i:06d}",
+                "corpus": name,
+                "rgb": rgb,
+                "tactile": tac,
+                "sensor_id": _sensor_id(cfg, spec.sensor),
+                "caption": f"a {adjectives[0]} {adjectives[1]} {adjectives[2]} {shape_word}, "
+                f"{adjectives[3]} and {adjectives[4]}",
+                "adjectives": adjectives,
+                "shape": shape_word,
+                "scale": float(spec.scale),
+                "density": float(spec.obj.density),
+                "mass": float(spec.obj.mass),
+                "hardness": spec.hardness,
+                "stiffness": float(res.stiffness),
+                "friction": float(spec.obj.friction),
+                "force_normal": float(res.force_normal),
+                "force_p05": float(p05),
+                "force_p50": float(p50),
+                "force_p95": float(p95),
+                "appearance_id": int(spec.appearance_id),
+                "scene_seed": int(spec.scene_seed),
+                "stratum": f"{shape_word}|{spec.hardness}|{int(spec.obj.density)}",
+                "null_source": null_source,
+                "mass_source": "density x MuJoCo geom volume (body_mass), kg",
+                "force_source": (
+                    "MuJoCo normal contact force object-gel (mj_contactForce), nominal press; "
+                    f"bands over {len(forces)} jittered presses, N"
+                ),
+                "hardness_source": (
+                    "contact-compliance class; stiffness = effective contact stiffness from "
+                    "solref (N/m)"
+                    if scene.has("contact_compliance")
+                    else "not simulated (contact_compliance not declared): rigid contact"
+                ),
+            }
+        )
+        if progress is not None and (count + 1) % 50 == 0:
+            dt = time.perf_counter() - t0
+            progress(f"{name} shard {shard}/{n_shards}: {count + 1} samples, "
+                     f"{1e3 * dt / (count + 1):.1f} ms/sample")  # fmt: skip
+    df = pd.DataFrame(rows, columns=COLUMNS)
+    for col in ("scale", "density", "mass", "stiffness", "friction", "force_normal",
+                "force_p05", "force_p50", "force_p95"):  # fmt: skip
+        df[col] = df[col].astype("float64")
+    for col in ("appearance_id", "scene_seed"):
+        df[col] = df[col].astype("int64")
+    return df
+
+
+def sensor_backgrounds(corpus: dict) -> pd.DataFrame:
+    """The exact background (PNG) each sensor's frames were built on: sensor_id, background,
+    corpus."""
+    cfg = _config(corpus)
+    return pd.DataFrame(
+        {
+            "sensor_id": [_sensor_id(cfg, k) for k in range(int(cfg["sensors"]))],
+            "background": [encode_png(_background(cfg, k)) for k in range(int(cfg["sensors"]))],
+            "corpus": [str(cfg["name"])] * int(cfg["sensors"]),
+        }
+    )

@@ -1,0 +1,398 @@
+"""Scene declarations and their compilation to MuJoCo: only declared effects are simulated.
+
+A scene (one entry of config/scenes.yaml) declares its kind, objects, sensors, cameras and a
+list of **effects** drawn from `EFFECTS`. `compile_scene` builds the MJCF/MjModel with exactly
+those effects:
+
+- physics left out is switched off in `model.opt.disableflags` (gravity -> mjDSBL_GRAVITY,
+  friction_shear -> frictionless contacts (condim 1) and mjDSBL_FRICTIONLOSS, no tactile
+  sensor -> mjDSBL_SENSOR);
+- render passes left out are never run: without `rgb` no camera and no renderer exist,
+  without `shadows` lights do not cast shadows and the shadow map has size 0, without
+  `texture` no texture asset is compiled;
+- sensors left out are not built (without `tactile`: no gel site, no touch sensor, no rays).
+
+Scene kinds: ``press`` (an object rests on a spring-loaded gel plate and is pressed into it,
+the paired and controlled corpora) and ``grasp_lift`` (a 2-finger gripper with tactile pads
+lifts an object, the policy scene). Units are SI throughout.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import mujoco
+import numpy as np
+
+__all__ = [
+    "EFFECTS",
+    "SHAPES",
+    "Scene",
+    "validate_scene",
+    "validate_scenes",
+    "compile_scene",
+    "scene_xml",
+]
+
+#: The fixed effect vocabulary, with what each one switches on.
+EFFECTS: dict[str, str] = {
+    "gravity": "gravity acts on the object (weight presses it into the gel)",
+    "contact_compliance": "per-object contact stiffness (solref/solimp) sets hardness",
+    "friction_shear": "frictional contacts (condim 3, elliptic cone) with per-object friction",
+    "press": "a fixed downward press force applied at the object's centre of mass",
+    "press_jitter": "repeated presses under seeded force/placement jitter give force bands",
+    "rgb": "the context camera renders an RGB frame",
+    "texture": "objects carry textures in the RGB frame (otherwise plain colour)",
+    "shadows": "lights cast shadows in the RGB frame",
+    "tactile": "the gel sensor is built; its indentation height field is shaded to a frame",
+    "sensor_noise": "seeded pixel noise is added to tactile frames",
+    "markers": "the gel carries a grid of dark markers displaced by the indentation",
+}
+
+#: Primitive shapes and how the characteristic size s (metres) maps to MuJoCo geom sizes.
+SHAPES: tuple[str, ...] = ("cube", "sphere", "cylinder", "capsule", "ellipsoid")
+
+_SCENE_KEYS = {
+    "kind",
+    "effects",
+    "objects",
+    "sensors",
+    "cameras",
+    "timestep",
+    "settle_steps",
+    "measure_steps",
+    "press",
+    "gel",
+    "description",
+}
+_OBJECT_KEYS = {"shapes", "size", "mass", "friction"}
+_SENSOR_KEYS = {"name"}
+_CAMERA_KEYS = {"name", "distance", "azimuth", "elevation", "fovy"}
+_PRESS_KEYS = {"force", "jitter_force", "jitter_xy", "jitter_yaw"}
+_GEL_KEYS = {"size", "stiffness", "plate_mass", "saturation", "smoothing", "camera_distance"}
+_KINDS = {"press", "grasp_lift"}
+
+TEXTURES: tuple[str, ...] = ("plain", "checkered", "striped", "speckled")
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A validated scene declaration with defaults filled in (all lengths in metres)."""
+
+    name: str
+    kind: str
+    effects: frozenset[str]
+    shapes: tuple[str, ...]
+    sensors: tuple[str, ...]
+    cameras: tuple[dict[str, float], ...]
+    timestep: float
+    settle_steps: int
+    measure_steps: int
+    press_force: float
+    jitter_force: float
+    jitter_xy: float
+    jitter_yaw: float
+    gel_size: tuple[float, float]
+    gel_stiffness: float
+    plate_mass: float
+    gel_saturation: float
+    gel_smoothing: float
+    gel_camera_distance: float
+    object: dict[str, float] = field(default_factory=dict)
+
+    def has(self, effect: str) -> bool:
+        """True when the scene declares `effect` (which must be in the vocabulary)."""
+        if effect not in EFFECTS:
+            raise ValueError(f"scene {self.name!r}: unknown effect {effect!r}")
+        return effect in self.effects
+
+
+def _check_keys(scene: str, where: str, got: Mapping[str, Any], allowed: set[str]) -> None:
+    bad = sorted(set(got) - allowed)
+    if bad:
+        raise ValueError(
+            f"scene {scene!r}: unknown key {where}{bad[0]!r} (allowed: {', '.join(sorted(allowed))})"
+        )
+
+
+def validate_scene(name: str, decl: Mapping[str, Any]) -> Scene:
+    """Check one declaration (ValueError naming the scene and key) and fill in defaults."""
+    if not isinstance(decl, Mapping):
+        raise ValueError(
+            f"scene {name!r}: declaration must be a mapping, got {type(decl).__name__}"
+        )
+    _check_keys(name, "", decl, _SCENE_KEYS)
+    kind = decl.get("kind", "press")
+    if kind not in _KINDS:
+        raise ValueError(f"scene {name!r}: key 'kind': {kind!r} is not one of {sorted(_KINDS)}")
+    effects = decl.get("effects")
+    if not isinstance(effects, list | tuple) or not effects:
+        raise ValueError(f"scene {name!r}: key 'effects' must be a non-empty list of effects")
+    for e in effects:
+        if e not in EFFECTS:
+            raise ValueError(
+                f"scene {name!r}: key 'effects': unknown effect {e!r} "
+                f"(vocabulary: {', '.join(EFFECTS)})"
+            )
+    objects = dict(decl.get("objects", {}))
+    _check_keys(name, "objects.", objects, _OBJECT_KEYS)
+    shapes = tuple(objects.pop("shapes", SHAPES))
+    for s in shapes:
+        if s not in SHAPES:
+            raise ValueError(f"scene {name!r}: key 'objects.shapes': unknown shape {s!r}")
+    sensors = decl.get("sensors", [{"name": "gel"}] if kind == "press" else [])
+    for i, s in enumerate(sensors):
+        _check_keys(name, f"sensors[{i}].", s, _SENSOR_KEYS)
+    cameras = decl.get("cameras", [{"name": "context"}])
+    for i, c in enumerate(cameras):
+        _check_keys(name, f"cameras[{i}].", c, _CAMERA_KEYS)
+    press = dict(decl.get("press", {}))
+    _check_keys(name, "press.", press, _PRESS_KEYS)
+    gel = dict(decl.get("gel", {}))
+    _check_keys(name, "gel.", gel, _GEL_KEYS)
+    timestep = float(decl.get("timestep", 5e-4 if kind == "press" else 1e-3))
+    if not 0 < timestep <= 0.01:
+        raise ValueError(f"scene {name!r}: key 'timestep': {timestep} not in (0, 0.01] s")
+    gel_size = tuple(float(v) for v in gel.get("size", [0.045, 0.06]))
+    if len(gel_size) != 2 or min(gel_size) <= 0:
+        raise ValueError(f"scene {name!r}: key 'gel.size' must be [height, width] in metres > 0")
+    return Scene(
+        name=name,
+        kind=kind,
+        effects=frozenset(effects),
+        shapes=shapes,
+        sensors=tuple(str(s["name"]) for s in sensors),
+        cameras=tuple(
+            {
+                "distance": float(c.get("distance", 0.16)),
+                "azimuth": float(c.get("azimuth", 45.0)),
+                "elevation": float(c.get("elevation", -40.0)),
+                "fovy": float(c.get("fovy", 40.0)),
+            }
+            for c in cameras
+        ),
+        timestep=timestep,
+        settle_steps=int(decl.get("settle_steps", 120)),
+        measure_steps=int(decl.get("measure_steps", 10)),
+        press_force=float(press.get("force", 0.5)),
+        jitter_force=float(press.get("jitter_force", 0.05)),
+        jitter_xy=float(press.get("jitter_xy", 0.001)),
+        jitter_yaw=float(press.get("jitter_yaw", 0.05)),
+        gel_size=(gel_size[0], gel_size[1]),
+        gel_stiffness=float(gel.get("stiffness", 2000.0)),
+        plate_mass=float(gel.get("plate_mass", 0.05)),
+        gel_saturation=float(gel.get("saturation", 0.002)),
+        gel_smoothing=float(gel.get("smoothing", 0.0006)),
+        gel_camera_distance=float(gel.get("camera_distance", 0.05)),
+        object={k: float(v) for k, v in objects.items()},
+    )
+
+
+def validate_scenes(scenes: Mapping[str, Any]) -> dict[str, Scene]:
+    """Validate every scene of a scenes.yaml mapping (scene name -> declaration)."""
+    if not isinstance(scenes, Mapping):
+        raise ValueError("scenes: expected a mapping scene_name -> declaration")
+    return {name: validate_scene(name, decl) for name, decl in scenes.items()}
+
+
+# ---------------------------------------------------------------------------------------------
+# MJCF
+
+
+def _geom_for_shape(shape: str, s: float) -> tuple[str, str, str]:
+    """(type, size attribute, euler) of the geom of `shape` with characteristic size s."""
+    if shape == "cube":
+        return "box", f"{s / 2} {s / 2} {s / 2}", "0 0 0"
+    if shape == "sphere":
+        return "sphere", f"{s / 2}", "0 0 0"
+    if shape == "cylinder":
+        return "cylinder", f"{s / 2} {s / 2}", "0 0 0"
+    if shape == "capsule":
+        return "capsule", f"{s / 4} {s / 2}", "0 1.5707963267948966 0"
+    return "ellipsoid", f"{s / 2} {0.35 * s} {0.25 * s}", "0 0 0"
+
+
+def _visual_xml(scene: Scene) -> str:
+    shadow = 2048 if scene.has("shadows") else 0
+    return (
+        f'<visual><quality offsamples="0" shadowsize="{shadow}"/>'
+        '<headlight ambient="0.35 0.35 0.35" diffuse="0.5 0.5 0.5" specular="0 0 0"/>'
+        '<map znear="0.01"/></visual>'
+    )
+
+
+def _assets_xml(scene: Scene) -> str:
+    """Textures (only with `texture`) and one material per texture kind for the object."""
+    parts = ["<asset>"]
+    if scene.has("texture"):
+        parts += [
+            '<texture name="tex_checkered" type="cube" builtin="checker" rgb1="1 1 1" '
+            'rgb2="0.35 0.35 0.35" width="64" height="64"/>',
+            '<texture name="tex_striped" type="cube" builtin="checker" rgb1="1 1 1" '
+            'rgb2="0.55 0.55 0.55" width="8" height="64" mark="edge" markrgb="0.2 0.2 0.2"/>',
+            '<texture name="tex_speckled" type="cube" builtin="flat" rgb1="1 1 1" '
+            'width="64" height="64" mark="random" random="0.25" markrgb="0.25 0.25 0.25"/>',
+        ]
+    for t in TEXTURES:
+        tex = f' texture="tex_{t}"' if scene.has("texture") and t != "plain" else ""
+        parts.append(f'<material name="mat_{t}" rgba="0.5 0.5 0.5 1"{tex} specular="0.2"/>')
+    parts.append("</asset>")
+    return "".join(parts)
+
+
+def _object_body_xml(scene: Scene, pos: str, s: float) -> str:
+    """The object body: one geom per declared shape, all but the active one parked (group 3)."""
+    geoms = []
+    for shape in scene.shapes:
+        gtype, size, euler = _geom_for_shape(shape, s)
+        geoms.append(
+            f'<geom name="obj_{shape}" type="{gtype}" size="{size}" euler="{euler}" group="3" '
+            f'contype="0" conaffinity="0" priority="1" material="mat_plain" condim="3" '
+            f'friction="0.8 0.005 0.0001"/>'
+        )
+    return (
+        f'<body name="object" pos="{pos}"><freejoint name="object_free"/>'
+        '<inertial pos="0 0 0" mass="0.1" diaginertia="1e-5 1e-5 1e-5"/>'
+        + "".join(geoms)
+        + "</body>"
+    )
+
+
+def _camera_xml(scene: Scene, target: tuple[float, float, float]) -> str:
+    if not scene.has("rgb"):
+        return ""
+    out = []
+    for i, c in enumerate(scene.cameras):
+        az, el, dist = np.deg2rad(c["azimuth"]), np.deg2rad(c["elevation"]), c["distance"]
+        fwd = np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+        pos = np.asarray(target) - dist * fwd
+        out.append(
+            f'<camera name="context{i}" mode="targetbody" target="cam_target" '
+            f'pos="{pos[0]:.6f} {pos[1]:.6f} {pos[2]:.6f}" fovy="{c["fovy"]}"/>'
+        )
+    return "".join(out)
+
+
+def _press_xml(scene: Scene) -> str:
+    """The press scene: a spring-loaded gel plate (the sensor's elastomer) and one object."""
+    gh, gw = scene.gel_size
+    cast = "true" if scene.has("shadows") else "false"
+    tactile = scene.has("tactile")
+    sensor_site = (
+        f'<site name="gel_touch" type="box" size="{gw / 2} {gh / 2} 0.01" pos="0 0 0" '
+        'rgba="0 0 0 0" group="4"/>'
+        if tactile
+        else ""
+    )
+    frame_site = '<site name="gel_frame" pos="0 0 0" size="0.001" group="4"/>' if tactile else ""
+    sensors = '<sensor><touch name="gel_touch" site="gel_touch"/></sensor>' if tactile else ""
+    return f"""
+<mujoco model="{scene.name}">
+  <compiler angle="radian" autolimits="true"/>
+  <option timestep="{scene.timestep}" cone="elliptic" integrator="implicitfast"/>
+  {_visual_xml(scene)}
+  {_assets_xml(scene)}
+  <worldbody>
+    <light name="key" pos="0.1 -0.1 0.4" dir="-0.25 0.25 -1" castshadow="{cast}" diffuse="0.6 0.6 0.6"/>
+    <geom name="table" type="plane" size="0.25 0.25 0.01" pos="0 0 -0.02" rgba="0.82 0.8 0.76 1"
+          contype="0" conaffinity="0"/>
+    <geom name="housing" type="box" size="{gw / 2 + 0.006} {gh / 2 + 0.006} 0.009" pos="0 0 -0.0115"
+          rgba="0.12 0.12 0.13 1" contype="0" conaffinity="0"/>
+    <body name="cam_target" pos="0 0 0.012"/>
+    {frame_site}
+    {_camera_xml(scene, (0.0, 0.0, 0.012))}
+    <body name="gel_plate" pos="0 0 0" gravcomp="1">
+      <joint name="gel_z" type="slide" axis="0 0 1" stiffness="{scene.gel_stiffness}"
+             damping="10" range="-0.02 0.005" limited="false"/>
+      <geom name="gel_pad" type="box" size="{gw / 2} {gh / 2} 0.0025" pos="0 0 -0.0025"
+            mass="{scene.plate_mass}" rgba="0.55 0.6 0.62 1" condim="3" group="0"/>
+      {sensor_site}
+    </body>
+    {_object_body_xml(scene, "0 0 0.05", 0.03)}
+  </worldbody>
+  {sensors}
+</mujoco>"""
+
+
+def _grasp_xml(scene: Scene) -> str:
+    """A 2-finger parallel gripper (slide joints, position actuators) with tactile pads."""
+    cast = "true" if scene.has("shadows") else "false"
+    tactile = scene.has("tactile")
+    s = scene.object.get("size", 0.04)
+    pads = []
+    for side, sign in (("left", -1.0), ("right", 1.0)):
+        site = (
+            f'<site name="{side}_pad" type="box" size="0.006 0.012 0.012" '
+            f'pos="{-sign * 0.005} 0 0" euler="0 {-sign * 1.5707963267948966} 0" group="4"/>'
+            if tactile
+            else ""
+        )
+        pads.append(
+            f'<body name="{side}_finger" pos="{sign * (s / 2 + 0.02)} 0 0" gravcomp="1">'
+            f'<joint name="{side}_slide" type="slide" axis="{-sign} 0 0" range="-0.01 0.06" '
+            'damping="5"/>'
+            '<geom type="box" size="0.004 0.012 0.03" pos="0 0 0.02" mass="0.03" '
+            'rgba="0.3 0.3 0.32 1" contype="2" conaffinity="1"/>'
+            f'<geom name="{side}_pad_geom" type="box" size="0.004 0.012 0.012" '
+            f'pos="{-sign * 0.001} 0 0" mass="0.01" rgba="0.55 0.6 0.62 1" condim="4" '
+            'friction="1.0 0.005 0.0001" contype="2" conaffinity="1"/>'
+            f"{site}</body>"
+        )
+    sensors = (
+        '<sensor><touch name="left_pad" site="left_pad"/><touch name="right_pad" site="right_pad"/>'
+        "</sensor>"
+        if tactile
+        else ""
+    )
+    return f"""
+<mujoco model="{scene.name}">
+  <compiler angle="radian" autolimits="true"/>
+  <option timestep="{scene.timestep}" cone="elliptic" integrator="implicitfast"/>
+  {_visual_xml(scene)}
+  {_assets_xml(scene)}
+  <worldbody>
+    <light name="key" pos="0.1 -0.1 0.5" dir="-0.2 0.2 -1" castshadow="{cast}"/>
+    <geom name="floor" type="plane" size="0.3 0.3 0.01" rgba="0.82 0.8 0.76 1" condim="3"/>
+    <body name="cam_target" pos="0 0 {s / 2}"/>
+    {_camera_xml(scene, (0.0, 0.0, s / 2))}
+    <body name="gripper" pos="0 0 {s / 2}" gravcomp="1">
+      <joint name="lift" type="slide" axis="0 0 1" range="-0.01 0.2" damping="20"/>
+      <geom type="box" size="{s / 2 + 0.03} 0.015 0.008" pos="0 0 0.06" mass="0.3"
+            rgba="0.2 0.2 0.22 1" contype="2" conaffinity="0"/>
+      {"".join(pads)}
+    </body>
+    {_object_body_xml(scene, f"0 0 {s / 2}", s)}
+  </worldbody>
+  <contact><exclude body1="world" body2="left_finger"/><exclude body1="world" body2="right_finger"/>
+    <exclude body1="world" body2="gripper"/></contact>
+  <actuator>
+    <position name="lift" joint="lift" kp="400" kv="40" ctrlrange="-0.01 0.2"/>
+    <position name="left" joint="left_slide" kp="600" kv="8" forcerange="-8 8" ctrlrange="-0.01 0.06"/>
+    <position name="right" joint="right_slide" kp="600" kv="8" forcerange="-8 8" ctrlrange="-0.01 0.06"/>
+  </actuator>
+  {sensors}
+</mujoco>"""
+
+
+def scene_xml(scene: Scene) -> str:
+    """The MJCF text of a validated scene (only declared effects appear in it)."""
+    return _press_xml(scene) if scene.kind == "press" else _grasp_xml(scene)
+
+
+def compile_scene(scene: Scene) -> mujoco.MjModel:
+    """Compile a validated scene to an MjModel with undeclared physics disabled."""
+    model = mujoco.MjModel.from_xml_string(scene_xml(scene))
+    flags = 0
+    if not scene.has("gravity"):
+        flags |= mujoco.mjtDisableBit.mjDSBL_GRAVITY
+    if not scene.has("friction_shear"):
+        flags |= mujoco.mjtDisableBit.mjDSBL_FRICTIONLOSS
+        model.geom_condim[:] = 1
+    if not scene.has("tactile"):
+        flags |= mujoco.mjtDisableBit.mjDSBL_SENSOR
+    model.opt.disableflags = int(model.opt.disableflags) | int(flags)
+    if not scene.has("shadows"):
+        model.light_castshadow[:] = 0
+    return model

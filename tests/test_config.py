@@ -1,0 +1,87 @@
+"""Config validation: a bad value stops the run with a message naming the key."""
+
+from __future__ import annotations
+
+import copy
+from pathlib import Path
+
+import pytest
+import yaml
+
+from tacgen_lib.config import ConfigError, validate_config
+
+ROOT = Path(__file__).resolve().parents[1]
+SCHEMA = ROOT / "config" / "config.schema.yaml"
+
+
+def _config(name: str = "config.yaml") -> dict:
+    cfg = yaml.safe_load((ROOT / "config" / name).read_text())
+    cfg["scenes_file"] = str(ROOT / cfg["scenes_file"])
+    return cfg
+
+
+def _merged(overlay: str) -> dict:
+    from snakemake.utils import update_config
+
+    cfg = _config()
+    update_config(cfg, yaml.safe_load((ROOT / "config" / overlay).read_text()))
+    return cfg
+
+
+@pytest.mark.parametrize(
+    "cfg",
+    [_config(), _merged("test.yaml"), _merged("paper.yaml")],
+    ids=["default", "test", "paper"],
+)
+def test_shipped_configs_are_valid(cfg):
+    validate_config(cfg, SCHEMA)
+    assert cfg["report"]["examples_per_corpus"] >= 1
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (
+            lambda c: c["align"].__setitem__("taus", [0.07, -0.1]),
+            r"align\.taus\[1\]: -0\.1 is less than or equal to the minimum of 0",
+        ),
+        (
+            lambda c: c["align"].__setitem__("taus", [0.0]),
+            r"align\.taus\[0\]: 0\.0 is less than or equal",
+        ),
+        (lambda c: c["align"].__setitem__("seeds", []), r"align\.seeds: \[\] should be non-empty"),
+        (
+            lambda c: c["corpora"]["sim_paired"].__setitem__("kind", "mystery"),
+            r"corpora\.sim_paired\.kind: 'mystery' is not one of",
+        ),
+        (
+            lambda c: c["corpora"]["sim_paired"].__setitem__("n", -5),
+            r"corpora\.sim_paired\.n: -5 is less than the minimum of 1",
+        ),
+        (
+            lambda c: c["corpora"]["sim_paired"].__setitem__("n", "many"),
+            r"corpora\.sim_paired\.n: 'many' is not of type 'integer'",
+        ),
+        (
+            lambda c: c["corpora"]["sim_paired"].__setitem__("scene", "nowhere"),
+            r"corpora\.sim_paired\.scene: unknown scene 'nowhere'",
+        ),
+        (
+            lambda c: c["splits"]["by_scale"].__setitem__("ghost", {"train": [0.1], "test": [0.2]}),
+            r"splits\.by_scale\.ghost: unknown corpus 'ghost'",
+        ),
+        (
+            lambda c: c["splits"]["fractions"].__setitem__("test", 0.5),
+            r"splits\.fractions: must sum to 1",
+        ),
+        (
+            lambda c: c.__setitem__("algn", {}),
+            r"\(top level\): Additional properties are not allowed \('algn' was unexpected\)",
+        ),
+    ],
+)
+def test_bad_values_name_the_key(edit, message):
+    cfg = copy.deepcopy(_config())
+    edit(cfg)
+    with pytest.raises(ConfigError, match=message):
+        validate_config(cfg, SCHEMA, source="config/config.yaml")

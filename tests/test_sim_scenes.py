@@ -1,0 +1,136 @@
+"""Scenes declare effects; only declared effects are compiled, run and rendered."""
+
+import copy
+
+import mujoco
+import numpy as np
+import pytest
+import yaml
+
+from tacgen_lib.sim import corpus, physics, tactile
+from tacgen_lib.sim.scenes import EFFECTS, compile_scene, validate_scene, validate_scenes
+
+SCENES = yaml.safe_load(open("config/scenes.yaml"))
+FAST = {"settle_steps": 60, "measure_steps": 5}
+
+
+def scene_with(effects, base="paired_press"):
+    decl = copy.deepcopy(SCENES[base])
+    decl.update(FAST)
+    decl["effects"] = list(effects)
+    return decl
+
+
+def run(effects, n=4, **extra):
+    scenes = {"s": scene_with(effects)}
+    cfg = {"name": "t", "design": "paired", "n": n, "seed": 3, "scene": "s", "presses": 3}
+    cfg.update(extra)
+    return corpus.simulate_shard(cfg, scenes, 0, 1)
+
+
+def test_config_scenes_validate():
+    scenes = validate_scenes(SCENES)
+    assert {"paired_press", "controlled_press", "grasp_lift"} <= set(scenes)
+    assert len(scenes["paired_press"].shapes) >= 4
+
+
+@pytest.mark.parametrize(
+    ("decl", "words"),
+    [
+        ({"effects": ["gravity", "smell"]}, ["'bad'", "'smell'"]),
+        ({"effects": ["gravity"], "colour": 1}, ["'bad'", "'colour'"]),
+        ({"effects": ["gravity"], "press": {"forse": 1}}, ["'bad'", "press.", "'forse'"]),
+        ({"effects": ["gravity"], "objects": {"shapes": ["torus"]}}, ["'bad'", "'torus'"]),
+        ({"effects": []}, ["'bad'", "'effects'"]),
+    ],
+)
+def test_bad_declarations_name_scene_and_key(decl, words):
+    with pytest.raises(ValueError) as err:
+        validate_scene("bad", decl)
+    for w in words:
+        assert w in str(err.value)
+
+
+def test_undeclared_physics_is_disabled_in_the_model():
+    bare = compile_scene(validate_scene("bare", {"effects": ["tactile"]}))
+    full = compile_scene(validate_scene("full", {"effects": list(EFFECTS)}))
+    dis = mujoco.mjtDisableBit
+    assert bare.opt.disableflags & dis.mjDSBL_GRAVITY
+    assert bare.opt.disableflags & dis.mjDSBL_FRICTIONLOSS
+    assert np.all(bare.geom_condim == 1)
+    assert not full.opt.disableflags & (dis.mjDSBL_GRAVITY | dis.mjDSBL_FRICTIONLOSS)
+    assert bare.ncam == 0 and full.ncam == 1  # no RGB camera without `rgb`
+    assert bare.ntex == 0 and full.ntex > 0  # no textures without `texture`
+    assert np.all(bare.light_castshadow == 0) and np.any(full.light_castshadow == 1)
+    assert bare.vis.quality.shadowsize == 0
+    no_touch = compile_scene(validate_scene("n", {"effects": ["gravity"]}))
+    assert no_touch.nsensor == 0 and no_touch.nsite == 0  # no tactile sensor built
+    assert no_touch.opt.disableflags & dis.mjDSBL_SENSOR
+
+
+def test_without_rgb_no_renderer_is_created_and_no_frame_rendered(monkeypatch):
+    calls = {"render": 0, "renderer": 0}
+    real_render = corpus.render_rgb
+
+    def spy_render(*a, **k):
+        calls["render"] += 1
+        return real_render(*a, **k)
+
+    class SpyRenderer:
+        def __init__(self, *a, **k):
+            calls["renderer"] += 1
+            raise AssertionError("Renderer created although `rgb` is not declared")
+
+    monkeypatch.setattr(corpus, "render_rgb", spy_render)
+    monkeypatch.setattr(mujoco, "Renderer", SpyRenderer)
+    df = run(["gravity", "press", "tactile", "sensor_noise"])
+    assert calls == {"render": 0, "renderer": 0}
+    assert df["rgb"].isna().all() and df["tactile"].notna().all()
+
+
+def test_without_tactile_or_noise_those_functions_never_run(monkeypatch):
+    calls = {"rays": 0, "shade": 0, "noise": 0}
+    for name in ("height_field_rays", "tactile_shading", "sensor_noise"):
+        real = getattr(tactile, name)
+        key = {"height_field_rays": "rays", "tactile_shading": "shade"}.get(name, "noise")
+
+        def spy(*a, _real=real, _key=key, **k):
+            calls[_key] += 1
+            return _real(*a, **k)
+
+        monkeypatch.setattr(tactile, name, spy)
+    df = run(["gravity", "press"])
+    assert calls == {"rays": 0, "shade": 0, "noise": 0} and df["tactile"].isna().all()
+    run(["gravity", "press", "tactile"])
+    assert calls["rays"] == 4 and calls["shade"] == 4 and calls["noise"] == 0
+    run(["gravity", "press", "tactile", "sensor_noise"])
+    assert calls["noise"] == 4
+
+
+def test_without_press_jitter_one_press_per_sample(monkeypatch):
+    calls = {"press": 0}
+    real = physics.press_object
+
+    def spy(*a, **k):
+        calls["press"] += 1
+        return real(*a, **k)
+
+    monkeypatch.setattr(physics, "press_object", spy)
+    df = run(["gravity", "press", "contact_compliance"])
+    assert calls["press"] == 4
+    assert (df.force_p05 == df.force_normal).all() and (df.force_p95 == df.force_normal).all()
+    run(["gravity", "press", "contact_compliance", "press_jitter"])
+    assert calls["press"] == 4 + 4 * (1 + 3)
+
+
+def test_declared_effects_do_not_depend_on_unrelated_effects():
+    base = ["gravity", "contact_compliance", "friction_shear", "press", "press_jitter", "tactile",
+            "sensor_noise"]  # fmt: skip
+    a = run(base)
+    b = run(base + ["rgb", "texture", "shadows"])
+    assert a["rgb"].isna().all() and b["rgb"].notna().all()
+    for col in ("tactile", "force_normal", "force_p05", "force_p95", "mass", "stiffness"):
+        assert a[col].tolist() == b[col].tolist(), col
+    c = run(["rgb", "texture"])
+    d = run(["rgb", "texture", "gravity", "press", "tactile"])
+    assert c["rgb"].tolist() == d["rgb"].tolist()  # the RGB frame ignores all physics

@@ -1,0 +1,227 @@
+"""Workflow runs on config/test.yaml: the DAG as a user meets it.
+
+One tiny run in a copy of the repository serves most tests (module-scoped); a second clean copy
+checks that every edge is reproduced bit for bit.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+pytestmark = pytest.mark.workflow
+
+ROOT = Path(__file__).resolve().parents[1]
+SNAKEMAKE = [sys.executable, "-m", "snakemake"]
+TREE = ["Snakefile", "rules", "config", "workflow", "tacgen_lib", "profiles", "envs"]
+
+
+def copy_tree(dest: Path) -> Path:
+    dest.mkdir(parents=True, exist_ok=True)
+    for name in TREE:
+        src = ROOT / name
+        if src.is_dir():
+            shutil.copytree(src, dest / name, ignore=shutil.ignore_patterns("__pycache__"))
+        else:
+            shutil.copy2(src, dest / name)
+    return dest
+
+
+def smk(
+    workdir: Path, *args: str, check: bool = True, timeout: int = 600
+) -> subprocess.CompletedProcess:
+    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+    cmd = [*SNAKEMAKE, "--cores", "2", "--configfile", "config/test.yaml", *args]
+    proc = subprocess.run(
+        cmd, cwd=workdir, capture_output=True, text=True, timeout=timeout, env=env
+    )
+    if check and proc.returncode != 0:
+        raise AssertionError(
+            f"snakemake {' '.join(args)} failed:\n{proc.stdout[-4000:]}\n{proc.stderr[-8000:]}"
+        )
+    return proc
+
+
+def planned_rules(workdir: Path, *args: str) -> dict[str, int]:
+    """Rules a dry run would execute, with job counts (from --summary-like job stats)."""
+    proc = smk(workdir, "--dry-run", *args)
+    out = proc.stdout + proc.stderr
+    if "Nothing to be done" in out:
+        return {}
+    counts: dict[str, int] = {}
+    in_table = False
+    for line in out.splitlines():
+        parts = line.split()
+        if parts[:2] == ["job", "count"]:
+            in_table = True
+            continue
+        if in_table:
+            if len(parts) == 2 and parts[1].isdigit() and parts[0] != "total":
+                counts[parts[0]] = int(parts[1])
+            elif parts and parts[0] == "total":
+                break
+    return counts
+
+
+def edge_hashes(workdir: Path) -> dict[str, str]:
+    return {
+        str(p.relative_to(workdir)): json.loads(p.read_text())["sha256"]
+        for p in sorted((workdir / "results").rglob("*.sha256.json"))
+        if "/shards/" not in str(p)
+    }
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory) -> Path:
+    work = copy_tree(tmp_path_factory.mktemp("wf") / "a")
+    smk(work)
+    return work
+
+
+def test_dry_run_plans_the_whole_dag(tmp_path):
+    work = copy_tree(tmp_path / "dry")
+    rules = planned_rules(work)
+    for rule in (
+        "simulate_corpus",
+        "merge_corpus",
+        "fuse_manifest",
+        "make_splits",
+        "edge_manifest",
+        "corpus_examples",
+    ):
+        assert rule in rules, rules
+    assert rules["merge_corpus"] == 3
+
+
+def test_full_run_makes_verified_edges_logs_and_benchmarks(run_dir):
+    from tacgen_lib import edges
+
+    manifest = edges.read(run_dir / "results/corpus/manifest.parquet").frame
+    splits = edges.read(run_dir / "results/corpus/splits.parquet").frame
+    assert set(manifest["corpus"]) == {"sim_paired", "sim_null", "sim_controlled"}
+    assert set(splits["sample_id"]) == set(manifest["sample_id"])
+    ctrl = splits.merge(manifest[["sample_id", "scale"]], on="sample_id").query(
+        "corpus == 'sim_controlled'"
+    )
+    assert set(ctrl.loc[ctrl.split == "test", "scale"].round(3)) == {0.25}
+    for rule in ("simulate_corpus", "merge_corpus", "make_splits", "edge_manifest"):
+        assert (
+            list((run_dir / "results/benchmarks" / rule).rglob("*.tsv"))
+            or (run_dir / f"results/benchmarks/{rule}.tsv").exists()
+        ), rule
+        assert list((run_dir / "results/logs").rglob(f"*{rule}*")), rule
+    table = (run_dir / "results/report/edge_manifest.tsv").read_text()
+    assert edges.sha256_file(run_dir / "results/corpus/splits.parquet") in table
+
+
+def test_second_run_has_nothing_to_do(run_dir):
+    assert planned_rules(run_dir) == {}
+
+
+def test_changed_param_reruns_only_its_downstream(run_dir, tmp_path):
+    work = copy_tree(tmp_path / "b")
+    shutil.copytree(run_dir / "results", work / "results")
+    shutil.copytree(run_dir / ".snakemake", work / ".snakemake")
+    assert planned_rules(work) == {}
+    cfg = work / "config/test.yaml"
+    cfg.write_text(cfg.read_text().replace("examples_per_corpus: 3", "examples_per_corpus: 2"))
+    assert set(planned_rules(work)) == {"corpus_examples", "all"}
+
+
+def test_changed_library_module_reruns_only_its_users(run_dir, tmp_path):
+    work = copy_tree(tmp_path / "c")
+    shutil.copytree(run_dir / "results", work / "results")
+    shutil.copytree(run_dir / ".snakemake", work / ".snakemake")
+    splits_py = work / "tacgen_lib/splits.py"
+    splits_py.write_text(splits_py.read_text() + "\n# an edit that changes the module's content\n")
+    assert set(planned_rules(work)) == {"make_splits", "corpus_examples", "edge_manifest", "all"}
+
+
+def test_two_clean_runs_give_identical_edges(run_dir, tmp_path):
+    work = copy_tree(tmp_path / "again")
+    smk(work)
+    first, second = edge_hashes(run_dir), edge_hashes(work)
+    assert first and first == second
+
+
+def test_report_builds_offline(run_dir):
+    smk(run_dir, "--report", "results/report.html")
+    html = (run_dir / "results/report.html").read_text(errors="replace")
+    assert len(html) > 10_000
+    for needle in ("edge_manifest", "sim_paired_examples", "Corpus"):
+        assert needle in html, needle
+
+
+def test_tampered_edge_is_refused(run_dir, tmp_path):
+    work = copy_tree(tmp_path / "t")
+    shutil.copytree(run_dir / "results", work / "results")
+    shutil.copytree(run_dir / ".snakemake", work / ".snakemake")
+    target = work / "results/corpus/manifest.parquet"
+    data = bytearray(target.read_bytes())
+    data[100] ^= 0xFF
+    target.write_bytes(bytes(data))
+    proc = smk(work, "--forcerun", "make_splits", check=False)
+    assert proc.returncode != 0
+    log = (work / "results/logs/make_splits.log").read_text()
+    assert "manifest.parquet: SHA-256" in log and "does not match the manifest" in log
+    assert target.read_bytes() == bytes(data)
+
+
+def test_bad_config_stops_with_the_key_named(tmp_path):
+    work = copy_tree(tmp_path / "bad")
+    cfg = work / "config/test.yaml"
+    cfg.write_text(cfg.read_text().replace("taus: [0.07]", "taus: [-0.07]"))
+    proc = smk(work, "--dry-run", check=False)
+    assert proc.returncode != 0
+    assert (
+        "align.taus[0]: -0.07 is less than or equal to the minimum of 0"
+        in proc.stdout + proc.stderr
+    )
+
+
+def test_real_corpus_path_runs_on_fixtures(tmp_path):
+    """The TVL ingest path end to end: SSVTP and HCT fixtures in the real layouts."""
+    sys.path.insert(0, str(ROOT / "tests"))
+    from fixtures_real import write_hct_fixture, write_ssvtp_fixture
+
+    from tacgen_lib import edges
+
+    data = tmp_path / "tvl"
+    write_ssvtp_fixture(data, n=12)
+    write_hct_fixture(data, n_traj=2, per_traj=4)
+    work = copy_tree(tmp_path / "real")
+    (work / "config/real.yaml").write_text(
+        f"""run_name: real-fixture
+scenes_file: config/scenes.yaml
+corpora:
+  ssvtp: {{kind: ssvtp, root: {data}}}
+  hct: {{kind: hct, root: {data}}}
+splits: {{seed: 42, fractions: {{train: 0.7, val: 0.1, test: 0.2}}}}
+align: {{seeds: [42], taus: [0.07]}}
+report: {{examples_per_corpus: 2}}
+"""
+    )
+    proc = subprocess.run(
+        [
+            *SNAKEMAKE,
+            "--cores",
+            "2",
+            "--configfile",
+            "config/real.yaml",
+            "--replace-workflow-config",
+        ],
+        cwd=work,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert proc.returncode == 0, proc.stderr[-6000:]
+    manifest = edges.read(work / "results/corpus/manifest.parquet").frame
+    assert manifest["corpus"].value_counts().to_dict() == {"ssvtp": 12, "hct": 8}
+    assert (work / "results/report/corpus/ssvtp_examples.png").stat().st_size > 1000

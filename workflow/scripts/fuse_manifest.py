@@ -1,0 +1,16 @@
+"""Fuse every corpus's metadata into one manifest keyed by sample_id (rule fuse_manifest)."""
+
+import pyarrow.parquet as pq
+
+from tacgen_lib import edges, log
+from tacgen_lib.manifest import fuse_manifest
+
+logger = log.for_rule(snakemake)
+frames = []
+for path in snakemake.input.samples:
+    edges.verify(path)
+    names = pq.read_schema(path).names
+    frames.append(edges.read(path, columns=[c for c in names if c not in ("rgb", "tactile")]).frame)
+manifest = fuse_manifest(frames)
+edges.write(snakemake.output[0], manifest, producer=snakemake.rule)
+logger.info("manifest: %d samples from %d corpora", len(manifest), manifest["corpus"].nunique())

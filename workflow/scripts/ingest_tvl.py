@@ -1,0 +1,18 @@
+"""Ingest a real TVL corpus folder, SSVTP or HCT layout (rule ingest_tvl)."""
+
+from pathlib import Path
+
+from tacgen_lib import edges, log
+from tacgen_lib.ingest import ingest_hct, ingest_ssvtp
+
+logger = log.for_rule(snakemake)
+corpus = snakemake.params.corpus
+root = Path(snakemake.input.root)
+if corpus["kind"] == "ssvtp":
+    background = Path(corpus["background"]) if corpus.get("background") else None
+    samples, sensors = ingest_ssvtp(root, corpus=corpus["name"], background=background)
+else:
+    samples, sensors = ingest_hct(root, corpus=corpus["name"])
+edges.write(snakemake.output.samples, samples, producer=snakemake.rule)
+edges.write(snakemake.output.sensors, sensors, key="sensor_id", producer=snakemake.rule)
+logger.info("ingested %d samples, %d sensor backgrounds from %s", len(samples), len(sensors), root)

@@ -1,0 +1,27 @@
+"""Concatenate a simulated corpus's shards; write its sensor backgrounds (rule merge_corpus)."""
+
+import os
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import pandas as pd  # noqa: E402
+
+from tacgen_lib import edges, log  # noqa: E402
+from tacgen_lib.sim.corpus import sensor_backgrounds  # noqa: E402
+
+logger = log.for_rule(snakemake)
+shards = [edges.read(path).frame for path in snakemake.input.shards]
+samples = pd.concat(shards, ignore_index=True).sort_values("sample_id", ignore_index=True)
+n_expected = snakemake.params.corpus["n"]
+if len(samples) != n_expected:
+    raise ValueError(
+        f"rule merge_corpus: corpus {snakemake.wildcards.corpus!r} has {len(samples)} samples "
+        f"across {len(shards)} shards, config asks for n={n_expected}"
+    )
+sensors = sensor_backgrounds(snakemake.params.corpus)
+unknown = set(samples["sensor_id"]) - set(sensors["sensor_id"])
+if unknown:
+    raise ValueError(f"rule merge_corpus: sensor(s) {sorted(unknown)} have no background image")
+edges.write(snakemake.output.samples, samples, producer=snakemake.rule)
+edges.write(snakemake.output.sensors, sensors, key="sensor_id", producer=snakemake.rule)
+logger.info("merged %d shards: %d samples, %d sensors", len(shards), len(samples), len(sensors))
