@@ -17,8 +17,12 @@ done
 if [ -n "$missing" ]; then
   echo "setup: installing Debian packages:$missing"
   if [ "$(id -u)" = 0 ]; then SUDO=""; else SUDO="sudo"; fi
-  $SUDO apt-get update -qq
-  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends $missing
+  aptlog=$(mktemp)
+  if ! { $SUDO apt-get update -qq && DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq \
+      -o Dpkg::Use-Pty=0 --no-install-recommends $missing; } >"$aptlog" 2>&1; then
+    cat "$aptlog"; echo "setup: apt-get failed (see above)" >&2; exit 1
+  fi
+  rm -f "$aptlog"
 fi
 
 # 2. Python environment. torch is pinned to the CPU build through constraints.txt.

@@ -1,0 +1,128 @@
+"""Fusion of vision (V) and tactile (T) features into one probe input (paper's V+T variants).
+
+This module owns the table of fusion variants (`FUSIONS`) and the one entry point
+`fuse(name, v, t)`. Every variant is a fixed, parameter-free, row-wise function of the pair
+(v_i, t_i): nothing is fitted, so no test row can leak into a fusion, and permuting the
+rows of T permutes the pairing and nothing else (the tactile-permutation control relies on
+this).
+
+Variants
+- ``concat``: [v, t]; raw backbone features (e.g. 384 + 768) or aligned projections.
+- ``mean``: (v + t) / 2; aligned projections of the same dimension.
+- ``max``: element-wise maximum; aligned, same dimension.
+- ``attention``: parameter-free scaled dot-product self-attention over the two modality
+  tokens of a sample: ``A = softmax([v; t] [v; t]^T / sqrt(d))`` (2 x 2, row-wise softmax),
+  output = mean over the two tokens of ``A [v; t]``. The weight of each modality grows with
+  its norm and its agreement with the other token; with equal-norm tokens it reduces to
+  ``mean``. Aligned, same dimension.
+- ``weighted_75_25`` / ``weighted_25_75``: 0.75 v + 0.25 t and 0.25 v + 0.75 t; aligned.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import expit
+
+__all__ = ["FUSIONS", "Fusion", "fuse", "fusion_table"]
+
+
+@dataclass(frozen=True)
+class Fusion:
+    """One fusion variant: its name, what it computes, and which features it needs."""
+
+    name: str
+    description: str
+    inputs: str  # "raw or aligned" | "aligned"
+    same_dim: bool
+    fn: Callable[[np.ndarray, np.ndarray], np.ndarray]
+
+    def dim(self, d_v: int, d_t: int) -> int:
+        """Output dimension for inputs of dimension d_v and d_t."""
+        return d_v + d_t if self.name == "concat" else d_v
+
+
+def _concat(v: np.ndarray, t: np.ndarray) -> np.ndarray:
+    return np.concatenate([v, t], axis=1)
+
+
+def _mean(v: np.ndarray, t: np.ndarray) -> np.ndarray:
+    return 0.5 * (v + t)
+
+
+def _max(v: np.ndarray, t: np.ndarray) -> np.ndarray:
+    return np.maximum(v, t)
+
+
+def _attention(v: np.ndarray, t: np.ndarray) -> np.ndarray:
+    d = v.shape[1]
+    scale = 1.0 / np.sqrt(d)
+    s_vv = np.einsum("ij,ij->i", v, v) * scale
+    s_tt = np.einsum("ij,ij->i", t, t) * scale
+    s_vt = np.einsum("ij,ij->i", v, t) * scale
+    # row "v" attends over (v, t) with scores (s_vv, s_vt); row "t" with (s_vt, s_tt).
+    a_vv = expit(s_vv - s_vt)  # softmax of two scores = logistic of their difference
+    a_tt = expit(s_tt - s_vt)
+    w_v = 0.5 * (a_vv + (1.0 - a_tt))  # mean over the two output tokens
+    return w_v[:, None] * v + (1.0 - w_v)[:, None] * t
+
+
+def _weighted(w_v: float) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
+    def fn(v: np.ndarray, t: np.ndarray) -> np.ndarray:
+        return w_v * v + (1.0 - w_v) * t
+
+    return fn
+
+
+FUSIONS: dict[str, Fusion] = {
+    f.name: f
+    for f in [
+        Fusion("concat", "[v, t] concatenated", "raw or aligned", False, _concat),
+        Fusion("mean", "(v + t) / 2", "aligned", True, _mean),
+        Fusion("max", "element-wise max(v, t)", "aligned", True, _max),
+        Fusion(
+            "attention",
+            "parameter-free self-attention over the tokens {v, t}: "
+            "softmax(x x^T / sqrt(d)), mean of the attended tokens",
+            "aligned",
+            True,
+            _attention,
+        ),
+        Fusion("weighted_75_25", "0.75 v + 0.25 t", "aligned", True, _weighted(0.75)),
+        Fusion("weighted_25_75", "0.25 v + 0.75 t", "aligned", True, _weighted(0.25)),
+    ]
+}
+
+
+def fusion_table() -> list[dict[str, str]]:
+    """Rows (name, description, inputs) of `FUSIONS`, for the report."""
+    return [
+        {"name": f.name, "description": f.description, "inputs": f.inputs} for f in FUSIONS.values()
+    ]
+
+
+def fuse(name: str, v: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Fuse row-paired V and T features with the variant `name` (see `FUSIONS`).
+
+    v: (n, d_v), t: (n, d_t); row i of each belongs to the same sample. Returns float64.
+    """
+    if name not in FUSIONS:
+        raise ValueError(f"fuse: unknown fusion {name!r}; choose one of {sorted(FUSIONS)}")
+    spec = FUSIONS[name]
+    v = np.asarray(v, dtype=np.float64)
+    t = np.asarray(t, dtype=np.float64)
+    if v.ndim != 2 or t.ndim != 2:
+        raise ValueError(f"fuse({name}): expected 2-D v and t, got {v.shape} and {t.shape}")
+    if v.shape[0] != t.shape[0]:
+        raise ValueError(
+            f"fuse({name}): v has {v.shape[0]} rows and t has {t.shape[0]}; "
+            "join them on sample_id first"
+        )
+    if spec.same_dim and v.shape[1] != t.shape[1]:
+        raise ValueError(
+            f"fuse({name}): needs aligned features of equal dimension, got v {v.shape[1]} "
+            f"and t {t.shape[1]}; use the aligned projections or 'concat'"
+        )
+    return spec.fn(v, t)

@@ -1,0 +1,236 @@
+"""Bootstrap CIs, controls and the paper's criterion, against scipy / plain-loop references."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.stats
+from sklearn.metrics import accuracy_score, r2_score
+
+from tacgen_lib import stats
+from tacgen_lib.fusion import fuse
+from tacgen_lib.probes import FixedLogistic, FixedRidge, r2
+
+
+def make_preds(n=80, seed=0):
+    rng = np.random.default_rng(seed)
+    y = rng.standard_normal(n)
+    return y, y + 0.9 * rng.standard_normal(n), y + 0.6 * rng.standard_normal(n)
+
+
+def delta_loop(metric, y, pv, pvt, idx):
+    """Plain-loop float64 reference: one resample at a time with scikit-learn's metrics."""
+    f = r2_score if metric == "r2" else accuracy_score
+    return np.array([f(y[i], pvt[i]) - f(y[i], pv[i]) for i in idx])
+
+
+def test_bootstrap_equals_scipy_percentile_ci_on_identical_resamples():
+    y, pv, pvt = make_preds()
+    seen = []
+
+    def delta_r2(i, axis=-1):  # statistic over resampled row indices, vectorised
+        if i.ndim == 2:
+            seen.append(i.copy())
+        yi = y[i]
+        ss_tot = np.sum((yi - yi.mean(axis=axis, keepdims=True)) ** 2, axis=axis)
+        return (np.sum((yi - pv[i]) ** 2, axis=axis) - np.sum((yi - pvt[i]) ** 2, axis=axis)) / (
+            ss_tot
+        )
+
+    ref = scipy.stats.bootstrap(
+        (np.arange(y.size),), delta_r2, n_resamples=2000, vectorized=True,
+        method="percentile", rng=np.random.default_rng(5),
+    )  # fmt: skip
+    got = stats.fixed_test_bootstrap(y, pv, pvt, "r2", n_resamples=2000, seed=5)
+    idx = stats.resample_indices(y.size, 2000, seed=5)
+    assert np.array_equal(np.concatenate(seen), idx)  # same Generator call -> same resamples
+    assert got["ci_low"] == pytest.approx(ref.confidence_interval.low, rel=1e-12)
+    assert got["ci_high"] == pytest.approx(ref.confidence_interval.high, rel=1e-12)
+
+
+@pytest.mark.parametrize("metric", ["r2", "accuracy"])
+def test_bootstrap_equals_plain_loop_reference(metric):
+    y, pv, pvt = make_preds(60, seed=1)
+    if metric == "accuracy":
+        y, pv, pvt = (np.digitize(a, [-0.5, 0.5]) for a in (y, pv, pvt))
+    got = stats.fixed_test_bootstrap(y, pv, pvt, metric, 500, seed=2, return_distribution=True)
+    idx = stats.resample_indices(y.size, 500, seed=2)
+    ref = delta_loop(metric, y, pv, pvt, idx)
+    np.testing.assert_allclose(got["deltas"], ref, rtol=1e-12, atol=1e-14)
+    lo, hi = np.quantile(ref, [0.025, 0.975])
+    assert got["ci_low"] == pytest.approx(lo, abs=1e-13)
+    assert got["ci_high"] == pytest.approx(hi, abs=1e-13)
+    assert got["p_gt0"] == np.mean(ref > 0)
+    full = r2_score if metric == "r2" else accuracy_score
+    assert got["delta"] == pytest.approx(full(y, pvt) - full(y, pv), abs=1e-14)
+
+
+def test_stratified_resamples_keep_strata_and_match_loop():
+    y, pv, pvt = make_preds(45, seed=3)
+    strata = np.repeat(["cube-dense-s", "sphere-soft-m", "cyl-dense-l"], [20, 15, 10])
+    idx = stats.resample_indices(45, 300, seed=9, strata=strata)
+    assert np.all(strata[idx] == strata[None, :])  # every column drawn from its own stratum
+    got = stats.fixed_test_bootstrap(y, pv, pvt, "r2", 300, 9, strata, return_distribution=True)
+    np.testing.assert_allclose(got["deltas"], delta_loop("r2", y, pv, pvt, idx), rtol=1e-12)
+
+
+def test_constant_target_resample_is_defined_and_finite():
+    y = np.array([2.0, 2.0, 2.0, 5.0, 7.0])
+    pv = np.array([2.0, 2.0, 2.0, 4.0, 8.0])  # exact on the constant rows
+    pvt = np.array([2.5, 2.0, 1.0, 5.0, 7.0])
+    idx = np.array([[0, 1, 2, 0, 1], [0, 0, 0, 0, 0], [1, 2, 3, 4, 0], [3, 3, 3, 3, 3]])
+    got = stats.fixed_test_bootstrap(y, pv, pvt, "r2", indices=idx, return_distribution=True)
+    # Resamples 0 and 1 are constant (y = 2): V exact -> R2 := 1, V+T off on row 0 -> 0.
+    # Resample 3 is constant (y = 5): V off -> 0, V+T exact -> 1. Resample 2 is ordinary.
+    ref = [0.0 - 1.0, 0.0 - 1.0, r2(y[idx[2]], pvt[idx[2]]) - r2(y[idx[2]], pv[idx[2]]), 1.0]
+    np.testing.assert_allclose(got["deltas"], ref, rtol=1e-12)
+    assert got["n_constant_resamples"] == 3
+    assert np.isfinite([got["ci_low"], got["ci_high"]]).all()
+    assert r2_score(y[idx[2]], pvt[idx[2]]) == pytest.approx(r2(y[idx[2]], pvt[idx[2]]))
+
+
+def test_single_class_resample_accuracy():
+    y = np.array([0, 0, 1, 2])
+    pv, pvt = np.array([0, 1, 1, 2]), np.array([0, 0, 2, 2])
+    idx = np.array([[0, 1, 0, 1], [0, 1, 2, 3]])
+    got = stats.fixed_test_bootstrap(y, pv, pvt, "accuracy", indices=idx, return_distribution=True)
+    np.testing.assert_allclose(got["deltas"], [1.0 - 0.5, 0.75 - 0.75])
+
+
+def control_data(n_tr=70, n_te=40, dv=6, dt=9, seed=0):
+    rng = np.random.default_rng(seed)
+    v = rng.standard_normal((n_tr + n_te, dv))
+    t = rng.standard_normal((n_tr + n_te, dt))
+    y = v[:, 0] + 1.5 * t[:, 0] + 0.3 * rng.standard_normal(n_tr + n_te)
+    return v[:n_tr], t[:n_tr], y[:n_tr], v[n_tr:], t[n_tr:], y[n_tr:]
+
+
+@pytest.mark.parametrize(
+    "dims,solver", [((6, 9), "pcg"), ((40, 50), "pcg"), ((40, 50), "cholesky")]
+)  # primal refit loop (p < n); batched dual kernel path (p >= n) by PCG or Cholesky
+def test_tactile_permutation_fast_path_equals_refit_loop(dims, solver):
+    v_tr, t_tr, y_tr, v_te, t_te, y_te = control_data(dv=dims[0], dt=dims[1])
+    kw = dict(fusion="concat", metric="r2", n_permutations=12, seed=4, solver=solver)
+    fast = stats.tactile_permutation_control(
+        v_tr, t_tr, y_tr, v_te, t_te, y_te, probe=FixedRidge(2.0), **kw
+    )
+    rng = np.random.default_rng(4)  # the documented draw: train permutations, then test
+    p_tr = np.argsort(rng.random((12, 70)), axis=1, kind="stable")
+    p_te = np.argsort(rng.random((12, 40)), axis=1, kind="stable")
+    v_score = r2_score(y_te, FixedRidge(2.0).fit_predict(v_tr, y_tr, v_te))
+    loop = []
+    for a, b in zip(p_tr, p_te, strict=True):
+        pred = FixedRidge(2.0).fit_predict(fuse("concat", v_tr, t_tr[a]), y_tr,
+                                           fuse("concat", v_te, t_te[b]))  # fmt: skip
+        loop.append(r2_score(y_te, pred) - v_score)
+    np.testing.assert_allclose(fast["deltas"], loop, rtol=1e-9, atol=1e-11)
+    real = r2_score(y_te, FixedRidge(2.0).fit_predict(fuse("concat", v_tr, t_tr), y_tr,
+                                                      fuse("concat", v_te, t_te))) - v_score  # fmt: skip
+    assert fast["delta_ctrl"] < real  # T carries signal only when paired
+
+
+def test_pcg_stragglers_fall_back_to_cholesky():
+    v_tr, t_tr, y_tr, v_te, t_te, _ = control_data(dv=40, dt=50)
+    rng = np.random.default_rng(0)
+    p_tr = np.argsort(rng.random((6, 70)), axis=1)
+    p_te = np.argsort(rng.random((6, 40)), axis=1)
+    args = (v_tr, t_tr, y_tr, v_te, t_te, 1e-3, p_tr, p_te)
+    capped, info = stats._concat_ridge_permuted(*args, solver="pcg", max_iter=3)
+    assert info == {"pcg_iterations": 3, "cholesky_solves": 6}  # none converged: all direct
+    direct, _ = stats._concat_ridge_permuted(*args, solver="cholesky")
+    pcg, info = stats._concat_ridge_permuted(*args, solver="pcg", max_iter=500)
+    assert info["cholesky_solves"] == 0
+    np.testing.assert_allclose(capped, direct, rtol=1e-12)
+    np.testing.assert_allclose(pcg, direct, rtol=1e-7, atol=1e-8)
+
+
+def test_tactile_permutation_generic_fusion_and_logistic():
+    v_tr, t_tr, y_tr, v_te, t_te, y_te = control_data(dt=6)
+    c_tr, c_te = (y_tr > 0).astype(int), (y_te > 0).astype(int)
+    out = stats.tactile_permutation_control(
+        v_tr, t_tr, c_tr, v_te, t_te, c_te, fusion="mean", probe=FixedLogistic(1.0),
+        metric="accuracy", n_permutations=5, seed=1,
+    )  # fmt: skip
+    again = stats.tactile_permutation_control(
+        v_tr, t_tr, c_tr, v_te, t_te, c_te, fusion="mean", probe=FixedLogistic(1.0),
+        metric="accuracy", n_permutations=5, seed=1,
+    )  # fmt: skip
+    assert np.array_equal(out["deltas"], again["deltas"])  # seeded => identical
+    assert out["deltas"].shape == (5,) and np.isfinite(out["deltas"]).all()
+
+
+def test_label_permutation_batched_equals_loop():
+    v_tr, t_tr, y_tr, v_te, t_te, y_te = control_data()
+    x_tr, x_te = fuse("concat", v_tr, t_tr), fuse("concat", v_te, t_te)
+    out = stats.label_permutation_control(
+        v_tr, x_tr, y_tr, v_te, x_te, y_te, probe_v=FixedRidge(1.0), probe_vt=FixedRidge(3.0),
+        metric="r2", n_permutations=10, seed=6,
+    )  # fmt: skip
+    perm = np.argsort(np.random.default_rng(6).random((10, 70)), axis=1, kind="stable")
+    ref = [
+        r2_score(y_te, FixedRidge(3.0).fit_predict(x_tr, y_tr[p], x_te))
+        - r2_score(y_te, FixedRidge(1.0).fit_predict(v_tr, y_tr[p], v_te))
+        for p in perm
+    ]
+    np.testing.assert_allclose(out["deltas"], ref, rtol=1e-9, atol=1e-12)
+    assert out["vt_score_mean"] < 0.2  # permuted labels carry nothing to the test rows
+
+
+def test_random_feature_control_is_seeded_and_dimension_matched():
+    v_tr, t_tr, y_tr, v_te, t_te, y_te = control_data()
+    kw = dict(fusion="concat", probe=FixedRidge(1.0), metric="r2", n_draws=4, seed=2)
+    a = stats.random_feature_control(v_tr, t_tr, y_tr, v_te, t_te, y_te, **kw)
+    b = stats.random_feature_control(v_tr, t_tr, y_tr, v_te, t_te, y_te, **kw)
+    assert np.array_equal(a["deltas"], b["deltas"])
+    rng = np.random.default_rng(2)
+    mu, sd = t_tr.mean(axis=0), t_tr.std(axis=0)
+    r_tr = mu + sd * rng.standard_normal(t_tr.shape)
+    r_te = mu + sd * rng.standard_normal(t_te.shape)
+    pred = FixedRidge(1.0).fit_predict(np.hstack([v_tr, r_tr]), y_tr, np.hstack([v_te, r_te]))
+    v_only = r2_score(y_te, FixedRidge(1.0).fit_predict(v_tr, y_tr, v_te))
+    assert a["deltas"][0] == pytest.approx(r2_score(y_te, pred) - v_only, rel=1e-10)
+
+
+def test_train_resample_diagnostic_equals_loop():
+    v_tr, t_tr, y_tr, v_te, t_te, y_te = control_data()
+    x_tr, x_te = fuse("concat", v_tr, t_tr), fuse("concat", v_te, t_te)
+    out = stats.train_resample_diagnostic(
+        v_tr, x_tr, y_tr, v_te, x_te, y_te, probe_v=FixedRidge(1.0), probe_vt=FixedRidge(1.0),
+        metric="r2", n_resamples=8, seed=3,
+    )  # fmt: skip
+    idx = stats.resample_indices(70, 8, seed=3)
+    ref = [
+        r2_score(y_te, FixedRidge(1.0).fit_predict(x_tr[i], y_tr[i], x_te))
+        - r2_score(y_te, FixedRidge(1.0).fit_predict(v_tr[i], y_tr[i], v_te))
+        for i in idx
+    ]
+    np.testing.assert_allclose(out["deltas"], ref, rtol=1e-10)
+    assert out["delta_sd"] > 0
+
+
+@pytest.mark.parametrize(
+    "delta,ci_low,ctrl,expected",
+    [
+        (0.05, 0.01, 0.0, True),
+        (0.03, 0.001, 0.0, True),  # boundary: Delta >= 0.03
+        (0.029, 0.01, 0.0, False),
+        (0.05, 0.0, 0.0, False),  # lower CI must be > 0
+        (0.05, 0.01, 0.05, False),  # control must stay below Delta
+    ],
+)
+def test_paper_criterion(delta, ci_low, ctrl, expected):
+    assert stats.paper_criterion(delta, ci_low, ctrl) is expected
+
+
+def test_criterion_and_bootstrap_refuse_non_finite():
+    with pytest.raises(ValueError, match="ci_low is nan"):
+        stats.paper_criterion(0.1, float("nan"), 0.0)
+    y, pv, pvt = make_preds(10)
+    pv[3] = np.inf
+    with pytest.raises(ValueError, match="pred_v is non-finite at test row 3"):
+        stats.fixed_test_bootstrap(y, pv, pvt, "r2", 10)
+    ids = [f"t-{i}" for i in range(10)]
+    with pytest.raises(ValueError, match="pred_v is non-finite at test sample_id 't-3'"):
+        stats.fixed_test_bootstrap(y, pv, pvt, "r2", 10, sample_ids=ids)
+    with pytest.raises(ValueError, match="metric must be"):
+        stats.fixed_test_bootstrap(y, pvt, pvt, "mse", 10)
