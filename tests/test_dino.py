@@ -1,0 +1,223 @@
+"""DINO pretraining: loss against a float64 loop reference, degenerate batches, determinism."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from tacgen_lib.dino import DINOHead, dino_loss, dino_loss_terms, multi_crop, pretrain_dino
+from tacgen_lib.vit import build_vit
+
+
+@pytest.fixture(autouse=True)
+def _one_torch_thread():
+    """Tiny tensors: one intra-op thread avoids OpenMP spin-waits on a loaded 2-core machine."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+def dino_loss_reference(s, t, center, ts, tt):
+    """Plain loops in float64: mean over pairs (iq, v != iq) of -sum p_t log p_s, batch-mean."""
+    s, t, center = s.double(), t.double(), center.double().reshape(-1)
+    total, pairs = 0.0, 0
+    for iq in range(t.shape[0]):
+        for v in range(s.shape[0]):
+            if v == iq:
+                continue
+            for b in range(s.shape[1]):
+                zt = (t[iq, b] - center) / tt
+                p = torch.exp(zt - torch.logsumexp(zt, 0))
+                zs = s[v, b] / ts
+                logq = zs - torch.logsumexp(zs, 0)
+                total += float(-(p * logq).sum()) / s.shape[1]
+            pairs += 1
+    return total / pairs
+
+
+def test_dino_loss_matches_float64_loop_reference():
+    g = torch.Generator().manual_seed(0)
+    s = 3 * torch.randn(6, 5, 32, generator=g)
+    t = 3 * torch.randn(2, 5, 32, generator=g)
+    center = torch.randn(1, 32, generator=g)
+    got = dino_loss(s, t, center, 0.1, 0.04)
+    assert got.item() == pytest.approx(dino_loss_reference(s, t, center, 0.1, 0.04), rel=1e-5)
+
+
+def test_loss_is_entropy_plus_nonnegative_kl():
+    g = torch.Generator().manual_seed(1)
+    s, t = torch.randn(4, 3, 16, generator=g), torch.randn(2, 3, 16, generator=g)
+    loss, ent, kl = dino_loss_terms(s, t, torch.zeros(16), 0.1, 0.04)
+    assert loss.item() == pytest.approx(ent.item() + kl.item(), rel=1e-6)
+    assert kl.item() >= 0 and 0 <= ent.item() <= math.log(16)
+    # teacher == student (same temperature, no centre) on the cross pairs -> KL == 0
+    same = torch.randn(1, 3, 16, generator=g).expand(2, 3, 16)
+    _, _, kl0 = dino_loss_terms(same, same, torch.zeros(16), 0.1, 0.1)
+    assert abs(kl0.item()) < 1e-5
+
+
+@pytest.mark.parametrize(
+    "case",
+    ["identical_images", "single_image", "huge_logits", "constant_logits", "globals_only"],
+)
+def test_dino_loss_finite_on_degenerate_batches(case):
+    g = torch.Generator().manual_seed(2)
+    k = 64
+    if case == "identical_images":
+        s = torch.randn(6, 1, k, generator=g).expand(6, 8, k)
+        t = s[:2]
+    elif case == "single_image":
+        s, t = torch.randn(6, 1, k, generator=g), torch.randn(2, 1, k, generator=g)
+    elif case == "huge_logits":
+        s, t = 1e4 * torch.randn(6, 4, k, generator=g), 1e4 * torch.randn(2, 4, k, generator=g)
+    elif case == "constant_logits":
+        s, t = torch.zeros(6, 4, k), torch.zeros(2, 4, k)
+    else:
+        s, t = torch.randn(2, 4, k, generator=g), torch.randn(2, 4, k, generator=g)
+    center = t.mean(dim=(0, 1))
+    s = s.clone().requires_grad_(True)
+    loss = dino_loss(s, t, center, 0.1, 0.04)
+    loss.backward()
+    assert torch.isfinite(loss) and torch.isfinite(s.grad).all()
+    assert loss.item() == pytest.approx(
+        dino_loss_reference(s.detach(), t, center, 0.1, 0.04), rel=1e-4
+    )
+    if case == "constant_logits":
+        assert loss.item() == pytest.approx(math.log(k), rel=1e-6)
+
+
+def test_dino_loss_shape_errors():
+    with pytest.raises(ValueError, match="at least one student crop"):
+        dino_loss(torch.zeros(1, 2, 8), torch.zeros(1, 2, 8), torch.zeros(8), 0.1, 0.04)
+    with pytest.raises(ValueError, match="does not match"):
+        dino_loss(torch.zeros(4, 2, 8), torch.zeros(2, 3, 8), torch.zeros(8), 0.1, 0.04)
+    with pytest.raises(ValueError, match="temperatures"):
+        dino_loss(torch.zeros(4, 2, 8), torch.zeros(2, 2, 8), torch.zeros(8), 0.1, 0.0)
+
+
+def test_dino_head_outputs_cosines_to_prototypes():
+    torch.manual_seed(3)
+    head = DINOHead(24, 50, 32, 16)
+    out = head(torch.randn(7, 24))
+    assert out.shape == (7, 50)
+    assert out.abs().max() <= 1 + 1e-6  # unit bottleneck . unit prototype rows
+
+
+def test_multi_crop_shapes_are_seeded():
+    x = torch.rand(3, 3, 56, 56, generator=torch.Generator().manual_seed(4))
+    a = multi_crop(x, torch.Generator().manual_seed(5), global_size=56, local_size=28, n_local=3)
+    b = multi_crop(x, torch.Generator().manual_seed(5), global_size=56, local_size=28, n_local=3)
+    c = multi_crop(x, torch.Generator().manual_seed(6), global_size=56, local_size=28, n_local=3)
+    assert [tuple(v.shape) for v in a] == [(3, 3, 56, 56)] * 2 + [(3, 3, 28, 28)] * 3
+    assert all(torch.equal(u, v) for u, v in zip(a, b, strict=True))
+    assert not torch.equal(a[0], c[0])
+    assert not torch.equal(a[0], a[1])  # the two global views differ
+
+
+def test_crops_of_a_flat_frame_without_jitter_keep_its_colour_or_its_grey():
+    # any crop/flip of a constant frame is that constant; only random greyscale may change it
+    rgb = torch.tensor([0.8, 0.3, 0.1])
+    x = rgb.view(1, 3, 1, 1).expand(16, 3, 40, 40).contiguous()
+    views = multi_crop(
+        x, torch.Generator().manual_seed(8), global_size=28, local_size=14, n_local=2, jitter=0.0
+    )
+    mean = torch.tensor([0.485, 0.456, 0.406]).view(1, 3, 1, 1)
+    std = torch.tensor([0.229, 0.224, 0.225]).view(1, 3, 1, 1)
+    grey = float((rgb * torch.tensor([0.299, 0.587, 0.114])).sum())
+    n_grey = 0
+    for v in views:
+        back = v * std + mean
+        for img in back:
+            is_rgb = torch.allclose(img, rgb.view(3, 1, 1).expand_as(img), atol=1e-5)
+            is_grey = torch.allclose(img, torch.full_like(img, grey), atol=1e-5)
+            assert is_rgb or is_grey
+            n_grey += int(is_grey)
+    assert 0 < n_grey < 4 * 16  # greyscale is applied to some views, not all
+
+
+def _tiny_images(n: int, seed: int) -> np.ndarray:
+    return np.random.default_rng(seed).integers(0, 256, (n, 30, 30, 3), dtype=np.uint8)
+
+
+def test_pretrain_dino_is_deterministic_and_reports_a_curve():
+    imgs = _tiny_images(12, 0)
+    kw = dict(arch="vit_tiny", image_size=28, epochs=2, batch_size=6, lr=1e-3, seed=11)
+    kw |= dict(n_local_crops=2, local_size=14, out_dim=64, hidden_dim=32, bottleneck_dim=16)
+    msgs: list[str] = []
+    a = pretrain_dino(imgs, progress=msgs.append, **kw)
+    b = pretrain_dino(imgs, **kw)
+    assert len(msgs) == 2 and msgs[0].startswith("dino epoch 1/2")
+    assert a.backbone_state.keys() == build_vit("vit_tiny", img_size=28).state_dict().keys()
+    for k, v in a.backbone_state.items():
+        assert torch.equal(v, b.backbone_state[k]), k
+    strip = [{k: v for k, v in r.items() if k != "seconds"} for r in a.curve]
+    assert strip == [{k: v for k, v in r.items() if k != "seconds"} for r in b.curve]
+    for row in a.curve:
+        assert 0 <= row["teacher_entropy"] <= math.log(64) + 1e-6
+        assert row["kl"] >= -1e-6 and np.isfinite(row["loss"])
+    c = pretrain_dino(imgs, **(kw | {"seed": 12}))
+    assert not torch.equal(a.backbone_state["cls_token"], c.backbone_state["cls_token"])
+    # the global RNG and determinism flag are left as they were
+    assert not torch.are_deterministic_algorithms_enabled()
+    assert torch.utils.deterministic.fill_uninitialized_memory
+
+
+def test_pretrain_dino_moves_the_teacher_and_loads_as_backbone():
+    imgs = _tiny_images(8, 1)
+    res = pretrain_dino(
+        imgs,
+        arch="vit_tiny",
+        image_size=28,
+        epochs=1,
+        batch_size=4,
+        lr=1e-3,
+        seed=0,
+        n_local_crops=2,
+        local_size=14,
+        out_dim=64,
+        hidden_dim=32,
+        bottleneck_dim=16,
+    )
+    torch.manual_seed(0)
+    init = build_vit("vit_tiny", img_size=28).state_dict()
+    assert not torch.equal(
+        init["blocks.0.attn.qkv.weight"], res.backbone_state["blocks.0.attn.qkv.weight"]
+    )
+    model = res.backbone()
+    assert not model.training and model.pos_embed.shape == (1, 5, 192)
+
+
+def test_pretrain_dino_degenerate_data_stays_finite():
+    # all frames identical, and a single frame: every batch is degenerate
+    one = np.full((1, 28, 28, 3), 90, np.uint8)
+    kw = dict(
+        arch="vit_tiny",
+        image_size=28,
+        epochs=2,
+        lr=1e-3,
+        seed=0,
+        n_local_crops=1,
+        local_size=14,
+        out_dim=32,
+        hidden_dim=16,
+        bottleneck_dim=8,
+    )
+    for imgs, bs in ((np.repeat(one, 6, axis=0), 3), (one, 4)):
+        res = pretrain_dino(imgs, batch_size=bs, **kw)
+        assert all(np.isfinite(r["loss"]) for r in res.curve)
+        assert all(torch.isfinite(v).all() for v in res.backbone_state.values())
+
+
+def test_pretrain_dino_input_errors():
+    imgs = _tiny_images(4, 2)
+    kw = dict(arch="vit_tiny", epochs=1, batch_size=2, lr=1e-3, seed=0)
+    with pytest.raises(ValueError, match="multiple of 14"):
+        pretrain_dino(imgs, image_size=30, **kw)
+    with pytest.raises(ValueError, match="uint8 frames"):
+        pretrain_dino(imgs.astype(np.float32), image_size=28, **kw)
+    with pytest.raises(ValueError, match="unknown ViT arch"):
+        pretrain_dino(imgs, image_size=28, **(kw | {"arch": "vit_giant"}))
