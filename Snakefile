@@ -24,10 +24,14 @@ wildcard_constraints:
 
 
 include: "rules/corpus.smk"
+include: "rules/preprocess.smk"
+include: "rules/features.smk"
+include: "rules/align.smk"
+include: "rules/probes.smk"
 include: "rules/report.smk"
 
 
 rule all:
     default_target: True
     input:
-        all_outputs(),
+        TARGETS,

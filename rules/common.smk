@@ -42,22 +42,15 @@ def corpus_edge(corpus, what="samples"):
     return f"results/corpus/{corpus}/{what}.parquet"
 
 
-def all_outputs():
-    outs = [
-        "results/corpus/manifest.parquet",
-        "results/corpus/splits.parquet",
-        "results/report/edge_manifest.html",
-    ]
-    outs += expand(
-        "results/report/corpus/{corpus}_examples.png", corpus=sorted(CORPORA)
-    )
-    return outs
+# Each stage's .smk appends what it keeps: TARGETS feed `rule all`, EDGES the edge manifest.
+TARGETS = ["results/corpus/manifest.parquet", "results/corpus/splits.parquet"]
+EDGES = ["results/corpus/manifest.parquet", "results/corpus/splits.parquet"]
+for _corpus in sorted(CORPORA):
+    EDGES += [corpus_edge(_corpus), corpus_edge(_corpus, "sensors")]
 
 
-def all_edges():
-    """Every edge the DAG keeps (the report lists them with their SHA-256)."""
-    out = []
-    for corpus in sorted(CORPORA):
-        out += [corpus_edge(corpus), corpus_edge(corpus, "sensors")]
-    out += ["results/corpus/manifest.parquet", "results/corpus/splits.parquet"]
-    return out
+def feature_edge(corpus, modality, variant=None):
+    """The frozen-feature edge of a corpus: vision, or tactile for one preprocessing variant."""
+    if modality == "vision":
+        return f"results/features/{corpus}/vision.parquet"
+    return f"results/features/{corpus}/tactile~{variant}.parquet"

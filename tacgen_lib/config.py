@@ -90,6 +90,48 @@ def validate_config(config: dict, schema_path: str | Path, *, source: str = "con
                 f"{source}: splits.by_scale.{name}: unknown corpus {name!r} "
                 f"(corpora: {', '.join(sorted(config['corpora']))})"
             )
+    corpora = set(config["corpora"])
+    refs = [
+        ("features.pretrain.corpus", config["features"]["pretrain"]["corpus"]),
+        ("features.worth_it.corpus", config["features"]["worth_it"]["corpus"]),
+    ]
+    refs += [(f"align.corpora[{i}]", c) for i, c in enumerate(config["align"]["corpora"])]
+    for fam, spec in config["probes"]["families"].items():
+        refs += [
+            (f"probes.families.{fam}.corpus", spec["corpus"]),
+            (f"probes.families.{fam}.heads_from", spec["heads_from"]),
+        ]
+    for key, name in refs:
+        if name not in corpora:
+            raise ConfigError(
+                f"{source}: {key}: unknown corpus {name!r} (corpora: {', '.join(sorted(corpora))})"
+            )
+    for fam, spec in config["probes"]["families"].items():
+        if spec["heads_from"] not in config["align"]["corpora"]:
+            raise ConfigError(
+                f"{source}: probes.families.{fam}.heads_from: {spec['heads_from']!r} is not in align.corpora, "
+                "so no heads are trained on it"
+            )
+    variants = set(config["preprocess"]["variants"])
+    vrefs = [
+        ("features.pretrain.variant", config["features"]["pretrain"]["variant"]),
+        ("probes.heads.variant", config["probes"]["heads"]["variant"]),
+    ]
+    vrefs += [(f"align.variants[{i}]", v) for i, v in enumerate(config["align"]["variants"])]
+    for key, name in vrefs:
+        if name not in variants:
+            raise ConfigError(f"{source}: {key}: variant {name!r} is not in preprocess.variants")
+    heads = config["probes"]["heads"]
+    if heads["variant"] not in config["align"]["variants"]:
+        raise ConfigError(
+            f"{source}: probes.heads.variant: {heads['variant']!r} is not in align.variants"
+        )
+    if heads["tau"] not in config["align"]["taus"]:
+        raise ConfigError(f"{source}: probes.heads.tau: {heads['tau']} is not in align.taus")
+    if heads["n_train"] not in config["align"]["n_train"]:
+        raise ConfigError(
+            f"{source}: probes.heads.n_train: {heads['n_train']} is not in align.n_train"
+        )
     fr = config["splits"]["fractions"]
     if abs(sum(fr.values()) - 1.0) > 1e-9:
         raise ConfigError(f"{source}: splits.fractions: must sum to 1, got {sum(fr.values()):g}")

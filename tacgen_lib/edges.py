@@ -39,6 +39,7 @@ __all__ = [
     "join",
     "sha256_file",
     "sidecar_path",
+    "record_file",
     "atomic_write_bytes",
 ]
 
@@ -214,6 +215,27 @@ def write(
         sidecar_path(path), (json.dumps(sidecar, indent=1, sort_keys=True) + "\n").encode()
     )
     atomic_write_bytes(path, data)
+    return digest
+
+
+def record_file(path: str | os.PathLike, *, producer: str = "", kind: str = "weights") -> str:
+    """Hash a non-Parquet output (model weights, a table file) into its sidecar manifest, so it
+    is verified by `verify` and listed in the report like an edge. Returns the SHA-256."""
+    path = Path(path)
+    digest = sha256_file(path)
+    sidecar = {
+        "file": path.name,
+        "sha256": digest,
+        "rows": None,
+        "key": None,
+        "columns": {},
+        "vectors": {},
+        "producer": producer,
+        "kind": kind,
+    }
+    atomic_write_bytes(
+        sidecar_path(path), (json.dumps(sidecar, indent=1, sort_keys=True) + "\n").encode()
+    )
     return digest
 
 

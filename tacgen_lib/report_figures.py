@@ -70,3 +70,32 @@ def corpus_example_grid(
     fig.suptitle(f"corpus {title}: examples", fontsize=10)
     fig.tight_layout()
     return fig
+
+
+def pretrain_curve_figure(curve: pd.DataFrame, *, title: str) -> plt.Figure:
+    """DINO loss (and teacher entropy, where recorded) per epoch."""
+    fig, ax = plt.subplots(figsize=(5, 3.2))
+    if len(curve) == 0:
+        ax.text(
+            0.5, 0.5, "loaded from a checkpoint: no pretraining curve", ha="center", va="center"
+        )
+        ax.set_axis_off()
+    else:
+        ax.plot(curve["epoch"], curve["loss"], marker="o", label="DINO loss")
+        ax.set_xlabel("epoch")
+        ax.set_ylabel("loss")
+        if "teacher_entropy" in curve.columns:
+            ax2 = ax.twinx()
+            ax2.plot(
+                curve["epoch"],
+                curve["teacher_entropy"],
+                color="tab:orange",
+                marker=".",
+                label="teacher entropy",
+            )
+            ax2.set_ylabel("teacher entropy (nats)")
+            ax2.legend(loc="upper right", fontsize=7)
+        ax.legend(loc="upper left", fontsize=7)
+    ax.set_title(title, fontsize=9)
+    fig.tight_layout()
+    return fig

@@ -92,6 +92,11 @@ def test_dry_run_plans_the_whole_dag(tmp_path):
         "merge_corpus",
         "fuse_manifest",
         "make_splits",
+        "background_subtract",
+        "pretrain_backbone",
+        "extract_vision_features",
+        "extract_tactile_features",
+        "pretrained_vs_random",
         "edge_manifest",
         "corpus_examples",
     ):
@@ -138,9 +143,9 @@ def test_changed_library_module_reruns_only_its_users(run_dir, tmp_path):
     work = copy_tree(tmp_path / "c")
     shutil.copytree(run_dir / "results", work / "results")
     shutil.copytree(run_dir / ".snakemake", work / ".snakemake")
-    splits_py = work / "tacgen_lib/splits.py"
-    splits_py.write_text(splits_py.read_text() + "\n# an edit that changes the module's content\n")
-    assert set(planned_rules(work)) == {"make_splits", "corpus_examples", "edge_manifest", "all"}
+    module = work / "tacgen_lib/backbone_check.py"
+    module.write_text(module.read_text() + "\n# an edit that changes the module's content\n")
+    assert set(planned_rules(work)) == {"pretrained_vs_random", "edge_manifest", "all"}
 
 
 def test_two_clean_runs_give_identical_edges(run_dir, tmp_path):

@@ -1,0 +1,162 @@
+"""Features stage: a DINOv2-architecture backbone per modality, frozen features per corpus."""
+
+FEAT = config["features"]
+PRETRAIN = FEAT["pretrain"]
+MODALITIES = ["vision", "tactile"]
+for _corpus in sorted(CORPORA):
+    TARGETS.append(feature_edge(_corpus, "vision"))
+    EDGES.append(feature_edge(_corpus, "vision"))
+    for _variant in VARIANTS:
+        TARGETS.append(feature_edge(_corpus, "tactile", _variant))
+        EDGES.append(feature_edge(_corpus, "tactile", _variant))
+TARGETS += ["results/features/pretrain_vs_random.html"]
+EDGES += expand("results/features/backbones/{m}.pt", m=MODALITIES)
+EDGES += ["results/features/pretrain_vs_random.parquet"]
+
+
+def backbone_frames(modality, corpus):
+    """The frames a modality's backbone sees: RGB from the corpus edge, tactile_proc per variant."""
+    if modality == "vision":
+        return corpus_edge(corpus)
+    return f"results/preprocess/{corpus}/{PRETRAIN['variant']}.parquet"
+
+
+rule pretrain_backbone:
+    """DINO self-distillation on the pretraining corpus's train split only (or an official checkpoint)."""
+    input:
+        frames=lambda w: backbone_frames(w.modality, PRETRAIN["corpus"]),
+        splits="results/corpus/splits.parquet",
+        code=lib(
+            "dino.py",
+            "vit.py",
+            "features.py",
+            "frames.py",
+            "splits.py",
+            "report_figures.py",
+        ),
+    output:
+        weights="results/features/backbones/{modality}.pt",
+        curve="results/features/backbones/{modality}_curve.parquet",
+        figure=report(
+            "results/report/features/{modality}_pretrain_curve.png",
+            caption="../workflow/report/pretrain_curve.rst",
+            category="Features",
+            subcategory="Backbone pretraining",
+            labels={"modality": "{modality}", "figure": "DINO training curve"},
+        ),
+    log:
+        "results/logs/pretrain_backbone/{modality}.log",
+    benchmark:
+        "results/benchmarks/pretrain_backbone/{modality}.tsv"
+    wildcard_constraints:
+        modality="vision|tactile",
+    conda:
+        "../envs/features.yaml"
+    threads: 2
+    resources:
+        mem_mb=6000,
+        runtime=120,
+    params:
+        backbone=lambda w: FEAT["backbones"][w.modality],
+        pretrain=PRETRAIN,
+        image_size=FEAT["image_size"],
+    script:
+        "../workflow/scripts/pretrain_backbone.py"
+
+
+rule extract_vision_features:
+    """Frozen vision backbone (CLS or mean-patch) and pixel-V for every RGB frame of a corpus."""
+    input:
+        frames=corpus_edge("{corpus}"),
+        weights="results/features/backbones/vision.pt",
+        code=lib("features.py", "vit.py", "frames.py"),
+    output:
+        feature_edge("{corpus}", "vision"),
+    log:
+        "results/logs/extract_features/{corpus}/vision.log",
+    benchmark:
+        "results/benchmarks/extract_features/{corpus}/vision.tsv"
+    conda:
+        "../envs/features.yaml"
+    threads: 2
+    resources:
+        mem_mb=4000,
+        runtime=30,
+    params:
+        features=FEAT,
+        column="rgb",
+    script:
+        "../workflow/scripts/extract_features.py"
+
+
+rule extract_tactile_features:
+    """Frozen tactile backbone and pixel-T for every background-subtracted frame of one variant."""
+    input:
+        frames="results/preprocess/{corpus}/{variant}.parquet",
+        weights="results/features/backbones/tactile.pt",
+        code=lib("features.py", "vit.py", "frames.py"),
+    output:
+        feature_edge("{corpus}", "tactile", "{variant}"),
+    log:
+        "results/logs/extract_features/{corpus}/tactile~{variant}.log",
+    benchmark:
+        "results/benchmarks/extract_features/{corpus}/tactile~{variant}.tsv"
+    wildcard_constraints:
+        variant=one_of(VARIANTS),
+    conda:
+        "../envs/features.yaml"
+    threads: 2
+    resources:
+        mem_mb=4000,
+        runtime=30,
+    params:
+        features=FEAT,
+        column="tactile_proc",
+    script:
+        "../workflow/scripts/extract_features.py"
+
+
+rule pretrained_vs_random:
+    """Linear probes on pretrained vs random-init backbone features, with a bootstrap CI."""
+    input:
+        vision=corpus_edge(FEAT["worth_it"]["corpus"]),
+        tactile=backbone_frames("tactile", FEAT["worth_it"]["corpus"]),
+        pretrained_vision=feature_edge(FEAT["worth_it"]["corpus"], "vision"),
+        pretrained_tactile=feature_edge(
+            FEAT["worth_it"]["corpus"], "tactile", PRETRAIN["variant"]
+        ),
+        manifest="results/corpus/manifest.parquet",
+        splits="results/corpus/splits.parquet",
+        code=lib(
+            "backbone_check.py",
+            "features.py",
+            "vit.py",
+            "frames.py",
+            "probes.py",
+            "stats.py",
+            "report_tables.py",
+        ),
+    output:
+        table="results/features/pretrain_vs_random.parquet",
+        html=report(
+            "results/features/pretrain_vs_random.html",
+            caption="../workflow/report/pretrain_vs_random.rst",
+            category="Features",
+            subcategory="Backbone pretraining",
+            labels={"table": "pretrained vs random init"},
+        ),
+    log:
+        "results/logs/pretrained_vs_random.log",
+    benchmark:
+        "results/benchmarks/pretrained_vs_random.tsv"
+    conda:
+        "../envs/features.yaml"
+    threads: 2
+    resources:
+        mem_mb=4000,
+        runtime=30,
+    params:
+        features=FEAT,
+        C=[0.1, 1.0, 10.0],
+    script:
+        "../workflow/scripts/pretrained_vs_random.py"

@@ -1,0 +1,79 @@
+"""Image columns of corpus edges as uint8 arrays: decoding, per-sensor backgrounds, variants.
+
+Edges carry PNG bytes (tacgen_lib.images); the numerics want (N, H, W, 3) uint8 stacks. This
+module does that conversion once, with errors that name the edge, the column and the sample.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+import pandas as pd
+
+from tacgen_lib.images import decode_png, encode_png
+from tacgen_lib.preprocess import background_subtract
+
+__all__ = ["decode_frames", "sensor_background_map", "subtract_backgrounds"]
+
+
+def decode_frames(frame: pd.DataFrame, column: str, *, where: str = "edge") -> np.ndarray:
+    """Stack the PNG images of `column` into (N, H, W, 3) uint8; all frames must share a shape."""
+    if column not in frame.columns:
+        raise ValueError(f"{where}: no image column {column!r}")
+    out: np.ndarray | None = None
+    for i, (sid, data) in enumerate(zip(frame["sample_id"], frame[column], strict=True)):
+        if data is None:
+            raise ValueError(f"{where}: sample_id {sid!r} has no image in column {column!r}")
+        img = decode_png(data, where=f"{where}: sample_id {sid!r} column {column!r}")
+        if out is None:
+            out = np.empty((len(frame), *img.shape), dtype=np.uint8)
+        elif img.shape != out.shape[1:]:
+            raise ValueError(
+                f"{where}: sample_id {sid!r} has a {img.shape} image in column {column!r}, "
+                f"the others are {out.shape[1:]}"
+            )
+        out[i] = img
+    return out if out is not None else np.empty((0, 1, 1, 3), dtype=np.uint8)
+
+
+def sensor_background_map(
+    sensors: pd.DataFrame, *, where: str = "sensors"
+) -> dict[str, np.ndarray]:
+    """sensor_id -> decoded background image."""
+    return {
+        sid: decode_png(data, where=f"{where}: sensor {sid!r}")
+        for sid, data in zip(sensors["sensor_id"], sensors["background"], strict=True)
+    }
+
+
+def subtract_backgrounds(
+    samples: pd.DataFrame,
+    backgrounds: dict[str, np.ndarray],
+    variant: str,
+    *,
+    where: str = "samples",
+    progress: Callable[[int], None] | None = None,
+) -> pd.DataFrame:
+    """Apply one background-subtraction variant to every tactile frame, each with its own
+    sensor's background. Returns sample_id, sensor_id and `tactile_proc` (PNG bytes).
+
+    A sample whose sensor has no background is an error naming the sensor and the sample_id.
+    """
+    out = []
+    for i, row in enumerate(samples[["sample_id", "sensor_id", "tactile"]].itertuples(index=False)):
+        sid, sensor, data = row
+        if sensor not in backgrounds:
+            raise ValueError(
+                f"{where}: sample_id {sid!r} was recorded by sensor {sensor!r}, which has no "
+                f"background image (sensors with one: {sorted(backgrounds)})"
+            )
+        tac = decode_png(data, where=f"{where}: sample_id {sid!r} column 'tactile'")
+        try:
+            proc = background_subtract(tac, backgrounds[sensor], variant)
+        except ValueError as exc:
+            raise ValueError(f"{where}: sample_id {sid!r} (sensor {sensor!r}): {exc}") from exc
+        out.append((sid, sensor, encode_png(proc, compression=1)))
+        if progress is not None:
+            progress(i + 1)
+    return pd.DataFrame(out, columns=["sample_id", "sensor_id", "tactile_proc"])

@@ -1,0 +1,27 @@
+"""Frozen ViT features and pixel features for every frame of an edge (rules extract_*_features)."""
+
+import torch
+
+from tacgen_lib import edges, log
+from tacgen_lib.features import extract_features, pixel_features
+from tacgen_lib.frames import decode_frames
+from tacgen_lib.vit import load_backbone
+
+logger = log.for_rule(snakemake)
+torch.set_num_threads(snakemake.threads)
+cfg, column = snakemake.params.features, snakemake.params.column
+frames = edges.read(snakemake.input.frames, columns=[column])
+images = decode_frames(frames.frame, column, where=snakemake.input.frames)
+model = load_backbone(snakemake.input.weights)
+logger.info("%d frames %s -> %s features", len(images), images.shape[1:], cfg["pool"])
+vit = extract_features(
+    model, images, image_size=cfg["image_size"], batch_size=cfg["batch_size"], pool=cfg["pool"]
+)
+pixel = pixel_features(images, size=tuple(cfg["pixel_size"]))
+edges.write(
+    snakemake.output[0],
+    frames.frame[["sample_id"]],
+    {"vit": vit, "pixel": pixel},
+    producer=snakemake.rule,
+)
+logger.info("wrote vit[%d] and pixel[%d] for %d samples", vit.shape[1], pixel.shape[1], len(vit))

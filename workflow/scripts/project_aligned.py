@@ -1,0 +1,38 @@
+"""Aligned projections of every sample of a target corpus by one cell's heads (rule project_aligned)."""
+
+import pandas as pd
+import torch
+
+from tacgen_lib import align, edges, log
+
+logger = log.for_rule(snakemake)
+torch.set_num_threads(snakemake.threads)
+feature, target = snakemake.params.feature, snakemake.wildcards.target
+
+heads = align.load_heads(snakemake.input.heads)
+vision = edges.read(snakemake.input.v, columns=[feature], require={feature: "vector"})
+tactile = edges.read(snakemake.input.t, columns=[feature], require={feature: "vector"})
+ids = sorted(vision.ids)
+if set(ids) != set(tactile.ids):
+    odd = sorted(set(ids) ^ set(tactile.ids))[0]
+    raise edges.EdgeError(
+        f"{snakemake.input.v} and {snakemake.input.t}: sample_id {odd!r} is in only one of the "
+        "two feature edges; rebuild the features of corpus " + repr(target)
+    )
+try:
+    v_aligned, t_aligned = align.project(
+        heads, vision.subset(ids).vectors[feature], tactile.subset(ids).vectors[feature]
+    )
+except ValueError as exc:
+    raise ValueError(
+        f"rule project_aligned: heads {snakemake.input.heads} cannot project {feature!r} features "
+        f"of corpus {target!r} ({exc}); both corpora need the same feature dimensions"
+    ) from exc
+frame = pd.DataFrame({"sample_id": ids, "corpus": target})
+edges.write(
+    snakemake.output[0],
+    frame,
+    {"v_aligned": v_aligned, "t_aligned": t_aligned},
+    producer=snakemake.rule,
+)
+logger.info("projected %d samples of %s to %d-d", len(ids), target, v_aligned.shape[1])
