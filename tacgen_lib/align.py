@@ -14,29 +14,37 @@ This module owns:
   gradient clipping, early stopping on the held-out validation loss keeping the best weights,
   seeded shuffling, bit-for-bit reproducible on CPU for a given seed and thread count) with two
   budgets, ``"epochs"`` and ``"steps"``;
-- persistence and use: `save_heads` / `load_heads` (torch.save with deterministic content),
-  `project` (features -> aligned, l2-normalised 128-d float32 projections).
+- persistence and use: `save_heads` / `load_heads` (torch.save with deterministic content,
+  hashed like an edge: a `<file>.sha256.json` sidecar, verified on load), `project`
+  (features -> aligned, l2-normalised 128-d float32 projections);
+- one grid cell of the alignment stage: `cell_ids` (the corpus's train/val/test rows, the
+  train rows cut to `n_train` by `train_subset`) and `fit_cell` (split guard, `fit_heads`,
+  retrieval on the held-out test rows, the training curve as a table).
 
 Retrieval metrics (top-k, median rank) live in `tacgen_lib.retrieval`.
 """
 
 from __future__ import annotations
 
+import hashlib
 import io
+import json
 import math
 import os
-import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Literal
 
 import numpy as np
+import pandas as pd
 import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from tacgen_lib import edges
 from tacgen_lib.retrieval import paired_retrieval
+from tacgen_lib.splits import assert_trainable, ids_in_split
 
 __all__ = [
     "HIDDEN_DIM",
@@ -55,6 +63,11 @@ __all__ = [
     "project",
     "save_heads",
     "load_heads",
+    "parse_n_train",
+    "train_subset",
+    "cell_ids",
+    "CellFit",
+    "fit_cell",
 ]
 
 HIDDEN_DIM = 512
@@ -551,34 +564,48 @@ def _payload(result: AlignResult) -> dict[str, Any]:
     }
 
 
-def save_heads(result: AlignResult, path: str | os.PathLike[str]) -> None:
-    """Write the best heads, dims, config and curve with torch.save, atomically.
+def save_heads(result: AlignResult, path: str | os.PathLike[str], *, producer: str = "") -> str:
+    """Write the best heads, dims, config and curve with torch.save, atomically; returns SHA-256.
 
     The content is deterministic: wall-clock seconds are not stored and the bytes are
     serialised in memory (so the zip's internal folder name does not depend on a temp file
     name) before a temp-file + rename. Same fit => same file bytes.
+    Like an edge, the file gets a `<file>.sha256.json` sidecar (written first, see
+    `tacgen_lib.edges`) naming its hash, the two heads' shapes and the producing rule, so the
+    report's edge manifest lists it and `load_heads` refuses a file changed after it was written.
     """
     buf = io.BytesIO()
     torch.save(_payload(result), buf)
-    path = os.fspath(path)
-    folder = os.path.dirname(os.path.abspath(path))
-    os.makedirs(folder, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=folder, prefix=".heads-", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(buf.getvalue())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    data = buf.getvalue()
+    dims = result.dims
+    layers = f"{dims['hidden_dim']}->{dims['out_dim']}"
+    sidecar = {
+        "file": os.path.basename(os.fspath(path)),
+        "sha256": hashlib.sha256(data).hexdigest(),
+        "rows": 2,
+        "key": "head",
+        "columns": {
+            "vision": f"mlp {dims['in_dim_v']}->{layers}",
+            "tactile": f"mlp {dims['in_dim_t']}->{layers}",
+        },
+        "vectors": {},
+        "producer": producer,
+    }
+    edges.atomic_write_bytes(
+        edges.sidecar_path(path), (json.dumps(sidecar, indent=1, sort_keys=True) + "\n").encode()
+    )
+    edges.atomic_write_bytes(path, data)
+    return sidecar["sha256"]
 
 
-def load_heads(path: str | os.PathLike[str]) -> AlignHeads:
+def load_heads(path: str | os.PathLike[str], *, verify: bool = True) -> AlignHeads:
     """Load heads written by `save_heads` as an `AlignHeads` module in eval mode.
 
+    verify: check the file's SHA-256 against its sidecar first (`edges.verify`).
     The stored metadata (config, curve, best_step...) is attached as ``heads.meta``.
     """
+    if verify:
+        edges.verify(path)
     try:
         payload = torch.load(os.fspath(path), map_location="cpu", weights_only=True)
     except Exception as exc:  # noqa: BLE001 - re-raised with the file named
@@ -588,3 +615,168 @@ def load_heads(path: str | os.PathLike[str]) -> AlignHeads:
     heads = _heads_from_state(payload["dims"], payload)
     heads.meta = {k: v for k, v in payload.items() if k not in ("vision", "tactile")}
     return heads
+
+
+# --------------------------------------------------------------------------------------------
+# One grid cell of the alignment stage
+# --------------------------------------------------------------------------------------------
+
+
+def parse_n_train(text: str | int) -> int | Literal["all"]:
+    """A training size as written in config or a path: ``"all"`` or an integer >= 2."""
+    if text == "all":
+        return "all"
+    try:
+        n = int(text)
+    except (TypeError, ValueError):
+        n = -1
+    if n < 2 or str(n) != str(text).strip():
+        raise ValueError(f"n_train must be 'all' or an integer >= 2, got {text!r}")
+    return n
+
+
+def train_subset(
+    train_ids: Sequence[str] | np.ndarray, n_train: int | str, seed: int
+) -> np.ndarray:
+    """The alignment-train rows of one cell: all train ids, or a seeded random subset of them.
+
+    Ids are sorted first, so the result depends only on the set of ids, `n_train` and `seed`.
+    For one seed the subsets are nested (the first n of one seeded permutation), so a larger
+    N adds rows to a smaller one. Returned sorted.
+    """
+    ids = np.sort(np.asarray(list(train_ids), dtype=object))
+    n = parse_n_train(n_train)
+    if n == "all":
+        return ids
+    if n > ids.size:
+        raise ValueError(
+            f"n_train={n} but the train split has only {ids.size} rows; "
+            "lower align.n_train or use 'all'"
+        )
+    order = np.random.default_rng(seed).permutation(ids.size)
+    return np.sort(ids[order[:n]])
+
+
+def cell_ids(
+    splits: pd.DataFrame, *, corpus: str, n_train: int | str, seed: int
+) -> dict[str, np.ndarray]:
+    """train (cut to `n_train` by `train_subset`), val and test sample ids of one corpus."""
+    out = {name: np.sort(ids_in_split(splits, name, corpus)) for name in ("train", "val", "test")}
+    for name, ids in out.items():
+        if ids.size == 0:
+            raise ValueError(
+                f"corpus {corpus!r} has no {name!r} rows in the split edge; alignment needs "
+                "train, val (early stopping) and test (retrieval) rows: check config splits"
+            )
+    out["train"] = train_subset(out["train"], n_train, seed)
+    return out
+
+
+@dataclass
+class CellFit:
+    """What `fit_cell` returns: the fit, its test-split retrieval metrics and its curve table."""
+
+    result: AlignResult
+    metrics: dict[str, Any]
+    curve: pd.DataFrame
+
+
+def fit_cell(
+    vision: edges.Edge,
+    tactile: edges.Edge,
+    splits: pd.DataFrame,
+    ids: dict[str, Sequence[str] | np.ndarray],
+    *,
+    feature: str,
+    tau: float,
+    seed: int,
+    rule: str = "train_heads",
+    progress: Callable[[str], Any] | None = None,
+    **train: Any,
+) -> CellFit:
+    """Train one alignment cell and evaluate it on held-out pairs (paper eq. 1, retrieval).
+
+    vision, tactile: the corpus's feature edges (keyed by sample_id); `feature` names the
+    vector column both use (``vit`` or ``pixel``). ids: {"train", "val", "test"} sample ids
+    (from `cell_ids`). The split guard runs first: `assert_trainable` refuses any train id not
+    in the train split and any validation id not in the val split (validation rows only steer
+    early stopping), naming the rule and the sample_id. Rows are joined on sample_id, never on
+    order. `train` holds `fit_heads`'s keyword arguments (budget, epochs, steps, batch_size,
+    lr, weight_decay, warmup_frac, clip_grad, patience, eval_every).
+
+    metrics: `paired_retrieval` of the projected test rows (top1/top5 both ways, median ranks,
+    chance levels), n_test, n_train_rows, n_val, best-step validation loss, best_step,
+    steps_run, stopped_early. curve: one row per evaluation, keyed by ``eval`` = "step~<k>".
+    """
+    train_ids = list(ids["train"])
+    val_ids = list(ids["val"])
+    test_ids = list(ids["test"])
+    assert_trainable(train_ids, splits, rule=rule, allowed=("train",))
+    assert_trainable(val_ids, splits, rule=rule, allowed=("val",))
+    held = set(test_ids) & (set(train_ids) | set(val_ids))
+    if held:
+        raise ValueError(
+            f"rule {rule}: sample_id {sorted(held)[0]!r} is both a test row and a training row"
+        )
+    for edge in (vision, tactile):
+        if feature not in edge.vectors:
+            raise edges.EdgeError(
+                f"{edge.path}: no vector column {feature!r} (has: {sorted(edge.vectors)}); "
+                "align.features must name a column of the feature edges"
+            )
+    fit_ids = train_ids + val_ids
+    v = vision.subset(fit_ids).vectors[feature]
+    t = tactile.subset(fit_ids).vectors[feature]
+    n_tr = len(train_ids)
+    result = fit_heads(
+        v,
+        t,
+        np.arange(n_tr),
+        np.arange(n_tr, len(fit_ids)),
+        tau=tau,
+        seed=seed,
+        progress=progress,
+        **train,
+    )
+    z_v, z_t = project(
+        result, vision.subset(test_ids).vectors[feature], tactile.subset(test_ids).vectors[feature]
+    )
+    retrieval = paired_retrieval(z_v, z_t)
+    metrics: dict[str, Any] = {
+        "budget": str(result.config["budget"]),
+        "val_loss": float(result.best_val_loss),
+        **{k: float(retrieval[k]) for k in _RETRIEVAL_KEYS},
+        "n_test": int(retrieval["n"]),
+        "n_train_rows": n_tr,
+        "n_val": len(val_ids),
+        "best_step": int(result.best_step),
+        "steps_run": int(result.steps_run),
+        "stopped_early": bool(result.stopped_early),
+    }
+    curve = pd.DataFrame(
+        [
+            {
+                "eval": f"step~{int(c['step'])}",
+                "step": int(c["step"]),
+                "epoch": float(c["epoch"]),
+                "lr": float(c["lr"]),
+                "train_loss": np.nan if c["train_loss"] is None else float(c["train_loss"]),
+                "val_loss": float(c["val_loss"]),
+                "val_top1": float(c["val_top1"]),
+            }
+            for c in result.curve
+        ]
+    )
+    return CellFit(result=result, metrics=metrics, curve=curve)
+
+
+_RETRIEVAL_KEYS = (
+    "top1_v2t",
+    "top1_t2v",
+    "top5_v2t",
+    "top5_t2v",
+    "median_rank_v2t",
+    "median_rank_t2v",
+    "chance_top1",
+    "chance_top5",
+)

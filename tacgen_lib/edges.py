@@ -120,6 +120,8 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> None:
 
 
 def _check_key(ids: pd.Series, where: str, key: str) -> None:
+    if len(ids) == 0:
+        return
     if ids.isna().any():
         row = int(np.flatnonzero(ids.isna().to_numpy())[0])
         raise EdgeError(f"{where}: column {key!r} has a null {key} at row {row}")

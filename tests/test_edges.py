@@ -179,3 +179,13 @@ def test_subset_names_unknown_id(tmp_path):
     edges.write(path, _frame())
     with pytest.raises(EdgeError, match="sample_id 'p-9999' is not in this edge"):
         edges.read(path).subset(["p-0001", "p-9999"])
+
+
+def test_empty_edge_round_trips(tmp_path):
+    path = tmp_path / "e.parquet"
+    edges.write(
+        path,
+        pd.DataFrame({"epoch_id": pd.Series([], dtype=object), "loss": pd.Series([], dtype=float)}),
+        key="epoch_id",
+    )
+    assert len(edges.read(path)) == 0

@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 import pytest
+import yaml
 
 pytestmark = pytest.mark.workflow
 
@@ -201,17 +202,45 @@ def test_real_corpus_path_runs_on_fixtures(tmp_path):
     write_ssvtp_fixture(data, n=12)
     write_hct_fixture(data, n_traj=2, per_traj=4)
     work = copy_tree(tmp_path / "real")
-    (work / "config/real.yaml").write_text(
-        f"""run_name: real-fixture
-scenes_file: config/scenes.yaml
-corpora:
-  ssvtp: {{kind: ssvtp, root: {data}}}
-  hct: {{kind: hct, root: {data}}}
-splits: {{seed: 42, fractions: {{train: 0.7, val: 0.1, test: 0.2}}}}
-align: {{seeds: [42], taus: [0.07]}}
-report: {{examples_per_corpus: 2}}
-"""
-    )
+    from snakemake.utils import update_config
+
+    cfg = yaml.safe_load((work / "config/config.yaml").read_text())
+    update_config(cfg, yaml.safe_load((work / "config/test.yaml").read_text()))
+    cfg["run_name"] = "real-fixture"
+    cfg["corpora"] = {
+        "ssvtp": {"kind": "ssvtp", "root": str(data)},
+        "hct": {"kind": "hct", "root": str(data)},
+    }
+    cfg["splits"].pop("by_scale")
+    cfg["features"]["pretrain"]["corpus"] = "ssvtp"
+    cfg["features"]["worth_it"]["corpus"] = "ssvtp"
+    cfg["align"]["corpora"] = ["ssvtp"]
+    # the official-checkpoint path: a ViT-S/14 state dict in DINOv2's key format (random
+    # weights, 518-px position grid as released), loaded and interpolated instead of pretraining
+    import torch
+
+    from tacgen_lib.vit import build_vit
+
+    ckpt = tmp_path / "dinov2_vits14_pretrain.pth"
+    torch.manual_seed(0)
+    torch.save(build_vit("vit_small", img_size=518).state_dict(), ckpt)
+    cfg["features"]["backbones"]["vision"] = {"arch": "vit_small", "checkpoint": str(ckpt)}
+    cfg["probes"]["families"] = {
+        "hardness": {
+            "corpus": "ssvtp",
+            "heads_from": "ssvtp",
+            "target": "hardness",
+            "kind": "logistic",
+            "vision": "vit",
+        }
+    }
+    (work / "config/real.yaml").write_text(yaml.safe_dump(cfg))
+    targets = [
+        "results/features/ssvtp/vision.parquet",
+        "results/features/hct/tactile~clip128.parquet",
+        "results/report/corpus/ssvtp_examples.png",
+        "results/report/corpus/hct_examples.png",
+    ]
     proc = subprocess.run(
         [
             *SNAKEMAKE,
@@ -220,6 +249,7 @@ report: {{examples_per_corpus: 2}}
             "--configfile",
             "config/real.yaml",
             "--replace-workflow-config",
+            *targets,
         ],
         cwd=work,
         capture_output=True,
@@ -230,3 +260,6 @@ report: {{examples_per_corpus: 2}}
     manifest = edges.read(work / "results/corpus/manifest.parquet").frame
     assert manifest["corpus"].value_counts().to_dict() == {"ssvtp": 12, "hct": 8}
     assert (work / "results/report/corpus/ssvtp_examples.png").stat().st_size > 1000
+    assert len(edges.read(work / "results/features/hct/tactile~clip128.parquet")) == 8
+    vision = edges.read(work / "results/features/ssvtp/vision.parquet", require={"vit": 384})
+    assert len(vision) == 12  # ViT-S/14 features from the checkpoint

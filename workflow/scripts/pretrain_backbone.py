@@ -47,7 +47,9 @@ else:
     model = result.backbone()
     # wall-clock seconds stay in the log and the benchmark file: the edge must be reproducible
     curve = pd.DataFrame(result.curve).drop(columns=["seconds"], errors="ignore")
-curve.insert(0, "epoch_id", [f"{modality}-{int(e):04d}" for e in curve["epoch"]])
+curve.insert(
+    0, "epoch_id", pd.Series([f"{modality}-{int(e):04d}" for e in curve["epoch"]], dtype=object)
+)
 save_backbone(model, snakemake.output.weights)
 digest = edges.record_file(snakemake.output.weights, producer=snakemake.rule)
 edges.write(snakemake.output.curve, curve, key="epoch_id", producer=snakemake.rule)

@@ -1,0 +1,158 @@
+"""Align stage: symmetric InfoNCE heads per grid cell (paper eq. 1), retrieval, summary."""
+
+
+include: "align_common.smk"
+
+
+for _c in ALIGN_CORPORA:
+    if _c not in CORPORA:
+        raise ValueError(
+            f"config align.corpora: {_c!r} is not a corpus (have {sorted(CORPORA)})"
+        )
+
+TARGETS += align_grid(f"{ALIGN_CELL}/metrics.parquet")
+TARGETS += ["results/align/summary.parquet"]
+TARGETS += expand(
+    f"{ALIGN_REPORT}/{{item}}",
+    item=["tau_ablation.html", "n_scaling.html", "seeds.html", "curves.png"],
+)
+EDGES += ["results/align/metrics.parquet"]
+for _name in ("metrics.parquet", "curve.parquet", "heads.pt"):
+    EDGES += align_grid(f"{ALIGN_CELL}/{_name}")
+
+
+localrules:
+    aggregate_align,
+
+
+rule train_heads:
+    """Symmetric InfoNCE heads on frozen V and T features of one corpus's train split, early-stopped on val."""
+    input:
+        v=lambda w: feature_edge(w.corpus, "vision"),
+        t=lambda w: feature_edge(w.corpus, "tactile", w.variant),
+        splits="results/corpus/splits.parquet",
+        code=lib("align.py", "retrieval.py", "splits.py"),
+    output:
+        heads=f"{ALIGN_CELL}/heads.pt",
+        metrics=f"{ALIGN_CELL}/metrics.parquet",
+        curve=f"{ALIGN_CELL}/curve.parquet",
+    log:
+        "results/logs/train_heads/{corpus}/{variant}/seed~{seed}_tau~{tau}_n~{n_train}.log",
+    benchmark:
+        "results/benchmarks/train_heads/{corpus}/{variant}/seed~{seed}_tau~{tau}_n~{n_train}.tsv"
+    wildcard_constraints:
+        **CELL_CONSTRAINTS,
+        corpus=one_of(ALIGN_CORPORA),
+        variant=one_of(ALIGN["variants"]),
+    conda:
+        "../envs/align.yaml"
+    threads: 2
+    resources:
+        mem_mb=4000,
+        runtime=60,
+    params:
+        feature=ALIGN["features"],
+        train={
+            k: ALIGN[k]
+            for k in (
+                "budget",
+                "epochs",
+                "steps",
+                "batch_size",
+                "lr",
+                "weight_decay",
+                "warmup_frac",
+                "clip_grad",
+                "patience",
+                "eval_every",
+            )
+        },
+    script:
+        "../workflow/scripts/train_heads.py"
+
+
+rule project_aligned:
+    """Aligned 128-d projections of every sample of {target} by the heads trained on {corpus}."""
+    input:
+        heads=f"{ALIGN_CELL}/heads.pt",
+        v=lambda w: feature_edge(w.target, "vision"),
+        t=lambda w: feature_edge(w.target, "tactile", w.variant),
+        code=lib("align.py"),
+    output:
+        f"{ALIGN_CELL}/aligned~{{target}}.parquet",
+    log:
+        "results/logs/project_aligned/{corpus}/{variant}/seed~{seed}_tau~{tau}_n~{n_train}_{target}.log",
+    benchmark:
+        "results/benchmarks/project_aligned/{corpus}/{variant}/seed~{seed}_tau~{tau}_n~{n_train}_{target}.tsv"
+    wildcard_constraints:
+        **CELL_CONSTRAINTS,
+        corpus=one_of(ALIGN_CORPORA),
+        variant=one_of(ALIGN["variants"]),
+        target=one_of(sorted(CORPORA)),
+    conda:
+        "../envs/align.yaml"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    params:
+        feature=ALIGN["features"],
+    script:
+        "../workflow/scripts/project_aligned.py"
+
+
+rule aggregate_align:
+    """One row per grid cell with its train time (benchmark), and the τ, N and seed tables and curves."""
+    input:
+        metrics=align_grid(f"{ALIGN_CELL}/metrics.parquet"),
+        curves=align_grid(f"{ALIGN_CELL}/curve.parquet"),
+        benchmarks=align_grid(
+            "results/benchmarks/train_heads/{corpus}/{variant}/seed~{seed}_tau~{tau}_n~{n_train}.tsv"
+        ),
+        code=lib("align_report.py", "report_tables.py"),
+    output:
+        summary="results/align/summary.parquet",
+        metrics="results/align/metrics.parquet",
+        tau=report(
+            f"{ALIGN_REPORT}/tau_ablation.html",
+            caption="../workflow/report/align_tau.rst",
+            category="Alignment",
+            subcategory="Retrieval",
+            labels={"table": "τ ablation"},
+        ),
+        n_scaling=report(
+            f"{ALIGN_REPORT}/n_scaling.html",
+            caption="../workflow/report/align_n_scaling.rst",
+            category="Alignment",
+            subcategory="Retrieval",
+            labels={"table": "N scaling"},
+        ),
+        seeds=report(
+            f"{ALIGN_REPORT}/seeds.html",
+            caption="../workflow/report/align_seeds.rst",
+            category="Alignment",
+            subcategory="Retrieval",
+            labels={"table": "retrieval over seeds"},
+        ),
+        curves=report(
+            f"{ALIGN_REPORT}/curves.png",
+            caption="../workflow/report/align_curves.rst",
+            category="Alignment",
+            subcategory="Training",
+            labels={"figure": "training curves"},
+        ),
+    log:
+        "results/logs/aggregate_align.log",
+    benchmark:
+        "results/benchmarks/aggregate_align.tsv"
+    conda:
+        "../envs/report.yaml"
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=5,
+    params:
+        n_ref=_align_ref_n(),
+        tau_ref=_align_ref_tau(),
+    script:
+        "../workflow/scripts/aggregate_align.py"

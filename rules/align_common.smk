@@ -1,0 +1,60 @@
+"""Helpers of the align stage (grid expansion, canonical cell paths); included by align.smk.
+
+`aligned_edge(...)` is the entry point other stages (probes) use to ask for aligned projections.
+"""
+
+ALIGN = config["align"]
+ALIGN_CORPORA = ALIGN["corpora"]
+ALIGN_REPORT = "results/report/align"
+ALIGN_CELL = "results/align/{corpus}/{variant}/seed~{seed}/tau~{tau}/n~{n_train}"
+# Canonical cell text: seeds without leading zeros, tau as tau_text() writes it, N an int or "all".
+CELL_CONSTRAINTS = dict(
+    seed=r"0|[1-9]\d*", tau=r"(0|[1-9]\d*)\.(0|\d*[1-9])", n_train=r"all|[1-9]\d*"
+)
+
+
+def tau_text(tau):
+    """The canonical path text of a temperature: Python's shortest float repr (0.07, 0.1, 1.0)."""
+    return repr(float(tau))
+
+
+def align_grid(path):
+    """`path` expanded over every grid cell of config align (corpora x variants x seeds x taus x N)."""
+    return expand(
+        path,
+        corpus=ALIGN_CORPORA,
+        variant=ALIGN["variants"],
+        seed=ALIGN["seeds"],
+        tau=[tau_text(t) for t in ALIGN["taus"]],
+        n_train=[str(n) for n in ALIGN["n_train"]],
+    )
+
+
+def aligned_edge(heads_from, target, variant, seed, tau, n_train):
+    """Aligned projections of corpus `target` by the heads trained on `heads_from` (one cell)."""
+    if heads_from not in ALIGN_CORPORA:
+        raise ValueError(
+            f"aligned_edge: heads_from={heads_from!r} is not in align.corpora {ALIGN_CORPORA}; "
+            "add it there so its heads are trained"
+        )
+    cell = ALIGN_CELL.format(
+        corpus=heads_from,
+        variant=variant,
+        seed=seed,
+        tau=tau_text(tau),
+        n_train=n_train,
+    )
+    return f"{cell}/aligned~{target}.parquet"
+
+
+def _align_ref_n():
+    """Training size of the τ table and the curve figure: 'all' if in the grid, else the largest."""
+    ns = [str(n) for n in ALIGN["n_train"]]
+    return "all" if "all" in ns else max(ns, key=int)
+
+
+def _align_ref_tau():
+    """τ of the N-scaling table: the probes' heads τ if in the grid, else the first τ."""
+    taus = [tau_text(t) for t in ALIGN["taus"]]
+    want = tau_text(config["probes"]["heads"]["tau"])
+    return want if want in taus else taus[0]

@@ -1,0 +1,292 @@
+"""The alignment fan-out through a REAL single-node SLURM cluster and profiles/slurm.
+
+Opt-in, because it installs Debian packages and takes ~4-7 minutes (more than CI's budget for
+one test):
+
+    TACGEN_SLURM_TEST=1 python -m pytest tests/test_slurm.py -v -s
+
+What it does, as root on Debian/Ubuntu: `apt-get install slurm-wlm munge` (a no-op when they
+are installed), writes a one-node /etc/slurm/slurm.conf (the executor plugin's job step drops
+SLURM_CONF, so the config must be at the default path; an existing file is backed up and put
+back), starts munged, slurmctld and slurmd in the foreground as children of this test, builds
+the tiny workflow's upstream (corpus, features) locally, then runs the alignment grid of
+config/test.yaml widened to 2 seeds x 2 taus through `--profile profiles/slurm` (every
+train_heads job an sbatch job; aggregate_align local). Without slurmdbd there is no accounting
+database, so the profile queries job status with squeue. Everything it started is stopped at
+the end (jobs cancelled, then slurmd, slurmctld, munged by their pids), also on failure or
+timeout. It skips, printing why, when it cannot run: not root, no apt-get, a SLURM already
+running here, install failure, or daemons that do not come up.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from test_workflow import SNAKEMAKE, copy_tree, smk  # noqa: E402
+
+pytestmark = [pytest.mark.slurm, pytest.mark.workflow]
+
+RUN_TIMEOUT = 600  # seconds for the SLURM run itself; the test fails (and cleans up) after it
+SLURM_CONF = Path("/etc/slurm/slurm.conf")
+GRID = {"seeds": [42, 43], "taus": [0.07, 0.1]}
+
+
+def _skip(reason: str) -> None:
+    print(f"\nSKIP test_slurm: {reason}", flush=True)
+    pytest.skip(reason)
+
+
+def _run(cmd: list[str], timeout: float, **kw) -> subprocess.CompletedProcess:
+    return subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, **kw)
+
+
+def _install() -> None:
+    if shutil.which("slurmctld") and shutil.which("munged"):
+        return
+    env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
+    for cmd in (["apt-get", "update"], ["apt-get", "install", "-y", "slurm-wlm", "munge"]):
+        try:
+            proc = _run(cmd, timeout=300, env=env)
+        except subprocess.TimeoutExpired:
+            _skip(f"{' '.join(cmd)} took more than 300 s")
+        if proc.returncode != 0:
+            _skip(f"{' '.join(cmd)} failed: {proc.stderr[-800:]}")
+
+
+def _slurm_conf(state: Path) -> str:
+    host = socket.gethostname().split(".")[0]
+    cpus = os.cpu_count() or 1
+    with open("/proc/meminfo") as fh:
+        mem_kb = int(next(line for line in fh if line.startswith("MemTotal")).split()[1])
+    real_mb = max(1000, int(mem_kb / 1024 * 0.8))
+    return f"""# Written by tests/test_slurm.py for a one-node test cluster; removed afterwards.
+ClusterName=tacgentest
+SlurmctldHost={host}(127.0.0.1)
+SlurmUser=root
+SlurmdUser=root
+AuthType=auth/munge
+StateSaveLocation={state}/ctld
+SlurmdSpoolDir={state}/d
+SlurmctldPidFile={state}/slurmctld.pid
+SlurmdPidFile={state}/slurmd.pid
+SlurmctldLogFile={state}/slurmctld.log
+SlurmdLogFile={state}/slurmd.log
+ProctrackType=proctrack/linuxproc
+TaskPlugin=task/none
+AccountingStorageType=accounting_storage/none
+JobAcctGatherType=jobacct_gather/none
+JobCompType=jobcomp/none
+MailProg=/bin/true
+SchedulerType=sched/backfill
+SelectType=select/cons_tres
+SelectTypeParameters=CR_CPU_Memory
+DefMemPerCPU=1000
+MinJobAge=600
+ReturnToService=2
+NodeName={host} NodeAddr=127.0.0.1 CPUs={cpus} RealMemory={real_mb} State=UNKNOWN
+PartitionName=test Nodes={host} Default=YES MaxTime=INFINITE State=UP
+"""
+
+
+def _stop(proc: subprocess.Popen, name: str) -> None:
+    """Stop one daemon this test started (by its pid), TERM then KILL."""
+    if proc.poll() is not None:
+        return
+    proc.send_signal(signal.SIGTERM)
+    try:
+        proc.wait(timeout=15)
+    except subprocess.TimeoutExpired:
+        print(f"{name} (pid {proc.pid}) ignored SIGTERM; killing it", flush=True)
+        proc.kill()
+        proc.wait(timeout=10)
+
+
+def _wait_idle(timeout: float = 30) -> str:
+    deadline, state = time.monotonic() + timeout, ""
+    while time.monotonic() < deadline:
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            state = _run(["sinfo", "-h", "-o", "%T"], timeout=10).stdout.strip()
+            if state.startswith("idle"):
+                return state
+        time.sleep(0.5)
+    return state
+
+
+@contextlib.contextmanager
+def single_node_slurm(state: Path) -> Iterator[Path]:
+    """munged + slurmctld + slurmd on localhost for the duration of the block."""
+    if os.geteuid() != 0:
+        _skip("needs root (installs slurm-wlm and munge, starts daemons)")
+    if not shutil.which("apt-get") and not shutil.which("slurmctld"):
+        _skip("no apt-get to install slurm-wlm and munge")
+    if shutil.which("pgrep"):
+        for daemon in ("slurmctld", "slurmd"):
+            if _run(["pgrep", "-x", daemon], timeout=10).returncode == 0:
+                _skip(f"a {daemon} is already running on this machine; not touching it")
+    started = time.monotonic()
+    _install()
+    print(f"slurm-wlm + munge present after {time.monotonic() - started:.0f} s", flush=True)
+
+    for sub in ("ctld", "d"):
+        (state / sub).mkdir(parents=True, exist_ok=True)
+    backup = None
+    if SLURM_CONF.exists():
+        backup = SLURM_CONF.with_name("slurm.conf.tacgen-test-backup")
+        shutil.copy2(SLURM_CONF, backup)
+    SLURM_CONF.parent.mkdir(parents=True, exist_ok=True)
+    SLURM_CONF.write_text(_slurm_conf(state))
+    daemons: list[tuple[str, subprocess.Popen]] = []
+    try:
+        munge_run = Path("/run/munge")
+        munge_key = Path("/etc/munge/munge.key")
+        if _run(["pgrep", "-x", "munged"], timeout=10).returncode != 0:
+            munge_run.mkdir(parents=True, exist_ok=True)
+            shutil.chown(munge_run, "munge", "munge")
+            if not munge_key.exists():
+                _run(["runuser", "-u", "munge", "--", "mungekey", "--create"], timeout=30)
+            munged = subprocess.Popen(
+                ["runuser", "-u", "munge", "--", "/usr/sbin/munged", "--foreground"],
+                stdout=subprocess.DEVNULL,
+                stderr=open(state / "munged.log", "w"),  # noqa: SIM115 - closed with the process
+            )
+            daemons.append(("munged", munged))
+            for _ in range(50):
+                if (munge_run / "munge.socket.2").exists():
+                    break
+                time.sleep(0.1)
+        for name, cmd in (("slurmctld", ["slurmctld", "-D", "-i"]), ("slurmd", ["slurmd", "-D"])):
+            daemons.append(
+                (
+                    name,
+                    subprocess.Popen(
+                        cmd, stdout=subprocess.DEVNULL, stderr=open(state / f"{name}.err", "w")
+                    ),
+                )
+            )
+            time.sleep(0.5)
+        node = _wait_idle()
+        dead = [n for n, p in daemons if p.poll() is not None]
+        if dead or not node.startswith("idle"):
+            logs = "".join(
+                f"\n--- {f.name}\n{f.read_text()[-1500:]}"
+                for f in sorted(state.glob("*.log")) + sorted(state.glob("*.err"))
+            )
+            _skip(f"SLURM did not come up (exited: {dead}, node state {node!r}){logs}")
+        print(f"single-node SLURM up after {time.monotonic() - started:.0f} s", flush=True)
+        yield state
+    finally:
+        if any(n == "slurmctld" and p.poll() is None for n, p in daemons):
+            # every job on this private cluster was submitted by this test
+            with contextlib.suppress(Exception):
+                _run(["scancel", "--full", "--user", "root"], timeout=30)
+                for _ in range(60):
+                    if not _run(["squeue", "-h", "-t", "R,CG,PD"], timeout=10).stdout.strip():
+                        break
+                    time.sleep(0.5)
+        for name, proc in reversed(daemons):
+            _stop(proc, name)
+        if backup is not None:
+            shutil.move(backup, SLURM_CONF)
+        else:
+            SLURM_CONF.unlink(missing_ok=True)
+
+
+@pytest.mark.skipif(
+    os.environ.get("TACGEN_SLURM_TEST") != "1",
+    reason="set TACGEN_SLURM_TEST=1 to run the alignment grid through a real one-node SLURM "
+    "(installs slurm-wlm + munge, ~4-7 min)",
+)
+def test_align_grid_through_slurm_profile(tmp_path):
+    from tacgen_lib import edges
+
+    work = copy_tree(tmp_path / "wf")
+    (work / "config/slurm_test.yaml").write_text(
+        f"align: {{seeds: {GRID['seeds']}, taus: {GRID['taus']}}}\n"
+    )
+    corpora = ["sim_paired", "sim_null"]
+    upstream = ["results/corpus/splits.parquet"] + [
+        f"results/features/{c}/{what}.parquet"
+        for c in corpora
+        for what in ("vision", "tactile~clip128")
+    ]
+    started = time.monotonic()
+    # (targets after an option: a bare word following --configfile would be read as a config)
+    smk(
+        work,
+        "--cores",
+        "2",
+        *upstream,
+        "--configfile",
+        "config/test.yaml",
+        "config/slurm_test.yaml",
+    )
+    print(f"upstream built locally in {time.monotonic() - started:.0f} s", flush=True)
+
+    with single_node_slurm(tmp_path / "slurm") as state:
+        cmd = [
+            *SNAKEMAKE,
+            "results/align/summary.parquet",
+            "results/report/align/seeds.html",
+            "--profile",
+            "profiles/slurm",
+            "--configfile",
+            "config/test.yaml",
+            "config/slurm_test.yaml",
+            "--slurm-init-seconds-before-status-checks",
+            "1",
+            "--slurm-no-account",
+            "--slurm-keep-successful-logs",
+        ]
+        t0 = time.monotonic()
+        try:
+            proc = subprocess.run(
+                cmd,
+                cwd=work,
+                capture_output=True,
+                text=True,
+                timeout=RUN_TIMEOUT,
+                env={**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")},
+            )
+        except subprocess.TimeoutExpired as exc:
+            ctld = (state / "slurmctld.log").read_text()[-3000:]
+            pytest.fail(
+                f"the SLURM run did not finish in {RUN_TIMEOUT} s\n{(exc.stderr or b'')[-4000:]}"
+                f"\n--- slurmctld.log\n{ctld}"
+            )
+        elapsed = time.monotonic() - t0
+        print(f"alignment grid through SLURM in {elapsed:.0f} s", flush=True)
+        assert proc.returncode == 0, proc.stderr[-6000:]
+        ctld_log = (state / "slurmctld.log").read_text()
+        # finished jobs stay visible for MinJobAge: what each sbatch job asked for
+        jobs = _run(["squeue", "-h", "-t", "all", "-o", "%k|%C|%m|%T"], timeout=10).stdout
+
+    n_cells = len(corpora) * len(GRID["seeds"]) * len(GRID["taus"])
+    slurm_logs = list((work / ".snakemake/slurm_logs/rule_train_heads").rglob("*.log"))
+    assert len(slurm_logs) == n_cells, slurm_logs  # one sbatch job per grid cell
+    assert not (work / ".snakemake/slurm_logs/rule_aggregate_align").exists()  # localrule
+    assert ctld_log.count("sched: Allocate JobId") >= n_cells
+    heads_jobs = [line.split("|") for line in jobs.splitlines() if "train_heads" in line]
+    assert len(heads_jobs) == n_cells, jobs
+    for _comment, cpus, mem, status in heads_jobs:  # the profile's set-resources, attempt 1
+        assert (cpus, mem, status) == ("2", "4000M", "COMPLETED"), jobs
+    summary = __import__("pandas").read_parquet(work / "results/align/summary.parquet")
+    assert len(summary) == n_cells
+    assert sorted(set(summary["tau"])) == ["0.07", "0.1"]
+    assert sorted(set(summary["seed"])) == GRID["seeds"]
+    assert (summary["train_seconds"] > 0).all()
+    for cell in summary["cell"]:
+        edges.verify(work / "results/align" / cell / "metrics.parquet")
+        edges.verify(work / "results/align" / cell / "heads.pt")
+    assert (work / "results/report/align/seeds.html").stat().st_size > 500
