@@ -266,7 +266,10 @@ def pretrain_dino(
     image_size, at least 28). Optimiser: AdamW (no decay on biases, norms, LayerScale and
     tokens), lr linear warm-up over `warmup_epochs` then cosine to lr/100, gradient-norm
     clipping at `clip_grad`; teacher EMA momentum cosine from `momentum_teacher` to 1 (0.99
-    rather than DINO's 0.996, as runs here have hundreds, not 100k+, steps).
+    rather than DINO's 0.996, as runs here have hundreds, not 100k+, steps). The centre starts
+    at the first teacher batch's mean, not at zero: from zero, the first ~20 steps (momentum
+    0.9) would sharpen the component all frames share into one constant target for every
+    image, which is a push towards collapse in a run of only ~100 steps.
     The last incomplete batch of each epoch is dropped, so every step has the same batch size
     (the order is reshuffled every epoch, so all frames are seen); batch_size is capped at N.
 
@@ -337,7 +340,7 @@ def pretrain_dino(
             [np.linspace(lr / max(warm, 1), lr, warm), _cosine(lr, lr / 100, total - warm)]
         )
         mom_sched = _cosine(momentum_teacher, 1.0, total)
-        center = torch.zeros(1, out_dim)
+        center: Tensor | None = None  # set from the first teacher batch (see docstring)
 
         curve: list[dict[str, float]] = []
         step = 0
@@ -359,6 +362,8 @@ def pretrain_dino(
                 b = idx.shape[0]
                 with torch.no_grad():
                     t_out = teacher(torch.cat(views[:2])).view(2, b, out_dim)
+                    if center is None:
+                        center = t_out.mean(dim=(0, 1)).view(1, out_dim)
                 s_glob = student(torch.cat(views[:2])).view(2, b, out_dim)
                 if n_local_crops:
                     s_loc = student(torch.cat(views[2:])).view(n_local_crops, b, out_dim)
