@@ -1,0 +1,57 @@
+"""Helpers of the probes stage (family specs, input lists, report items); included by probes.smk."""
+
+PROBES = config["probes"]
+PROBE_FAMILIES = sorted(PROBES["families"])
+PROBE_DIR = "results/probes/{family}"
+PROBE_REPORT = "results/report/probes"
+PROBE_TABLES = [
+    "controlled",
+    "paired",
+    "sweep",
+    "align_seeds",
+    "variants",
+    "controls",
+    "fusions",
+]
+PROBE_FIGURES = ["forest", "confusion"]
+PROBE_EDGES = ["seed~{seed}", "sweep~{seed}", "confusion~{seed}"]
+
+
+def probe_family(family):
+    return {"name": family, **PROBES["families"][family]}
+
+
+def probe_inputs(wildcards):
+    """Edges one probe family reads: labels, splits, raw V/T features, aligned projections."""
+    fam = probe_family(wildcards.family)
+    heads = PROBES["heads"]
+    return {
+        "manifest": "results/corpus/manifest.parquet",
+        "splits": "results/corpus/splits.parquet",
+        "vision": feature_edge(fam["corpus"], "vision"),
+        "tactile": [
+            feature_edge(fam["corpus"], "tactile", v)
+            for v in config["preprocess"]["variants"]
+        ],
+        "aligned": [
+            aligned_edge(
+                fam["heads_from"],
+                fam["corpus"],
+                heads["variant"],
+                seed,
+                heads["tau"],
+                heads["n_train"],
+            )
+            for seed in config["align"]["seeds"]
+        ],
+    }
+
+
+def probe_report_item(name, ext, caption, label):
+    return report(
+        f"{PROBE_REPORT}/{name}.{ext}",
+        caption=f"../workflow/report/probe_{caption}.rst",
+        category="Probes",
+        subcategory="Figures" if ext == "png" else "Tables",
+        labels={"item": label},
+    )

@@ -1,0 +1,358 @@
+"""Tables and figures of the probes stage, built from the probe summary (pure functions).
+
+Input is the tidy summary written by rule ``aggregate_probes`` (one row per family, input,
+tactile variant, fusion, alignment seed, probe seed and control; see `probe_suite`), plus its
+lambda/C sweep and confusion-count tables. Every function returns a DataFrame (rendered to
+HTML with `report_tables.to_html`) or a matplotlib Figure; none reads or writes files.
+
+- `controlled_table`: families on the appearance-controlled corpus (mass, log-mass, density;
+  pixel-V headline and ViT-V sensitivity), V vs V+T for every input and fusion.
+- `paired_table`: families on the paired corpus (hardness, force), each with its null-corpus
+  sibling (family name + ``_null``) in the columns beside it.
+- `sweep_table`: Delta at every lambda (test R^2, ridge) or C (CV accuracy, logistic) for
+  each fusion variant; ``*`` marks the value CV chose for the V+T probe.
+- `align_seed_table`: aligned-input results as mean +- sd over alignment seeds.
+- `variant_table`: the tactile preprocessing ablation (raw V + raw T of each variant, concat).
+- `controls_table`: every control row next to its comparison's Delta.
+- `forest_plot`: Delta with its 95% CI for every main comparison, labelled by
+  family / input / fusion and seeds; null-corpus families in their own colour.
+- `confusion_figure`: confusion matrices of the logistic probes (concat comparisons).
+"""
+
+from __future__ import annotations
+
+import math
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pandas as pd  # noqa: E402
+
+from tacgen_lib.fusion import fusion_table  # noqa: E402
+from tacgen_lib.probe_suite import class_order  # noqa: E402
+
+__all__ = [
+    "align_seed_table",
+    "confusion_figure",
+    "controlled_table",
+    "controls_table",
+    "forest_plot",
+    "fusions_frame",
+    "main_rows",
+    "paired_table",
+    "sweep_table",
+    "variant_table",
+]
+
+_ORDER = ["family", "input", "t_variant", "fusion", "align_seed", "probe_seed"]
+
+
+def _num(x: object, fmt: str = "{:.3f}") -> str:
+    if x is None or (isinstance(x, float) and math.isnan(x)) or x is pd.NA:
+        return ""
+    return fmt.format(float(x))
+
+
+def _seed(x: object) -> str:
+    if x is None or x is pd.NA or (isinstance(x, float) and math.isnan(x)):
+        return "-"
+    return str(int(x))
+
+
+def _delta_ci(row: pd.Series) -> str:
+    if row.get("status", "ok") != "ok":
+        return f"({row['status']})"
+    return f"{_num(row['delta'], '{:+.3f}')} [{_num(row['ci_low'], '{:+.3f}')}, {_num(row['ci_high'], '{:+.3f}')}]"
+
+
+def _criterion(x: object) -> str:
+    if x is None or x is pd.NA or (isinstance(x, float) and math.isnan(x)):
+        return "n/a"
+    return "yes" if bool(x) else "no"
+
+
+def main_rows(summary: pd.DataFrame) -> pd.DataFrame:
+    """The V vs V+T comparisons (control == "none"), in a stable order."""
+    rows = summary.loc[summary["control"] == "none"].copy()
+    rows["_a"] = rows["align_seed"].fillna(-1)
+    return rows.sort_values(
+        ["family", "input", "t_variant", "fusion", "_a", "probe_seed"], kind="stable"
+    ).drop(columns="_a")
+
+
+def _headline(rows: pd.DataFrame) -> pd.DataFrame:
+    """Main comparisons with the heads' tactile variant (the ablation has its own table)."""
+    return rows.loc[rows["t_variant"] == rows["heads_variant"]]
+
+
+def _comparison_columns(rows: pd.DataFrame) -> pd.DataFrame:
+    return pd.DataFrame(
+        {
+            "family": rows["family"],
+            "target": rows["target"],
+            "V features": rows.get("vision", pd.Series("", index=rows.index)),
+            "input": rows["input"],
+            "fusion": rows["fusion"],
+            "align seed": rows["align_seed"].map(_seed),
+            "probe seed": rows["probe_seed"].map(_seed),
+            "metric": rows["metric"],
+            "V": rows["v_score"].map(_num),
+            "V+T": rows["vt_score"].map(_num),
+            "Δ [95% CI]": rows.apply(_delta_ci, axis=1),
+            "p(Δ>0)": rows["p_gt0"].map(_num),
+            "Δ_ctrl": rows["delta_ctrl"].map(lambda x: _num(x, "{:+.3f}")),
+            "criterion": rows["criterion_met"].map(_criterion),
+            "n train/test": rows["n_train"].astype(str) + "/" + rows["n_test"].astype(str),
+            "notes": rows["notes"],
+        }
+    ).reset_index(drop=True)
+
+
+def controlled_table(summary: pd.DataFrame) -> pd.DataFrame:
+    """Families on the appearance-controlled corpus: pixel-V families first (the headline)."""
+    rows = _headline(main_rows(summary))
+    rows = rows.loc[rows["design"] == "controlled"].copy()
+    rows["_vit"] = rows["vision"] != "pixel"
+    rows = rows.sort_values(["_vit", "family"], kind="stable")
+    return _comparison_columns(rows)
+
+
+def _keys(rows: pd.DataFrame, columns: list[str]) -> list[str]:
+    """One text key per row from `columns` (missing values as "-")."""
+    return [
+        "|".join(
+            _seed(v)
+            if isinstance(v, (int, float, np.integer)) or v is pd.NA or v is None
+            else str(v)
+            for v in r
+        )
+        for r in rows[columns].itertuples(index=False)
+    ]
+
+
+def paired_table(summary: pd.DataFrame) -> pd.DataFrame:
+    """Paired-corpus families, each with its ``_null`` sibling's result in the columns beside."""
+    rows = _headline(main_rows(summary))
+    rows = rows.loc[rows["design"] != "controlled"]
+    families = sorted(rows["family"].unique())
+    main = [f for f in families if not (f.endswith("_null") and f[: -len("_null")] in families)]
+    key = ["input", "fusion", "align_seed", "probe_seed"]
+    out = []
+    for fam in main:
+        a = rows.loc[rows["family"] == fam].copy()
+        table = _comparison_columns(a)
+        null = rows.loc[rows["family"] == f"{fam}_null"]
+        if len(null):
+            a["_k"] = _keys(a, key)
+            null = null.assign(_k=_keys(null, key))
+            by_key = null.set_index("_k")
+            got = [by_key.loc[k] if k in by_key.index else None for k in a["_k"]]
+            table["null: V+T"] = [_num(g["vt_score"]) if g is not None else "" for g in got]
+            table["null: Δ [95% CI]"] = [_delta_ci(g) if g is not None else "" for g in got]
+            table["null: criterion"] = [
+                _criterion(g["criterion_met"]) if g is not None else "" for g in got
+            ]
+        out.append(table)
+    return pd.concat(out, ignore_index=True) if out else pd.DataFrame()
+
+
+def sweep_table(sweep: pd.DataFrame, summary: pd.DataFrame) -> pd.DataFrame:
+    """One row per comparison, one column per lambda / C: Delta at that regulariser.
+
+    Ridge: Delta of test R^2 with both probes refitted at that lambda. Logistic: Delta of the
+    mean CV accuracy (no test refit per C). ``*`` marks the regulariser CV chose for V+T.
+    """
+    if sweep.empty:
+        return pd.DataFrame()
+    heads = summary.drop_duplicates("family").set_index("family")["heads_variant"]
+    sw = sweep.loc[sweep["t_variant"].to_numpy() == sweep["family"].map(heads).to_numpy()].copy()
+    sw["value"] = np.where(
+        sw["reg_name"] == "lambda", sw["test_vt"] - sw["test_v"], sw["cv_vt"] - sw["cv_v"]
+    )
+    sw["cell"] = [
+        f"{v:+.3f}{'*' if s else ''}" for v, s in zip(sw["value"], sw["selected_vt"], strict=True)
+    ]
+    sw["_a"] = sw["align_seed"].map(_seed)
+    sw["column"] = sw["reg_name"] + "=" + sw["reg"].map(lambda r: f"{r:g}")
+    sw["measure"] = np.where(sw["reg_name"] == "lambda", "Δ test R²", "Δ CV accuracy")
+    index = ["family", "measure", "input", "fusion", "_a", "probe_seed"]
+    table = sw.pivot_table(index=index, columns="column", values="cell", aggfunc="first")
+    cols = sorted(table.columns, key=lambda c: (c.split("=")[0], float(c.split("=")[1])))
+    table = table[cols].fillna("").reset_index().rename(columns={"_a": "align seed"})
+    table.columns.name = None
+    return table
+
+
+def align_seed_table(summary: pd.DataFrame) -> pd.DataFrame:
+    """Aligned-input comparisons aggregated over alignment seeds: mean +- sd, criterion count."""
+    rows = main_rows(summary)
+    rows = rows.loc[(rows["input"] == "aligned") & (rows["status"] == "ok")]
+    out = []
+    for (fam, fusion, seed), g in rows.groupby(["family", "fusion", "probe_seed"], sort=True):
+
+        def ms(col: str, g: pd.DataFrame = g) -> str:
+            x = g[col].astype(float).to_numpy()
+            sd = float(np.std(x, ddof=1)) if x.size > 1 else 0.0
+            return f"{x.mean():+.3f} ± {sd:.3f}" if col == "delta" else f"{x.mean():.3f} ± {sd:.3f}"
+
+        met = g["criterion_met"].dropna()
+        out.append(
+            {
+                "family": fam,
+                "target": g["target"].iloc[0],
+                "fusion": fusion,
+                "probe seed": int(seed),
+                "align seeds": ", ".join(map(_seed, g["align_seed"])),
+                "V": ms("v_score"),
+                "V+T": ms("vt_score"),
+                "Δ": ms("delta"),
+                "CI low > 0": f"{int((g['ci_low'] > 0).sum())}/{len(g)}",
+                "criterion met": f"{int(met.astype(bool).sum())}/{len(met)}" if len(met) else "n/a",
+            }
+        )
+    return pd.DataFrame(out)
+
+
+def variant_table(summary: pd.DataFrame) -> pd.DataFrame:
+    """Tactile preprocessing ablation: raw V + raw T (concat) for every variant and family."""
+    rows = main_rows(summary)
+    rows = rows.loc[(rows["input"] == "raw") & (rows["fusion"] == "concat")].copy()
+    if rows.empty:
+        return pd.DataFrame()
+    rows["cell"] = rows.apply(lambda r: f"{_num(r['vt_score'])} (Δ {_delta_ci(r)})", axis=1)
+    table = rows.pivot_table(
+        index=["family", "target", "metric", "probe_seed"],
+        columns="t_variant",
+        values="cell",
+        aggfunc="first",
+    )
+    v = rows.groupby(["family", "target", "metric", "probe_seed"])["v_score"].first().map(_num)
+    table.insert(0, "V alone", v)
+    table = table.reset_index().rename(columns={"probe_seed": "probe seed"})
+    table.columns.name = None
+    return table
+
+
+def controls_table(summary: pd.DataFrame) -> pd.DataFrame:
+    """Each control's Delta distribution beside the Delta of the comparison it controls."""
+    ctrl = summary.loc[summary["control"] != "none"]
+    if ctrl.empty:
+        return pd.DataFrame()
+    main = main_rows(summary).set_index("row_id")
+    parent = ctrl["row_id"].str.rsplit("|", n=1).str[0] + "|none"
+    ctrl = ctrl.assign(_a=ctrl["align_seed"].fillna(-1)).sort_values(
+        ["family", "input", "_a", "probe_seed", "control"], kind="stable"
+    )
+    parent = parent.loc[ctrl.index]
+    return pd.DataFrame(
+        {
+            "family": ctrl["family"],
+            "input": ctrl["input"],
+            "fusion": ctrl["fusion"],
+            "align seed": ctrl["align_seed"].map(_seed),
+            "probe seed": ctrl["probe_seed"].map(_seed),
+            "Δ (comparison)": [_num(main.loc[p, "delta"], "{:+.3f}") for p in parent],
+            "control": ctrl["control"],
+            "draws": ctrl["n_resamples"].astype(str),
+            "V": ctrl["v_score"].map(_num),
+            "V+T (mean)": ctrl["vt_score"].map(_num),
+            "Δ mean [2.5%, 97.5%]": [
+                f"{d:+.3f} [{lo:+.3f}, {hi:+.3f}]"
+                for d, lo, hi in zip(ctrl["delta"], ctrl["ci_low"], ctrl["ci_high"], strict=True)
+            ],
+            "p(Δ>0)": ctrl["p_gt0"].map(_num),
+            "notes": ctrl["notes"],
+        }
+    ).reset_index(drop=True)
+
+
+def fusions_frame() -> pd.DataFrame:
+    """The fusion variants (`fusion.fusion_table`) as a table."""
+    return pd.DataFrame(fusion_table())
+
+
+def forest_plot(summary: pd.DataFrame, *, min_delta: float = 0.03) -> plt.Figure:
+    """Delta with its 95% fixed-test bootstrap CI for every main comparison (heads' variant).
+
+    One line per comparison, labelled ``family / input / fusion  a~align seed s~probe seed``;
+    R^2 and accuracy families share the axis (both are differences of a score in [.., 1]).
+    Null-corpus families are drawn in grey; the dashed line is the paper's min Delta.
+    """
+    rows = _headline(main_rows(summary))
+    rows = rows.loc[rows["status"] == "ok"].iloc[::-1]
+    n = max(len(rows), 1)
+    fig, ax = plt.subplots(figsize=(8.5, 1.2 + 0.22 * n))
+    y = np.arange(len(rows))
+    null = rows["null_corpus"].astype(bool).to_numpy() if len(rows) else np.array([], bool)
+    colours = np.where(null, "#888888", "#1f5fa8")
+    for yi, (_, r), c in zip(y, rows.iterrows(), colours, strict=True):
+        ax.plot([r["ci_low"], r["ci_high"]], [yi, yi], color=c, lw=1.6)
+        marker = "D" if r["criterion_met"] is True else "o"
+        ax.plot([r["delta"]], [yi], marker=marker, color=c, ms=4.5)
+    labels = [
+        f"{r['family']} / {r['input']} / {r['fusion']}  a~{_seed(r['align_seed'])} "
+        f"s~{_seed(r['probe_seed'])}"
+        for _, r in rows.iterrows()
+    ]
+    ax.set_yticks(y, labels, fontsize=7)
+    ax.axvline(0.0, color="black", lw=0.8)
+    ax.axvline(min_delta, color="black", lw=0.8, ls="--")
+    ax.set_ylim(-0.8, n - 0.2)
+    ax.set_xlabel("Δ = score(V+T) − score(V)  (R² or accuracy), 95% fixed-test bootstrap CI")
+    ax.set_title(
+        "Probe gains with 95% CIs (blue: main corpora, grey: null corpus; ◆: criterion met)",
+        fontsize=9,
+    )
+    ax.grid(axis="x", color="#dddddd", lw=0.6)
+    fig.tight_layout()
+    return fig
+
+
+def confusion_figure(confusion: pd.DataFrame) -> plt.Figure:
+    """Confusion matrices (test rows) of the logistic probes' concat comparisons: V and V+T."""
+    conf = confusion.loc[confusion["fusion"] == "concat"] if len(confusion) else confusion
+    if len(conf):
+        conf = conf.loc[conf["t_variant"] == conf["heads_variant"]]
+    groups = (
+        list(
+            conf.assign(_a=conf["align_seed"].fillna(-1)).groupby(
+                ["family", "input", "_a", "probe_seed"], sort=True
+            )
+        )
+        if len(conf)
+        else []
+    )
+    if not groups:
+        fig, ax = plt.subplots(figsize=(4, 1.5))
+        ax.axis("off")
+        ax.text(0.5, 0.5, "no logistic probe in this run", ha="center", va="center")
+        return fig
+    fig, axes = plt.subplots(len(groups), 2, figsize=(6.4, 2.6 * len(groups)), squeeze=False)
+    for row_axes, ((fam, inp, a, s), g) in zip(axes, groups, strict=True):
+        classes = class_order(g["true"])
+        for ax, model in zip(row_axes, ("V", "V+T"), strict=True):
+            m = g.loc[g["model"] == model]
+            mat = (
+                m.pivot_table(index="true", columns="pred", values="count", aggfunc="sum")
+                .reindex(index=classes, columns=classes)
+                .fillna(0)
+                .to_numpy()
+            )
+            top = max(mat.max(), 1)
+            ax.imshow(mat, cmap="Blues", vmin=0, vmax=top)
+            for (i, j), v in np.ndenumerate(mat):
+                colour = "white" if v > 0.6 * top else "black"
+                ax.text(j, i, f"{int(v)}", ha="center", va="center", fontsize=8, color=colour)
+            ax.set_xticks(range(len(classes)), classes, fontsize=7, rotation=30)
+            ax.set_yticks(range(len(classes)), classes, fontsize=7)
+            ax.set_xlabel("predicted", fontsize=7)
+            ax.set_ylabel("true", fontsize=7)
+            acc = np.trace(mat) / max(mat.sum(), 1)
+            ax.set_title(
+                f"{fam} / {inp} a~{_seed(a if a >= 0 else None)} s~{int(s)}\n{model}: acc {acc:.3f}",
+                fontsize=8,
+            )
+    fig.tight_layout()
+    return fig

@@ -1,0 +1,799 @@
+"""One probe family of the paper's protocol: inputs x fusions x controls -> tidy result rows.
+
+This module owns the orchestration of a probe family (``probes.families.<name>`` in config):
+which rows train and test the probes, which target is predicted, which V vs V+T comparisons
+are made, which controls run on which comparison, and how every outcome becomes one tidy row.
+The numerics it calls live in `probes` (ridge/logistic probes), `fusion` (V+T variants) and
+`stats` (bootstrap, controls, the paper's criterion); file I/O lives in the rule scripts.
+
+Protocol (paper, "Probes")
+- Rows: train = the corpus's ``train`` + ``val`` split (the probe has no early stopping, so
+  validation rows are ordinary training rows), test = its ``test`` split. For the
+  appearance-controlled corpus the split is by object scale (train 0.15/0.20, test 0.25),
+  fixed by the split edge. Rows without a label (real corpora) are dropped and counted.
+- Target (`target_values`): a manifest column; ``log_mass`` = log(mass); logistic targets
+  (``density`` as 3 classes, ``hardness`` soft/hard) are class labels (strings).
+- Comparisons (`plan_comparisons`), V vs V+T always on the same rows:
+  * ``raw``: V = vision features (pixel or vit), T = tactile ``vit`` features of the heads'
+    preprocessing variant; every configured fusion (``concat`` always). A same-dimension
+    fusion (mean, max, attention, weighted) runs on raw features only when d_V == d_T and is
+    otherwise recorded as a ``skipped`` row with the reason.
+  * ``raw`` tactile ablation: T of every other preprocessing variant, ``concat`` with raw V.
+  * ``aligned``: V_aligned vs fuse(V_aligned, T_aligned) for every fusion and alignment seed.
+- Regulariser: lambda (ridge) or C (logistic) by K-fold CV on the training rows only.
+- Statistics per comparison: fixed-test bootstrap (stratified within strata when given),
+  percentile 95% CI, p(Delta > 0).
+- Controls (budget cap): train-resample diagnostic, tactile-permutation, label-permutation
+  and dimension-matched random-feature controls run on the ``concat`` comparison of each input
+  (raw with the heads' variant, and aligned per alignment seed) -- the comparisons the paper's
+  claims rest on. Logistic controls (about 1,000 lbfgs refits per comparison) run on the raw
+  concat and on the first alignment seed's aligned concat only, at lbfgs tol 1e-4
+  (`CONTROL_TOL`, `LOGISTIC_CONTROL_ALIGN_SEEDS`). Other comparisons say
+  ``controls = "not run"``; their ``delta_ctrl`` and ``criterion_met`` are null, not guessed.
+- The paper's criterion (Delta >= 0.03, CI lower bound > 0, Delta_ctrl < Delta, with
+  Delta_ctrl the tactile-permutation mean) is a column; nothing is filtered on it.
+
+Every row carries ``row_id`` = ``family|input|t~variant|fusion|a~align_seed|s~probe_seed|control``,
+unique within a run, the key of the probe edges.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+from sklearn.exceptions import ConvergenceWarning
+
+from tacgen_lib import stats
+from tacgen_lib.fusion import FUSIONS, fuse
+from tacgen_lib.probes import FixedLogistic, FixedRidge, fit_logistic, fit_ridge_probe, ridge_fixed
+
+__all__ = [
+    "BANDS",
+    "class_order",
+    "CONTROLS",
+    "ComparisonSpec",
+    "FamilyResult",
+    "FamilyRows",
+    "FittedProbe",
+    "ProbeSettings",
+    "compare",
+    "confusion_counts",
+    "family_rows",
+    "fit_probe",
+    "plan_comparisons",
+    "pool_strata",
+    "row_id",
+    "run_family",
+    "target_values",
+    "tidy",
+]
+
+#: The controls, in the order their rows are written.
+CONTROLS = ("train_resample", "tactile_permutation", "label_permutation", "random_features")
+#: Targets whose uncertainty bands travel with the results: target -> (low, high) columns.
+BANDS = {"force_p50": ("force_p05", "force_p95")}
+#: lbfgs tolerance of the logistic refits inside controls: scikit-learn's default. The main
+#: probes use `probes.fit_logistic`'s tighter 1e-6; controls are distributions over hundreds
+#: of refits, where 1e-4 changes no conclusion and roughly halves their cost.
+CONTROL_TOL = 1e-4
+#: Logistic controls refit ~1,000 lbfgs problems per comparison, so they run on the raw concat
+#: comparison and the aligned concat of this many alignment seeds (the first in sorted order);
+#: ridge controls are batched solves and run on every concat comparison.
+LOGISTIC_CONTROL_ALIGN_SEEDS = 1
+#: The columns whose product defines the bootstrap strata of a controlled corpus.
+CONTROLLED_STRATA = ("shape", "density", "scale")
+
+
+# --------------------------------------------------------------------------- settings
+
+
+@dataclass(frozen=True)
+class ProbeSettings:
+    """Everything a comparison needs from config ``probes`` for one family and probe seed."""
+
+    kind: str  # "ridge" | "logistic"
+    lambdas: tuple[float, ...]
+    C: tuple[float, ...]
+    folds: int
+    bootstrap: int
+    train_resamples: int
+    permutations: int
+    label_permutations: int
+    random_draws: int
+    seed: int
+    min_delta: float = 0.03
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("ridge", "logistic"):
+            raise ValueError(f"ProbeSettings.kind must be 'ridge' or 'logistic', got {self.kind!r}")
+
+    @property
+    def metric(self) -> str:
+        return "r2" if self.kind == "ridge" else "accuracy"
+
+    @property
+    def reg_name(self) -> str:
+        return "lambda" if self.kind == "ridge" else "C"
+
+    @classmethod
+    def from_config(cls, probes_cfg: Mapping, kind: str, seed: int) -> ProbeSettings:
+        """Settings from the config section ``probes`` (validated by the schema)."""
+        return cls(
+            kind=kind,
+            lambdas=tuple(float(x) for x in probes_cfg["lambdas"]),
+            C=tuple(float(x) for x in probes_cfg["C"]),
+            folds=int(probes_cfg["folds"]),
+            bootstrap=int(probes_cfg["bootstrap"]),
+            train_resamples=int(probes_cfg["train_resamples"]),
+            permutations=int(probes_cfg["permutations"]),
+            label_permutations=int(probes_cfg["label_permutations"]),
+            random_draws=int(probes_cfg["random_draws"]),
+            seed=int(seed),
+        )
+
+
+# --------------------------------------------------------------------------- rows + target
+
+
+def target_values(frame: pd.DataFrame, target: str, kind: str) -> np.ndarray:
+    """The probe target of each row: float for ridge, class labels (str) for logistic.
+
+    ``log_mass`` is log(mass) (mass must be > 0). Missing labels come back as NaN (ridge) or
+    None (logistic); `family_rows` drops those rows. A logistic class label is the value as
+    text (``density`` 600.0 -> "600.0"), so numbers and words are treated alike.
+    """
+    source = "mass" if target == "log_mass" else target
+    if source not in frame.columns:
+        raise ValueError(
+            f"target {target!r}: the manifest has no column {source!r} "
+            f"(columns: {', '.join(sorted(map(str, frame.columns)))})"
+        )
+    col = frame[source]
+    if kind == "ridge":
+        values = pd.to_numeric(col, errors="coerce").to_numpy(dtype=np.float64)
+        if target == "log_mass":
+            bad = values <= 0
+            if bad.any():
+                sid = frame["sample_id"].iloc[int(np.flatnonzero(bad)[0])]
+                raise ValueError(f"target log_mass: sample_id {sid!r} has mass <= 0")
+            values = np.log(values)
+        return values
+    labels = np.empty(len(col), dtype=object)
+    for i, v in enumerate(col.tolist()):
+        missing = v is None or (isinstance(v, float) and math.isnan(v))
+        labels[i] = None if missing else str(v)
+    return labels
+
+
+@dataclass(frozen=True)
+class FamilyRows:
+    """The labelled train and test rows of one family, in sample_id order."""
+
+    corpus: str
+    target: str
+    kind: str
+    train_ids: np.ndarray
+    test_ids: np.ndarray
+    y_train: np.ndarray
+    y_test: np.ndarray
+    strata_test: np.ndarray | None  # bootstrap strata of the test rows (or None)
+    bands_test: pd.DataFrame | None  # (low, high) band columns of the test rows (or None)
+    n_unlabelled: int  # rows of the corpus dropped for a missing label
+    strata_note: str = "none"  # how the bootstrap strata were formed (a summary column)
+
+    @property
+    def n_train(self) -> int:
+        return int(self.train_ids.size)
+
+    @property
+    def n_test(self) -> int:
+        return int(self.test_ids.size)
+
+
+def pool_strata(labels: np.ndarray, min_size: int = 2) -> tuple[np.ndarray, int]:
+    """Bootstrap strata with at least `min_size` rows each: smaller cells are pooled.
+
+    Resampling within a one-row cell always returns that row, which would shrink the CI for
+    no reason; such rows are pooled into one stratum "pooled" (and if that pool is itself
+    too small, the smallest remaining cells join it until it is not). Returns the labels and
+    the number of pooled rows.
+    """
+    labels = np.asarray(labels, dtype=object).copy()
+    counts = pd.Series(labels).value_counts()
+    small = set(counts.index[counts < min_size])
+    pooled = np.isin(labels, list(small))
+    rest = counts[counts >= min_size].sort_values(kind="stable")
+    for cell in rest.index:
+        if pooled.sum() == 0 or pooled.sum() >= min_size:
+            break
+        pooled |= labels == cell
+    labels[pooled] = "pooled"
+    return labels, int(pooled.sum())
+
+
+def family_rows(
+    manifest: pd.DataFrame,
+    splits: pd.DataFrame,
+    *,
+    corpus: str,
+    target: str,
+    kind: str,
+    strata: Sequence[str] | None = None,
+) -> FamilyRows:
+    """Train (train + val) and test rows of `corpus` with their targets (sorted by sample_id).
+
+    strata: manifest columns whose joint value defines bootstrap strata of the test rows
+    (e.g. `CONTROLLED_STRATA`); None for unstratified resampling.
+    """
+    rows = manifest.loc[manifest["corpus"] == corpus]
+    if rows.empty:
+        raise ValueError(f"corpus {corpus!r}: no rows in the manifest")
+    rows = rows.merge(splits[["sample_id", "split"]], on="sample_id", how="left", validate="1:1")
+    unsplit = rows["split"].isna()
+    if unsplit.any():
+        raise ValueError(
+            f"corpus {corpus!r}: sample_id {rows.loc[unsplit, 'sample_id'].iloc[0]!r} "
+            "is not in the split edge; rebuild the splits"
+        )
+    rows = rows.sort_values("sample_id", ignore_index=True)
+    y = target_values(rows, target, kind)
+    labelled = np.array([v is not None and v == v for v in y], dtype=bool)
+    rows, y = rows.loc[labelled].reset_index(drop=True), y[labelled]
+    train = rows["split"].isin(["train", "val"]).to_numpy()
+    test = (rows["split"] == "test").to_numpy()
+    if not train.any() or not test.any():
+        raise ValueError(
+            f"corpus {corpus!r}, target {target!r}: {int(train.sum())} labelled train/val and "
+            f"{int(test.sum())} labelled test rows; a probe needs both"
+        )
+    strata_test, strata_note = None, "none"
+    if strata:
+        missing = [c for c in strata if c not in rows.columns]
+        if missing:
+            raise ValueError(f"corpus {corpus!r}: no strata column(s) {missing} in the manifest")
+        cells = rows.loc[test, list(strata)].astype(str).agg(" x ".join, axis=1)
+        strata_test, n_pooled = pool_strata(cells.to_numpy(dtype=object))
+        strata_note = f"{' x '.join(strata)}: {len(set(strata_test))} strata" + (
+            f" ({n_pooled} test rows of cells with < 2 rows pooled)" if n_pooled else ""
+        )
+    bands_test = None
+    if target in BANDS and all(c in rows.columns for c in BANDS[target]):
+        bands_test = rows.loc[test, list(BANDS[target])].reset_index(drop=True).astype(float)
+    ids = rows["sample_id"].to_numpy(dtype=object)
+    return FamilyRows(
+        corpus=corpus,
+        target=target,
+        kind=kind,
+        train_ids=ids[train],
+        test_ids=ids[test],
+        y_train=y[train],
+        y_test=y[test],
+        strata_test=strata_test,
+        strata_note=strata_note,
+        bands_test=bands_test,
+        n_unlabelled=int((~labelled).sum()),
+    )
+
+
+# --------------------------------------------------------------------------- probes
+
+
+@dataclass(frozen=True)
+class FittedProbe:
+    """A probe fitted on the training rows: test predictions, chosen regulariser, diagnostics."""
+
+    pred_test: np.ndarray
+    reg: float  # lambda or C chosen by CV
+    grid: np.ndarray
+    cv_scores: np.ndarray  # mean held-out score per grid value
+    converged: bool
+    n_iter: int | None  # lbfgs iterations (logistic); None for ridge (closed form)
+
+    def fixed(self, kind: str) -> FixedRidge | FixedLogistic:
+        """The probe at its chosen regulariser, for controls and resampling diagnostics."""
+        if kind == "ridge":
+            return FixedRidge(self.reg)
+        return FixedLogistic(self.reg, tol=CONTROL_TOL)
+
+
+def fit_probe(
+    X_train: np.ndarray,
+    y_train: np.ndarray,
+    X_test: np.ndarray,
+    settings: ProbeSettings,
+    *,
+    train_ids: Sequence | np.ndarray | None = None,
+    test_ids: Sequence | np.ndarray | None = None,
+) -> FittedProbe:
+    """Ridge (CV over ``lambdas``) or logistic (stratified CV over ``C``) on the training rows.
+
+    The number of folds is capped at the number of training rows (ridge) or the smallest
+    class count (logistic, inside `probes.fit_logistic`).
+    """
+    if settings.kind == "ridge":
+        probe = fit_ridge_probe(
+            X_train,
+            y_train,
+            settings.lambdas,
+            n_folds=min(settings.folds, len(y_train)),
+            seed=settings.seed,
+            sample_ids=train_ids,
+        )
+        sel = probe.selection
+        pred = probe.predict(X_test, sample_ids=test_ids)
+        return FittedProbe(pred, probe.lam, sel.lambdas, sel.cv_scores, True, None)
+    probe = fit_logistic(
+        X_train, y_train, settings.C, settings.seed, n_folds=settings.folds, sample_ids=train_ids
+    )
+    pred = np.asarray(probe.predict(X_test, sample_ids=test_ids), dtype=object)
+    return FittedProbe(
+        pred,
+        probe.C,
+        probe.C_grid,
+        probe.cv_scores,
+        bool(probe.converged and probe.cv_converged),
+        int(max(probe.n_iter, probe.cv_max_n_iter)),
+    )
+
+
+def _test_sweep(
+    X_train: np.ndarray, y_train: np.ndarray, X_test: np.ndarray, y_test: np.ndarray, lambdas
+) -> np.ndarray:
+    """Test R^2 of ridge at every lambda of the grid (the lambda sweep; one solve each)."""
+    out = np.empty(len(lambdas))
+    for i, lam in enumerate(lambdas):
+        coef, icpt, _ = ridge_fixed(X_train, y_train, float(lam))
+        out[i] = stats.score("r2", y_test, np.asarray(X_test, np.float64) @ coef + icpt)
+    return out
+
+
+# --------------------------------------------------------------------------- plan
+
+
+@dataclass(frozen=True)
+class ComparisonSpec:
+    """One V vs V+T comparison of a family: its input, tactile variant, fusion, seed."""
+
+    input: str  # "raw" | "aligned"
+    t_variant: str
+    fusion: str
+    align_seed: int | None
+    controls: bool
+    skip_reason: str | None = None
+
+
+def plan_comparisons(
+    fusions: Sequence[str],
+    *,
+    heads_variant: str,
+    variants: Sequence[str],
+    align_seeds: Sequence[int],
+    dim_v_raw: int,
+    dim_t_raw: int,
+    control_align_seeds: int | None = None,
+) -> list[ComparisonSpec]:
+    """Every comparison of a family, in a fixed order (raw, tactile ablation, aligned).
+
+    Controls run on ``concat`` of raw (heads' variant) and of aligned (every alignment seed,
+    or only the first `control_align_seeds` in sorted order); when ``concat`` is not among the
+    aligned fusions, on the first configured fusion instead.
+    Same-dimension fusions on raw features of unequal dimension are planned as skipped rows.
+    """
+    unknown = [f for f in fusions if f not in FUSIONS]
+    if unknown:
+        raise ValueError(f"unknown fusion(s) {unknown}; choose from {sorted(FUSIONS)}")
+    fusions = list(dict.fromkeys(fusions))
+    raw_fusions = ["concat"] + [f for f in fusions if f != "concat"]
+    control_aligned = "concat" if "concat" in fusions else fusions[0]
+    plan = []
+    for f in raw_fusions:
+        reason = None
+        if FUSIONS[f].same_dim and dim_v_raw != dim_t_raw:
+            reason = (
+                f"fusion {f!r} needs V and T of equal dimension; raw V has {dim_v_raw} and "
+                f"raw T {dim_t_raw} (use the aligned input or concat)"
+            )
+        plan.append(ComparisonSpec("raw", heads_variant, f, None, f == "concat", reason))
+    for v in variants:
+        if v != heads_variant:
+            plan.append(ComparisonSpec("raw", v, "concat", None, False))
+    seeds = sorted(align_seeds)
+    with_controls = set(seeds if control_align_seeds is None else seeds[:control_align_seeds])
+    for s in seeds:
+        for f in fusions:
+            ctl = f == control_aligned and s in with_controls
+            plan.append(ComparisonSpec("aligned", heads_variant, f, int(s), ctl))
+    return plan
+
+
+def row_id(family: str, spec: ComparisonSpec, probe_seed: int, control: str = "none") -> str:
+    """The key of a result row (unique within a run)."""
+    a = "-" if spec.align_seed is None else str(spec.align_seed)
+    return f"{family}|{spec.input}|t~{spec.t_variant}|{spec.fusion}|a~{a}|s~{probe_seed}|{control}"
+
+
+# --------------------------------------------------------------------------- one comparison
+
+
+@dataclass
+class Comparison:
+    """Outcome of one comparison: the main row, control rows, lambda sweep, predictions."""
+
+    main: dict
+    controls: list[dict] = field(default_factory=list)
+    sweep: list[dict] = field(default_factory=list)
+    pred_v: np.ndarray | None = None
+    pred_vt: np.ndarray | None = None
+
+
+def _control_row(name: str, out: dict) -> dict:
+    """A control's distribution as a summary row: mean Delta, its 2.5/97.5% quantiles as the
+    interval, the share of draws with Delta > 0. V is the V probe's score (mean over refits
+    when the control refits it: training resamples, permuted labels)."""
+    deltas = np.asarray(out["deltas"], dtype=np.float64)
+    v = float(np.mean(out["v_scores"])) if "v_scores" in out else float(out["v_score"])
+    n = int(deltas.size)
+    return {
+        "control": name,
+        "status": "ok",
+        "v_score": v,
+        "vt_score": float(np.mean(out["vt_scores"])),
+        "delta": float(out["delta_mean"]),
+        "delta_sd": float(out["delta_sd"]),
+        "ci_low": float(out["delta_q025"]),
+        "ci_high": float(out["delta_q975"]),
+        "p_gt0": float(np.mean(deltas > 0.0)),
+        "n_resamples": n,
+    }
+
+
+def compare(
+    v_train: np.ndarray,
+    v_test: np.ndarray,
+    t_train: np.ndarray,
+    t_test: np.ndarray,
+    rows: FamilyRows,
+    fusion: str,
+    settings: ProbeSettings,
+    *,
+    controls: bool,
+    v_probe: FittedProbe | None = None,
+) -> Comparison:
+    """V vs fuse(V, T) on the family's rows: fit, bootstrap, (controls), criterion, sweep.
+
+    v_probe: the V probe fitted on (v_train, y_train), shared between the comparisons of one
+    input (it does not depend on T or the fusion). Controls refit at the CV-chosen
+    regularisers. Returns the main row (statistics and diagnostics) and, with controls, one
+    row per control in `CONTROLS`; seeds are all ``settings.seed``, so every comparison of a
+    family sees the same bootstrap resamples and permutations (paired across comparisons).
+    """
+    kind, metric = settings.kind, settings.metric
+    y_tr, y_te = rows.y_train, rows.y_test
+    x_vt_tr, x_vt_te = fuse(fusion, v_train, t_train), fuse(fusion, v_test, t_test)
+    if v_probe is None:
+        v_probe = fit_probe(
+            v_train, y_tr, v_test, settings, train_ids=rows.train_ids, test_ids=rows.test_ids
+        )
+    vt_probe = fit_probe(
+        x_vt_tr, y_tr, x_vt_te, settings, train_ids=rows.train_ids, test_ids=rows.test_ids
+    )
+    boot = stats.fixed_test_bootstrap(
+        y_te,
+        v_probe.pred_test,
+        vt_probe.pred_test,
+        metric,
+        n_resamples=settings.bootstrap,
+        seed=settings.seed,
+        strata=rows.strata_test,
+        sample_ids=rows.test_ids,
+    )
+    main = {
+        "control": "none",
+        "status": "ok",
+        "v_score": boot["v_score"],
+        "vt_score": boot["vt_score"],
+        "delta": boot["delta"],
+        "delta_sd": math.nan,
+        "ci_low": boot["ci_low"],
+        "ci_high": boot["ci_high"],
+        "p_gt0": boot["p_gt0"],
+        "n_resamples": boot["n_resamples"],
+        "n_constant_resamples": boot["n_constant_resamples"],
+        "v_reg": v_probe.reg,
+        "vt_reg": vt_probe.reg,
+        "dim_v": int(v_train.shape[1]),
+        "dim_vt": int(x_vt_tr.shape[1]),
+        "converged": bool(v_probe.converged and vt_probe.converged),
+        "n_iter_v": v_probe.n_iter,
+        "n_iter_vt": vt_probe.n_iter,
+        "controls": "run" if controls else "not run",
+        "delta_ctrl": math.nan,
+        "criterion_met": None,
+        "notes": "",
+    }
+    if rows.bands_test is not None:
+        lo, hi = (rows.bands_test[c].to_numpy() for c in rows.bands_test.columns)
+        main["band_low_mean"] = float(np.mean(lo))
+        main["band_high_mean"] = float(np.mean(hi))
+        main["v_in_band"] = float(np.mean((v_probe.pred_test >= lo) & (v_probe.pred_test <= hi)))
+        main["vt_in_band"] = float(np.mean((vt_probe.pred_test >= lo) & (vt_probe.pred_test <= hi)))
+    result = Comparison(main, pred_v=v_probe.pred_test, pred_vt=vt_probe.pred_test)
+    test_v = test_vt = np.full(v_probe.grid.size, np.nan)
+    if kind == "ridge":
+        test_v = _test_sweep(v_train, y_tr, v_test, y_te, v_probe.grid)
+        test_vt = _test_sweep(x_vt_tr, y_tr, x_vt_te, y_te, vt_probe.grid)
+    for i, reg in enumerate(v_probe.grid):
+        result.sweep.append(
+            {
+                "reg": float(reg),
+                "cv_v": float(v_probe.cv_scores[i]),
+                "cv_vt": float(vt_probe.cv_scores[i]),
+                "test_v": float(test_v[i]),
+                "test_vt": float(test_vt[i]),
+                "delta_test": float(test_vt[i] - test_v[i]),
+                "selected_v": bool(reg == v_probe.reg),
+                "selected_vt": bool(reg == vt_probe.reg),
+            }
+        )
+    if not controls:
+        main["notes"] = "controls not run (run on the concat comparisons only; see probe_suite)"
+        return result
+    fixed_v, fixed_vt = v_probe.fixed(kind), vt_probe.fixed(kind)
+    common = {"metric": metric, "seed": settings.seed}
+    runs = {
+        "train_resample": (settings.train_resamples, lambda: stats.train_resample_diagnostic(
+            v_train, x_vt_tr, y_tr, v_test, x_vt_te, y_te, probe_v=fixed_v, probe_vt=fixed_vt,
+            n_resamples=settings.train_resamples, **common,
+        )),
+        "tactile_permutation": (settings.permutations, lambda: stats.tactile_permutation_control(
+            v_train, t_train, y_tr, v_test, t_test, y_te, fusion=fusion, probe=fixed_vt,
+            probe_v=fixed_v, n_permutations=settings.permutations, **common,
+        )),
+        "label_permutation": (settings.label_permutations, lambda: stats.label_permutation_control(
+            v_train, x_vt_tr, y_tr, v_test, x_vt_te, y_te, probe_v=fixed_v, probe_vt=fixed_vt,
+            n_permutations=settings.label_permutations, **common,
+        )),
+        "random_features": (settings.random_draws, lambda: stats.random_feature_control(
+            v_train, t_train, y_tr, v_test, t_test, y_te, fusion=fusion, probe=fixed_vt,
+            probe_v=fixed_v, n_draws=settings.random_draws, **common,
+        )),
+    }  # fmt: skip
+    for name in CONTROLS:
+        count, call = runs[name]
+        if count <= 0:
+            continue
+        with warnings.catch_warnings(record=True) as caught:
+            # A logistic refit that misses convergence at the iteration cap warns once per
+            # refit; the warnings are counted into the control's notes, not flooded to the log.
+            warnings.simplefilter("always", category=ConvergenceWarning)
+            try:
+                row = _control_row(name, call())
+            except ValueError as exc:  # e.g. a training resample left holding one class
+                row = {"control": name, "status": "failed", "notes": f"control failed: {exc}"}
+        for w in caught:
+            if not issubclass(w.category, ConvergenceWarning):
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        unconverged = sum(issubclass(w.category, ConvergenceWarning) for w in caught)
+        if unconverged:
+            row["notes"] = f"{unconverged} refit(s) did not converge within the iteration cap"
+        result.controls.append(row)
+        if name == "tactile_permutation" and row.get("status", "ok") == "ok":
+            main["delta_ctrl"] = row["delta"]
+    if math.isnan(main["delta_ctrl"]):
+        main["notes"] = "no tactile-permutation control (probes.permutations = 0, or it failed)"
+    else:
+        main["criterion_met"] = stats.paper_criterion(
+            main["delta"], main["ci_low"], main["delta_ctrl"], settings.min_delta
+        )
+    return result
+
+
+def confusion_counts(
+    y_true: np.ndarray, y_pred: np.ndarray, classes: Sequence[str]
+) -> list[tuple[str, str, int]]:
+    """(true, predicted, count) for every pair of classes, zeros included."""
+    y_true, y_pred = np.asarray(y_true, dtype=object), np.asarray(y_pred, dtype=object)
+    return [(a, b, int(np.sum((y_true == a) & (y_pred == b)))) for a in classes for b in classes]
+
+
+# --------------------------------------------------------------------------- a family
+
+
+@dataclass(frozen=True)
+class FamilyResult:
+    """Tidy tables of one family and probe seed: results, lambda/C sweep, confusion counts."""
+
+    rows: pd.DataFrame
+    sweep: pd.DataFrame
+    confusion: pd.DataFrame
+
+
+def run_family(
+    family: str,
+    rows: FamilyRows,
+    *,
+    vision: tuple[np.ndarray, np.ndarray],
+    tactile: Mapping[str, tuple[np.ndarray, np.ndarray]],
+    aligned: Mapping[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
+    fusions: Sequence[str],
+    heads_variant: str,
+    settings: ProbeSettings,
+    labels: Mapping[str, object] | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> FamilyResult:
+    """Run every planned comparison of one family and probe seed.
+
+    vision: raw V features (train rows, test rows), rows in ``rows.train_ids`` /
+        ``rows.test_ids`` order; tactile: variant -> raw T features (train, test);
+    aligned: alignment seed -> (V_aligned train, V_aligned test, T_aligned train, test).
+    labels: constant columns added to every row (e.g. corpus design, vision feature kind).
+    A comparison whose probe cannot be fitted (e.g. a class with a single training row) is a
+    ``failed`` row with the error as its note; a planned skip is a ``skipped`` row.
+    """
+    say = progress or (lambda _msg: None)
+    if heads_variant not in tactile:
+        raise ValueError(
+            f"family {family!r}: no raw tactile features for the heads' variant {heads_variant!r}"
+        )
+    v_tr, v_te = vision
+    plan = plan_comparisons(
+        fusions,
+        heads_variant=heads_variant,
+        variants=list(tactile),
+        align_seeds=sorted(aligned),
+        dim_v_raw=v_tr.shape[1],
+        dim_t_raw=tactile[heads_variant][0].shape[1],
+        control_align_seeds=None if settings.kind == "ridge" else LOGISTIC_CONTROL_ALIGN_SEEDS,
+    )
+    base = {
+        "family": family,
+        "corpus": rows.corpus,
+        "target": rows.target,
+        "kind": settings.kind,
+        "metric": settings.metric,
+        "reg_name": settings.reg_name,
+        "probe_seed": settings.seed,
+        "heads_variant": heads_variant,
+        "n_train": rows.n_train,
+        "n_test": rows.n_test,
+        "n_unlabelled": rows.n_unlabelled,
+        "bootstrap_strata": rows.strata_note,
+        **(labels or {}),
+    }
+    classes = class_order([*rows.y_train, *rows.y_test]) if settings.kind == "logistic" else []
+    out_rows, sweep_rows, conf_rows = [], [], []
+    v_cache: dict[tuple, FittedProbe] = {}
+    for i, spec in enumerate(plan):
+        ident = {
+            "input": spec.input,
+            "t_variant": spec.t_variant,
+            "fusion": spec.fusion,
+            "align_seed": spec.align_seed,
+        }
+        key = row_id(family, spec, settings.seed)
+        if spec.skip_reason is not None:
+            out_rows.append(
+                {"row_id": key, **base, **ident, "control": "none", "status": "skipped",
+                 "controls": "not run", "notes": spec.skip_reason}
+            )  # fmt: skip
+            continue
+        if spec.input == "raw":
+            vv_tr, vv_te = v_tr, v_te
+            tt_tr, tt_te = tactile[spec.t_variant]
+            cache_key = ("raw",)
+        else:
+            vv_tr, vv_te, tt_tr, tt_te = aligned[spec.align_seed]
+            cache_key = ("aligned", spec.align_seed)
+        try:
+            if cache_key not in v_cache:
+                v_cache[cache_key] = fit_probe(
+                    vv_tr, rows.y_train, vv_te, settings,
+                    train_ids=rows.train_ids, test_ids=rows.test_ids,
+                )  # fmt: skip
+            res = compare(
+                vv_tr, vv_te, tt_tr, tt_te, rows, spec.fusion, settings,
+                controls=spec.controls, v_probe=v_cache[cache_key],
+            )  # fmt: skip
+        except ValueError as exc:
+            out_rows.append(
+                {"row_id": key, **base, **ident, "control": "none", "status": "failed",
+                 "controls": "not run", "notes": f"probe could not be fitted: {exc}"}
+            )  # fmt: skip
+            say(f"[{i + 1}/{len(plan)}] {key}: failed ({exc})")
+            continue
+        out_rows.append({"row_id": key, **base, **ident, **res.main})
+        for c in res.controls:
+            out_rows.append(
+                {"row_id": row_id(family, spec, settings.seed, c["control"]), **base, **ident,
+                 "controls": "run", **c}
+            )  # fmt: skip
+        for s in res.sweep:
+            sweep_rows.append(
+                {"row_id": f"{key}|{settings.reg_name}={s['reg']:g}", "comparison": key,
+                 "family": family, "corpus": rows.corpus, "target": rows.target,
+                 "metric": settings.metric, **ident, "probe_seed": settings.seed,
+                 "heads_variant": heads_variant, "reg_name": settings.reg_name, **s}
+            )  # fmt: skip
+        if settings.kind == "logistic":
+            for model, pred in (("V", res.pred_v), ("V+T", res.pred_vt)):
+                for a, b, n in confusion_counts(rows.y_test, pred, classes):
+                    conf_rows.append(
+                        {"row_id": f"{key}|{model}|{a}|{b}", "comparison": key,
+                         "family": family, "corpus": rows.corpus, "target": rows.target,
+                         **ident, "probe_seed": settings.seed, "heads_variant": heads_variant,
+                         "model": model,
+                         "true": a, "pred": b, "count": n}
+                    )  # fmt: skip
+        say(
+            f"[{i + 1}/{len(plan)}] {key}: V {res.main['v_score']:.3f} V+T "
+            f"{res.main['vt_score']:.3f} delta {res.main['delta']:+.3f} "
+            f"[{res.main['ci_low']:+.3f}, {res.main['ci_high']:+.3f}]"
+        )
+    return FamilyResult(
+        rows=tidy(pd.DataFrame(out_rows)),
+        sweep=tidy(_frame(sweep_rows, SWEEP_COLUMNS)),
+        confusion=tidy(_frame(conf_rows, CONFUSION_COLUMNS)),
+    )
+
+
+_IDENT = {
+    "row_id": "str", "comparison": "str", "family": "str", "corpus": "str", "target": "str",
+    "input": "str", "t_variant": "str", "fusion": "str", "align_seed": "Int64",
+    "probe_seed": "int64", "heads_variant": "str",
+}  # fmt: skip
+#: Columns of the lambda/C sweep table (one row per comparison and regulariser value).
+SWEEP_COLUMNS = {
+    **_IDENT, "metric": "str", "reg_name": "str", "reg": "float64", "cv_v": "float64",
+    "cv_vt": "float64", "test_v": "float64", "test_vt": "float64", "delta_test": "float64",
+    "selected_v": "bool", "selected_vt": "bool",
+}  # fmt: skip
+#: Columns of the confusion-count table (logistic families; empty for ridge families).
+CONFUSION_COLUMNS = {**_IDENT, "model": "str", "true": "str", "pred": "str", "count": "int64"}
+
+
+def _frame(rows: list[dict], columns: Mapping[str, str]) -> pd.DataFrame:
+    """Rows as a frame with exactly `columns`, typed even when there are no rows."""
+    frame = pd.DataFrame(rows, columns=list(columns))
+    if frame.empty:
+        return frame.astype(dict(columns))
+    return frame
+
+
+_INT_COLUMNS = (
+    "align_seed", "n_iter_v", "n_iter_vt", "n_resamples", "n_constant_resamples", "dim_v",
+    "dim_vt",
+)  # fmt: skip
+
+
+def tidy(frame: pd.DataFrame) -> pd.DataFrame:
+    """Stable column types for Parquet (and after reading one back): nullable ints for seeds,
+    iterations, counts and dimensions; nullable booleans for the criterion and convergence."""
+    frame = frame.copy()
+    for col in _INT_COLUMNS:
+        if col in frame.columns:
+            frame[col] = pd.array(
+                [None if pd.isna(v) else int(v) for v in frame[col]], dtype="Int64"
+            )
+    for col in ("criterion_met", "converged"):
+        if col in frame.columns:
+            frame[col] = pd.array(
+                [None if pd.isna(v) else bool(v) for v in frame[col]], dtype="boolean"
+            )
+    if "notes" in frame.columns:
+        frame["notes"] = frame["notes"].fillna("").astype(str)
+    return frame
+
+
+def class_order(labels: Sequence) -> list[str]:
+    """Distinct class labels in natural order: numerically when every label is a number
+    ("500.0" < "2000.0"), else alphabetically."""
+    distinct = sorted({str(x) for x in labels})
+    try:
+        return sorted(distinct, key=float)
+    except ValueError:
+        return distinct

@@ -1,0 +1,207 @@
+"""The probes stage in the workflow (rules probe, aggregate_probes) on config/test.yaml.
+
+The run writes synthetic upstream edges with `tacgen_lib.edges` (manifest, splits, vision and
+tactile features per preprocessing variant, aligned projections per alignment seed) and allows
+only the probe rules, so it takes seconds; tests/test_workflow.py runs the whole DAG. In the
+synthetic corpora the tactile features carry the labels on the paired and controlled corpora
+and nothing on the null corpus, so the summary must show V+T beating V there and not here.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from test_workflow import ROOT, copy_tree, smk  # noqa: E402
+
+from tacgen_lib import edges, probe_suite  # noqa: E402
+
+pytestmark = pytest.mark.workflow
+
+PROBE_RULES = ["--allowed-rules", "probe", "aggregate_probes"]
+TABLES = ["controlled", "paired", "sweep", "align_seeds", "variants", "controls", "fusions"]
+TARGETS = [
+    "results/probes/summary.parquet",
+    *[f"results/report/probes/{t}.html" for t in TABLES],
+    "results/report/probes/forest.png",
+    "results/report/probes/confusion.png",
+]
+SUMMARY_COLUMNS = {
+    "row_id", "family", "corpus", "target", "input", "t_variant", "fusion", "align_seed",
+    "probe_seed", "control", "status", "metric", "v_score", "vt_score", "delta", "ci_low",
+    "ci_high", "p_gt0", "criterion_met", "delta_ctrl", "controls", "v_reg", "vt_reg",
+    "reg_name", "n_train", "n_test", "converged", "notes", "null_corpus", "design",
+    "bootstrap_strata",
+}  # fmt: skip
+
+
+def merged_config() -> dict:
+    """config/config.yaml extended by config/test.yaml, as Snakemake merges them."""
+
+    def merge(a: dict, b: dict) -> dict:
+        out = dict(a)
+        for k, v in b.items():
+            out[k] = merge(a[k], v) if isinstance(v, dict) and isinstance(a.get(k), dict) else v
+        return out
+
+    base = yaml.safe_load((ROOT / "config/config.yaml").read_text())
+    return merge(base, yaml.safe_load((ROOT / "config/test.yaml").read_text()))
+
+
+def write_upstream(work: Path, cfg: dict, n: int = 60) -> None:
+    """Manifest, splits, feature and aligned edges for every corpus the probe families use."""
+    rng = np.random.default_rng(0)
+    variants = cfg["preprocess"]["variants"]
+    heads = cfg["probes"]["heads"]
+    manifest, splits = [], []
+    for corpus, spec in sorted(cfg["corpora"].items()):
+        ids = [f"{corpus}-{i:05d}" for i in range(n)]
+        density = rng.choice([500.0, 2000.0, 5000.0], n)
+        scale = np.tile([0.15, 0.2, 0.25], n // 3)
+        mass = density * scale**3
+        hard = rng.random(n) < 0.5
+        force = 2.0 + 3.0 * hard + rng.normal(0, 0.3, n)
+        shape = rng.choice(["box", "sphere"], n)
+        frame = pd.DataFrame(
+            {
+                "sample_id": ids, "corpus": corpus, "sensor_id": "s0", "caption": "",
+                "stratum": shape, "shape": shape, "scale": scale, "density": density,
+                "mass": mass, "hardness": np.where(hard, "hard", "soft"),
+                "force_p05": force - 0.5, "force_p50": force, "force_p95": force + 0.5,
+            }
+        )  # fmt: skip
+        manifest.append(frame)
+        if spec.get("design") == "controlled":
+            split = np.where(scale == 0.25, "test", np.where(np.arange(n) % 9 == 0, "val", "train"))
+        else:
+            split = np.array(["train"] * (n - 16) + ["val"] * 4 + ["test"] * 12)
+        splits.append(pd.DataFrame({"sample_id": ids, "corpus": corpus, "split": split}))
+        # what touch "feels": density, hardness and force -- except on the null corpus
+        signal = np.column_stack([np.log(density), hard, force, np.log(mass)])
+        if spec.get("null"):
+            signal = rng.permutation(signal)
+        key = pd.DataFrame({"sample_id": ids})
+        base = work / "results/features" / corpus
+        vision = {"vit": rng.normal(size=(n, 16)), "pixel": rng.normal(size=(n, 24))}
+        edges.write(base / "vision.parquet", key, vision, producer="test")
+        for variant in variants:
+            t = np.column_stack([signal, rng.normal(size=(n, 12))]) + 0.05 * rng.normal(
+                size=(n, 16)
+            )
+            edges.write(base / f"tactile~{variant}.parquet", key, {"vit": t}, producer="test")
+        for fam in cfg["probes"]["families"].values():
+            if fam["corpus"] != corpus:
+                continue
+            for seed in cfg["align"]["seeds"]:
+                cell = (
+                    f"results/align/{fam['heads_from']}/{heads['variant']}/seed~{seed}/"
+                    f"tau~{float(heads['tau'])!r}/n~{heads['n_train']}"
+                )
+                t_al = np.column_stack([signal, rng.normal(size=(n, 4))])
+                vectors = {"v_aligned": rng.normal(size=(n, 8)), "t_aligned": t_al}
+                edges.write(
+                    work / cell / f"aligned~{corpus}.parquet", key, vectors, producer="test"
+                )
+    edges.write(
+        work / "results/corpus/manifest.parquet", pd.concat(manifest, ignore_index=True),
+        producer="test",
+    )  # fmt: skip
+    edges.write(
+        work / "results/corpus/splits.parquet", pd.concat(splits, ignore_index=True),
+        producer="test",
+    )  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def cfg() -> dict:
+    return merged_config()
+
+
+@pytest.fixture(scope="module")
+def probes_run(tmp_path_factory, cfg) -> Path:
+    work = copy_tree(tmp_path_factory.mktemp("probes") / "wf")
+    write_upstream(work, cfg)
+    smk(work, "--cores", "2", *TARGETS, *PROBE_RULES)  # targets must follow a flag
+    return work
+
+
+@pytest.fixture(scope="module")
+def summary(probes_run) -> pd.DataFrame:
+    return probe_suite.tidy(edges.read(probes_run / "results/probes/summary.parquet").frame)
+
+
+def test_summary_edge_has_the_documented_columns_and_one_row_per_comparison(summary, cfg):
+    assert SUMMARY_COLUMNS <= set(summary.columns), SUMMARY_COLUMNS - set(summary.columns)
+    assert summary["row_id"].is_unique
+    assert set(summary["family"]) == set(cfg["probes"]["families"])
+    ident = ["family", "input", "t_variant", "fusion", "align_seed", "probe_seed", "control"]
+    assert not summary[ident].astype(str).duplicated().any()
+    assert set(summary["control"]) == {"none", *probe_suite.CONTROLS}
+    main = summary.loc[summary["control"] == "none"]
+    assert set(main["status"]) <= {"ok", "skipped"}
+    # every configured fusion on aligned features, for every alignment seed
+    aligned = main.loc[main["input"] == "aligned"]
+    assert set(aligned["fusion"]) == set(cfg["probes"]["fusions"])
+    assert set(aligned["align_seed"]) == set(cfg["align"]["seeds"])
+    # the tactile ablation covers every preprocessing variant
+    raw_concat = main.loc[(main["input"] == "raw") & (main["fusion"] == "concat")]
+    assert set(raw_concat["t_variant"]) == set(cfg["preprocess"]["variants"])
+    # pixel-V (24-d) and tactile ViT (16-d) differ: same-dimension fusions are skipped, with why
+    skipped = main.loc[main["status"] == "skipped"]
+    assert len(skipped) and (skipped["vision"] == "pixel").all()
+    assert skipped["notes"].str.contains("needs V and T of equal dimension").all()
+    # the criterion is evaluated exactly where the controls ran
+    ran = main["controls"] == "run"
+    assert main.loc[ran, "criterion_met"].notna().all()
+    assert main.loc[~ran, "criterion_met"].isna().all()
+    assert (main.loc[ran, "fusion"] == "concat").all()
+    hard = main.loc[main["family"] == "hardness"]
+    assert set(hard["metric"]) == {"accuracy"} and set(hard["reg_name"]) == {"C"}
+    force = main.loc[(main["family"] == "force") & (main["status"] == "ok")]
+    assert force["vt_in_band"].between(0, 1).all() and force["band_low_mean"].notna().all()
+    ctrl = main.loc[main["design"] == "controlled", "bootstrap_strata"]
+    assert ctrl.str.startswith("shape x density x scale").all()
+
+
+def test_null_corpus_rows_are_present_and_show_no_gain(summary):
+    main = summary.loc[(summary["control"] == "none") & (summary["status"] == "ok")]
+    null = main.loc[main["null_corpus"].astype(bool)]
+    assert set(null["family"]) == {"hardness_null", "force_null"}
+    assert not null["criterion_met"].fillna(False).astype(bool).any()
+    real = main.loc[(main["family"] == "force") & (main["controls"] == "run")]
+    assert (real["ci_low"] > 0).all() and real["criterion_met"].astype(bool).all()
+
+
+def test_report_items_exist(probes_run):
+    report = probes_run / "results/report/probes"
+    for name in TABLES:
+        html = (report / f"{name}.html").read_text()
+        assert "<table>" in html and "<tr>" in html, name
+    paired = (report / "paired.html").read_text()
+    assert "hardness" in paired and "null: Δ [95% CI]" in paired
+    assert "mass_vit" in (report / "controlled.html").read_text()
+    for name in ("forest", "confusion"):
+        assert (report / f"{name}.png").read_bytes()[:4] == b"\x89PNG", name
+
+
+def test_probe_edges_are_verified_and_keyed_by_row_id(probes_run, cfg):
+    seed = cfg["probes"]["seeds"][0]
+    rows = edges.read(probes_run / f"results/probes/hardness/seed~{seed}.parquet")
+    assert rows.key == "row_id" and len(rows)
+    conf = edges.read(probes_run / f"results/probes/hardness/confusion~{seed}.parquet").frame
+    assert set(conf["model"]) == {"V", "V+T"} and set(conf["true"]) == {"hard", "soft"}
+    empty = edges.read(probes_run / f"results/probes/force/confusion~{seed}.parquet")
+    assert len(empty) == 0
+    log = (probes_run / f"results/logs/probe/hardness/seed~{seed}.log").read_text()
+    assert "train/val rows" in log and "|none: V " in log
+
+
+def test_second_run_has_nothing_to_do(probes_run):
+    proc = smk(probes_run, "--dry-run", *TARGETS, *PROBE_RULES)  # targets follow a flag
+    assert "Nothing to be done" in proc.stdout + proc.stderr
