@@ -1,6 +1,11 @@
 """Corpus stage: simulate (or ingest) corpora, fuse their manifest, fix the splits."""
 
 
+localrules:
+    fuse_manifest,
+    make_splits,
+
+
 rule simulate_corpus:
     """One shard of a MuJoCo-simulated corpus: only the effects its scene declares are computed."""
     input:

@@ -1,5 +1,12 @@
 """Report stage: what a reader of `snakemake --report` looks at."""
 
+
+localrules:
+    corpus_examples,
+    edge_manifest,
+    cost_of_accuracy,
+
+
 TARGETS += ["results/report/edge_manifest.html"]
 TARGETS += expand("results/report/corpus/{corpus}_examples.png", corpus=sorted(CORPORA))
 
@@ -60,3 +67,53 @@ rule edge_manifest:
         runtime=5,
     script:
         "../workflow/scripts/edge_manifest.py"
+
+
+TARGETS += ["results/report/cost_of_accuracy.html"]
+
+
+def simulate_benchmarks(wildcards=None):
+    return [
+        f"results/benchmarks/simulate_corpus/{c}/{s}.tsv"
+        for c in SIM_CORPORA
+        for s in range(CORPORA[c]["shards"])
+    ]
+
+
+rule cost_of_accuracy:
+    """Each knob's accuracy against its run time: benchmark files joined with the metrics."""
+    input:
+        align="results/align/summary.parquet",
+        pretrain="results/features/pretrain_vs_random.parquet",
+        pretrain_bench=expand(
+            "results/benchmarks/pretrain_backbone/{m}.tsv", m=["vision", "tactile"]
+        ),
+        simulate_bench=simulate_benchmarks,
+        manifest="results/corpus/manifest.parquet",
+        code=lib("cost.py", "align_report.py", "report_tables.py"),
+    output:
+        html=report(
+            "results/report/cost_of_accuracy.html",
+            caption="../workflow/report/cost_of_accuracy.rst",
+            category="Cost of accuracy",
+            labels={"table": "cost of accuracy"},
+        ),
+        figure=report(
+            "results/report/cost_of_accuracy.png",
+            caption="../workflow/report/cost_of_accuracy.rst",
+            category="Cost of accuracy",
+            labels={"figure": "cost of accuracy"},
+        ),
+        tsv="results/report/cost_of_accuracy.tsv",
+    log:
+        "results/logs/cost_of_accuracy.log",
+    benchmark:
+        "results/benchmarks/cost_of_accuracy.tsv"
+    conda:
+        "../envs/report.yaml"
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=5,
+    script:
+        "../workflow/scripts/cost_of_accuracy.py"

@@ -27,20 +27,24 @@ def pretrained_vs_random(
     C_grid: Sequence[float] = (0.1, 1.0, 10.0),
     seed: int = 0,
     n_resamples: int = 2000,
+    n_folds: int = 3,
     sample_ids: np.ndarray | None = None,
 ) -> dict:
     """Accuracy of a logistic probe on each feature set and Δ = pretrained − random with a CI.
 
     pretrained, random_init: (N, d) features of the same N frames; labels: (N,) classes;
-    train, test: row positions. Returns random_score (as v_score), pretrained_score (as
-    vt_score), delta, ci_low, ci_high, p_gt0 and the chosen C of each probe.
+    train, test: row positions; C by `n_folds`-fold CV on the train rows.
+    Returns random_accuracy, pretrained_accuracy, delta, ci_low, ci_high, p_gt0, the test
+    chance level (majority class) and the chosen C of each probe.
     """
     ids_tr = None if sample_ids is None else sample_ids[train]
     ids_te = None if sample_ids is None else sample_ids[test]
     fits = {}
     preds = {}
     for name, feats in (("random", random_init), ("pretrained", pretrained)):
-        probe = fit_logistic(feats[train], labels[train], C_grid, seed, sample_ids=ids_tr)
+        probe = fit_logistic(
+            feats[train], labels[train], C_grid, seed, n_folds=n_folds, sample_ids=ids_tr
+        )
         fits[name] = probe
         preds[name] = probe.predict(feats[test], sample_ids=ids_te)
     boot = fixed_test_bootstrap(
