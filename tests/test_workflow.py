@@ -98,6 +98,12 @@ def test_dry_run_plans_the_whole_dag(tmp_path):
         "extract_vision_features",
         "extract_tactile_features",
         "pretrained_vs_random",
+        "train_heads",
+        "project_aligned",
+        "aggregate_align",
+        "probe",
+        "aggregate_probes",
+        "cost_of_accuracy",
         "edge_manifest",
         "corpus_examples",
     ):
@@ -140,13 +146,30 @@ def test_changed_param_reruns_only_its_downstream(run_dir, tmp_path):
     assert set(planned_rules(work)) == {"corpus_examples", "all"}
 
 
+def test_changed_probe_param_reruns_only_the_probes(run_dir, tmp_path):
+    work = copy_tree(tmp_path / "p")
+    shutil.copytree(run_dir / "results", work / "results")
+    shutil.copytree(run_dir / ".snakemake", work / ".snakemake")
+    cfg = work / "config/test.yaml"
+    cfg.write_text(
+        cfg.read_text().replace("probes:\n  bootstrap: 200", "probes:\n  bootstrap: 150")
+    )
+    assert "probes:\n  bootstrap: 150" in cfg.read_text()
+    assert set(planned_rules(work)) == {"probe", "aggregate_probes", "edge_manifest", "all"}
+
+
 def test_changed_library_module_reruns_only_its_users(run_dir, tmp_path):
     work = copy_tree(tmp_path / "c")
     shutil.copytree(run_dir / "results", work / "results")
     shutil.copytree(run_dir / ".snakemake", work / ".snakemake")
     module = work / "tacgen_lib/backbone_check.py"
     module.write_text(module.read_text() + "\n# an edit that changes the module's content\n")
-    assert set(planned_rules(work)) == {"pretrained_vs_random", "edge_manifest", "all"}
+    assert set(planned_rules(work)) == {
+        "pretrained_vs_random",
+        "edge_manifest",
+        "cost_of_accuracy",
+        "all",
+    }
 
 
 def test_two_clean_runs_give_identical_edges(run_dir, tmp_path):
