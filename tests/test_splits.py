@@ -49,7 +49,9 @@ def test_by_scale_split_holds_out_the_test_scale():
     )
     assert set(s.loc[s.split == "test", "scale"]) == {0.25}
     assert set(s.loc[s.split != "test", "scale"]) == {0.15, 0.2}
-    assert (s.split == "val").sum() == round(0.1 * (s.scale < 0.25).sum())  # val share of train scales
+    assert (s.split == "val").sum() == round(
+        0.1 * (s.scale < 0.25).sum()
+    )  # val share of train scales
 
 
 def test_by_scale_without_the_scale_rows_is_a_clear_error():
