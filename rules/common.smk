@@ -54,3 +54,18 @@ def feature_edge(corpus, modality, variant=None):
     if modality == "vision":
         return f"results/features/{corpus}/vision.parquet"
     return f"results/features/{corpus}/tactile~{variant}.parquet"
+
+
+def backbone_frames(modality, corpus):
+    """The frames a modality's backbone sees: RGB from the corpus edge, tactile_proc per variant."""
+    if modality == "vision":
+        return corpus_edge(corpus)
+    return f"results/preprocess/{corpus}/{config['features']['pretrain']['variant']}.parquet"
+
+
+def simulate_benchmarks(wildcards=None):
+    return [
+        f"results/benchmarks/simulate_corpus/{c}/{s}.tsv"
+        for c in SIM_CORPORA
+        for s in range(CORPORA[c]["shards"])
+    ]

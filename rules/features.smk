@@ -14,13 +14,6 @@ EDGES += expand("results/features/backbones/{m}.pt", m=MODALITIES)
 EDGES += ["results/features/pretrain_vs_random.parquet"]
 
 
-def backbone_frames(modality, corpus):
-    """The frames a modality's backbone sees: RGB from the corpus edge, tactile_proc per variant."""
-    if modality == "vision":
-        return corpus_edge(corpus)
-    return f"results/preprocess/{corpus}/{PRETRAIN['variant']}.parquet"
-
-
 rule pretrain_backbone:
     """DINO self-distillation on the pretraining corpus's train split only (or an official checkpoint)."""
     input:

@@ -72,14 +72,6 @@ rule edge_manifest:
 TARGETS += ["results/report/cost_of_accuracy.html"]
 
 
-def simulate_benchmarks(wildcards=None):
-    return [
-        f"results/benchmarks/simulate_corpus/{c}/{s}.tsv"
-        for c in SIM_CORPORA
-        for s in range(CORPORA[c]["shards"])
-    ]
-
-
 rule cost_of_accuracy:
     """Each knob's accuracy against its run time: benchmark files joined with the metrics."""
     input:
