@@ -19,12 +19,19 @@ rule corpus_examples:
         splits="results/corpus/splits.parquet",
         code=lib("report_figures.py", "preprocess.py", "images.py"),
     output:
-        report(
+        examples=report(
             "results/report/corpus/{corpus}_examples.png",
             caption="../workflow/report/corpus_examples.rst",
             category="Corpus",
             subcategory="{corpus}",
             labels={"corpus": "{corpus}", "figure": "examples"},
+        ),
+        labels=report(
+            "results/report/corpus/{corpus}_labels.png",
+            caption="../workflow/report/corpus_labels.rst",
+            category="Corpus",
+            subcategory="{corpus}",
+            labels={"corpus": "{corpus}", "figure": "labels"},
         ),
     log:
         "results/logs/corpus_examples/{corpus}.log",

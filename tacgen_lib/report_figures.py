@@ -99,3 +99,64 @@ def pretrain_curve_figure(curve: pd.DataFrame, *, title: str) -> plt.Figure:
     ax.set_title(title, fontsize=9)
     fig.tight_layout()
     return fig
+
+
+def label_distribution_figure(samples: pd.DataFrame, *, title: str) -> plt.Figure:
+    """Label distributions of a corpus and its force bands (p05–p95 around p50 against mass).
+
+    Panels appear for the label columns the corpus has: shape, density and hardness counts,
+    a mass histogram, and force_p50 with its p05/p95 band per sample against mass (with the
+    m·g line). A real corpus without physical labels shows its hardness and top adjectives.
+    """
+    panels = []
+    for col in ("shape", "density", "hardness"):
+        if col in samples.columns and samples[col].notna().any():
+            panels.append(("counts", col))
+    if "mass" in samples.columns and samples["mass"].notna().any():
+        panels.append(("hist", "mass"))
+    if {"force_p05", "force_p50", "force_p95", "mass"} <= set(samples.columns) and samples[
+        "force_p50"
+    ].notna().any():
+        panels.append(("bands", "force"))
+    if not panels and "adjectives" in samples.columns:
+        panels.append(("adjectives", "adjectives"))
+    fig, axes = plt.subplots(
+        1, max(len(panels), 1), figsize=(3.2 * max(len(panels), 1), 3.0), squeeze=False
+    )
+    for ax, (kind, col) in zip(axes[0], panels, strict=False):
+        if kind == "counts":
+            counts = samples[col].astype(str).value_counts().sort_index()
+            ax.bar(counts.index, counts.to_numpy())
+            ax.tick_params(axis="x", labelrotation=45, labelsize=7)
+            ax.set_title(f"{col} (samples)", fontsize=9)
+        elif kind == "hist":
+            ax.hist(samples[col].dropna().to_numpy(), bins=30)
+            ax.set_xlabel("mass (kg)")
+            ax.set_title("mass", fontsize=9)
+        elif kind == "bands":
+            d = samples.dropna(subset=["mass", "force_p50"]).sort_values("mass")
+            ax.errorbar(
+                d["mass"],
+                d["force_p50"],
+                yerr=[d["force_p50"] - d["force_p05"], d["force_p95"] - d["force_p50"]],
+                fmt=".",
+                ms=2,
+                elinewidth=0.5,
+                alpha=0.6,
+                label="p50 with p05–p95",
+            )
+            m = np.linspace(0, d["mass"].max(), 10)
+            ax.plot(m, 9.81 * m, "k--", lw=0.8, label="m·g")
+            ax.set_xlabel("mass (kg)")
+            ax.set_ylabel("contact force (N)")
+            ax.set_title("force bands", fontsize=9)
+            ax.legend(fontsize=6)
+        else:
+            words = (
+                pd.Series([w for adj in samples[col] for w in list(adj)]).value_counts().head(12)
+            )
+            ax.barh(words.index[::-1], words.to_numpy()[::-1])
+            ax.set_title("top adjectives", fontsize=9)
+    fig.suptitle(f"corpus {title}: labels", fontsize=10)
+    fig.tight_layout()
+    return fig

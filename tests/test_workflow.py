@@ -128,6 +128,9 @@ def test_full_run_makes_verified_edges_logs_and_benchmarks(run_dir):
             or (run_dir / f"results/benchmarks/{rule}.tsv").exists()
         ), rule
         assert list((run_dir / "results/logs").rglob(f"*{rule}*")), rule
+    for corpus in ("sim_paired", "sim_null", "sim_controlled"):
+        for figure in ("examples", "labels"):
+            assert (run_dir / f"results/report/corpus/{corpus}_{figure}.png").stat().st_size > 5000
     table = (run_dir / "results/report/edge_manifest.tsv").read_text()
     assert edges.sha256_file(run_dir / "results/corpus/splits.parquet") in table
 
