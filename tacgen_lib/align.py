@@ -26,9 +26,7 @@ Retrieval metrics (top-k, median rank) live in `tacgen_lib.retrieval`.
 
 from __future__ import annotations
 
-import hashlib
 import io
-import json
 import math
 import os
 import time
@@ -579,23 +577,18 @@ def save_heads(result: AlignResult, path: str | os.PathLike[str], *, producer: s
     data = buf.getvalue()
     dims = result.dims
     layers = f"{dims['hidden_dim']}->{dims['out_dim']}"
-    sidecar = {
-        "file": os.path.basename(os.fspath(path)),
-        "sha256": hashlib.sha256(data).hexdigest(),
-        "rows": 2,
-        "key": "head",
-        "columns": {
+    return edges.write_bytes(
+        path,
+        data,
+        rows=2,
+        key="head",
+        columns={
             "vision": f"mlp {dims['in_dim_v']}->{layers}",
             "tactile": f"mlp {dims['in_dim_t']}->{layers}",
         },
-        "vectors": {},
-        "producer": producer,
-    }
-    edges.atomic_write_bytes(
-        edges.sidecar_path(path), (json.dumps(sidecar, indent=1, sort_keys=True) + "\n").encode()
+        vectors={},
+        producer=producer,
     )
-    edges.atomic_write_bytes(path, data)
-    return sidecar["sha256"]
 
 
 def load_heads(path: str | os.PathLike[str], *, verify: bool = True) -> AlignHeads:

@@ -40,6 +40,7 @@ __all__ = [
     "sha256_file",
     "sidecar_path",
     "record_file",
+    "write_bytes",
     "atomic_write_bytes",
 ]
 
@@ -202,20 +203,34 @@ def write(
     sink = pa.BufferOutputStream()
     pq.write_table(table, sink, compression="zstd", write_statistics=False)
     data = sink.getvalue().to_pybytes()
-    digest = hashlib.sha256(data).hexdigest()
-    sidecar = {
-        "file": path.name,
-        "sha256": digest,
-        "rows": len(frame),
-        "key": key,
+    return write_bytes(
+        path,
+        data,
+        rows=len(frame),
+        key=key,
         # column types as a reader will see them (Parquet renames list items, for one)
-        "columns": {f.name: str(f.type) for f in pq.read_schema(pa.BufferReader(data))},
-        "vectors": dims,
-        "producer": producer,
-    }
+        columns={f.name: str(f.type) for f in pq.read_schema(pa.BufferReader(data))},
+        vectors=dims,
+        producer=producer,
+    )
+
+
+def _write_sidecar(path: Path, digest: str, fields: Mapping) -> None:
+    sidecar = {"file": path.name, "sha256": digest, **fields}
     atomic_write_bytes(
         sidecar_path(path), (json.dumps(sidecar, indent=1, sort_keys=True) + "\n").encode()
     )
+
+
+def write_bytes(path: str | os.PathLike, data: bytes, **fields) -> str:
+    """Write any file atomically with its sidecar manifest (written first); returns the SHA-256.
+
+    fields: what the sidecar records besides file and sha256 (rows, key, columns, vectors,
+    producer, ...), so `verify` checks the file and the report lists it like an edge.
+    """
+    path = Path(path)
+    digest = hashlib.sha256(data).hexdigest()
+    _write_sidecar(path, digest, fields)
     atomic_write_bytes(path, data)
     return digest
 
@@ -225,9 +240,7 @@ def record_file(path: str | os.PathLike, *, producer: str = "", kind: str = "wei
     is verified by `verify` and listed in the report like an edge. Returns the SHA-256."""
     path = Path(path)
     digest = sha256_file(path)
-    sidecar = {
-        "file": path.name,
-        "sha256": digest,
+    fields = {
         "rows": None,
         "key": None,
         "columns": {},
@@ -235,9 +248,7 @@ def record_file(path: str | os.PathLike, *, producer: str = "", kind: str = "wei
         "producer": producer,
         "kind": kind,
     }
-    atomic_write_bytes(
-        sidecar_path(path), (json.dumps(sidecar, indent=1, sort_keys=True) + "\n").encode()
-    )
+    _write_sidecar(path, digest, fields)
     return digest
 
 
