@@ -1,12 +1,22 @@
 """DINO self-distillation pretraining of a per-modality ViT backbone (in-workflow, CPU).
 
-This module owns the DINO recipe (Caron et al. 2021, as used for DINOv2's image-level loss):
-a student and a teacher of the same architecture (tacgen_lib.vit backbone + DINO projection
-head); the teacher is an exponential moving average (EMA) of the student; the teacher's
-outputs are centred (running mean, momentum 0.9) and sharpened (teacher temperature below
-the student's); the student sees 2 global + a few local crops, the teacher only the 2 global
-crops; the loss is the cross-entropy between the teacher distribution of one view and the
-student distribution of every other view.
+This module owns the DINO recipe (Caron et al. 2021) with DINOv2's image-level safeguards
+(Oquab et al. 2023): a student and a teacher of the same architecture (tacgen_lib.vit backbone +
+DINO projection head); the teacher is an exponential moving average (EMA) of the student; the
+teacher's logits are turned into targets by Sinkhorn-Knopp centring (`sinkhorn_knopp`, DINOv2)
+or, as in DINO v1, by subtracting a running centre (momentum 0.9) and sharpening (teacher
+temperature below the student's); the student sees 2 global + a few local crops, the teacher
+only the 2 global crops; the loss is the cross-entropy between the teacher target of one view
+and the student distribution of every other view, plus the KoLeo regulariser on the student's
+CLS features of each global crop (`koleo_loss`, DINOv2, weight 0.1); the prototypes (the head's
+last layer) are frozen during the first epoch (DINO). `collapse_diagnostics` reads both
+collapses off every batch (per-sample vs batch-mean target entropy, CLS cosine).
+
+Why SK + KoLeo: with the running centre, runs of ~100 steps on the simulated corpus collapsed
+(one prototype for every frame, then uniform targets: per-sample and batch-mean entropy both
+-> ln K, teacher CLS cosine 0.95). SK makes every prototype take an equal share of each batch,
+so the one-prototype collapse is impossible and a lower teacher temperature is safe; KoLeo
+keeps the CLS features of a batch apart, so SK cannot be satisfied by a constant feature.
 
 Augmentations are torch-only and batched (no torchvision): random resized crop and horizontal
 flip as one affine resampling (`F.affine_grid` + `F.grid_sample`, reflection padding), then
@@ -39,10 +49,14 @@ from tacgen_lib.vit import PATCH_SIZE, DinoVisionTransformer, build_vit
 __all__ = [
     "DINOHead",
     "PretrainResult",
+    "collapse_diagnostics",
+    "dino_cross_entropy",
     "dino_loss",
     "dino_loss_terms",
+    "koleo_loss",
     "multi_crop",
     "pretrain_dino",
+    "sinkhorn_knopp",
 ]
 
 
@@ -81,27 +95,13 @@ class _Net(nn.Module):
         self.backbone = backbone
         self.head = head
 
-    def forward(self, x: Tensor) -> Tensor:
-        return self.head(self.backbone(x))
+    def forward(self, x: Tensor) -> tuple[Tensor, Tensor]:
+        """(CLS features (B, D), head logits (B, K))."""
+        cls = self.backbone(x)
+        return cls, self.head(cls)
 
 
-def dino_loss_terms(
-    student_out: Tensor,
-    teacher_out: Tensor,
-    center: Tensor,
-    student_temp: float,
-    teacher_temp: float,
-) -> tuple[Tensor, Tensor, Tensor]:
-    """DINO cross-entropy with its two parts: (loss, teacher entropy, KL(teacher || student)).
-
-    student_out: (S, B, K) student logits for S crops, the first T of which are the global
-    crops the teacher saw; teacher_out: (T, B, K) teacher logits; center: (K,) or (1, K).
-    The teacher distribution is softmax((teacher - center) / teacher_temp); the student's is
-    log_softmax(student / student_temp). The loss averages -sum_k p_t log p_s over all
-    (teacher crop t, student crop s) pairs with s != t and over the batch; entropy and KL are
-    averaged the same way (loss = entropy + KL). Log-sum-exp throughout, so constant,
-    identical or single-sample batches and large logits stay finite.
-    """
+def _check_logits(student_out: Tensor, teacher_out: Tensor) -> None:
     if student_out.ndim != 3 or teacher_out.ndim != 3:
         raise ValueError(
             f"dino_loss: expected (crops, batch, K) logits, got student {tuple(student_out.shape)}"
@@ -114,22 +114,111 @@ def dino_loss_terms(
             f"dino_loss: teacher {tuple(teacher_out.shape)} does not match student "
             f"{tuple(student_out.shape)} (need same batch and K, teacher crops <= student crops)"
         )
-    if not (0 < teacher_temp and 0 < student_temp):
-        raise ValueError(f"dino_loss: temperatures must be > 0, got {student_temp}, {teacher_temp}")
+    if n_s == n_t == 1:
+        raise ValueError("dino_loss: need at least one student crop the teacher did not see")
+
+
+def dino_cross_entropy(
+    student_out: Tensor, teacher_probs: Tensor, student_temp: float
+) -> tuple[Tensor, Tensor, Tensor]:
+    """DINO cross-entropy against given teacher targets: (loss, teacher entropy, KL).
+
+    student_out: (S, B, K) student logits for S crops, the first T of which are the global
+    crops the teacher saw; teacher_probs: (T, B, K) teacher distributions (rows sum to 1, from
+    `sinkhorn_knopp` or centring + sharpening). The student's distribution is
+    log_softmax(student / student_temp). The loss averages -sum_k p_t log p_s over all
+    (teacher crop t, student crop s) pairs with s != t and over the batch; the per-sample
+    teacher entropy and KL(teacher || student) are averaged the same way (loss = entropy + KL).
+    """
+    _check_logits(student_out, teacher_probs)
+    if not 0 < student_temp:
+        raise ValueError(f"dino_loss: student temperature must be > 0, got {student_temp}")
+    n_s, b, _ = student_out.shape
+    n_t = teacher_probs.shape[0]
     pair_mask = torch.ones(n_t, n_s, dtype=torch.bool)
     pair_mask[torch.arange(n_t), torch.arange(n_t)] = False
-    if not pair_mask.any():
-        raise ValueError("dino_loss: need at least one student crop the teacher did not see")
-    log_p_t = F.log_softmax((teacher_out - center.reshape(1, 1, k)) / teacher_temp, dim=-1)
-    p_t = log_p_t.exp()
     log_p_s = F.log_softmax(student_out / student_temp, dim=-1)
     # cross-entropy for every (teacher crop, student crop) pair, averaged over the batch
-    ce = -torch.einsum("tbk,sbk->ts", p_t, log_p_s) / b
-    entropy_t = -(p_t * log_p_t).sum(-1).mean(-1)  # (T,)
+    ce = -torch.einsum("tbk,sbk->ts", teacher_probs, log_p_s) / b
+    entropy_t = _entropy(teacher_probs).mean(-1)  # (T,)
     n_pairs = pair_mask.sum()
     loss = ce[pair_mask].sum() / n_pairs
     entropy = (entropy_t[:, None].expand(n_t, n_s)[pair_mask]).sum() / n_pairs
     return loss, entropy, loss - entropy
+
+
+def _entropy(p: Tensor) -> Tensor:
+    """Shannon entropy (nats) over the last axis, 0 log 0 = 0."""
+    return -torch.special.xlogy(p, p).sum(-1)
+
+
+def dino_loss_terms(
+    student_out: Tensor,
+    teacher_out: Tensor,
+    center: Tensor,
+    student_temp: float,
+    teacher_temp: float,
+) -> tuple[Tensor, Tensor, Tensor]:
+    """DINO cross-entropy with a centred teacher (DINO v1): (loss, teacher entropy, KL).
+
+    teacher_out: (T, B, K) teacher logits; center: (K,) or (1, K). The teacher distribution is
+    softmax((teacher - center) / teacher_temp); see `dino_cross_entropy` for the rest.
+    Log-sum-exp throughout, so constant, identical or single-sample batches and large logits
+    stay finite.
+    """
+    _check_logits(student_out, teacher_out)
+    if not (0 < teacher_temp and 0 < student_temp):
+        raise ValueError(f"dino_loss: temperatures must be > 0, got {student_temp}, {teacher_temp}")
+    k = teacher_out.shape[-1]
+    p_t = F.softmax((teacher_out - center.reshape(1, 1, k)) / teacher_temp, dim=-1)
+    return dino_cross_entropy(student_out, p_t, student_temp)
+
+
+def sinkhorn_knopp(teacher_out: Tensor, teacher_temp: float, n_iterations: int = 3) -> Tensor:
+    """Sinkhorn-Knopp centring of teacher logits (SwAV; DINOv2's replacement for the centre).
+
+    teacher_out: (..., K) logits; all leading axes together are the N rows of one batch (DINOv2
+    normalises both global crops jointly). Starting from Q = exp(logits / teacher_temp), each
+    iteration rescales every prototype (column) to total mass N/K and then every row to mass 1,
+    as DINOv2's `sinkhorn_knopp_teacher`; the result (same shape) has rows summing to 1 exactly
+    and columns approaching N/K (equipartition) as n_iterations grows. Computed in the log
+    domain, so huge logits and small temperatures stay finite. A batch whose rows are all equal
+    gets uniform rows, which is why SK alone does not prevent representation collapse (see
+    `koleo_loss`).
+    """
+    if not 0 < teacher_temp:
+        raise ValueError(f"sinkhorn_knopp: teacher_temp must be > 0, got {teacher_temp}")
+    if n_iterations < 1:
+        raise ValueError(f"sinkhorn_knopp: n_iterations must be >= 1, got {n_iterations}")
+    shape = teacher_out.shape
+    log_q = (teacher_out.reshape(-1, shape[-1]) / teacher_temp).float()
+    n, k = log_q.shape
+    for _ in range(n_iterations):
+        log_q = log_q - torch.logsumexp(log_q, dim=0, keepdim=True) + math.log(n / k)
+        log_q = log_q - torch.logsumexp(log_q, dim=1, keepdim=True)
+    return log_q.exp().reshape(shape).to(teacher_out.dtype)
+
+
+def koleo_loss(features: Tensor, eps: float = 1e-8) -> Tensor:
+    """KoLeo regulariser (DINOv2, after Sablayrolles et al. 2019): -mean_i log d(x_i, NN(x_i)).
+
+    features: (B, D), l2-normalised here; d is the Euclidean distance from each row to its
+    nearest other row (torch pairwise_distance with `eps`, as DINOv2). Minimising it spreads
+    the batch over the sphere (the Kozachenko-Leonenko entropy estimator, up to constants).
+    Identical rows give -log(~eps*sqrt(D)), large but finite with finite gradients; a batch of
+    one row has no neighbour and gives 0.
+    """
+    if features.ndim != 2:
+        raise ValueError(f"koleo_loss: expected (batch, dim) features, got {tuple(features.shape)}")
+    b = features.shape[0]
+    if b < 2:
+        return features.sum() * 0.0
+    x = F.normalize(features, dim=-1, eps=eps)
+    with torch.no_grad():
+        dots = x @ x.T
+        dots.fill_diagonal_(-2.0)  # never its own neighbour (cosines are >= -1)
+        nn_idx = dots.argmax(dim=1)
+    return -torch.log(F.pairwise_distance(x, x[nn_idx], p=2, eps=eps) + eps).mean()
 
 
 def dino_loss(
@@ -141,6 +230,44 @@ def dino_loss(
 ) -> Tensor:
     """DINO self-distillation loss (see `dino_loss_terms` for shapes and definition)."""
     return dino_loss_terms(student_out, teacher_out, center, student_temp, teacher_temp)[0]
+
+
+_CURVE_MEANS = (
+    "loss",
+    "teacher_entropy",
+    "kl",
+    "koleo",
+    "teacher_batch_entropy",
+    "teacher_cls_cosine",
+)
+
+
+def collapse_diagnostics(teacher_probs: Tensor, teacher_cls: Tensor) -> dict[str, float]:
+    """Two collapse read-outs of one teacher batch (averaged over its global crops).
+
+    teacher_probs: (T, B, K) teacher targets; teacher_cls: (T, B, D) teacher CLS features.
+    teacher_batch_entropy: entropy of the batch-mean target, H(mean_b p_b). With the per-sample
+    entropy mean_b H(p_b) it brackets the two collapses: one-prototype collapse has both near 0,
+    uniform collapse both near ln K; a healthy teacher has per-sample low and batch-mean high
+    (their difference is the mutual information between image and prototype, <= ln B).
+    teacher_cls_cosine: mean cosine between the CLS features of different images (-> 1 when the
+    representation collapses to a constant).
+    """
+    if teacher_probs.ndim != 3 or teacher_cls.ndim != 3:
+        raise ValueError(
+            f"collapse_diagnostics: expected (crops, batch, .) tensors, got "
+            f"{tuple(teacher_probs.shape)} and {tuple(teacher_cls.shape)}"
+        )
+    batch_h = _entropy(teacher_probs.double().mean(dim=1)).mean()
+    b = teacher_cls.shape[1]
+    if b < 2:
+        cos = torch.tensor(1.0, dtype=torch.float64)
+    else:
+        z = F.normalize(teacher_cls.double(), dim=-1, eps=1e-12)
+        gram = z @ z.transpose(1, 2)  # (T, B, B)
+        cos = (gram.sum((1, 2)) - gram.diagonal(dim1=1, dim2=2).sum(-1)) / (b * (b - 1))
+        cos = cos.mean()
+    return {"teacher_batch_entropy": float(batch_h), "teacher_cls_cosine": float(cos)}
 
 
 def _random_resized_crop(
@@ -214,7 +341,9 @@ class PretrainResult:
 
     backbone_state: the teacher backbone's weights in official DINOv2 key format (what DINO
     evaluates; save with torch.save or vit.save_backbone after `backbone()`).
-    curve: one dict per epoch: epoch, loss, teacher_entropy, kl, lr, momentum, seconds.
+    curve: one dict per epoch (means over its steps): epoch, loss (DINO cross-entropy),
+    teacher_entropy (per-sample), kl, koleo, teacher_batch_entropy, teacher_cls_cosine (see
+    `collapse_diagnostics`), then the last step's lr, momentum, teacher_temp, and seconds.
     """
 
     arch: str
@@ -252,7 +381,13 @@ def pretrain_dino(
     bottleneck_dim: int = 128,
     student_temp: float = 0.1,
     teacher_temp: float = 0.04,
+    warmup_teacher_temp: float | None = None,
+    warmup_teacher_temp_epochs: int = 0,
+    centering: str = "sinkhorn_knopp",
+    sinkhorn_iterations: int = 3,
     center_momentum: float = 0.9,
+    koleo_weight: float = 0.1,
+    freeze_last_layer_epochs: int = 1,
     momentum_teacher: float = 0.99,
     weight_decay: float = 0.04,
     warmup_epochs: int = 1,
@@ -265,11 +400,15 @@ def pretrain_dino(
     are image_size, local crops `local_size` (default: the multiple of 14 nearest 3/7 of
     image_size, at least 28). Optimiser: AdamW (no decay on biases, norms, LayerScale and
     tokens), lr linear warm-up over `warmup_epochs` then cosine to lr/100, gradient-norm
-    clipping at `clip_grad`; teacher EMA momentum cosine from `momentum_teacher` to 1 (0.99
-    rather than DINO's 0.996, as runs here have hundreds, not 100k+, steps). The centre starts
-    at the first teacher batch's mean, not at zero: from zero, the first ~20 steps (momentum
-    0.9) would sharpen the component all frames share into one constant target for every
-    image, which is a push towards collapse in a run of only ~100 steps.
+    clipping at `clip_grad`; teacher EMA momentum cosine from `momentum_teacher` to 1.
+    Teacher targets: centering="sinkhorn_knopp" (default; `sinkhorn_iterations` as DINOv2) or
+    "centre" (DINO v1 running centre with `center_momentum`; the centre starts at the first
+    teacher batch's mean, as from zero the first steps sharpen the component all frames share
+    into one target). Teacher temperature: linear from `warmup_teacher_temp` (default: no
+    warm-up) to `teacher_temp` over `warmup_teacher_temp_epochs`. `koleo_weight` scales the
+    KoLeo term (0 turns it off); the head's last layer gets no update for the first
+    `freeze_last_layer_epochs`. With centering="centre", koleo_weight=0 and
+    freeze_last_layer_epochs=0 the run is the previous recipe, bit for bit.
     The last incomplete batch of each epoch is dropped, so every step has the same batch size
     (the order is reshuffled every epoch, so all frames are seen); batch_size is capped at N.
 
@@ -294,6 +433,16 @@ def pretrain_dino(
     if local_size % PATCH_SIZE:
         raise ValueError(
             f"pretrain_dino: local_size {local_size} is not a multiple of {PATCH_SIZE}"
+        )
+    if centering not in ("sinkhorn_knopp", "centre"):
+        raise ValueError(
+            f"pretrain_dino: centering must be 'sinkhorn_knopp' or 'centre', got {centering!r}"
+        )
+    if koleo_weight < 0 or freeze_last_layer_epochs < 0 or warmup_teacher_temp_epochs < 0:
+        raise ValueError(
+            "pretrain_dino: koleo_weight, freeze_last_layer_epochs and warmup_teacher_temp_epochs "
+            f"must be >= 0, got {koleo_weight}, {freeze_last_layer_epochs}, "
+            f"{warmup_teacher_temp_epochs}"
         )
     say = progress or (lambda _msg: None)
 
@@ -340,6 +489,12 @@ def pretrain_dino(
             [np.linspace(lr / max(warm, 1), lr, warm), _cosine(lr, lr / 100, total - warm)]
         )
         mom_sched = _cosine(momentum_teacher, 1.0, total)
+        t_warm = min(total, warmup_teacher_temp_epochs * steps_per_epoch)
+        tt_start = teacher_temp if warmup_teacher_temp is None else warmup_teacher_temp
+        tt_sched = np.concatenate(
+            [np.linspace(tt_start, teacher_temp, t_warm), np.full(total - t_warm, teacher_temp)]
+        )
+        frozen_steps = freeze_last_layer_epochs * steps_per_epoch
         center: Tensor | None = None  # set from the first teacher batch (see docstring)
 
         curve: list[dict[str, float]] = []
@@ -347,7 +502,7 @@ def pretrain_dino(
         for epoch in range(epochs):
             t0 = time.perf_counter()
             perm = order_rng.permutation(n)
-            sums = np.zeros(3)
+            sums = dict.fromkeys(_CURVE_MEANS, 0.0)
             student.train()
             for bi in range(steps_per_epoch):
                 idx = torch.from_numpy(perm[bi * batch_size : (bi + 1) * batch_size])
@@ -360,18 +515,27 @@ def pretrain_dino(
                     jitter=jitter,
                 )
                 b = idx.shape[0]
+                t_temp = float(tt_sched[step])
                 with torch.no_grad():
-                    t_out = teacher(torch.cat(views[:2])).view(2, b, out_dim)
-                    if center is None:
-                        center = t_out.mean(dim=(0, 1)).view(1, out_dim)
-                s_glob = student(torch.cat(views[:2])).view(2, b, out_dim)
+                    t_cls, t_out = teacher(torch.cat(views[:2]))
+                    t_out = t_out.view(2, b, out_dim)
+                    if centering == "sinkhorn_knopp":
+                        p_t = sinkhorn_knopp(t_out, t_temp, sinkhorn_iterations)
+                    else:
+                        if center is None:
+                            center = t_out.mean(dim=(0, 1)).view(1, out_dim)
+                        p_t = F.softmax((t_out - center.view(1, 1, out_dim)) / t_temp, dim=-1)
+                s_cls, s_glob = student(torch.cat(views[:2]))
+                s_glob = s_glob.view(2, b, out_dim)
                 if n_local_crops:
-                    s_loc = student(torch.cat(views[2:])).view(n_local_crops, b, out_dim)
+                    s_loc = student(torch.cat(views[2:]))[1].view(n_local_crops, b, out_dim)
                     s_out = torch.cat((s_glob, s_loc))
                 else:
                     s_out = s_glob
-                loss, ent, kl = dino_loss_terms(s_out, t_out, center, student_temp, teacher_temp)
-                if not torch.isfinite(loss):
+                loss, ent, kl = dino_cross_entropy(s_out, p_t, student_temp)
+                koleo = sum(koleo_loss(c) for c in s_cls.view(2, b, -1))
+                total_loss = loss + koleo_weight * koleo if koleo_weight else loss
+                if not torch.isfinite(total_loss):
                     raise FloatingPointError(
                         f"pretrain_dino: non-finite loss at epoch {epoch} step {bi}; lower lr "
                         f"(now {lr_sched[step]:.2e}) or check the frames"
@@ -379,7 +543,10 @@ def pretrain_dino(
                 for g in opt.param_groups:
                     g["lr"] = float(lr_sched[step])
                 opt.zero_grad(set_to_none=True)
-                loss.backward()
+                total_loss.backward()
+                if step < frozen_steps:  # DINO: prototypes fixed while the rest settles
+                    for p in student.head.last_layer.parameters():
+                        p.grad = None
                 if clip_grad:
                     nn.utils.clip_grad_norm_(student.parameters(), clip_grad)
                 opt.step()
@@ -387,25 +554,32 @@ def pretrain_dino(
                     m = float(mom_sched[step])
                     for ps, pt in zip(student.parameters(), teacher.parameters(), strict=True):
                         pt.mul_(m).add_(ps.detach(), alpha=1 - m)
-                    batch_center = t_out.mean(dim=(0, 1)).view(1, out_dim)
-                    center = center * center_momentum + batch_center * (1 - center_momentum)
-                sums += (loss.item(), ent.item(), kl.item())
+                    if centering == "centre":
+                        batch_center = t_out.mean(dim=(0, 1)).view(1, out_dim)
+                        center = center * center_momentum + batch_center * (1 - center_momentum)
+                    diag = collapse_diagnostics(p_t, t_cls.view(2, b, -1))
+                sums["loss"] += loss.item()
+                sums["teacher_entropy"] += ent.item()
+                sums["kl"] += kl.item()
+                sums["koleo"] += float(koleo.detach())
+                for key, val in diag.items():
+                    sums[key] += val
                 step += 1
-            mean = sums / steps_per_epoch
-            row = {
-                "epoch": float(epoch + 1),
-                "loss": float(mean[0]),
-                "teacher_entropy": float(mean[1]),
-                "kl": float(mean[2]),
+            row = {"epoch": float(epoch + 1)}
+            row |= {key: val / steps_per_epoch for key, val in sums.items()}
+            row |= {
                 "lr": float(lr_sched[step - 1]),
                 "momentum": float(mom_sched[step - 1]),
+                "teacher_temp": float(tt_sched[step - 1]),
                 "seconds": time.perf_counter() - t0,
             }
             curve.append(row)
             say(
                 f"dino epoch {epoch + 1}/{epochs}: loss {row['loss']:.4f} "
-                f"H(teacher) {row['teacher_entropy']:.3f} KL {row['kl']:.4f} "
-                f"({row['seconds']:.1f}s)"
+                f"H(teacher) {row['teacher_entropy']:.3f} "
+                f"H(batch-mean teacher) {row['teacher_batch_entropy']:.3f} "
+                f"KL {row['kl']:.4f} KoLeo {row['koleo']:.3f} "
+                f"cos(teacher CLS) {row['teacher_cls_cosine']:.3f} ({row['seconds']:.1f}s)"
             )
     finally:
         torch.use_deterministic_algorithms(det_before)
