@@ -50,7 +50,7 @@ from sklearn.exceptions import ConvergenceWarning
 
 from tacgen_lib import stats
 from tacgen_lib.fusion import FUSIONS, fuse
-from tacgen_lib.probes import FixedLogistic, FixedRidge, fit_logistic, fit_ridge_probe, ridge_fixed
+from tacgen_lib.probes import FixedLogistic, FixedRidge, fit_logistic, fit_ridge_probe
 
 __all__ = [
     "BANDS",
@@ -78,8 +78,10 @@ CONTROLS = ("train_resample", "tactile_permutation", "label_permutation", "rando
 #: Targets whose uncertainty bands travel with the results: target -> (low, high) columns.
 BANDS = {"force_p50": ("force_p05", "force_p95")}
 #: lbfgs tolerance of the logistic refits inside controls: scikit-learn's default. The main
-#: probes use `probes.fit_logistic`'s tighter 1e-6; controls are distributions over hundreds
-#: of refits, where 1e-4 changes no conclusion and roughly halves their cost.
+#: probes use `probes.fit_logistic`'s tighter 1e-6. Controls are distributions over hundreds of
+#: refits; at 1e-4 the hardness tactile-permutation Δ_ctrl moved by 0.004 against 1e-6 (0.013
+#: vs 0.017), while 1e-6 made the batched train-resample refits of the 3-class density probe
+#: run for minutes.
 CONTROL_TOL = 1e-4
 #: Logistic controls refit ~1,000 lbfgs problems per comparison, so they run on the raw concat
 #: comparison and the aligned concat of this many alignment seeds (the first in sorted order);
@@ -293,6 +295,7 @@ class FittedProbe:
     cv_scores: np.ndarray  # mean held-out score per grid value
     converged: bool
     n_iter: int | None  # lbfgs iterations (logistic); None for ridge (closed form)
+    pred_grid: np.ndarray | None = None  # (L, m) test predictions at every lambda (ridge)
 
     def fixed(self, kind: str) -> FixedRidge | FixedLogistic:
         """The probe at its chosen regulariser, for controls and resampling diagnostics."""
@@ -326,7 +329,8 @@ def fit_probe(
         )
         sel = probe.selection
         pred = probe.predict(X_test, sample_ids=test_ids)
-        return FittedProbe(pred, probe.lam, sel.lambdas, sel.cv_scores, True, None)
+        grid = probe.predict_grid(X_test, sample_ids=test_ids)  # same decomposition as the CV
+        return FittedProbe(pred, probe.lam, sel.lambdas, sel.cv_scores, True, None, grid)
     probe = fit_logistic(
         X_train, y_train, settings.C, settings.seed, n_folds=settings.folds, sample_ids=train_ids
     )
@@ -339,17 +343,6 @@ def fit_probe(
         bool(probe.converged and probe.cv_converged),
         int(max(probe.n_iter, probe.cv_max_n_iter)),
     )
-
-
-def _test_sweep(
-    X_train: np.ndarray, y_train: np.ndarray, X_test: np.ndarray, y_test: np.ndarray, lambdas
-) -> np.ndarray:
-    """Test R^2 of ridge at every lambda of the grid (the lambda sweep; one solve each)."""
-    out = np.empty(len(lambdas))
-    for i, lam in enumerate(lambdas):
-        coef, icpt, _ = ridge_fixed(X_train, y_train, float(lam))
-        out[i] = stats.score("r2", y_test, np.asarray(X_test, np.float64) @ coef + icpt)
-    return out
 
 
 # --------------------------------------------------------------------------- plan
@@ -525,8 +518,8 @@ def compare(
     result = Comparison(main, pred_v=v_probe.pred_test, pred_vt=vt_probe.pred_test)
     test_v = test_vt = np.full(v_probe.grid.size, np.nan)
     if kind == "ridge":
-        test_v = _test_sweep(v_train, y_tr, v_test, y_te, v_probe.grid)
-        test_vt = _test_sweep(x_vt_tr, y_tr, x_vt_te, y_te, vt_probe.grid)
+        test_v = np.array([stats.score("r2", y_te, p) for p in v_probe.pred_grid])
+        test_vt = np.array([stats.score("r2", y_te, p) for p in vt_probe.pred_grid])
     for i, reg in enumerate(v_probe.grid):
         result.sweep.append(
             {

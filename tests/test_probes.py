@@ -106,7 +106,9 @@ def test_ridge_path_property_equals_sklearn(n, p, log_lam, seed):
 @pytest.mark.parametrize(
     "n,p,lams,dup,expected",
     [
-        (80, 10, LAMBDAS, False, {"gram"}),  # primal: one p x p eigh per fold
+        (80, 10, LAMBDAS, False, {"deletion"}),  # primal: one p x p eigh for all folds
+        (80, 10, LAMBDAS, True, {"deletion"}),  # primal with duplicated rows
+        (60, 45, LAMBDAS, False, {"deletion"}),  # primal, p close to the fold-train rows
         (40, 90, LAMBDAS, False, {"deletion"}),  # dual: one eigh for all folds
         (40, 90, LAMBDAS, True, {"deletion"}),  # duplicated rows: null space of the Gram
         (40, 6, [1e-9, 1.0], False, {"svd"}),  # lambda below the Gram's resolution
@@ -265,3 +267,160 @@ def test_logistic_C_selection_equals_gridsearchcv_on_same_folds():
     gs = GridSearchCV(pipe, {"m__C": grid}, cv=cv).fit(X, y)
     assert probe.C == gs.best_params_["m__C"]
     np.testing.assert_allclose(probe.cv_scores, gs.cv_results_["mean_test_score"], atol=1e-12)
+
+
+# --------------------------------------------------------------------------- ridge grid refit
+
+
+@pytest.mark.parametrize("n,p", [(60, 12), (25, 70)])  # primal and dual deletion paths
+def test_ridge_probe_grid_refit_equals_sklearn_at_every_lambda(n, p):
+    X, y = regression_data(n + 15, p, seed=9)
+    probe = probes.fit_ridge_probe(X[:n], y[:n], LAMBDAS, seed=2)
+    assert set(probe.selection.solver) == {"deletion"}
+    grid = probe.predict_grid(X[n:])
+    for i, lam in enumerate(LAMBDAS):
+        ref = Ridge(alpha=lam, solver="svd").fit(X[:n], y[:n])
+        np.testing.assert_allclose(grid[i], ref.predict(X[n:]), rtol=1e-8, atol=1e-10)
+    np.testing.assert_allclose(grid[LAMBDAS.index(probe.lam)], probe.predict(X[n:]), rtol=1e-13)
+
+
+# --------------------------------------------------------------------------- batched logistic
+
+
+def objective_gradient(Z, y, sw, coef, intercept, C, classes):
+    """Plain float64 gradient of scikit-learn's lbfgs objective at (coef (p, K'), intercept).
+
+    sum_i sw_i loss_i / S + ||coef||^2 / (2 C S); sigmoid for two classes, softmax otherwise.
+    """
+    S = sw.sum()
+    yi = np.searchsorted(classes, y)
+    m = Z @ coef + intercept
+    if coef.shape[1] == 1:
+        d = 1.0 / (1.0 + np.exp(-m[:, 0])) - (yi == 1)
+        d = d[:, None]
+    else:
+        e = np.exp(m - m.max(axis=1, keepdims=True))
+        d = e / e.sum(axis=1, keepdims=True) - np.eye(coef.shape[1])[yi]
+    d = d * (sw / S)[:, None]
+    return np.concatenate([(Z.T @ d + coef / (C * S)).ravel(), d.sum(axis=0)])
+
+
+def sklearn_fit(Z, y, C, sw=None):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        return LogisticRegression(C=C, tol=1e-12, max_iter=100000).fit(Z, y, sample_weight=sw)
+
+
+def assert_same_optimum(Z, y, sw, C, got_coef, got_icpt, ref, classes):
+    """Parameters agree within the strong-convexity bound of the two gradients:
+    ||theta_a - theta_b|| <= (||g_a|| + ||g_b||) / mu, mu = the smallest Hessian eigenvalue
+    (finite differences of the float64 gradient at the reference; the intercept is
+    unpenalised, so mu comes from the loss there), with a factor 2 for the Hessian's
+    variation between points this close."""
+    ref_coef, ref_icpt = ref.coef_.T, ref.intercept_
+    if ref_coef.shape[1] > 1:  # softmax intercepts are defined up to a shift: centre them
+        ref_icpt = ref_icpt - ref_icpt.mean()
+        got_icpt = got_icpt - got_icpt.mean()
+    shape = ref_coef.shape
+
+    def grad(theta):
+        return objective_gradient(
+            Z, y, sw, theta[: ref_coef.size].reshape(shape), theta[ref_coef.size :], C, classes
+        )
+
+    theta = np.concatenate([ref_coef.ravel(), ref_icpt])
+    h = 1e-5
+    hess = np.array(
+        [(grad(theta + h * e) - grad(theta - h * e)) / (2 * h) for e in np.eye(theta.size)]
+    )
+    if ref_coef.shape[1] > 1:  # drop the intercept-shift null direction of the softmax
+        k = ref_coef.shape[1]
+        basis = np.eye(theta.size)
+        shift = np.zeros(theta.size)
+        shift[-k:] = 1 / np.sqrt(k)
+        q = np.linalg.qr(np.column_stack([shift, basis]))[0][:, 1 : theta.size]
+        hess = q.T @ hess @ q
+    mu = np.linalg.eigvalsh(0.5 * (hess + hess.T))[0]
+    assert mu > 0
+    g_got = grad(np.concatenate([got_coef.ravel(), got_icpt]))
+    g_ref = grad(theta)
+    bound = 2 * (np.linalg.norm(g_got) + np.linalg.norm(g_ref)) / mu
+    diff = np.concatenate([(got_coef - ref_coef).ravel(), got_icpt - ref_icpt])
+    assert np.linalg.norm(diff) <= bound + 1e-12
+    return bound
+
+
+@pytest.mark.parametrize("n_classes,C", [(2, 0.1), (2, 10.0), (3, 1.0)])
+def test_logistic_batch_equals_sklearn_on_permuted_targets(n_classes, C):
+    rng = np.random.default_rng(n_classes)
+    X = rng.standard_normal((90, 7)) * rng.uniform(0.1, 20, 7) + rng.uniform(-50, 50, 7)
+    y = np.digitize(X[:, 0] / X[:, 0].std() + rng.standard_normal(90), [-0.5, 0.5][: n_classes - 1])
+    perm = np.argsort(rng.random((5, 90)), axis=1)
+    blk = probes.standardise_block(X)
+    scaler = StandardScaler().fit(X)
+    np.testing.assert_allclose(blk.offset, scaler.mean_, rtol=1e-13)
+    np.testing.assert_allclose(blk.scale, scaler.scale_, rtol=1e-12)
+    fit = probes.fit_logistic_batch([blk], y[perm], C, tol=1e-10)  # ends by tol or ftol
+    loose = probes.fit_logistic_batch([blk], y[perm], C, tol=1e-6)  # ends by tol
+    assert fit.converged.all() and loose.converged.all()
+    Z = scaler.transform(X)
+    for b in range(5):
+        ref = sklearn_fit(Z, y[perm[b]], C)
+        assert_same_optimum(
+            Z, y[perm[b]], np.ones(90), C, fit.coef[b], fit.intercept[b], ref, fit.classes
+        )
+        g = objective_gradient(Z, y[perm[b]], np.ones(90), loose.coef[b], loose.intercept[b], C,
+                               fit.classes)  # fmt: skip
+        assert np.abs(g).max() <= 1e-6  # the stopping rule, checked by an independent formula
+        test = probes.DesignBlock(X, None, blk.offset, blk.scale)
+        got = fit.predict([test])[b]
+        margin = np.sort(np.abs(ref.decision_function(Z)).reshape(90, -1), axis=1)
+        clear = margin[:, 0] > 1e-6 if n_classes == 2 else np.ones(90, bool)
+        np.testing.assert_array_equal(got[clear], ref.predict(Z)[clear])
+
+
+def test_logistic_batch_separable_converges_by_the_l2_term():
+    X, y = separable_three_class(seed=2)
+    y2 = (y > 0).astype(int)
+    for labels, k in ((y, 3), (y2, 2)):
+        fit = probes.fit_logistic_batch([probes.standardise_block(X)], labels, 100.0, tol=1e-8)
+        assert fit.converged.all() and 0 < fit.n_iter[0] < 12800  # iterations are recorded
+        n = len(labels)
+        # objective at the optimum <= at zero (log K): ||coef||^2 <= 2 C n log K
+        assert np.sum(fit.coef**2) <= 2 * 100.0 * n * np.log(k)
+        Z = StandardScaler().fit_transform(X)
+        ref = sklearn_fit(Z, labels, 100.0)
+        assert_same_optimum(
+            Z, labels, np.ones(n), 100.0, fit.coef[0], fit.intercept[0], ref, fit.classes
+        )
+        assert probes.accuracy(labels, fit.predict([probes.DesignBlock(Z)])[0]) == 1.0
+
+
+def test_logistic_batch_weights_equal_duplicated_rows_and_own_scaler():
+    rng = np.random.default_rng(5)
+    X = rng.standard_normal((60, 5)) * [1.0, 3.0, 0.2, 10.0, 1.0] + [0.0, 100.0, -3.0, 0.0, 7.0]
+    y = np.digitize(X[:, 0] + 0.3 * X[:, 2] + 0.7 * rng.standard_normal(60), [-0.4, 0.6])
+    idx = rng.integers(0, 60, (4, 60))
+    counts = np.stack([np.bincount(i, minlength=60) for i in idx]).astype(float)
+    blk = probes.standardise_block(X, weights=counts)
+    fit = probes.fit_logistic_batch([blk], y, 1.0, sample_weight=counts, tol=1e-10)
+    for b in range(4):
+        scaler = StandardScaler().fit(X[idx[b]])
+        np.testing.assert_allclose(blk.offset[b], scaler.mean_, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(blk.scale[b], scaler.scale_, rtol=1e-12)
+        Z = scaler.transform(X[idx[b]])
+        ref = sklearn_fit(Z, y[idx[b]], 1.0)
+        assert_same_optimum(
+            Z, y[idx[b]], np.ones(60), 1.0, fit.coef[b], fit.intercept[b], ref, fit.classes
+        )
+
+
+def test_logistic_batch_refuses_a_problem_missing_a_class():
+    X = np.random.default_rng(0).standard_normal((20, 3))
+    y = np.repeat([0, 1, 2], [8, 8, 4])
+    w = np.ones((3, 20))
+    w[1, y == 2] = 0.0  # resample 1 holds classes 0 and 1 only
+    with pytest.raises(ValueError, match="problem 1 holds 2 of 3 classes; refit it alone"):
+        probes.fit_logistic_batch([probes.standardise_block(X)], y, 1.0, sample_weight=w)
+    with pytest.raises(ValueError, match="single class"):
+        probes.fit_logistic_batch([probes.standardise_block(X)], np.zeros(20), 1.0)

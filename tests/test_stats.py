@@ -135,13 +135,32 @@ def test_pcg_stragglers_fall_back_to_cholesky():
     p_tr = np.argsort(rng.random((6, 70)), axis=1)
     p_te = np.argsort(rng.random((6, 40)), axis=1)
     args = (v_tr, t_tr, y_tr, v_te, t_te, 1e-3, p_tr, p_te)
-    capped, info = stats._concat_ridge_permuted(*args, solver="pcg", max_iter=3)
+    capped, info = stats._concat_ridge_permuted(*args, solver="pcg", max_iter=3, deflate=4)
     assert info == {"pcg_iterations": 3, "cholesky_solves": 6}  # none converged: all direct
     direct, _ = stats._concat_ridge_permuted(*args, solver="cholesky")
     pcg, info = stats._concat_ridge_permuted(*args, solver="pcg", max_iter=500)
     assert info["cholesky_solves"] == 0
     np.testing.assert_allclose(capped, direct, rtol=1e-12)
     np.testing.assert_allclose(pcg, direct, rtol=1e-7, atol=1e-8)
+
+
+@pytest.mark.parametrize("deflate", [0, 3, 20, 64])
+def test_pcg_preconditioner_any_deflation_converges_to_cholesky(deflate):
+    """The deflated preconditioner is SPD for every rank kept: the solution never depends on
+    it; keeping every direction of both blocks makes it exact (one or two iterations)."""
+    v_tr, t_tr, y_tr, v_te, t_te, _ = control_data(n_tr=90, dv=40, dt=60, seed=3)
+    v_tr = v_tr * (1.0 / (1.0 + np.arange(40)))  # decaying spectra, like frozen ViT features
+    t_tr = t_tr * (3.0 / np.sqrt(1.0 + np.arange(60)))
+    rng = np.random.default_rng(1)
+    p_tr = np.argsort(rng.random((7, 90)), axis=1)
+    p_te = np.argsort(rng.random((7, 40)), axis=1)
+    args = (v_tr, t_tr, y_tr, v_te, t_te, 0.5, p_tr, p_te)
+    direct, _ = stats._concat_ridge_permuted(*args, solver="cholesky")
+    pcg, info = stats._concat_ridge_permuted(*args, max_iter=400, deflate=deflate)
+    assert info["cholesky_solves"] == 0
+    np.testing.assert_allclose(pcg, direct, rtol=1e-8, atol=1e-9)
+    if deflate >= 60:
+        assert info["pcg_iterations"] <= 2
 
 
 def test_tactile_permutation_generic_fusion_and_logistic():
@@ -234,3 +253,83 @@ def test_criterion_and_bootstrap_refuse_non_finite():
         stats.fixed_test_bootstrap(y, pv, pvt, "r2", 10, sample_ids=ids)
     with pytest.raises(ValueError, match="metric must be"):
         stats.fixed_test_bootstrap(y, pvt, pvt, "mse", 10)
+
+
+# ------------------------------------------------------------------ batched logistic controls
+
+TIGHT = FixedLogistic(1.0, tol=1e-10)  # both paths at the optimum: identical labels
+
+
+def class_data(n_tr=80, n_te=40, seed=0, n_classes=2):
+    v_tr, t_tr, y_tr, v_te, t_te, y_te = control_data(n_tr, n_te, dv=4, dt=5, seed=seed)
+    cuts = [-0.6, 0.6] if n_classes == 3 else [0.0]
+    return v_tr, t_tr, np.digitize(y_tr, cuts), v_te, t_te, np.digitize(y_te, cuts)
+
+
+@pytest.mark.parametrize("n_classes", [2, 3])
+def test_logistic_tactile_permutation_batched_equals_refit_loop(n_classes):
+    v_tr, t_tr, y_tr, v_te, t_te, y_te = class_data(n_classes=n_classes)
+    kw = dict(fusion="concat", metric="accuracy", n_permutations=6, seed=4, probe=TIGHT)
+    fast = stats.tactile_permutation_control(v_tr, t_tr, y_tr, v_te, t_te, y_te, **kw)
+    # multi-class controls keep the per-refit loop (stats._batched); the batched solver's
+    # 3-class results are tested against scikit-learn in test_probes.py
+    assert fast["solver"] == ({"batched_logistic": 6} if n_classes == 2 else {"refits": 6})
+    rng = np.random.default_rng(4)
+    p_tr = np.argsort(rng.random((6, 80)), axis=1, kind="stable")
+    p_te = np.argsort(rng.random((6, 40)), axis=1, kind="stable")
+    loop = [
+        accuracy_score(
+            y_te,
+            TIGHT.fit_predict(fuse("concat", v_tr, t_tr[a]), y_tr, fuse("concat", v_te, t_te[b])),
+        )  # fmt: skip
+        for a, b in zip(p_tr, p_te, strict=True)
+    ]
+    np.testing.assert_array_equal(fast["vt_scores"], loop)
+
+
+def test_logistic_label_permutation_batched_equals_refit_loop():
+    v_tr, t_tr, y_tr, v_te, t_te, y_te = class_data(n_classes=3, seed=1)
+    x_tr, x_te = fuse("concat", v_tr, t_tr), fuse("concat", v_te, t_te)
+    out = stats.label_permutation_control(
+        v_tr, x_tr, y_tr, v_te, x_te, y_te, probe_v=TIGHT, probe_vt=TIGHT,
+        metric="accuracy", n_permutations=6, seed=6,
+    )  # fmt: skip
+    perm = np.argsort(np.random.default_rng(6).random((6, 80)), axis=1, kind="stable")
+    vt = [accuracy_score(y_te, TIGHT.fit_predict(x_tr, y_tr[p], x_te)) for p in perm]
+    v = [accuracy_score(y_te, TIGHT.fit_predict(v_tr, y_tr[p], v_te)) for p in perm]
+    np.testing.assert_array_equal(out["vt_scores"], vt)
+    np.testing.assert_array_equal(out["v_scores"], v)
+
+
+def test_logistic_random_features_batched_equals_refit_loop():
+    v_tr, t_tr, y_tr, v_te, t_te, y_te = class_data(seed=2)
+    kw = dict(fusion="concat", metric="accuracy", n_draws=4, seed=2)
+    fast = stats.random_feature_control(v_tr, t_tr, y_tr, v_te, t_te, y_te, probe=TIGHT, **kw)
+    rng = np.random.default_rng(2)
+    mu, sd = t_tr.mean(axis=0), t_tr.std(axis=0)
+    loop = []
+    for _ in range(4):
+        r_tr = mu + sd * rng.standard_normal(t_tr.shape)
+        r_te = mu + sd * rng.standard_normal(t_te.shape)
+        pred = TIGHT.fit_predict(np.hstack([v_tr, r_tr]), y_tr, np.hstack([v_te, r_te]))
+        loop.append(accuracy_score(y_te, pred))
+    np.testing.assert_array_equal(fast["vt_scores"], loop)
+
+
+def test_logistic_train_resample_batched_equals_loop_with_missing_class_resamples():
+    v_tr, t_tr, y_tr, v_te, t_te, y_te = class_data(n_tr=30, n_classes=3, seed=3)
+    y_tr = y_tr.copy()
+    y_tr[:] = np.where(y_tr == 2, 1, y_tr)
+    y_tr[:2] = 2  # a class of two rows: about one resample in eight misses it
+    x_tr, x_te = fuse("concat", v_tr, t_tr), fuse("concat", v_te, t_te)
+    out = stats.train_resample_diagnostic(
+        v_tr, x_tr, y_tr, v_te, x_te, y_te, probe_v=TIGHT, probe_vt=TIGHT,
+        metric="accuracy", n_resamples=16, seed=3,
+    )  # fmt: skip
+    idx = stats.resample_indices(30, 16, seed=3)
+    missing = [len(np.unique(y_tr[i])) < 3 for i in idx]
+    assert any(missing) and not all(missing)  # both paths are exercised
+    vt = [accuracy_score(y_te, TIGHT.fit_predict(x_tr[i], y_tr[i], x_te)) for i in idx]
+    v = [accuracy_score(y_te, TIGHT.fit_predict(v_tr[i], y_tr[i], v_te)) for i in idx]
+    np.testing.assert_array_equal(out["vt_scores"], vt)
+    np.testing.assert_array_equal(out["v_scores"], v)
