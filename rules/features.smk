@@ -45,7 +45,9 @@ rule pretrain_backbone:
         modality="vision|tactile",
     conda:
         "../envs/features.yaml"
-    threads: 2
+    # one thread each, so the vision and tactile runs share 2 cores side by side (measured
+    # faster than one after the other at 2 threads); reruns are bit-identical per thread count
+    threads: 1
     resources:
         mem_mb=6000,
         runtime=120,
