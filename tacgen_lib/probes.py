@@ -398,7 +398,20 @@ def _fold_deletions(
     return out
 
 
-def _deletion_predictions_st(
+def _guarded_eigh(
+    m: np.ndarray, size: int, lam_min: float
+) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Eigenpairs (e, v) of the symmetric PSD `m` and the mask of eigenvalues above their error,
+    or None when that error (``size * eps * e_max``) is too large for `lam_min` (`GRAM_GUARD`).
+    """
+    e, v = scipy.linalg.eigh(m, driver="evd", check_finite=False)  # evd: ~1.3x numpy's
+    err = size * _EPS * max(e[-1], 0.0)
+    if err * GRAM_GUARD > lam_min:
+        return None
+    return e, v, e > err
+
+
+def _deletion_predictions(
     G0: np.ndarray, y: np.ndarray, folds: list[np.ndarray], lam: np.ndarray
 ) -> tuple[list[np.ndarray], tuple[np.ndarray, np.ndarray]] | None:
     """Held-out predictions of every fold and lambda from ONE eigendecomposition (dual form).
@@ -414,11 +427,10 @@ def _deletion_predictions_st(
     ``coef = X0^T U diag(1 / (e + lam)) U^T y_c`` (`fit_ridge_probe` reuses them).
     """
     n = y.size
-    e, u = scipy.linalg.eigh(G0, driver="evd", check_finite=False)  # evd: ~1.3x numpy's
-    err = n * _EPS * max(e[-1], 0.0)
-    if err * GRAM_GUARD > lam.min():
+    eig = _guarded_eigh(G0, n, lam.min())
+    if eig is None:
         return None
-    pos = e > err
+    e, u, pos = eig
     up, ep, u0 = u[:, pos], e[pos], u[:, ~pos]
     yc = y - y.mean()
     g = lam[:, None] / (ep + lam[:, None])  # (L, k)
@@ -432,7 +444,7 @@ def _deletion_predictions_st(
     return None if out is None else (out, (ep, up))
 
 
-def _deletion_predictions_primal_st(
+def _deletion_predictions_primal(
     X0: np.ndarray, y: np.ndarray, folds: list[np.ndarray], lam: np.ndarray
 ) -> tuple[list[np.ndarray], tuple[np.ndarray, np.ndarray]] | None:
     """`_deletion_predictions` for p < n, from ONE eigendecomposition of the p x p scatter.
@@ -445,11 +457,10 @@ def _deletion_predictions_primal_st(
     also the primal eigenpairs (e, W) for the refit.
     """
     n, p = X0.shape
-    e, w = scipy.linalg.eigh(X0.T @ X0, driver="evd", check_finite=False)
-    err = max(n, p) * _EPS * max(e[-1], 0.0)
-    if err * GRAM_GUARD > lam.min():
+    eig = _guarded_eigh(X0.T @ X0, max(n, p), lam.min())
+    if eig is None:
         return None
-    pos = e > err
+    e, w, pos = eig
     e, w = e[pos], w[:, pos]
     u = (X0 @ w) / np.sqrt(e)
     yc = y - y.mean()
@@ -464,23 +475,6 @@ def _deletion_predictions_primal_st(
 
     out = _fold_deletions(block, resid, y, folds)
     return None if out is None else (out, (e, w))
-
-
-def _deletion_predictions(
-    G0: np.ndarray, y: np.ndarray, folds: list[np.ndarray], lam: np.ndarray
-) -> tuple[list[np.ndarray], tuple[np.ndarray, np.ndarray]] | None:
-    """`_deletion_predictions_st` on one BLAS thread: its many small solves run 2-5x slower
-    with two threads (measured), and the eigh gains ~10%."""
-    with _BLAS.limit(limits=1):
-        return _deletion_predictions_st(G0, y, folds, lam)
-
-
-def _deletion_predictions_primal(
-    X0: np.ndarray, y: np.ndarray, folds: list[np.ndarray], lam: np.ndarray
-) -> tuple[list[np.ndarray], tuple[np.ndarray, np.ndarray]] | None:
-    """`_deletion_predictions_primal_st` on one BLAS thread (as `_deletion_predictions`)."""
-    with _BLAS.limit(limits=1):
-        return _deletion_predictions_primal_st(X0, y, folds, lam)
 
 
 def select_lambda_cv(
@@ -513,10 +507,13 @@ def select_lambda_cv(
     G0 = X0 @ X0.T if p > n - max(len(f) for f in folds) else None
     scores = np.empty((len(folds), lam.size))
     solver = []
-    if G0 is not None:
-        deleted, kind = _deletion_predictions(G0, y, folds, lam), "dual"
-    else:
-        deleted, kind = _deletion_predictions_primal(X0, y, folds, lam), "primal"
+    # one BLAS thread: the deletion paths' many small solves ran 2-5x slower with two
+    # (measured), and their eigh gains ~10%
+    with _BLAS.limit(limits=1):
+        if G0 is not None:
+            deleted, kind = _deletion_predictions(G0, y, folds, lam), "dual"
+        else:
+            deleted, kind = _deletion_predictions_primal(X0, y, folds, lam), "primal"
     eig = None if deleted is None else (kind, *deleted[1])
     for k, ho in enumerate(folds):
         if deleted is not None:
@@ -599,13 +596,10 @@ def _grid_refit(
     elif eig is not None:
         e, w = eig[1:]
         coefs = ((w.T @ (x0.T @ yc)) / (e + lam[:, None])) @ w.T
-    elif p <= n:
-        e, w = scipy.linalg.eigh(x0.T @ x0, driver="evd", check_finite=False)
-        err = max(n, p) * _EPS * max(e[-1], 0.0)
-        if err * GRAM_GUARD <= lam.min():
-            good = e > err
-            e, w = e[good], w[:, good]
-            coefs = ((w.T @ (x0.T @ yc)) / (e + lam[:, None])) @ w.T
+    elif p <= n and (scatter := _guarded_eigh(x0.T @ x0, max(n, p), lam.min())) is not None:
+        e, w, good = scatter
+        e, w = e[good], w[:, good]
+        coefs = ((w.T @ (x0.T @ yc)) / (e + lam[:, None])) @ w.T
     if coefs is None:
         path = ridge_path(X, y, lam)
         return path.coefs, path.intercepts
@@ -810,6 +804,11 @@ class DesignBlock:
     def dim(self) -> int:
         return int(self.data.shape[-1])
 
+    def transform(self, data: np.ndarray, perm: np.ndarray | None = None) -> DesignBlock:
+        """Other rows (the test rows) under this block's offset and scale, as
+        ``StandardScaler.transform`` applies a fitted scaler."""
+        return DesignBlock(np.asarray(data, dtype=np.float64), perm, self.offset, self.scale)
+
     def _affine(self, b: int) -> tuple[np.ndarray, np.ndarray]:
         off = np.zeros((b, self.dim)) if self.offset is None else self.offset
         sc = np.ones((b, self.dim)) if self.scale is None else self.scale
@@ -852,13 +851,15 @@ def standardise_block(
 ) -> DesignBlock:
     """A `DesignBlock` equal to ``StandardScaler().fit_transform`` of X per problem.
 
-    weights (B, n): row multiplicities of each problem (bootstrap counts), giving each
-    problem the scaler of its own resample ``X[idx]``; without weights the scaler is shared
-    (and unchanged by a row permutation). Zero-variance columns get scale 1, as scikit-learn.
+    X: (n, d) shared by every problem, or (B, n, d) private to each (one scaler per problem).
+    weights (B, n), with a shared X only: row multiplicities of each problem (bootstrap
+    counts), giving each problem the scaler of its own resample ``X[idx]``; without weights a
+    shared X has one scaler (unchanged by a row permutation). Zero-variance columns get
+    scale 1, as scikit-learn.
     """
     X = np.asarray(X, dtype=np.float64)
     if weights is None:
-        mean, var = X.mean(axis=0), X.var(axis=0)
+        mean, var = X.mean(axis=-2), X.var(axis=-2)
     else:  # moments about the full-sample mean: no cancellation for large column offsets
         weights = np.asarray(weights, dtype=np.float64)
         centre = X.mean(axis=0)
