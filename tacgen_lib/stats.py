@@ -280,12 +280,14 @@ def _logistic_batch_predict(
     return fit.predict(test)
 
 
-def _v_score(probe: Probe, v_train, y_train, v_test, y_test, metric: Metric) -> float:
-    """Score of the V probe; a logistic one through the batched solver (B = 1), so both
-    sides of a control's Delta come from the same solver."""
-    if _batched(probe, y_train):
+def _v_score(
+    probe: Probe, v_train, y_train, v_test, y_test, metric: Metric, *, batched: bool
+) -> float:
+    """Score of the V probe: with `batched` (the control's V+T side is batched), through the
+    batched solver (B = 1), so both sides of the control's Delta come from the same solver."""
+    if batched and _batched(probe, y_train):
         blk = standardise_block(v_train)
-        test = DesignBlock(np.asarray(v_test, np.float64), None, blk.offset, blk.scale)
+        test = blk.transform(v_test)
         return float(
             _accuracy_rows(y_test, _logistic_batch_predict(probe, [blk], y_train, [test]))[0]
         )
@@ -339,7 +341,7 @@ def train_resample_diagnostic(
                 (probe_vt, x_vt_train, x_vt_test, vt_s),
             ):
                 blk = standardise_block(x_tr, weights=counts[full])
-                test = DesignBlock(np.asarray(x_te, np.float64), None, blk.offset, blk.scale)
+                test = blk.transform(x_te)
                 preds = _logistic_batch_predict(
                     probe, [blk], y_train, [test], sample_weight=counts[full]
                 )
@@ -580,17 +582,11 @@ def tactile_permutation_control(
     perm_te = _permutations(v_test.shape[0], n_permutations, rng)
     fast = isinstance(probe, FixedRidge) and fusion == "concat" and metric == "r2"
     batched = _batched(probe, y_train) and fusion == "concat"
-    if batched:
-        v_score = _v_score(probe_v or probe, v_train, y_train, v_test, y_test, metric)
-    else:
-        v_score = score(metric, y_test, (probe_v or probe).fit_predict(v_train, y_train, v_test))
+    v_score = _v_score(probe_v or probe, v_train, y_train, v_test, y_test, metric, batched=batched)
     if batched:
         # [V, P T] standardised = [std V, P std T]: scalers are unchanged by a row permutation
         bv, bt = standardise_block(v_train), standardise_block(t_train, perm=perm_tr)
-        test = [
-            DesignBlock(v_test, None, bv.offset, bv.scale),
-            DesignBlock(t_test, perm_te, bt.offset, bt.scale),
-        ]
+        test = [bv.transform(v_test), bt.transform(t_test, perm_te)]
         preds = _logistic_batch_predict(probe, [bv, bt], y_train, test)
         vt = _accuracy_rows(y_test, preds)
         info = {"batched_logistic": n_permutations}
@@ -651,7 +647,7 @@ def label_permutation_control(
             return np.array([score(metric, y_test, p) for p in preds])
         if _batched(probe, y_train):  # one design, B permuted targets
             blk = standardise_block(x_tr)
-            test = DesignBlock(np.asarray(x_te, np.float64), None, blk.offset, blk.scale)
+            test = blk.transform(x_te)
             return _accuracy_rows(y_test, _logistic_batch_predict(probe, [blk], y_perm, [test]))
         return np.array([score(metric, y_test, probe.fit_predict(x_tr, yp, x_te)) for yp in y_perm])
 
@@ -697,10 +693,7 @@ def random_feature_control(
     y_train, y_test = np.asarray(y_train), np.asarray(y_test)
     vt = np.empty(n_draws)
     batched = _batched(probe, y_train) and fusion == "concat" and n_draws > 0
-    if batched:
-        v_score = _v_score(probe_v or probe, v_train, y_train, v_test, y_test, metric)
-    else:
-        v_score = score(metric, y_test, (probe_v or probe).fit_predict(v_train, y_train, v_test))
+    v_score = _v_score(probe_v or probe, v_train, y_train, v_test, y_test, metric, batched=batched)
     if batched:
         draws = [
             (
@@ -711,13 +704,9 @@ def random_feature_control(
         ]  # fmt: skip  (same draw order as the refit loop)
         r_tr = np.stack([d[0] for d in draws])
         r_te = np.stack([d[1] for d in draws])
-        bv = standardise_block(np.asarray(v_train, np.float64))
-        r_mean, r_sd = r_tr.mean(axis=1), r_tr.std(axis=1)
-        tiny = r_sd < 10 * np.finfo(np.float64).eps * np.maximum(np.abs(r_mean), 1.0)
-        r_sd = np.where(tiny, 1.0, r_sd)
-        train = [bv, DesignBlock(r_tr, None, r_mean, r_sd)]
-        test = [DesignBlock(np.asarray(v_test, np.float64), None, bv.offset, bv.scale),
-                DesignBlock(r_te, None, r_mean, r_sd)]  # fmt: skip
+        bv, br = standardise_block(v_train), standardise_block(r_tr)  # br: a scaler per draw
+        train = [bv, br]
+        test = [bv.transform(v_test), br.transform(r_te)]
         vt[:] = _accuracy_rows(y_test, _logistic_batch_predict(probe, train, y_train, test))
     for j in range(0 if batched else n_draws):  # otherwise each draw is one refit
         r_tr = mu + sd * rng.standard_normal(t_train.shape)
