@@ -169,9 +169,14 @@ def dino_loss_terms(
     _check_logits(student_out, teacher_out)
     if not (0 < teacher_temp and 0 < student_temp):
         raise ValueError(f"dino_loss: temperatures must be > 0, got {student_temp}, {teacher_temp}")
-    k = teacher_out.shape[-1]
-    p_t = F.softmax((teacher_out - center.reshape(1, 1, k)) / teacher_temp, dim=-1)
+    p_t = _centre_and_sharpen(teacher_out, center, teacher_temp)
     return dino_cross_entropy(student_out, p_t, student_temp)
+
+
+def _centre_and_sharpen(teacher_out: Tensor, center: Tensor, teacher_temp: float) -> Tensor:
+    """DINO v1 teacher targets: softmax((teacher_out - center) / teacher_temp) over K."""
+    k = teacher_out.shape[-1]
+    return F.softmax((teacher_out - center.reshape(1, 1, k)) / teacher_temp, dim=-1)
 
 
 def sinkhorn_knopp(teacher_out: Tensor, teacher_temp: float, n_iterations: int = 3) -> Tensor:
@@ -524,7 +529,7 @@ def pretrain_dino(
                     else:
                         if center is None:
                             center = t_out.mean(dim=(0, 1)).view(1, out_dim)
-                        p_t = F.softmax((t_out - center.view(1, 1, out_dim)) / t_temp, dim=-1)
+                        p_t = _centre_and_sharpen(t_out, center, t_temp)
                 s_cls, s_glob = student(torch.cat(views[:2]))
                 s_glob = s_glob.view(2, b, out_dim)
                 if n_local_crops:
