@@ -242,14 +242,22 @@ def _summary(deltas: np.ndarray) -> dict:
     }
 
 
-def _batched(probe: object, y_train: np.ndarray) -> bool:
+def _batched(probe: object, y_train: np.ndarray, *, n_features: int | None = None) -> bool:
     """Whether a control's logistic refits go through `probes.fit_logistic_batch`.
 
-    Binary targets only: on the default 3-class density probe (120 rows, 960 features) the
-    batched L-BFGS ran for minutes where the per-refit scikit-learn loop takes seconds, so
-    multi-class controls keep the loop until the batched solver is fixed for them.
+    Every logistic control whose refits share one unweighted design (tactile and label
+    permutations: ``n_features`` None). Refits whose design differs per problem (bootstrap
+    row weights, private random-feature blocks: pass the design's column count) only when
+    ``n_train >= n_features``: the solver's preconditioner comes from the shared scatter, and
+    with fewer rows than columns a problem that drops or reweights rows has directions whose
+    only curvature is the L2 term, which that scatter does not see. Measured on the default
+    density probe (3 classes, 120 rows, 960 columns, C = 10, one thread): train resamples
+    batched 173 s against 37 s for the scikit-learn loop, permutations 10 s against 78 s; on
+    hardness (2 classes, 960 rows, 384 columns) batched is 15-90x faster in every control.
     """
-    return isinstance(probe, FixedLogistic) and np.unique(np.asarray(y_train)).size == 2
+    if not isinstance(probe, FixedLogistic):
+        return False
+    return n_features is None or np.asarray(y_train).shape[0] >= n_features
 
 
 def _logistic_batch_predict(
@@ -326,7 +334,9 @@ def train_resample_diagnostic(
     v_s = np.empty(n_resamples)
     vt_s = np.empty(n_resamples)
     loop = range(n_resamples)
-    if _batched(probe_v, y_train) and isinstance(probe_vt, FixedLogistic):
+    if _batched(probe_v, y_train, n_features=np.shape(x_vt_train)[1]) and isinstance(
+        probe_vt, FixedLogistic
+    ):
         # a resample is the full rows weighted by their bootstrap counts, standardised by
         # its own scaler; resamples missing a class are refitted alone below (scikit-learn
         # then fits the classes present, or refuses a single class)
@@ -692,7 +702,8 @@ def random_feature_control(
     rng = np.random.default_rng(seed)
     y_train, y_test = np.asarray(y_train), np.asarray(y_test)
     vt = np.empty(n_draws)
-    batched = _batched(probe, y_train) and fusion == "concat" and n_draws > 0
+    n_cols = np.shape(v_train)[1] + t_train.shape[1]
+    batched = _batched(probe, y_train, n_features=n_cols) and fusion == "concat" and n_draws > 0
     v_score = _v_score(probe_v or probe, v_train, y_train, v_test, y_test, metric, batched=batched)
     if batched:
         draws = [

@@ -379,6 +379,30 @@ def test_logistic_batch_equals_sklearn_on_permuted_targets(n_classes, C):
         np.testing.assert_array_equal(got[clear], ref.predict(Z)[clear])
 
 
+@pytest.mark.parametrize("n_classes", [2, 3])
+def test_logistic_batch_wide_design_low_rank_basis_equals_sklearn(n_classes):
+    """Fewer rows than columns (the density probe's shape): the preconditioner is the
+    penalty's identity plus a rank <= n term; the optimum is still scikit-learn's."""
+    rng = np.random.default_rng(10 + n_classes)
+    n, d = 36, 150
+    X = rng.standard_normal((n, 6)) @ rng.standard_normal((6, d)) + 0.1 * rng.standard_normal(
+        (n, d)
+    )
+    y = np.arange(n) % n_classes
+    blk = probes.standardise_block(X)
+    basis = probes._block_basis(blk, 0.25 if n_classes == 2 else 1.0 / n_classes, 1.0 / n)
+    assert basis.dense is None and basis.vecs.shape[1] <= n  # the low-rank form is used
+    perm = np.argsort(rng.random((3, n)), axis=1)
+    fit = probes.fit_logistic_batch([blk], y[perm], 1.0, tol=1e-10)
+    assert fit.converged.all()
+    Z = StandardScaler().fit_transform(X)
+    for b in range(3):
+        ref = sklearn_fit(Z, y[perm[b]], 1.0)
+        assert_same_optimum(
+            Z, y[perm[b]], np.ones(n), 1.0, fit.coef[b], fit.intercept[b], ref, fit.classes
+        )
+
+
 def test_logistic_batch_separable_converges_by_the_l2_term():
     X, y = separable_three_class(seed=2)
     y2 = (y > 0).astype(int)

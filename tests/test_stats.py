@@ -273,9 +273,7 @@ def test_logistic_tactile_permutation_batched_equals_refit_loop(n_classes):
     v_tr, t_tr, y_tr, v_te, t_te, y_te = class_data(n_classes=n_classes)
     kw = dict(fusion="concat", metric="accuracy", n_permutations=6, seed=4, probe=TIGHT)
     fast = stats.tactile_permutation_control(v_tr, t_tr, y_tr, v_te, t_te, y_te, **kw)
-    # multi-class controls keep the per-refit loop (stats._batched); the batched solver's
-    # 3-class results are tested against scikit-learn in test_probes.py
-    assert fast["solver"] == ({"batched_logistic": 6} if n_classes == 2 else {"refits": 6})
+    assert fast["solver"] == {"batched_logistic": 6}  # one shared design: batched
     rng = np.random.default_rng(4)
     p_tr = np.argsort(rng.random((6, 80)), axis=1, kind="stable")
     p_te = np.argsort(rng.random((6, 40)), axis=1, kind="stable")
@@ -335,3 +333,33 @@ def test_logistic_train_resample_batched_equals_loop_with_missing_class_resample
     v = [accuracy_score(y_te, TIGHT.fit_predict(v_tr[i], y_tr[i], v_te)) for i in idx]
     np.testing.assert_array_equal(out["vt_scores"], vt)
     np.testing.assert_array_equal(out["v_scores"], v)
+
+
+def test_logistic_controls_batch_only_where_the_shared_preconditioner_fits():
+    """Shared unweighted designs always batch (any number of classes); designs that vary per
+    problem (bootstrap weights, random blocks) batch only with at least as many rows as
+    columns; ridge never goes through the logistic batch."""
+    y = np.repeat([0, 1, 2], 10)
+    probe = TIGHT
+    assert stats._batched(probe, y)
+    assert stats._batched(probe, y, n_features=30)
+    assert not stats._batched(probe, y, n_features=31)
+    assert not stats._batched(FixedRidge(1.0), y)
+    v_tr, t_tr, y_tr, v_te, t_te, y_te = class_data(n_tr=12, n_classes=3, seed=5)
+    wide_tr, wide_te = np.hstack([v_tr, v_tr**2, t_tr]), np.hstack([v_te, v_te**2, t_te])
+    out = stats.train_resample_diagnostic(
+        v_tr,
+        wide_tr,
+        y_tr,
+        v_te,
+        wide_te,
+        y_te,
+        probe_v=TIGHT,
+        probe_vt=TIGHT,
+        metric="accuracy",
+        n_resamples=4,
+        seed=5,
+    )  # fmt: skip  (13 columns > 12 rows: the refit loop, equal to scikit-learn by construction)
+    idx = stats.resample_indices(12, 4, seed=5)
+    vt = [accuracy_score(y_te, TIGHT.fit_predict(wide_tr[i], y_tr[i], wide_te)) for i in idx]
+    np.testing.assert_array_equal(out["vt_scores"], vt)
