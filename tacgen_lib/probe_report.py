@@ -273,39 +273,56 @@ def fusions_frame() -> pd.DataFrame:
     return pd.DataFrame(fusion_table())
 
 
-def forest_plot(summary: pd.DataFrame, *, min_delta: float = 0.03) -> plt.Figure:
-    """Delta with its 95% fixed-test bootstrap CI for every main comparison (heads' variant).
+def forest_plot(summary: pd.DataFrame, *, min_delta: float = 0.03, ncols: int = 4) -> plt.Figure:
+    """Delta with its 95% fixed-test bootstrap CI for every main comparison (heads' variant),
+    one panel per probe family.
 
-    One line per comparison, labelled ``family / input / fusion  a~align seed s~probe seed``;
-    R^2 and accuracy families share the axis (both are differences of a score in [.., 1]).
-    Null-corpus families are drawn in grey; the dashed line is the paper's min Delta.
+    A panel's lines are labelled ``input / fusion  a~align seed s~probe seed``; each panel has
+    its own Delta axis (R^2 and accuracy gains differ in scale), with 0 (solid) and the paper's
+    min Delta (dashed). Null-corpus families are drawn in grey; a diamond marks a comparison
+    that meets the paper's criterion.
     """
     rows = _headline(main_rows(summary))
-    rows = rows.loc[rows["status"] == "ok"].iloc[::-1]
-    n = max(len(rows), 1)
-    fig, ax = plt.subplots(figsize=(8.5, 1.2 + 0.22 * n))
-    y = np.arange(len(rows))
-    null = rows["null_corpus"].astype(bool).to_numpy() if len(rows) else np.array([], bool)
-    colours = np.where(null, "#888888", "#1f5fa8")
-    for yi, (_, r), c in zip(y, rows.iterrows(), colours, strict=True):
-        ax.plot([r["ci_low"], r["ci_high"]], [yi, yi], color=c, lw=1.6)
-        marker = "D" if r["criterion_met"] is True else "o"
-        ax.plot([r["delta"]], [yi], marker=marker, color=c, ms=4.5)
-    labels = [
-        f"{r['family']} / {r['input']} / {r['fusion']}  a~{_seed(r['align_seed'])} "
-        f"s~{_seed(r['probe_seed'])}"
-        for _, r in rows.iterrows()
-    ]
-    ax.set_yticks(y, labels, fontsize=7)
-    ax.axvline(0.0, color="black", lw=0.8)
-    ax.axvline(min_delta, color="black", lw=0.8, ls="--")
-    ax.set_ylim(-0.8, n - 0.2)
-    ax.set_xlabel("Δ = score(V+T) − score(V)  (R² or accuracy), 95% fixed-test bootstrap CI")
-    ax.set_title(
-        "Probe gains with 95% CIs (blue: main corpora, grey: null corpus; ◆: criterion met)",
-        fontsize=9,
+    rows = rows.loc[rows["status"] == "ok"]
+    families = list(dict.fromkeys(rows["family"])) or ["(no comparison)"]
+    ncols = max(1, min(ncols, len(families)))
+    nrows = -(-len(families) // ncols)
+    height = max((rows["family"] == f).sum() for f in families) if len(rows) else 1
+    fig, axes = plt.subplots(
+        nrows, ncols, figsize=(4.6 * ncols, nrows * (1.3 + 0.2 * height)), squeeze=False
     )
-    ax.grid(axis="x", color="#dddddd", lw=0.6)
+    for ax in axes.flat[len(families) :]:
+        ax.axis("off")
+    for ax, fam in zip(axes.flat, families, strict=False):
+        part = rows.loc[rows["family"] == fam].iloc[::-1]
+        null = bool(part["null_corpus"].astype(bool).any()) if len(part) else False
+        colour = "#888888" if null else "#1f5fa8"
+        y = np.arange(len(part))
+        for yi, (_, r) in zip(y, part.iterrows(), strict=True):
+            ax.plot([r["ci_low"], r["ci_high"]], [yi, yi], color=colour, lw=1.6)
+            met = r["criterion_met"] is True
+            ax.plot(
+                [r["delta"]], [yi], marker="D" if met else "o", color=colour, ms=6 if met else 4
+            )
+        labels = [
+            f"{r['input']} / {r['fusion']}  a~{_seed(r['align_seed'])} s~{_seed(r['probe_seed'])}"
+            for _, r in part.iterrows()
+        ]
+        ax.set_yticks(y, labels, fontsize=7)
+        ax.set_ylim(-0.8, max(len(part), 1) - 0.2)
+        ax.axvline(0.0, color="black", lw=0.8)
+        ax.axvline(min_delta, color="black", lw=0.8, ls="--")
+        metric = part["metric"].iloc[0] if len(part) and "metric" in part else ""
+        corpus = part["corpus"].iloc[0] if len(part) and "corpus" in part else ""
+        ax.set_title(f"{fam} ({corpus}, {metric})" if len(part) else fam, fontsize=9)
+        ax.set_xlabel("Δ = V+T − V, 95% CI", fontsize=8)
+        ax.tick_params(axis="x", labelsize=7)
+        ax.grid(axis="x", color="#dddddd", lw=0.6)
+    fig.suptitle(
+        "Probe gains with 95% fixed-test bootstrap CIs (blue: main corpora, grey: null corpus; "
+        "◆: criterion met; dashed: the paper's min Δ)",
+        fontsize=10,
+    )
     fig.tight_layout()
     return fig
 

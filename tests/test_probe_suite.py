@@ -364,12 +364,14 @@ def test_report_tables_and_figures_from_a_summary(ridge_signal, logistic_signal)
     assert sweep.filter(like="lambda=").apply(lambda c: c.str.endswith("*")).to_numpy().any()
     assert len(probe_report.fusions_frame()) == 6
     fig = probe_report.forest_plot(summary)
-    labels = [t.get_text() for t in fig.axes[0].get_yticklabels()]
-    n_main = int(
-        ((summary["control"] == "none") & (summary["status"] == "ok")
-         & (summary["t_variant"] == summary["heads_variant"])).sum()
-    )  # fmt: skip
-    assert len(labels) == n_main and "fam_null / raw / concat  a~- s~42" in labels
+    shown = summary.loc[(summary["control"] == "none") & (summary["status"] == "ok")
+                        & (summary["t_variant"] == summary["heads_variant"])]  # fmt: skip
+    panels = {ax.get_title().split(" (")[0]: ax for ax in fig.axes if ax.get_title()}
+    assert set(panels) == set(shown["family"])  # one panel per family
+    for fam, ax in panels.items():
+        labels = [t.get_text() for t in ax.get_yticklabels()]
+        assert len(labels) == (shown["family"] == fam).sum()
+    assert "raw / concat  a~- s~42" in [t.get_text() for t in panels["fam_null"].get_yticklabels()]
     conf = logistic_signal.confusion.assign(family="hard")
     fig = probe_report.confusion_figure(conf)
     assert len(fig.axes) == 2 * 3  # raw + two alignment seeds, V and V+T each
