@@ -26,12 +26,12 @@ from __future__ import annotations
 
 import argparse
 import math
-import os
 import statistics
 import time
 from collections.abc import Callable
 from typing import NamedTuple
 
+import machine
 import numpy as np
 import torch
 
@@ -172,11 +172,8 @@ def main() -> None:
     args = ap.parse_args()
     if args.threads:
         torch.set_num_threads(args.threads)
-    load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    print(
-        f"torch {torch.__version__}, threads {torch.get_num_threads()}, batch {BATCH}, "
-        f"cores {os.cpu_count()}, load average {load:.2f}"
-    )
+    print(f"machine: {machine.describe()}")
+    print(f"torch {torch.__version__}, threads {torch.get_num_threads()}, batch {BATCH}")
     head = (
         f"{'in_dim':>6} {'GEMM GF/s':>9} {'GF/step':>7} {'ms/step':>8} {'median':>7} "
         f"{'samples/s':>9} {'roofline':>8} {'fraction':>8} {'cpu-frac':>8} {'target':>6} "

@@ -20,6 +20,7 @@ import argparse
 import os
 import time
 
+import machine
 import numpy as np
 import scipy.stats
 from sklearn.linear_model import Ridge
@@ -221,7 +222,8 @@ def main() -> None:
     assert np.allclose(chol["deltas"], ctrl["deltas"], rtol=1e-6, atol=1e-9)
     t_all, _ = best_of(whole_probe, args.repeats, "all")
 
-    print(f"machine: {os.cpu_count()} cores, BLAS threads {blas}; n_train={args.n_train} n_test={args.n_test} "
+    print(f"machine: {machine.describe()}")
+    print(f"BLAS threads {blas}; n_train={args.n_train} n_test={args.n_test} "
           f"d={args.d_v}+{args.d_t}; lambdas={np.round(lambdas, 3).tolist()}")  # fmt: skip
     print(f"selected lambda V={pv.lam:g} (CV solvers {pv.selection.solver[0]}) "
           f"V+T={pvt.lam:g} ({pvt.selection.solver[0]}); GridSearchCV agrees")  # fmt: skip
