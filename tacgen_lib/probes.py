@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable, Sequence
+from contextlib import AbstractContextManager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -71,6 +72,14 @@ _EPS = np.finfo(np.float64).eps
 # L-BFGS-B): with 2 BLAS threads on a loaded 2-core machine each call waits for a busy core,
 # measured 10-18x slower than one thread. Logistic fits therefore run single-threaded.
 _BLAS = ThreadpoolController()
+
+
+def single_blas_thread() -> AbstractContextManager:
+    """Context manager: BLAS/LAPACK limited to one thread for the block it guards (the many
+    small products of lbfgs, the deletion paths and the PCG set-up)."""
+    return _BLAS.limit(limits=1)
+
+
 # Gram eigenvalues carry an absolute error of about max(n, p) * eps * e_max. The Gram path
 # is used only if that error, divided by the smallest lambda, stays below 1 / GRAM_GUARD:
 # predictions are then accurate to ~1e-6 relative, far below CV noise.
@@ -509,7 +518,7 @@ def select_lambda_cv(
     solver = []
     # one BLAS thread: the deletion paths' many small solves ran 2-5x slower with two
     # (measured), and their eigh gains ~10%
-    with _BLAS.limit(limits=1):
+    with single_blas_thread():
         if G0 is not None:
             deleted, kind = _deletion_predictions(G0, y, folds, lam), "dual"
         else:
@@ -659,7 +668,7 @@ def _fit_logistic_once(
                 ("logistic", LogisticRegression(C=C, solver="lbfgs", max_iter=it, tol=tol)),
             ]
         )
-        with warnings.catch_warnings(record=True) as caught, _BLAS.limit(limits=1):
+        with warnings.catch_warnings(record=True) as caught, single_blas_thread():
             warnings.simplefilter("always")
             model.fit(X, y)
         conv = [w for w in caught if issubclass(w.category, ConvergenceWarning)]

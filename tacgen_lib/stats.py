@@ -34,7 +34,6 @@ from sklearn.exceptions import ConvergenceWarning
 
 from tacgen_lib.fusion import fuse
 from tacgen_lib.probes import (
-    _BLAS,
     GRAM_GUARD,
     DesignBlock,
     FixedLogistic,
@@ -43,6 +42,7 @@ from tacgen_lib.probes import (
     fit_logistic_batch,
     r2,
     ridge_fixed,
+    single_blas_thread,
     standardise_block,
 )
 
@@ -451,7 +451,7 @@ def _pcg_permuted(
     dv = c0 / e_v + 1.0
     dt = c0 / e_t + 1.0
     cross = np.empty((b, e_v.size, e_t.size))
-    with _BLAS.limit(limits=1):  # B small products: threads only add synchronisation
+    with single_blas_thread():  # B small products: threads only add synchronisation
         for j in range(b):  # U_v^T P_j U_t = U_v^T (rows perm_j of U_t)
             cross[j] = u_v.T @ u_t[perm[j]]
         schur = -np.matmul((cross / dv[:, None]).transpose(0, 2, 1), cross)
