@@ -340,13 +340,13 @@ def test_logistic_controls_batch_only_where_the_shared_preconditioner_fits():
     problem (bootstrap weights, random blocks) batch only with at least as many rows as
     columns; ridge never goes through the logistic batch."""
     y = np.repeat([0, 1, 2], 10)
-    probe = TIGHT
-    assert stats._batched(probe, y)
-    assert stats._batched(probe, y, n_features=30)
-    assert not stats._batched(probe, y, n_features=31)
+    assert stats._batched(TIGHT, y)
+    assert stats._batched(TIGHT, y, n_features=30)
+    assert not stats._batched(TIGHT, y, n_features=31)
     assert not stats._batched(FixedRidge(1.0), y)
     v_tr, t_tr, y_tr, v_te, t_te, y_te = class_data(n_tr=12, n_classes=3, seed=5)
     wide_tr, wide_te = np.hstack([v_tr, v_tr**2, t_tr]), np.hstack([v_te, v_te**2, t_te])
+    # 13 columns > 12 rows: the train resamples take the refit loop and equal scikit-learn
     out = stats.train_resample_diagnostic(
         v_tr,
         wide_tr,
@@ -359,7 +359,7 @@ def test_logistic_controls_batch_only_where_the_shared_preconditioner_fits():
         metric="accuracy",
         n_resamples=4,
         seed=5,
-    )  # fmt: skip  (13 columns > 12 rows: the refit loop, equal to scikit-learn by construction)
+    )
     idx = stats.resample_indices(12, 4, seed=5)
     vt = [accuracy_score(y_te, TIGHT.fit_predict(wide_tr[i], y_tr[i], wide_te)) for i in idx]
     np.testing.assert_array_equal(out["vt_scores"], vt)
