@@ -1032,9 +1032,6 @@ def fit_logistic_batch(
             out.append(t.apply(flat).reshape(d, b, k).transpose(1, 0, 2))
         return np.concatenate(out, axis=1)
 
-    to_w = apply_bases  # (B, p, K) gamma -> coefficients
-    to_gamma_grad = apply_bases  # T^T = T: the gradient in gamma coordinates
-
     def margins(w: np.ndarray) -> np.ndarray:
         parts = np.split(w, cut, axis=1)
         return sum(blk.margins(x) for blk, x in zip(blocks, parts, strict=True))
@@ -1062,7 +1059,8 @@ def fit_logistic_batch(
         gw += pen[:, None, None] * w
         gc = dm.sum(axis=1)
         g_orig = np.concatenate([gw.reshape(b, -1), gc], axis=1)
-        g_gam = np.concatenate([to_gamma_grad(gw).reshape(b, -1), t_int * gc], axis=1)
+        # gradient in gamma coordinates: T^T gw, and T^T = T
+        g_gam = np.concatenate([apply_bases(gw).reshape(b, -1), t_int * gc], axis=1)
         return g_orig, g_gam
 
     gam = np.zeros((b, p * k + k))
@@ -1091,7 +1089,7 @@ def fit_logistic_batch(
         for s_, y_, r_, a in zip(s_hist, y_hist, rho, reversed(alphas), strict=True):
             q += (a - r_ * np.einsum("bi,bi->b", y_, q))[:, None] * s_
         q[done] = 0.0
-        dw = to_w(q[:, : p * k].reshape(b, p, k))
+        dw = apply_bases(q[:, : p * k].reshape(b, p, k))  # gamma step -> coefficient step
         dm = margins(dw) + (t_int * q[:, p * k :])[:, None, :]
         slope = np.einsum("bi,bi->b", g, q)
         step = np.where(done, 0.0, 1.0)
