@@ -2,7 +2,6 @@
 VENV ?= .venv
 BIN := $(VENV)/bin
 CORES ?= 2
-export MUJOCO_GL ?= egl
 
 .PHONY: setup run report test lint
 

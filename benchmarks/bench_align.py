@@ -1,7 +1,7 @@
 """Head-training throughput against the machine's float32 GEMM roofline (same run).
 
 For in_dim 384 and 768 (ViT-S / ViT-B feature widths) and batch 256, this times
-`tacgen_lib.align.train_step` (forward of both heads, symmetric InfoNCE, backward, clipping,
+`tacgen_lib.align.heads.train_step` (forward of both heads, symmetric InfoNCE, backward, clipping,
 fused AdamW) and compares it with the time the same step's matrix products would take at the
 float32 GEMM rate torch.matmul reaches on this machine, measured in the same process,
 interleaved with the step timings (so both see the same load):
@@ -35,7 +35,7 @@ import machine
 import numpy as np
 import torch
 
-from tacgen_lib.align import (
+from tacgen_lib.align.heads import (
     HIDDEN_DIM,
     OUT_DIM,
     AlignHeads,

@@ -28,9 +28,9 @@ from sklearn.linear_model import LogisticRegression
 from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import StandardScaler
 
-from tacgen_lib.dino import pretrain_dino
-from tacgen_lib.features import extract_features, pixel_features
-from tacgen_lib.vit import build_vit
+from tacgen_lib.features.dino import pretrain_dino
+from tacgen_lib.features.extract import extract_features, pixel_features
+from tacgen_lib.features.vit import build_vit
 
 
 def shapes_dataset(

@@ -27,9 +27,9 @@ from sklearn.linear_model import Ridge
 from sklearn.model_selection import GridSearchCV
 from threadpoolctl import threadpool_info, threadpool_limits
 
-from tacgen_lib.fusion import fuse
-from tacgen_lib.probes import FixedLogistic, FixedRidge, fit_ridge_probe, make_folds
-from tacgen_lib.stats import (
+from tacgen_lib.probes.fusion import fuse
+from tacgen_lib.probes.linear import FixedLogistic, FixedRidge, fit_ridge_probe, make_folds
+from tacgen_lib.probes.stats import (
     fixed_test_bootstrap,
     label_permutation_control,
     tactile_permutation_control,

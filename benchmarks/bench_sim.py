@@ -1,4 +1,4 @@
-"""Benchmark of the simulated corpus (tacgen_lib.sim): tactile frame rate, per-sample time,
+"""Benchmark of the simulated corpus (tacgen_lib.corpus.sim): tactile frame rate, per-sample time,
 and the cost of each declared effect. Prints figures; not a test.
 
     /tmp/venv/bin/python benchmarks/bench_sim.py [--samples 60] [--frames 300]
@@ -23,9 +23,9 @@ import mujoco  # noqa: I001
 import numpy as np
 import yaml
 
-import tacgen_lib.sim  # noqa: F401  (sets MUJOCO_GL=egl before mujoco is imported)
-from tacgen_lib.sim import corpus, physics, tactile
-from tacgen_lib.sim.scenes import scene_xml, validate_scene
+import tacgen_lib.corpus.sim  # noqa: F401  (sets MUJOCO_GL=egl before mujoco is imported)
+from tacgen_lib.corpus.sim import corpus, physics, tactile
+from tacgen_lib.corpus.sim.scenes import scene_xml, validate_scene
 
 SCENES = yaml.safe_load(open("config/scenes.yaml"))
 PAIRED = {"name": "bench", "kind": "simulated", "design": "paired", "seed": 1,

@@ -31,15 +31,15 @@ rule train_heads:
         v=lambda w: feature_edge(w.corpus, "vision"),
         t=lambda w: feature_edge(w.corpus, "tactile", w.variant),
         splits="results/corpus/splits.parquet",
-        code=lib("align.py", "retrieval.py", "splits.py"),
+        code=imports_of("train_heads"),
     output:
         heads=f"{ALIGN_CELL}/heads.pt",
         metrics=f"{ALIGN_CELL}/metrics.parquet",
         curve=f"{ALIGN_CELL}/curve.parquet",
     log:
-        "results/logs/train_heads/{corpus}/{variant}/seed~{seed}_tau~{tau}_n~{n_train}.log",
+        f"results/logs/train_heads/{CELL_PATTERN}.log",
     benchmark:
-        "results/benchmarks/train_heads/{corpus}/{variant}/seed~{seed}_tau~{tau}_n~{n_train}.tsv"
+        f"results/benchmarks/train_heads/{CELL_PATTERN}.tsv"
     wildcard_constraints:
         **CELL_CONSTRAINTS,
         corpus=one_of(ALIGN_CORPORA),
@@ -77,13 +77,13 @@ rule project_aligned:
         heads=f"{ALIGN_CELL}/heads.pt",
         v=lambda w: feature_edge(w.target, "vision"),
         t=lambda w: feature_edge(w.target, "tactile", w.variant),
-        code=lib("align.py"),
+        code=imports_of("project_aligned"),
     output:
         f"{ALIGN_CELL}/aligned~{{target}}.parquet",
     log:
-        "results/logs/project_aligned/{corpus}/{variant}/seed~{seed}_tau~{tau}_n~{n_train}_{target}.log",
+        f"results/logs/project_aligned/{CELL_PATTERN}/{{target}}.log",
     benchmark:
-        "results/benchmarks/project_aligned/{corpus}/{variant}/seed~{seed}_tau~{tau}_n~{n_train}_{target}.tsv"
+        f"results/benchmarks/project_aligned/{CELL_PATTERN}/{{target}}.tsv"
     wildcard_constraints:
         **CELL_CONSTRAINTS,
         corpus=one_of(ALIGN_CORPORA),
@@ -106,10 +106,8 @@ rule aggregate_align:
     input:
         metrics=align_grid(f"{ALIGN_CELL}/metrics.parquet"),
         curves=align_grid(f"{ALIGN_CELL}/curve.parquet"),
-        benchmarks=align_grid(
-            "results/benchmarks/train_heads/{corpus}/{variant}/seed~{seed}_tau~{tau}_n~{n_train}.tsv"
-        ),
-        code=lib("align_report.py", "report_tables.py"),
+        benchmarks=align_grid(f"results/benchmarks/train_heads/{CELL_PATTERN}.tsv"),
+        code=imports_of("aggregate_align"),
     output:
         summary="results/align/summary.parquet",
         metrics="results/align/metrics.parquet",
@@ -152,6 +150,7 @@ rule aggregate_align:
         mem_mb=1000,
         runtime=5,
     params:
+        cells=align_cells(),  # the order of the metrics, curves and benchmarks inputs
         n_ref=_align_ref_n(),
         tau_ref=_align_ref_tau(),
     script:

@@ -3,19 +3,17 @@
 `aligned_edge(...)` is the entry point other stages (probes) use to ask for aligned projections.
 """
 
+from tacgen_lib.align.cells import CELL_CONSTRAINTS, CELL_PATTERN, cell_name, tau_text
+
 ALIGN = config["align"]
 ALIGN_CORPORA = ALIGN["corpora"]
 ALIGN_REPORT = "results/report/align"
-ALIGN_CELL = "results/align/{corpus}/{variant}/seed~{seed}/tau~{tau}/n~{n_train}"
-# Canonical cell text: seeds without leading zeros, tau as tau_text() writes it, N an int or "all".
-CELL_CONSTRAINTS = dict(
-    seed=r"0|[1-9]\d*", tau=r"(0|[1-9]\d*)\.(0|\d*[1-9])", n_train=r"all|[1-9]\d*"
-)
+ALIGN_CELL = f"results/align/{CELL_PATTERN}"
 
 
-def tau_text(tau):
-    """The canonical path text of a temperature: Python's shortest float repr (0.07, 0.1, 1.0)."""
-    return repr(float(tau))
+def align_cells():
+    """Names of every grid cell, in the order `align_grid` expands them."""
+    return align_grid(CELL_PATTERN)
 
 
 def align_grid(path):
@@ -37,14 +35,8 @@ def aligned_edge(heads_from, target, variant, seed, tau, n_train):
             f"aligned_edge: heads_from={heads_from!r} is not in align.corpora {ALIGN_CORPORA}; "
             "add it there so its heads are trained"
         )
-    cell = ALIGN_CELL.format(
-        corpus=heads_from,
-        variant=variant,
-        seed=seed,
-        tau=tau_text(tau),
-        n_train=n_train,
-    )
-    return f"{cell}/aligned~{target}.parquet"
+    cell = cell_name(heads_from, variant, seed, tau, n_train)
+    return f"results/align/{cell}/aligned~{target}.parquet"
 
 
 def _align_ref_n():

@@ -4,7 +4,8 @@ import os
 import re
 from pathlib import Path
 
-from tacgen_lib.config import validate_config, load_yaml
+from tacgen_lib.io.config import load_yaml, validate_config
+from tacgen_lib.io.imports import code_inputs
 
 validate_config(
     config,
@@ -25,17 +26,16 @@ def one_of(names):
     return "|".join(map(re.escape, names)) if names else NOTHING
 
 
-def lib(*names):
-    """Inputs naming the tacgen_lib modules a job imports; editing one reruns its jobs.
+def imports_of(script):
+    """Code inputs of a rule: the tacgen_lib modules its script reaches through imports.
 
-    A name ending in '/' stands for every module in that sub-package.
+    Derived from the script's source (tacgen_lib.io.imports), so editing a module reruns exactly
+    the jobs whose scripts reach it, however indirectly.
     """
-    root = Path(workflow.basedir) / "tacgen_lib"
-    out = [root / "edges.py", root / "log.py"]
-    for name in names:
-        path = root / name
-        out += sorted(path.glob("*.py")) if name.endswith("/") else [path]
-    return sorted({os.path.relpath(p) for p in out})
+    base = Path(workflow.basedir)
+    return code_inputs(
+        base / "workflow" / "scripts" / f"{script}.py", base / "tacgen_lib"
+    )
 
 
 def corpus_edge(corpus, what="samples"):

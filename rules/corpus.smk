@@ -10,7 +10,7 @@ rule simulate_corpus:
     """One shard of a MuJoCo-simulated corpus: only the effects its scene declares are computed."""
     input:
         scenes=config["scenes_file"],
-        code=lib("sim/", "images.py"),
+        code=imports_of("simulate_corpus"),
     output:
         temp("results/corpus/{corpus}/shards/{shard}.parquet"),
     log:
@@ -41,7 +41,7 @@ rule merge_corpus:
             shard=range(CORPORA[w.corpus]["shards"]),
         ),
         scenes=config["scenes_file"],
-        code=lib("sim/", "images.py"),
+        code=imports_of("merge_corpus"),
     output:
         samples="results/corpus/{corpus}/samples.parquet",
         sensors="results/corpus/{corpus}/sensors.parquet",
@@ -67,7 +67,7 @@ rule ingest_tvl:
     """A real TVL corpus from a local folder (SSVTP or HCT layout) into the corpus edge schema."""
     input:
         root=lambda w: CORPORA[w.corpus]["root"],
-        code=lib("ingest.py", "images.py"),
+        code=imports_of("ingest_tvl"),
     output:
         samples="results/corpus/{corpus}/samples.parquet",
         sensors="results/corpus/{corpus}/sensors.parquet",
@@ -93,7 +93,7 @@ rule fuse_manifest:
     """One manifest pool keyed by sample_id across every corpus (labels, captions, no pixels)."""
     input:
         samples=expand(corpus_edge("{corpus}"), corpus=sorted(CORPORA)),
-        code=lib(),
+        code=imports_of("fuse_manifest"),
     output:
         "results/corpus/manifest.parquet",
     log:
@@ -114,7 +114,7 @@ rule make_splits:
     """Fixed train/val/test splits, stratified at a fixed seed, made before any feature exists."""
     input:
         manifest="results/corpus/manifest.parquet",
-        code=lib("splits.py"),
+        code=imports_of("make_splits"),
     output:
         "results/corpus/splits.parquet",
     log:

@@ -9,9 +9,9 @@ for _corpus in sorted(CORPORA):
     for _variant in VARIANTS:
         TARGETS.append(feature_edge(_corpus, "tactile", _variant))
         EDGES.append(feature_edge(_corpus, "tactile", _variant))
-TARGETS += ["results/features/pretrain_vs_random.html"]
+TARGETS += ["results/features/pretrained_vs_random.html"]
 EDGES += expand("results/features/backbones/{m}.pt", m=MODALITIES)
-EDGES += ["results/features/pretrain_vs_random.parquet"]
+EDGES += ["results/features/pretrained_vs_random.parquet"]
 
 
 rule pretrain_backbone:
@@ -19,14 +19,7 @@ rule pretrain_backbone:
     input:
         frames=lambda w: backbone_frames(w.modality, PRETRAIN["corpus"]),
         splits="results/corpus/splits.parquet",
-        code=lib(
-            "dino.py",
-            "vit.py",
-            "features.py",
-            "frames.py",
-            "splits.py",
-            "report_figures.py",
-        ),
+        code=imports_of("pretrain_backbone"),
     output:
         weights="results/features/backbones/{modality}.pt",
         curve="results/features/backbones/{modality}_curve.parquet",
@@ -64,7 +57,7 @@ rule extract_vision_features:
     input:
         frames=corpus_edge("{corpus}"),
         weights="results/features/backbones/vision.pt",
-        code=lib("features.py", "vit.py", "frames.py"),
+        code=imports_of("extract_features"),
     output:
         feature_edge("{corpus}", "vision"),
     log:
@@ -89,7 +82,7 @@ rule extract_tactile_features:
     input:
         frames="results/preprocess/{corpus}/{variant}.parquet",
         weights="results/features/backbones/tactile.pt",
-        code=lib("features.py", "vit.py", "frames.py"),
+        code=imports_of("extract_features"),
     output:
         feature_edge("{corpus}", "tactile", "{variant}"),
     log:
@@ -114,28 +107,20 @@ rule extract_tactile_features:
 rule pretrained_vs_random:
     """Linear probes on pretrained vs random-init backbone features, with a bootstrap CI."""
     input:
-        vision=corpus_edge(FEAT["worth_it"]["corpus"]),
-        tactile=backbone_frames("tactile", FEAT["worth_it"]["corpus"]),
-        pretrained_vision=feature_edge(FEAT["worth_it"]["corpus"], "vision"),
+        vision=corpus_edge(FEAT["pretrained_vs_random"]["corpus"]),
+        tactile=backbone_frames("tactile", FEAT["pretrained_vs_random"]["corpus"]),
+        pretrained_vision=feature_edge(FEAT["pretrained_vs_random"]["corpus"], "vision"),
         pretrained_tactile=feature_edge(
-            FEAT["worth_it"]["corpus"], "tactile", PRETRAIN["variant"]
+            FEAT["pretrained_vs_random"]["corpus"], "tactile", PRETRAIN["variant"]
         ),
         manifest="results/corpus/manifest.parquet",
         splits="results/corpus/splits.parquet",
-        code=lib(
-            "backbone_check.py",
-            "features.py",
-            "vit.py",
-            "frames.py",
-            "probes.py",
-            "stats.py",
-            "report_tables.py",
-        ),
+        code=imports_of("pretrained_vs_random"),
     output:
-        table="results/features/pretrain_vs_random.parquet",
+        table="results/features/pretrained_vs_random.parquet",
         html=report(
-            "results/features/pretrain_vs_random.html",
-            caption="../workflow/report/pretrain_vs_random.rst",
+            "results/features/pretrained_vs_random.html",
+            caption="../workflow/report/pretrained_vs_random.rst",
             category="Features",
             subcategory="Backbone pretraining",
             labels={"table": "pretrained vs random init"},

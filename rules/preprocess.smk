@@ -8,7 +8,7 @@ rule background_subtract:
     input:
         samples=corpus_edge("{corpus}"),
         sensors=corpus_edge("{corpus}", "sensors"),
-        code=lib("frames.py", "preprocess.py", "images.py"),
+        code=imports_of("background_subtract"),
     output:
         "results/preprocess/{corpus}/{variant}.parquet",
     log:

@@ -2,8 +2,8 @@
 
 Each family in config probes.families is probed at each probe seed: V vs V+T on raw and on
 aligned features, every fusion variant, the tactile preprocessing ablation, bootstrap CIs and
-controls (tacgen_lib.probe_suite). aggregate_probes joins the families into one summary and
-draws the report's probe tables and figures (tacgen_lib.probe_report).
+controls (tacgen_lib.probes.protocol). aggregate_probes joins the families into one summary and
+draws the report's probe tables and figures (tacgen_lib.report.probes).
 """
 
 
@@ -26,7 +26,7 @@ rule probe:
     """V vs V+T probes of one family and probe seed: CV-chosen regulariser, bootstrap, controls."""
     input:
         unpack(probe_inputs),
-        code=lib("probe_suite.py", "probes.py", "stats.py", "fusion.py", "splits.py"),
+        code=imports_of("probe"),
     output:
         rows=f"{PROBE_DIR}/seed~{{seed}}.parquet",
         sweep=f"{PROBE_DIR}/sweep~{{seed}}.parquet",
@@ -74,7 +74,7 @@ rule aggregate_probes:
             family=PROBE_FAMILIES,
             seed=PROBES["seeds"],
         ),
-        code=lib("probe_report.py", "fusion.py", "report_tables.py"),
+        code=imports_of("aggregate_probes"),
     output:
         summary="results/probes/summary.parquet",
         sweep="results/probes/sweep.parquet",

@@ -17,7 +17,7 @@ rule corpus_examples:
         samples=corpus_edge("{corpus}"),
         sensors=corpus_edge("{corpus}", "sensors"),
         splits="results/corpus/splits.parquet",
-        code=lib("report_figures.py", "preprocess.py", "images.py"),
+        code=imports_of("corpus_examples"),
     output:
         examples=report(
             "results/report/corpus/{corpus}_examples.png",
@@ -53,7 +53,7 @@ rule edge_manifest:
     """Every edge of the run with its SHA-256, rows, columns and producing rule, re-verified."""
     input:
         edges=lambda w: sorted(set(EDGES)),
-        code=lib(),
+        code=imports_of("edge_manifest"),
     output:
         html=report(
             "results/report/edge_manifest.html",
@@ -83,13 +83,13 @@ rule cost_of_accuracy:
     """Each knob's accuracy against its run time: benchmark files joined with the metrics."""
     input:
         align="results/align/summary.parquet",
-        pretrain="results/features/pretrain_vs_random.parquet",
+        pretrain="results/features/pretrained_vs_random.parquet",
         pretrain_bench=expand(
             "results/benchmarks/pretrain_backbone/{m}.tsv", m=["vision", "tactile"]
         ),
         simulate_bench=simulate_benchmarks,
         manifest="results/corpus/manifest.parquet",
-        code=lib("cost.py", "align_report.py", "report_tables.py"),
+        code=imports_of("cost_of_accuracy"),
     output:
         html=report(
             "results/report/cost_of_accuracy.html",

@@ -1,7 +1,7 @@
 """Tiny on-disk copies of the real TVL layouts (SSVTP and HCT) for tests.
 
 The files are real JPEGs written with ``cv2.imwrite`` plus the text/CSV files of the public
-dataset, in exactly its folder structure (see ``tacgen_lib.ingest``), so tests exercise the same
+dataset, in exactly its folder structure (see ``tacgen_lib.corpus.ingest``), so tests exercise the same
 parsing a user's download goes through. Images are small (24 x 32) and seeded: the same
 arguments always write the same bytes. Tactile frames are a per-sensor background plus a
 coloured contact blob, like a DIGIT frame; the background is saved next to them.

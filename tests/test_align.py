@@ -1,4 +1,4 @@
-"""Tests of tacgen_lib.align: heads, symmetric InfoNCE (paper eq. 1) and head training.
+"""Tests of tacgen_lib.align.heads: heads, symmetric InfoNCE (paper eq. 1) and head training.
 
 Hard cases are checked against `info_nce_reference` (float64, plain loops, no cross_entropy or
 matmul) and against a float64 copy of the heads.
@@ -18,8 +18,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import binom
 
-from tacgen_lib import align
-from tacgen_lib.align import (
+from tacgen_lib.align import heads as align
+from tacgen_lib.align.heads import (
     AlignHeads,
     cosine_warmup_lr,
     fit_heads,
@@ -30,16 +30,7 @@ from tacgen_lib.align import (
     project,
     save_heads,
 )
-from tacgen_lib.retrieval import paired_retrieval
-
-
-@pytest.fixture(autouse=True)
-def one_thread():
-    """One intra-op thread: the tests' matrices are small and the machine is shared."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+from tacgen_lib.align.retrieval import paired_retrieval
 
 
 def near_duplicate_pairs(batch: int, dim: int, scale: float, seed: int = 0):

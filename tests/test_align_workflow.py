@@ -1,25 +1,25 @@
 """The alignment stage in the workflow (rules train_heads, project_aligned, aggregate_align).
 
 The workflow run uses config/test.yaml with synthetic upstream edges (split edge and feature
-edges written with `tacgen_lib.edges`, only the align rules allowed), so it takes seconds; the
+edges written with `tacgen_lib.io.edges`, only the align rules allowed), so it takes seconds; the
 full DAG including the real features is run by tests/test_workflow.py. Unit tests cover the
 library path the rule scripts call (split guard, cell ids, summary and tables).
 """
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from snakemake_run import copy_tree, smk
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from test_workflow import copy_tree, smk  # noqa: E402
-
-from tacgen_lib import align, align_report, edges  # noqa: E402
-from tacgen_lib.splits import LeakageError  # noqa: E402
+from tacgen_lib.align import heads as align  # noqa: E402
+from tacgen_lib.align.cells import cell_name  # noqa: E402
+from tacgen_lib.corpus.splits import LeakageError  # noqa: E402
+from tacgen_lib.io import edges  # noqa: E402
+from tacgen_lib.report import align as align_report  # noqa: E402
 
 CELL = "seed~42/tau~0.07/n~all"
 ALIGN_RULES = ["--allowed-rules", "train_heads", "project_aligned", "aggregate_align"]
@@ -94,7 +94,7 @@ def test_cell_outputs_are_verified_edges(align_run):
     aligned = edges.read(folder / "aligned~sim_controlled.parquet", require={"v_aligned": 128})
     assert len(aligned) == 40 and set(aligned.frame["corpus"]) == {"sim_controlled"}
     np.testing.assert_allclose(np.linalg.norm(aligned.vectors["t_aligned"], axis=1), 1, rtol=1e-5)
-    log = align_run / "results/logs/train_heads/sim_paired/clip128/seed~42_tau~0.07_n~all.log"
+    log = align_run / "results/logs/train_heads/sim_paired/clip128/seed~42/tau~0.07/n~all.log"
     text = log.read_text()
     assert "align step 0/" in text and "28 train / 4 val / 8 test rows" in text
 
@@ -184,7 +184,7 @@ def test_tables_report_mean_and_sd_over_seeds():
     rows = []
     for seed, top1 in ((1, 0.5), (2, 0.7)):
         for n in ("10", "all"):
-            cell = align_report.cell_name("p", "clip128", seed, "0.07", n)
+            cell = cell_name("p", "clip128", seed, "0.07", n)
             rows.append(
                 {"cell": cell, "corpus": "p", "variant": "clip128", "seed": seed, "tau": "0.07",
                  "n_train": n, "budget": "steps", "val_loss": 1.0, "top1_v2t": top1,
@@ -201,6 +201,3 @@ def test_tables_report_mean_and_sd_over_seeds():
     assert align_report.tau_ablation_table(summary, "all")["seeds"].tolist() == [2]
     with pytest.raises(ValueError, match="has metrics but no benchmark time"):
         align_report.alignment_summary(metrics, {**seconds, "x/y/seed~1/tau~0.1/n~all": 1.0})
-    assert align_report.cell_from_path(
-        "results/benchmarks/train_heads/p/clip128/seed~1_tau~0.07_n~10.tsv"
-    ) == align_report.cell_from_path("results/align/p/clip128/seed~1/tau~0.07/n~10/heads.pt")

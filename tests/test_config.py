@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from tacgen_lib.config import ConfigError, validate_config
+from tacgen_lib.io.config import ConfigError, validate_config
 
 ROOT = Path(__file__).resolve().parents[1]
 SCHEMA = ROOT / "config" / "config.schema.yaml"

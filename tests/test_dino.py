@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import torch
 
-from tacgen_lib.dino import (
+from tacgen_lib.features.dino import (
     DINOHead,
     collapse_diagnostics,
     dino_loss,
@@ -18,16 +18,7 @@ from tacgen_lib.dino import (
     pretrain_dino,
     sinkhorn_knopp,
 )
-from tacgen_lib.vit import build_vit
-
-
-@pytest.fixture(autouse=True)
-def _one_torch_thread():
-    """Tiny tensors: one intra-op thread avoids OpenMP spin-waits on a loaded 2-core machine."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+from tacgen_lib.features.vit import build_vit
 
 
 def dino_loss_reference(s, t, center, ts, tt):

@@ -8,9 +8,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from tacgen_lib import edges
-from tacgen_lib.edges import EdgeError
-from tacgen_lib.images import decode_png, encode_png
+from tacgen_lib.io import edges
+from tacgen_lib.io.edges import EdgeError
+from tacgen_lib.io.images import decode_png, encode_png
 
 
 def _frame(n: int = 5) -> pd.DataFrame:

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 import torch
 
-from tacgen_lib.features import (
+from tacgen_lib.features.extract import (
     IMAGENET_MEAN,
     IMAGENET_STD,
     extract_features,
@@ -15,16 +15,7 @@ from tacgen_lib.features import (
     pixel_features,
     to_unit_tensor,
 )
-from tacgen_lib.vit import build_vit
-
-
-@pytest.fixture(autouse=True)
-def _one_torch_thread():
-    """Tiny tensors: one intra-op thread avoids OpenMP spin-waits on a loaded 2-core machine."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
+from tacgen_lib.features.vit import build_vit
 
 
 @pytest.fixture(scope="module")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from tacgen_lib.fusion import FUSIONS, fuse, fusion_table
+from tacgen_lib.probes.fusion import FUSIONS, fuse, fusion_table
 
 
 def pair(n=9, d=5, seed=0):

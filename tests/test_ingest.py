@@ -1,4 +1,4 @@
-"""Real-corpus ingest (tacgen_lib.ingest) on tiny copies of the TVL SSVTP and HCT layouts."""
+"""Real-corpus ingest (tacgen_lib.corpus.ingest) on tiny copies of the TVL SSVTP and HCT layouts."""
 
 from __future__ import annotations
 
@@ -17,8 +17,7 @@ from fixtures_real import IMAGE_SHAPE, write_hct_fixture, write_ssvtp_fixture
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tacgen_lib.images import decode_png
-from tacgen_lib.ingest import (
+from tacgen_lib.corpus.ingest import (
     OTHER_STRATUM,
     SAMPLE_COLUMNS,
     SENSOR_COLUMNS,
@@ -28,6 +27,7 @@ from tacgen_lib.ingest import (
     parse_caption,
     top_pattern_strata,
 )
+from tacgen_lib.io.images import decode_png
 
 
 def imread_rgb(path: Path) -> np.ndarray:

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis.extra.numpy import arrays
 
-from tacgen_lib.preprocess import (
+from tacgen_lib.preprocess.background import (
     VARIANTS,
     background_subtract,
     clahe_proc,

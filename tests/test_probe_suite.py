@@ -13,8 +13,8 @@ import pytest
 from sklearn.linear_model import Ridge
 from sklearn.metrics import r2_score
 
-from tacgen_lib import probe_report
-from tacgen_lib import probe_suite as ps
+from tacgen_lib.probes import protocol as ps
+from tacgen_lib.report import probes as probe_report
 
 VARIANTS = ["clip128", "histmatch"]
 FUSIONS = ["concat", "mean"]

@@ -16,7 +16,7 @@ from sklearn.model_selection import GridSearchCV
 from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import StandardScaler
 
-from tacgen_lib import probes
+from tacgen_lib.probes import linear as probes
 
 
 def ridge_reference(X, y, lam):

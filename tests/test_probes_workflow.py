@@ -1,6 +1,6 @@
 """The probes stage in the workflow (rules probe, aggregate_probes) on config/test.yaml.
 
-The run writes synthetic upstream edges with `tacgen_lib.edges` (manifest, splits, vision and
+The run writes synthetic upstream edges with `tacgen_lib.io.edges` (manifest, splits, vision and
 tactile features per preprocessing variant, aligned projections per alignment seed) and allows
 only the probe rules, so it takes seconds; tests/test_workflow.py runs the whole DAG. In the
 synthetic corpora the tactile features carry the labels on the paired and controlled corpora
@@ -9,18 +9,15 @@ and nothing on the null corpus, so the summary must show V+T beating V there and
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
-import yaml
+from snakemake_run import copy_tree, merged_config, smk
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from test_workflow import ROOT, copy_tree, smk  # noqa: E402
-
-from tacgen_lib import edges, probe_suite  # noqa: E402
+from tacgen_lib.io import edges  # noqa: E402
+from tacgen_lib.probes import protocol as probe_suite  # noqa: E402
 
 pytestmark = pytest.mark.workflow
 
@@ -39,19 +36,6 @@ SUMMARY_COLUMNS = {
     "reg_name", "n_train", "n_test", "converged", "notes", "null_corpus", "design",
     "bootstrap_strata",
 }  # fmt: skip
-
-
-def merged_config() -> dict:
-    """config/config.yaml extended by config/test.yaml, as Snakemake merges them."""
-
-    def merge(a: dict, b: dict) -> dict:
-        out = dict(a)
-        for k, v in b.items():
-            out[k] = merge(a[k], v) if isinstance(v, dict) and isinstance(a.get(k), dict) else v
-        return out
-
-    base = yaml.safe_load((ROOT / "config/config.yaml").read_text())
-    return merge(base, yaml.safe_load((ROOT / "config/test.yaml").read_text()))
 
 
 def write_upstream(work: Path, cfg: dict, n: int = 60) -> None:

@@ -1,4 +1,4 @@
-"""Tests of tacgen_lib.retrieval against a plain-loop reference (math.fsum dot products)."""
+"""Tests of tacgen_lib.align.retrieval against a plain-loop reference (math.fsum dot products)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tacgen_lib.retrieval import TIE_RTOL, paired_retrieval
+from tacgen_lib.align.retrieval import TIE_RTOL, paired_retrieval
 
 
 def reference_ranks(q: np.ndarray, c: np.ndarray) -> list[int]:
@@ -92,7 +92,7 @@ def test_single_pair():
 
 
 def test_chunked_matches_reference_beyond_one_chunk(monkeypatch):
-    import tacgen_lib.retrieval as retrieval
+    import tacgen_lib.align.retrieval as retrieval
 
     monkeypatch.setattr(retrieval, "_CHUNK", 7)  # force several chunks on a small problem
     rng = np.random.default_rng(0)

@@ -7,8 +7,8 @@ import pandas as pd
 import pytest
 import yaml
 
-from tacgen_lib.images import decode_png
-from tacgen_lib.sim import corpus
+from tacgen_lib.corpus.sim import corpus
+from tacgen_lib.io.images import decode_png
 
 SCENES = yaml.safe_load(open("config/scenes.yaml"))
 for _decl in SCENES.values():

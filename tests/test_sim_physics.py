@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 import yaml
 
-from tacgen_lib.sim import physics, tactile
-from tacgen_lib.sim.grasp import grasp_lift
-from tacgen_lib.sim.scenes import SHAPES, compile_scene, validate_scene, validate_scenes
+from tacgen_lib.corpus.sim import physics, tactile
+from tacgen_lib.corpus.sim.grasp import grasp_lift
+from tacgen_lib.corpus.sim.scenes import SHAPES, compile_scene, validate_scene, validate_scenes
 
 SCENES = yaml.safe_load(open("config/scenes.yaml"))
 FORCE_TOL = 0.005  # relative: resting force vs m g

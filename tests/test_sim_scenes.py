@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 import yaml
 
-from tacgen_lib.sim import corpus, physics, tactile
-from tacgen_lib.sim.scenes import EFFECTS, compile_scene, validate_scene, validate_scenes
+from tacgen_lib.corpus.sim import corpus, physics, tactile
+from tacgen_lib.corpus.sim.scenes import EFFECTS, compile_scene, validate_scene, validate_scenes
 
 SCENES = yaml.safe_load(open("config/scenes.yaml"))
 FAST = {"settle_steps": 60, "measure_steps": 5}

@@ -1,10 +1,10 @@
-"""Tactile frames: ray-cast height field, gel compression, three-light shading (tacgen_lib.sim)."""
+"""Tactile frames: ray-cast height field, gel compression, three-light shading (tacgen_lib.corpus.sim)."""
 
 import numpy as np
 import pytest
 
-from tacgen_lib.sim import physics, tactile
-from tacgen_lib.sim.scenes import compile_scene, validate_scene
+from tacgen_lib.corpus.sim import physics, tactile
+from tacgen_lib.corpus.sim.scenes import compile_scene, validate_scene
 
 OPTICS = tactile.GelOptics((0.045, 0.06), (120, 160), 0.05, 0.002, 0.0006)
 

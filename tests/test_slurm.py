@@ -27,15 +27,12 @@ import shutil
 import signal
 import socket
 import subprocess
-import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from test_workflow import SNAKEMAKE, copy_tree, smk  # noqa: E402
+from snakemake_run import SNAKEMAKE, copy_tree, smk
 
 pytestmark = [pytest.mark.slurm, pytest.mark.workflow]
 
@@ -210,7 +207,7 @@ def single_node_slurm(state: Path) -> Iterator[Path]:
     "(installs slurm-wlm + munge as root, ~2-3 min); make test sets it",
 )
 def test_align_grid_through_slurm_profile(tmp_path):
-    from tacgen_lib import edges
+    from tacgen_lib.io import edges
 
     work = copy_tree(tmp_path / "wf")
     (work / "config/slurm_test.yaml").write_text(
@@ -258,7 +255,6 @@ def test_align_grid_through_slurm_profile(tmp_path):
                 capture_output=True,
                 text=True,
                 timeout=RUN_TIMEOUT,
-                env={**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")},
             )
         except subprocess.TimeoutExpired as exc:
             ctld = (state / "slurmctld.log").read_text()[-3000:]

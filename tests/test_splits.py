@@ -6,8 +6,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from tacgen_lib.manifest import fuse_manifest
-from tacgen_lib.splits import LeakageError, assert_trainable, ids_in_split, make_splits
+from tacgen_lib.corpus.manifest import fuse_manifest
+from tacgen_lib.corpus.splits import LeakageError, assert_trainable, ids_in_split, make_splits
 
 
 def _manifest(n: int = 200) -> pd.DataFrame:

@@ -7,9 +7,9 @@ import pytest
 import scipy.stats
 from sklearn.metrics import accuracy_score, r2_score
 
-from tacgen_lib import stats
-from tacgen_lib.fusion import fuse
-from tacgen_lib.probes import FixedLogistic, FixedRidge, r2
+from tacgen_lib.probes import stats
+from tacgen_lib.probes.fusion import fuse
+from tacgen_lib.probes.linear import FixedLogistic, FixedRidge, r2
 
 
 def make_preds(n=80, seed=0):

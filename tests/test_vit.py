@@ -8,7 +8,7 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from tacgen_lib.vit import (
+from tacgen_lib.features.vit import (
     ARCHS,
     Attention,
     build_vit,
@@ -17,15 +17,6 @@ from tacgen_lib.vit import (
     load_pretrained,
     save_backbone,
 )
-
-
-@pytest.fixture(autouse=True)
-def _one_torch_thread():
-    """Tiny tensors: one intra-op thread avoids OpenMP spin-waits on a loaded 2-core machine."""
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(before)
 
 
 def official_shapes(dim: int, depth: int, grid: int, regs: int = 0) -> dict[str, tuple]:

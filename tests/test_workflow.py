@@ -6,8 +6,6 @@ checks that every edge is reproduced bit for bit.
 
 from __future__ import annotations
 
-import json
-import os
 import shutil
 import subprocess
 import sys
@@ -15,67 +13,9 @@ from pathlib import Path
 
 import pytest
 import yaml
+from snakemake_run import ROOT, SNAKEMAKE, copy_tree, edge_hashes, planned_rules, smk
 
 pytestmark = pytest.mark.workflow
-
-ROOT = Path(__file__).resolve().parents[1]
-SNAKEMAKE = [sys.executable, "-m", "snakemake"]
-TREE = ["Snakefile", "rules", "config", "workflow", "tacgen_lib", "profiles", "envs"]
-
-
-def copy_tree(dest: Path) -> Path:
-    dest.mkdir(parents=True, exist_ok=True)
-    for name in TREE:
-        src = ROOT / name
-        if src.is_dir():
-            shutil.copytree(src, dest / name, ignore=shutil.ignore_patterns("__pycache__"))
-        else:
-            shutil.copy2(src, dest / name)
-    return dest
-
-
-def smk(
-    workdir: Path, *args: str, check: bool = True, timeout: int = 600
-) -> subprocess.CompletedProcess:
-    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
-    cmd = [*SNAKEMAKE, "--cores", "2", "--configfile", "config/test.yaml", *args]
-    proc = subprocess.run(
-        cmd, cwd=workdir, capture_output=True, text=True, timeout=timeout, env=env
-    )
-    if check and proc.returncode != 0:
-        raise AssertionError(
-            f"snakemake {' '.join(args)} failed:\n{proc.stdout[-4000:]}\n{proc.stderr[-8000:]}"
-        )
-    return proc
-
-
-def planned_rules(workdir: Path, *args: str) -> dict[str, int]:
-    """Rules a dry run would execute, with job counts (from --summary-like job stats)."""
-    proc = smk(workdir, "--dry-run", *args)
-    out = proc.stdout + proc.stderr
-    if "Nothing to be done" in out:
-        return {}
-    counts: dict[str, int] = {}
-    in_table = False
-    for line in out.splitlines():
-        parts = line.split()
-        if parts[:2] == ["job", "count"]:
-            in_table = True
-            continue
-        if in_table:
-            if len(parts) == 2 and parts[1].isdigit() and parts[0] != "total":
-                counts[parts[0]] = int(parts[1])
-            elif parts and parts[0] == "total":
-                break
-    return counts
-
-
-def edge_hashes(workdir: Path) -> dict[str, str]:
-    return {
-        str(p.relative_to(workdir)): json.loads(p.read_text())["sha256"]
-        for p in sorted((workdir / "results").rglob("*.sha256.json"))
-        if "/shards/" not in str(p)
-    }
 
 
 @pytest.fixture(scope="module")
@@ -112,7 +52,7 @@ def test_dry_run_plans_the_whole_dag(tmp_path):
 
 
 def test_full_run_makes_verified_edges_logs_and_benchmarks(run_dir):
-    from tacgen_lib import edges
+    from tacgen_lib.io import edges
 
     manifest = edges.read(run_dir / "results/corpus/manifest.parquet").frame
     splits = edges.read(run_dir / "results/corpus/splits.parquet").frame
@@ -165,7 +105,7 @@ def test_changed_library_module_reruns_only_its_users(run_dir, tmp_path):
     work = copy_tree(tmp_path / "c")
     shutil.copytree(run_dir / "results", work / "results")
     shutil.copytree(run_dir / ".snakemake", work / ".snakemake")
-    module = work / "tacgen_lib/backbone_check.py"
+    module = work / "tacgen_lib/features/pretrained_vs_random.py"
     module.write_text(module.read_text() + "\n# an edit that changes the module's content\n")
     assert set(planned_rules(work)) == {
         "pretrained_vs_random",
@@ -173,6 +113,27 @@ def test_changed_library_module_reruns_only_its_users(run_dir, tmp_path):
         "cost_of_accuracy",
         "all",
     }
+
+
+def test_edit_to_an_indirectly_imported_module_reruns_exactly_its_users(run_dir, tmp_path):
+    """fusion.py is imported by no script, only through probes.protocol and report.probes."""
+    from tacgen_lib.io.imports import import_closure
+
+    module = "tacgen_lib/probes/fusion.py"
+    scripts = ROOT / "workflow/scripts"
+    direct = [p.name for p in scripts.glob("*.py") if "probes.fusion" in p.read_text()]
+    users = {
+        p.stem
+        for p in scripts.glob("*.py")
+        if ROOT / module in import_closure(p, ROOT / "tacgen_lib")
+    }
+    assert not direct and users == {"probe", "aggregate_probes"}
+    work = copy_tree(tmp_path / "f")
+    shutil.copytree(run_dir / "results", work / "results")
+    shutil.copytree(run_dir / ".snakemake", work / ".snakemake")
+    (work / module).write_text((work / module).read_text() + "\n# an edit\n")
+    # its users rerun, then only what reads their outputs: the edge manifest and `all`
+    assert set(planned_rules(work)) == users | {"edge_manifest", "all"}
 
 
 def test_two_clean_runs_give_identical_edges(run_dir, tmp_path):
@@ -222,7 +183,7 @@ def test_real_corpus_path_runs_on_fixtures(tmp_path):
     sys.path.insert(0, str(ROOT / "tests"))
     from fixtures_real import write_hct_fixture, write_ssvtp_fixture
 
-    from tacgen_lib import edges
+    from tacgen_lib.io import edges
 
     data = tmp_path / "tvl"
     write_ssvtp_fixture(data, n=12)
@@ -239,13 +200,13 @@ def test_real_corpus_path_runs_on_fixtures(tmp_path):
     }
     cfg["splits"].pop("by_scale")
     cfg["features"]["pretrain"]["corpus"] = "ssvtp"
-    cfg["features"]["worth_it"]["corpus"] = "ssvtp"
+    cfg["features"]["pretrained_vs_random"]["corpus"] = "ssvtp"
     cfg["align"]["corpora"] = ["ssvtp"]
     # the official-checkpoint path: a ViT-S/14 state dict in DINOv2's key format (random
     # weights, 518-px position grid as released), loaded and interpolated instead of pretraining
     import torch
 
-    from tacgen_lib.vit import build_vit
+    from tacgen_lib.features.vit import build_vit
 
     ckpt = tmp_path / "dinov2_vits14_pretrain.pth"
     torch.manual_seed(0)

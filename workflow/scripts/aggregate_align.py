@@ -6,32 +6,36 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from tacgen_lib import align_report, edges, log
-from tacgen_lib.report_tables import to_html
+from tacgen_lib.align.cells import CELL_COLUMNS
+from tacgen_lib.io import edges, log
+from tacgen_lib.report import align as align_report
+from tacgen_lib.report.write import write_figure, write_table
 
 logger = log.for_rule(snakemake)
 out, params = snakemake.output, snakemake.params
 
-metrics = []
-for path in snakemake.input.metrics:
-    row = edges.read(path, require={"cell": "str"}).frame
-    if list(row["cell"]) != [align_report.cell_from_path(path)]:
-        raise ValueError(f"rule aggregate_align: {path} holds cell(s) {list(row['cell'])}")
+inputs = zip(
+    params.cells,
+    snakemake.input.metrics,
+    snakemake.input.curves,
+    snakemake.input.benchmarks,
+    strict=True,
+)
+metrics, curves, seconds = [], [], {}
+for cell, metrics_path, curve_path, bench_path in inputs:
+    row = edges.read(metrics_path, require={"cell": "str"}).frame
+    if list(row["cell"]) != [cell]:
+        raise ValueError(
+            f"rule aggregate_align: {metrics_path} holds cell(s) {list(row['cell'])}, expected {cell!r}"
+        )
     metrics.append(row)
-metrics = pd.concat(metrics, ignore_index=True)
-seconds = {
-    align_report.cell_from_path(p): align_report.benchmark_seconds(p)
-    for p in snakemake.input.benchmarks
-}
-summary = align_report.alignment_summary(metrics, seconds)
-
-curves = []
-for path in snakemake.input.curves:
-    cell = align_report.cell_from_path(path)
-    curve = edges.read(path, require={"step": "int", "val_loss": "float"}).frame
-    for col in align_report.CELL_COLUMNS:
-        curve[col] = metrics.loc[metrics["cell"] == cell, col].iloc[0]
+    curve = edges.read(curve_path, require={"step": "int", "val_loss": "float"}).frame
+    for col in CELL_COLUMNS:
+        curve[col] = row[col].iloc[0]
     curves.append(curve)
+    seconds[cell] = align_report.benchmark_seconds(bench_path)
+metrics = pd.concat(metrics, ignore_index=True)
+summary = align_report.alignment_summary(metrics, seconds)
 curves = pd.concat(curves, ignore_index=True)
 
 # The per-cell metrics as one hashed edge (reproducible: no wall times) ...
@@ -56,9 +60,7 @@ tables = {
     ),
 }
 for name, (table, title) in tables.items():
-    edges.atomic_write_bytes(out[name], to_html(table, title=title, mono=()).encode())
+    write_table(table, out[name], title=title, mono=())
 fig = align_report.curve_figure(curves, n_train=params.n_ref)
-buf = io.BytesIO()
-fig.savefig(buf, format="png", dpi=110, metadata={"Software": None})
-edges.atomic_write_bytes(out.curves, buf.getvalue())
+write_figure(fig, out.curves)
 logger.info("%d cells summarised; report items written", len(summary))

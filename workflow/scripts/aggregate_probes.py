@@ -3,9 +3,10 @@
 
 import pandas as pd
 
-from tacgen_lib import edges, log, probe_report
-from tacgen_lib.probe_suite import tidy
-from tacgen_lib.report_tables import to_html
+from tacgen_lib.io import edges, log
+from tacgen_lib.probes.protocol import tidy
+from tacgen_lib.report import probes as probe_report
+from tacgen_lib.report.write import write_figure, write_table
 
 logger = log.for_rule(snakemake)
 
@@ -50,15 +51,14 @@ tables = {
     "fusions": (probe_report.fusions_frame(), "Fusion variants of V and T features"),
 }
 for name, (table, title) in tables.items():
-    with open(snakemake.output[name], "w") as fh:
-        fh.write(to_html(table, title=title, mono=()))
+    write_table(table, snakemake.output[name], title=title, mono=())
     logger.info("table %s: %d rows", name, len(table))
 figures = {
     "forest": probe_report.forest_plot(summary),
     "confusion_png": probe_report.confusion_figure(confusion),
 }
 for name, fig in figures.items():
-    fig.savefig(snakemake.output[name], dpi=110, metadata={"Software": None})
+    write_figure(fig, snakemake.output[name])
 main = summary.loc[summary["control"] == "none"]
 logger.info(
     "%d summary rows; %d comparisons (%s); criterion met in %d of %d evaluated",

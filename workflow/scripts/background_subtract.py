@@ -1,7 +1,7 @@
 """Background-subtract every tactile frame of a corpus (rule background_subtract)."""
 
-from tacgen_lib import edges, log
-from tacgen_lib.frames import sensor_background_map, subtract_backgrounds
+from tacgen_lib.io import edges, log
+from tacgen_lib.preprocess.frames import sensor_background_map, subtract_backgrounds
 
 logger = log.for_rule(snakemake)
 samples = edges.read(snakemake.input.samples, columns=["sensor_id", "tactile"]).frame

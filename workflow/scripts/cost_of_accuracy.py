@@ -4,10 +4,10 @@ from pathlib import Path
 
 import pandas as pd
 
-from tacgen_lib import edges, log
-from tacgen_lib.align_report import benchmark_seconds
-from tacgen_lib.cost import cost_figure, cost_rows
-from tacgen_lib.report_tables import to_html
+from tacgen_lib.io import edges, log
+from tacgen_lib.report.align import benchmark_seconds
+from tacgen_lib.report.cost import cost_figure, cost_rows
+from tacgen_lib.report.write import write_figure, write_table
 
 logger = log.for_rule(snakemake)
 simulate = {}
@@ -23,13 +23,11 @@ table = cost_rows(
     corpus_sizes=manifest["corpus"].value_counts().to_dict(),
 )
 table.to_csv(snakemake.output.tsv, sep="\t", index=False)
-with open(snakemake.output.html, "w") as fh:
-    fh.write(
-        to_html(
-            table.round(4),
-            title="Cost of accuracy: seconds per job against the metric it produced",
-            mono=(),
-        )
-    )
-cost_figure(table).savefig(snakemake.output.figure, dpi=110, metadata={"Software": None})
+write_table(
+    table.round(4),
+    snakemake.output.html,
+    title="Cost of accuracy: seconds per job against the metric it produced",
+    mono=(),
+)
+write_figure(cost_figure(table), snakemake.output.figure)
 logger.info("%d jobs joined with their metrics", len(table))

@@ -2,10 +2,10 @@
 
 import torch
 
-from tacgen_lib import edges, log
-from tacgen_lib.features import extract_features, pixel_features
-from tacgen_lib.frames import decode_frames
-from tacgen_lib.vit import load_backbone
+from tacgen_lib.features.extract import extract_features, pixel_features
+from tacgen_lib.features.vit import load_backbone
+from tacgen_lib.io import edges, log
+from tacgen_lib.preprocess.frames import decode_frames
 
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)

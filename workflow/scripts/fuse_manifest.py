@@ -2,8 +2,8 @@
 
 import pyarrow.parquet as pq
 
-from tacgen_lib import edges, log
-from tacgen_lib.manifest import fuse_manifest
+from tacgen_lib.corpus.manifest import fuse_manifest
+from tacgen_lib.io import edges, log
 
 logger = log.for_rule(snakemake)
 frames = []

@@ -2,8 +2,8 @@
 
 from pathlib import Path
 
-from tacgen_lib import edges, log
-from tacgen_lib.ingest import ingest_hct, ingest_ssvtp
+from tacgen_lib.corpus.ingest import ingest_hct, ingest_ssvtp
+from tacgen_lib.io import edges, log
 
 logger = log.for_rule(snakemake)
 corpus = snakemake.params.corpus

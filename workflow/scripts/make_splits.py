@@ -1,7 +1,7 @@
 """Fix the train/val/test splits before any feature is computed (rule make_splits)."""
 
-from tacgen_lib import edges, log
-from tacgen_lib.splits import make_splits
+from tacgen_lib.corpus.splits import make_splits
+from tacgen_lib.io import edges, log
 
 logger = log.for_rule(snakemake)
 cfg = snakemake.params.splits

@@ -1,13 +1,9 @@
 """Concatenate a simulated corpus's shards; write its sensor backgrounds (rule merge_corpus)."""
 
-import os
+import pandas as pd
 
-os.environ.setdefault("MUJOCO_GL", "egl")
-
-import pandas as pd  # noqa: E402
-
-from tacgen_lib import edges, log  # noqa: E402
-from tacgen_lib.sim.corpus import sensor_backgrounds  # noqa: E402
+from tacgen_lib.corpus.sim.corpus import sensor_backgrounds
+from tacgen_lib.io import edges, log
 
 logger = log.for_rule(snakemake)
 shards = [edges.read(path).frame for path in snakemake.input.shards]

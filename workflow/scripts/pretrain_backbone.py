@@ -3,12 +3,13 @@
 import pandas as pd
 import torch
 
-from tacgen_lib import edges, log
-from tacgen_lib.dino import pretrain_dino
-from tacgen_lib.frames import decode_frames
-from tacgen_lib.report_figures import pretrain_curve_figure
-from tacgen_lib.splits import assert_trainable, ids_in_split
-from tacgen_lib.vit import build_vit, load_pretrained, save_backbone
+from tacgen_lib.corpus.splits import assert_trainable, ids_in_split
+from tacgen_lib.features.dino import pretrain_dino
+from tacgen_lib.features.vit import build_vit, load_pretrained, save_backbone
+from tacgen_lib.io import edges, log
+from tacgen_lib.preprocess.frames import decode_frames
+from tacgen_lib.report.figures import pretrain_curve_figure
+from tacgen_lib.report.write import write_figure
 
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
@@ -54,5 +55,5 @@ save_backbone(model, snakemake.output.weights)
 digest = edges.record_file(snakemake.output.weights, producer=snakemake.rule)
 edges.write(snakemake.output.curve, curve, key="epoch_id", producer=snakemake.rule)
 fig = pretrain_curve_figure(curve, title=f"{modality} backbone ({backbone['arch']})")
-fig.savefig(snakemake.output.figure, dpi=110, metadata={"Software": None})
+write_figure(fig, snakemake.output.figure)
 logger.info("saved %s backbone, sha256 %s", modality, digest)

@@ -4,16 +4,16 @@ import pandas as pd
 import torch
 from threadpoolctl import threadpool_limits
 
-from tacgen_lib import edges, log
-from tacgen_lib.backbone_check import pretrained_vs_random, random_backbone
-from tacgen_lib.features import extract_features
-from tacgen_lib.frames import decode_frames
-from tacgen_lib.report_tables import to_html
+from tacgen_lib.features.extract import extract_features
+from tacgen_lib.features.pretrained_vs_random import pretrained_vs_random, random_backbone
+from tacgen_lib.io import edges, log
+from tacgen_lib.preprocess.frames import decode_frames
+from tacgen_lib.report.write import write_table
 
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
 cfg = snakemake.params.features
-check = cfg["worth_it"]
+check = cfg["pretrained_vs_random"]
 corpus = check["corpus"]
 splits = edges.read(snakemake.input.splits).frame
 manifest = edges.read(snakemake.input.manifest).frame.set_index("sample_id")
@@ -68,11 +68,9 @@ for modality, column in (("vision", "rgb"), ("tactile", "tactile_proc")):
     )
 table = pd.DataFrame(rows)
 edges.write(snakemake.output.table, table, key="check_id", producer=snakemake.rule)
-with open(snakemake.output.html, "w") as fh:
-    fh.write(
-        to_html(
-            table.round(4),
-            title="Pretrained vs random-init backbone: logistic probe accuracy on the test split",
-            mono=(),
-        )
-    )
+write_table(
+    table.round(4),
+    snakemake.output.html,
+    title="Pretrained vs random-init backbone: logistic probe accuracy on the test split",
+    mono=(),
+)

@@ -2,9 +2,9 @@
 
 from threadpoolctl import threadpool_limits
 
-from tacgen_lib import edges, log
-from tacgen_lib.probe_suite import CONTROLLED_STRATA, ProbeSettings, family_rows, run_family
-from tacgen_lib.splits import assert_trainable
+from tacgen_lib.corpus.splits import assert_trainable
+from tacgen_lib.io import edges, log
+from tacgen_lib.probes.protocol import CONTROLLED_STRATA, ProbeSettings, family_rows, run_family
 
 logger = log.for_rule(snakemake)
 family = snakemake.params.family

@@ -3,13 +3,14 @@
 import pandas as pd
 import torch
 
-from tacgen_lib import align, edges, log
+from tacgen_lib.align import heads
+from tacgen_lib.io import edges, log
 
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
 feature, target = snakemake.params.feature, snakemake.wildcards.target
 
-heads = align.load_heads(snakemake.input.heads)
+model = heads.load_heads(snakemake.input.heads)
 vision = edges.read(snakemake.input.v, columns=[feature], require={feature: "vector"})
 tactile = edges.read(snakemake.input.t, columns=[feature], require={feature: "vector"})
 ids = sorted(vision.ids)
@@ -20,8 +21,8 @@ if set(ids) != set(tactile.ids):
         "two feature edges; rebuild the features of corpus " + repr(target)
     )
 try:
-    v_aligned, t_aligned = align.project(
-        heads, vision.subset(ids).vectors[feature], tactile.subset(ids).vectors[feature]
+    v_aligned, t_aligned = heads.project(
+        model, vision.subset(ids).vectors[feature], tactile.subset(ids).vectors[feature]
     )
 except ValueError as exc:
     raise ValueError(

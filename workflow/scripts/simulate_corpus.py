@@ -1,12 +1,8 @@
 """Simulate one shard of a corpus (rule simulate_corpus)."""
 
-import os
-
-os.environ.setdefault("MUJOCO_GL", "egl")
-
-from tacgen_lib import edges, log  # noqa: E402
-from tacgen_lib.config import load_yaml  # noqa: E402
-from tacgen_lib.sim.corpus import simulate_shard  # noqa: E402
+from tacgen_lib.corpus.sim.corpus import simulate_shard
+from tacgen_lib.io import edges, log
+from tacgen_lib.io.config import load_yaml
 
 logger = log.for_rule(snakemake)
 frame = simulate_shard(

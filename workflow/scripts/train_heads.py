@@ -4,18 +4,19 @@ import pandas as pd
 import torch
 from threadpoolctl import threadpool_limits
 
-from tacgen_lib import align, edges, log
-from tacgen_lib.align_report import cell_name
+from tacgen_lib.align import heads
+from tacgen_lib.align.cells import cell_name
+from tacgen_lib.io import edges, log
 
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
 w, feature = snakemake.wildcards, snakemake.params.feature
-seed, n_train = int(w.seed), align.parse_n_train(w.n_train)
+seed, n_train = int(w.seed), heads.parse_n_train(w.n_train)
 
 vision = edges.read(snakemake.input.v, columns=[feature], require={feature: "vector"})
 tactile = edges.read(snakemake.input.t, columns=[feature], require={feature: "vector"})
 splits = edges.read(snakemake.input.splits, require={"split": "str", "corpus": "str"}).frame
-ids = align.cell_ids(splits, corpus=w.corpus, n_train=n_train, seed=seed)
+ids = heads.cell_ids(splits, corpus=w.corpus, n_train=n_train, seed=seed)
 logger.info(
     "%s: %d train / %d val / %d test rows, %s features v[%d] t[%d]",
     w.corpus,
@@ -27,7 +28,7 @@ logger.info(
     tactile.vectors[feature].shape[1],
 )
 with threadpool_limits(snakemake.threads):
-    fit = align.fit_cell(
+    fit = heads.fit_cell(
         vision,
         tactile,
         splits,
@@ -50,7 +51,7 @@ row = {
     "feature": feature,
     **fit.metrics,
 }
-align.save_heads(fit.result, snakemake.output.heads, producer=snakemake.rule)
+heads.save_heads(fit.result, snakemake.output.heads, producer=snakemake.rule)
 edges.write(snakemake.output.curve, fit.curve, key="eval", producer=snakemake.rule)
 edges.write(snakemake.output.metrics, pd.DataFrame([row]), key="cell", producer=snakemake.rule)
 logger.info(

@@ -11,22 +11,19 @@ which reads one benchmark TSV.
 from __future__ import annotations
 
 import os
-import re
 from collections.abc import Mapping, Sequence
 
-import matplotlib
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
+from tacgen_lib.align.cells import CELL_COLUMNS
+from tacgen_lib.align.retrieval import RETRIEVAL_METRICS
 
 __all__ = [
     "CELL_COLUMNS",
     "METRIC_COLUMNS",
     "SUMMARY_COLUMNS",
-    "cell_name",
-    "cell_from_path",
     "benchmark_seconds",
     "alignment_summary",
     "mean_sd",
@@ -36,15 +33,7 @@ __all__ = [
     "curve_figure",
 ]
 
-CELL_COLUMNS = ("corpus", "variant", "seed", "tau", "n_train")
-METRIC_COLUMNS = (
-    "top1_v2t",
-    "top1_t2v",
-    "top5_v2t",
-    "top5_t2v",
-    "median_rank_v2t",
-    "median_rank_t2v",
-)
+METRIC_COLUMNS = RETRIEVAL_METRICS
 SUMMARY_COLUMNS = (
     "cell",
     *CELL_COLUMNS,
@@ -55,29 +44,6 @@ SUMMARY_COLUMNS = (
     "chance_top5",
     "train_seconds",
 )
-
-
-def cell_name(corpus: str, variant: str, seed: int | str, tau: str, n_train: int | str) -> str:
-    """The key of a grid cell: its output folder below results/align/."""
-    return f"{corpus}/{variant}/seed~{seed}/tau~{tau}/n~{n_train}"
-
-
-_CELL_RE = re.compile(
-    r"(?P<corpus>[^/]+)/(?P<variant>[^/]+)/seed~(?P<seed>[^/_]+)[/_]"
-    r"tau~(?P<tau>[^/_]+)[/_]n~(?P<n_train>[^/_.]+)"
-)
-
-
-def cell_from_path(path: str | os.PathLike[str]) -> str:
-    """The cell key of a per-cell output or benchmark path.
-
-    Accepts ``.../{corpus}/{variant}/seed~S/tau~T/n~N/<file>`` (the cell's folder) and
-    ``.../{corpus}/{variant}/seed~S_tau~T_n~N.tsv`` (its benchmark or log file).
-    """
-    m = _CELL_RE.search(str(path))
-    if m is None:
-        raise ValueError(f"{path}: not the path of an alignment grid cell")
-    return cell_name(**m.groupdict())
 
 
 def benchmark_seconds(path: str | os.PathLike[str]) -> float:

@@ -1,6 +1,6 @@
 """Image columns of corpus edges as uint8 arrays: decoding, per-sensor backgrounds, variants.
 
-Edges carry PNG bytes (tacgen_lib.images); the numerics want (N, H, W, 3) uint8 stacks. This
+Edges carry PNG bytes (tacgen_lib.io.images); the numerics want (N, H, W, 3) uint8 stacks. This
 module does that conversion once, with errors that name the edge, the column and the sample.
 """
 
@@ -11,8 +11,8 @@ from collections.abc import Callable
 import numpy as np
 import pandas as pd
 
-from tacgen_lib.images import decode_png, encode_png
-from tacgen_lib.preprocess import background_subtract
+from tacgen_lib.io.images import decode_png, encode_png
+from tacgen_lib.preprocess.background import background_subtract
 
 __all__ = ["decode_frames", "sensor_background_map", "subtract_backgrounds"]
 

@@ -3,7 +3,7 @@
 This module owns how uint8 frames become model inputs (resize to a square of `image_size`
 pixels with antialiased bilinear interpolation, scale to [0, 1], ImageNet mean/std
 normalisation) and how model outputs become one float32 vector per frame. The same input
-pipeline is used by DINO pretraining (tacgen_lib.dino), so features and pretraining agree.
+pipeline is used by DINO pretraining (tacgen_lib.features.dino), so features and pretraining agree.
 
 Non-square frames are resized (not cropped) to the square input, so the whole gel / view is
 kept; the aspect change is the same for every frame of a modality.
@@ -19,7 +19,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor
 
-from tacgen_lib.vit import DinoVisionTransformer
+from tacgen_lib.features.vit import DinoVisionTransformer
 
 __all__ = [
     "IMAGENET_MEAN",

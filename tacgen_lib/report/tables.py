@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from tacgen_lib import edges
+from tacgen_lib.io import edges
 
 __all__ = ["edge_manifest_table", "to_html"]
 

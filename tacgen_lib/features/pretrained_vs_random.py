@@ -2,7 +2,7 @@
 
 A linear (logistic) probe on frozen features of each backbone, fitted on the train rows and
 scored on the fixed test rows; the difference in accuracy gets a fixed-test bootstrap CI
-(tacgen_lib.stats.fixed_test_bootstrap), so "pretraining helps" is a statement with an interval.
+(tacgen_lib.probes.stats.fixed_test_bootstrap), so "pretraining helps" is a statement with an interval.
 """
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from tacgen_lib.probes import fit_logistic
-from tacgen_lib.stats import fixed_test_bootstrap
+from tacgen_lib.probes.linear import fit_logistic
+from tacgen_lib.probes.stats import fixed_test_bootstrap
 
 __all__ = ["pretrained_vs_random"]
 
@@ -75,7 +75,7 @@ def random_backbone(arch: str, image_size: int, seed: int):
     """A randomly initialised ViT of `arch` (the baseline a pretrained backbone must beat)."""
     import torch
 
-    from tacgen_lib.vit import build_vit
+    from tacgen_lib.features.vit import build_vit
 
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)

@@ -65,6 +65,18 @@ def retrieval_ranks(queries: np.ndarray, candidates: np.ndarray) -> np.ndarray:
     return ranks
 
 
+RETRIEVAL_METRICS = (
+    "top1_v2t",
+    "top1_t2v",
+    "top5_v2t",
+    "top5_t2v",
+    "median_rank_v2t",
+    "median_rank_t2v",
+)
+"""The retrieval metrics of `paired_retrieval` (besides chance levels and n), in table order."""
+CHANCE_COLUMNS = ("chance_top1", "chance_top5")
+
+
 def paired_retrieval(z_v: np.ndarray, z_t: np.ndarray) -> dict[str, float]:
     """Cross-modal retrieval of paired projections (vision->touch and touch->vision).
 

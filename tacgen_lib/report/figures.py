@@ -4,14 +4,11 @@ from __future__ import annotations
 
 import textwrap
 
-import matplotlib
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
-
-from tacgen_lib.images import decode_png  # noqa: E402
+from tacgen_lib.io.images import decode_png
 
 __all__ = ["corpus_example_grid"]
 
@@ -37,7 +34,7 @@ def corpus_example_grid(
     samples: pd.DataFrame, sensors: pd.DataFrame, splits: pd.DataFrame, *, n: int, title: str
 ) -> plt.Figure:
     """Rows of RGB | raw tactile | background | tactile_proc, captioned with id, split, caption."""
-    from tacgen_lib.preprocess import tactile_proc
+    from tacgen_lib.preprocess.background import tactile_proc
 
     picks = _pick_examples(samples, splits, n)
     backgrounds = {

@@ -93,7 +93,10 @@ def validate_config(config: dict, schema_path: str | Path, *, source: str = "con
     corpora = set(config["corpora"])
     refs = [
         ("features.pretrain.corpus", config["features"]["pretrain"]["corpus"]),
-        ("features.worth_it.corpus", config["features"]["worth_it"]["corpus"]),
+        (
+            "features.pretrained_vs_random.corpus",
+            config["features"]["pretrained_vs_random"]["corpus"],
+        ),
     ]
     refs += [(f"align.corpora[{i}]", c) for i, c in enumerate(config["align"]["corpora"])]
     for fam, spec in config["probes"]["families"].items():

@@ -10,11 +10,8 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-import matplotlib
-
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import pandas as pd  # noqa: E402
+import matplotlib.pyplot as plt
+import pandas as pd
 
 __all__ = ["COST_COLUMNS", "cost_rows", "cost_figure"]
 
@@ -34,7 +31,7 @@ def cost_rows(
     """Tidy cost-of-accuracy table.
 
     align_summary: results/align/summary.parquet (train_seconds, top1_v2t per cell);
-    pretrain: results/features/pretrain_vs_random.parquet; pretrain_seconds: modality -> s;
+    pretrain: results/features/pretrained_vs_random.parquet; pretrain_seconds: modality -> s;
     simulate_seconds: corpus -> total simulation seconds over its shards; corpus_sizes: corpus
     -> samples; probe_seconds: family -> s of its probe jobs, with probe_summary giving the
     family's main Δ and CI width.

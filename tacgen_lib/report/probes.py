@@ -23,15 +23,12 @@ from __future__ import annotations
 
 import math
 
-import matplotlib
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pandas as pd  # noqa: E402
-
-from tacgen_lib.fusion import fusion_table  # noqa: E402
-from tacgen_lib.probe_suite import class_order  # noqa: E402
+from tacgen_lib.probes.fusion import fusion_table
+from tacgen_lib.probes.protocol import class_order
 
 __all__ = [
     "align_seed_table",

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from tacgen_lib.sim.scenes import Scene
+from tacgen_lib.corpus.sim.scenes import Scene
 
 __all__ = [
     "ObjectPhysics",

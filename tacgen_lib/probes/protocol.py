@@ -48,9 +48,9 @@ import numpy as np
 import pandas as pd
 from sklearn.exceptions import ConvergenceWarning
 
-from tacgen_lib import stats
-from tacgen_lib.fusion import FUSIONS, fuse
-from tacgen_lib.probes import FixedLogistic, FixedRidge, fit_logistic, fit_ridge_probe
+from tacgen_lib.probes import stats
+from tacgen_lib.probes.fusion import FUSIONS, fuse
+from tacgen_lib.probes.linear import FixedLogistic, FixedRidge, fit_logistic, fit_ridge_probe
 
 __all__ = [
     "BANDS",

@@ -32,8 +32,8 @@ import numpy as np
 import scipy.linalg
 from sklearn.exceptions import ConvergenceWarning
 
-from tacgen_lib.fusion import fuse
-from tacgen_lib.probes import (
+from tacgen_lib.probes.fusion import fuse
+from tacgen_lib.probes.linear import (
     GRAM_GUARD,
     DesignBlock,
     FixedLogistic,

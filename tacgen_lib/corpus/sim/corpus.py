@@ -36,9 +36,9 @@ import mujoco
 import numpy as np
 import pandas as pd
 
-from tacgen_lib.images import encode_png
-from tacgen_lib.sim import physics, tactile
-from tacgen_lib.sim.scenes import Scene, compile_scene, validate_scene
+from tacgen_lib.corpus.sim import physics, tactile
+from tacgen_lib.corpus.sim.scenes import Scene, compile_scene, validate_scene
+from tacgen_lib.io.images import encode_png
 
 __all__ = [
     "SampleSpec",
@@ -225,7 +225,7 @@ def _runtime(scene: Scene, cfg: Mapping[str, Any]) -> dict[str, Any]:
 def _prefer_headless_egl() -> None:
     """Use EGL when no display exists and MUJOCO_GL asked for nothing else.
 
-    mujoco picks its GL backend when first imported; if that happened before tacgen_lib.sim
+    mujoco picks its GL backend when first imported; if that happened before tacgen_lib.corpus.sim
     could default MUJOCO_GL to egl (e.g. `import mujoco` first), it chose GLFW, which needs
     an X display. Switch the backend class the renderer will use to EGL in that case.
     """

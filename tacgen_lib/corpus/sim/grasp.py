@@ -13,8 +13,8 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from tacgen_lib.sim import physics, tactile
-from tacgen_lib.sim.scenes import Scene, compile_scene
+from tacgen_lib.corpus.sim import physics, tactile
+from tacgen_lib.corpus.sim.scenes import Scene, compile_scene
 
 __all__ = ["GraspResult", "grasp_lift"]
 

@@ -40,7 +40,7 @@ Identifiers: SSVTP ``sample_id`` is ``f"{corpus}-{i:06d}"``; HCT's is
 ``test.csv`` of that folder. SSVTP has one sensor, ``f"{corpus}-bg"``; HCT has one per background
 file, ``f"{corpus}-bg:{path relative to root/hct}"``.
 
-Every image is decoded (JPEG or PNG) and re-encoded as PNG with :func:`tacgen_lib.images.encode_png`
+Every image is decoded (JPEG or PNG) and re-encoded as PNG with :func:`tacgen_lib.io.images.encode_png`
 so all corpora carry the same lossless encoding. Errors name the file and the ``sample_id``; an
 ingest either returns the whole corpus or raises.
 """
@@ -58,7 +58,7 @@ from pathlib import Path
 import cv2
 import pandas as pd
 
-from tacgen_lib.images import decode_png, encode_png
+from tacgen_lib.io.images import decode_png, encode_png
 
 __all__ = [
     "HCT_COLUMNS",

@@ -387,7 +387,7 @@ def load_pretrained(model: DinoVisionTransformer, path: str | Path) -> DinoVisio
             f"{path}: checkpoint does not fit the model "
             f"(embed_dim {model.embed_dim}, depth {len(model.blocks)}, "
             f"registers {model.num_register_tokens}); " + "; ".join(parts) + ". "
-            "Build the matching arch (see tacgen_lib.vit.ARCHS) or use load_backbone(path)."
+            "Build the matching arch (see tacgen_lib.features.vit.ARCHS) or use load_backbone(path)."
         )
     model.load_state_dict({k: v.to(own[k].dtype) for k, v in sd.items()}, strict=True)
     return model

@@ -21,7 +21,7 @@ This module owns:
   train rows cut to `n_train` by `train_subset`) and `fit_cell` (split guard, `fit_heads`,
   retrieval on the held-out test rows, the training curve as a table).
 
-Retrieval metrics (top-k, median rank) live in `tacgen_lib.retrieval`.
+Retrieval metrics (top-k, median rank) live in `tacgen_lib.align.retrieval`.
 """
 
 from __future__ import annotations
@@ -40,9 +40,9 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from tacgen_lib import edges
-from tacgen_lib.retrieval import paired_retrieval
-from tacgen_lib.splits import assert_trainable, ids_in_split
+from tacgen_lib.align.retrieval import CHANCE_COLUMNS, RETRIEVAL_METRICS, paired_retrieval
+from tacgen_lib.corpus.splits import assert_trainable, ids_in_split
+from tacgen_lib.io import edges
 
 __all__ = [
     "HIDDEN_DIM",
@@ -569,7 +569,7 @@ def save_heads(result: AlignResult, path: str | os.PathLike[str], *, producer: s
     serialised in memory (so the zip's internal folder name does not depend on a temp file
     name) before a temp-file + rename. Same fit => same file bytes.
     Like an edge, the file gets a `<file>.sha256.json` sidecar (written first, see
-    `tacgen_lib.edges`) naming its hash, the two heads' shapes and the producing rule, so the
+    `tacgen_lib.io.edges`) naming its hash, the two heads' shapes and the producing rule, so the
     report's edge manifest lists it and `load_heads` refuses a file changed after it was written.
     """
     buf = io.BytesIO()
@@ -763,13 +763,4 @@ def fit_cell(
     return CellFit(result=result, metrics=metrics, curve=curve)
 
 
-_RETRIEVAL_KEYS = (
-    "top1_v2t",
-    "top1_t2v",
-    "top5_v2t",
-    "top5_t2v",
-    "median_rank_v2t",
-    "median_rank_t2v",
-    "chance_top1",
-    "chance_top5",
-)
+_RETRIEVAL_KEYS = (*RETRIEVAL_METRICS, *CHANCE_COLUMNS)

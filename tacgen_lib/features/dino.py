@@ -1,7 +1,7 @@
 """DINO self-distillation pretraining of a per-modality ViT backbone (in-workflow, CPU).
 
 This module owns the DINO recipe (Caron et al. 2021) with DINOv2's image-level safeguards
-(Oquab et al. 2023): a student and a teacher of the same architecture (tacgen_lib.vit backbone +
+(Oquab et al. 2023): a student and a teacher of the same architecture (tacgen_lib.features.vit backbone +
 DINO projection head); the teacher is an exponential moving average (EMA) of the student; the
 teacher's logits are turned into targets by Sinkhorn-Knopp centring (`sinkhorn_knopp`, DINOv2)
 or, as in DINO v1, by subtracting a running centre (momentum 0.9) and sharpening (teacher
@@ -43,8 +43,8 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from tacgen_lib.features import imagenet_normalise, to_unit_tensor
-from tacgen_lib.vit import PATCH_SIZE, DinoVisionTransformer, build_vit
+from tacgen_lib.features.extract import imagenet_normalise, to_unit_tensor
+from tacgen_lib.features.vit import PATCH_SIZE, DinoVisionTransformer, build_vit
 
 __all__ = [
     "DINOHead",

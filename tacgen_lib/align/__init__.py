@@ -1,0 +1,1 @@
+"""The align stage: symmetric InfoNCE projection heads (paper eq. 1), retrieval, grid cells."""

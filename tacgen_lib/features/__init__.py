@@ -1,0 +1,1 @@
+"""The features stage: the DINOv2-architecture ViT, DINO pretraining, frozen-feature extraction."""

@@ -1,0 +1,1 @@
+"""The preprocess stage: tactile background subtraction and its variants, frames from edges."""

@@ -1,0 +1,1 @@
+"""The probes stage: linear probes, their statistics and controls, fusion, the family protocol."""

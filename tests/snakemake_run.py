@@ -1,0 +1,84 @@
+"""Running the workflow from tests: a copy of the repository, Snakemake on config/test.yaml.
+
+Shared by the workflow, align, probes and SLURM test modules (imported by name: pytest puts
+tests/ on sys.path).
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+SNAKEMAKE = [sys.executable, "-m", "snakemake"]
+TREE = ["Snakefile", "rules", "config", "workflow", "tacgen_lib", "profiles", "envs"]
+
+
+def copy_tree(dest: Path) -> Path:
+    dest.mkdir(parents=True, exist_ok=True)
+    for name in TREE:
+        src = ROOT / name
+        if src.is_dir():
+            shutil.copytree(src, dest / name, ignore=shutil.ignore_patterns("__pycache__"))
+        else:
+            shutil.copy2(src, dest / name)
+    return dest
+
+
+def smk(
+    workdir: Path, *args: str, check: bool = True, timeout: int = 600
+) -> subprocess.CompletedProcess:
+    cmd = [*SNAKEMAKE, "--cores", "2", "--configfile", "config/test.yaml", *args]
+    proc = subprocess.run(cmd, cwd=workdir, capture_output=True, text=True, timeout=timeout)
+    if check and proc.returncode != 0:
+        raise AssertionError(
+            f"snakemake {' '.join(args)} failed:\n{proc.stdout[-4000:]}\n{proc.stderr[-8000:]}"
+        )
+    return proc
+
+
+def planned_rules(workdir: Path, *args: str) -> dict[str, int]:
+    """Rules a dry run would execute, with job counts (from --summary-like job stats)."""
+    proc = smk(workdir, "--dry-run", *args)
+    out = proc.stdout + proc.stderr
+    if "Nothing to be done" in out:
+        return {}
+    counts: dict[str, int] = {}
+    in_table = False
+    for line in out.splitlines():
+        parts = line.split()
+        if parts[:2] == ["job", "count"]:
+            in_table = True
+            continue
+        if in_table:
+            if len(parts) == 2 and parts[1].isdigit() and parts[0] != "total":
+                counts[parts[0]] = int(parts[1])
+            elif parts and parts[0] == "total":
+                break
+    return counts
+
+
+def edge_hashes(workdir: Path) -> dict[str, str]:
+    return {
+        str(p.relative_to(workdir)): json.loads(p.read_text())["sha256"]
+        for p in sorted((workdir / "results").rglob("*.sha256.json"))
+        if "/shards/" not in str(p)
+    }
+
+
+def merged_config() -> dict:
+    """config/config.yaml extended by config/test.yaml, as Snakemake merges them."""
+
+    def merge(a: dict, b: dict) -> dict:
+        out = dict(a)
+        for k, v in b.items():
+            out[k] = merge(a[k], v) if isinstance(v, dict) and isinstance(a.get(k), dict) else v
+        return out
+
+    base = yaml.safe_load((ROOT / "config/config.yaml").read_text())
+    return merge(base, yaml.safe_load((ROOT / "config/test.yaml").read_text()))

@@ -1,0 +1,123 @@
+"""Code inputs derived from imports: every rule declares exactly the library modules it reaches.
+
+The library's `import_closure` reads the source with `ast`; the reference here is the standard
+library's `modulefinder`, which follows the compiled bytecode instead, restricted to this
+repository so that numpy or torch are never walked.
+"""
+
+from __future__ import annotations
+
+import modulefinder
+import re
+import textwrap
+from pathlib import Path
+
+import pytest
+from snakemake_run import ROOT, copy_tree, smk
+
+from tacgen_lib.io.imports import code_inputs, import_closure
+
+LIB = ROOT / "tacgen_lib"
+SCRIPTS = ROOT / "workflow" / "scripts"
+
+
+def modulefinder_closure(script: Path) -> set[str]:
+    """Library files a script reaches, by the standard library's bytecode-following finder."""
+    finder = modulefinder.ModuleFinder(path=[str(ROOT)])
+    finder.run_script(str(script))
+    return {
+        str(Path(m.__file__).resolve().relative_to(ROOT))
+        for name, m in finder.modules.items()
+        if name.split(".")[0] == "tacgen_lib" and m.__file__
+    }
+
+
+def rule_scripts() -> dict[str, tuple[str, str | None]]:
+    """rule -> (its script's stem, the script named in its `code=imports_of(...)` or None)."""
+    out = {}
+    for smk_file in sorted((ROOT / "rules").glob("*.smk")):
+        for block in re.split(r"(?m)^(?=rule )", smk_file.read_text())[1:]:
+            name = re.match(r"rule (\w+):", block).group(1)
+            script = re.search(r'script:\n\s+"\.\./workflow/scripts/(\w+)\.py"', block)
+            if script is None:
+                continue
+            declared = re.search(r'code=imports_of\("(\w+)"\)', block)
+            out[name] = (script.group(1), declared.group(1) if declared else None)
+    return out
+
+
+def test_every_scripted_rule_declares_the_imports_of_its_own_script():
+    scripts = rule_scripts()
+    assert len(scripts) >= 15
+    wrong = {rule: pair for rule, pair in scripts.items() if pair[0] != pair[1]}
+    assert not wrong, f"rules whose code= input is missing or names another script: {wrong}"
+
+
+@pytest.mark.parametrize("script", sorted(p.stem for p in SCRIPTS.glob("*.py")))
+def test_import_closure_equals_modulefinder(script):
+    path = SCRIPTS / f"{script}.py"
+    got = {str(p.relative_to(ROOT)) for p in import_closure(path, LIB)}
+    assert got == modulefinder_closure(path)
+    assert "tacgen_lib/io/log.py" in got  # every script logs
+
+
+@pytest.mark.workflow
+def test_dry_run_inputs_of_every_job_are_its_scripts_import_closure(tmp_path):
+    """What Snakemake sees as each job's library inputs equals what its script reaches."""
+    proc = smk(copy_tree(tmp_path / "wf"), "--dry-run")
+    scripts = rule_scripts()
+    seen = set()
+    for rule, inputs in re.findall(
+        r"\nrule (\w+):\n    input: ([^\n]*)", proc.stdout + proc.stderr
+    ):
+        if rule not in scripts:
+            continue
+        declared = {f for f in inputs.split(", ") if f.startswith("tacgen_lib/")}
+        want = modulefinder_closure(SCRIPTS / f"{scripts[rule][0]}.py")
+        assert declared == want, rule
+        seen.add(rule)
+    assert {"simulate_corpus", "train_heads", "probe", "aggregate_probes"} <= seen
+
+
+def write_library(root: Path, files: dict[str, str]) -> Path:
+    for name, text in files.items():
+        path = root / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(textwrap.dedent(text))
+    return root / "tacgen_lib"
+
+
+def test_closure_follows_relative_function_level_and_package_imports(tmp_path):
+    lib = write_library(
+        tmp_path,
+        {
+            "tacgen_lib/__init__.py": "",
+            "tacgen_lib/a/__init__.py": "",
+            "tacgen_lib/a/one.py": "from . import two\n",
+            "tacgen_lib/a/two.py": "def f():\n    from ..b import three\n",
+            "tacgen_lib/b/__init__.py": "import numpy\n",
+            "tacgen_lib/b/three.py": "from tacgen_lib.b.four import NAME\n",
+            "tacgen_lib/b/four.py": "NAME = 1\n",
+            "tacgen_lib/b/unused.py": "",
+            "script.py": "import os\nfrom tacgen_lib.a import one\n",
+        },
+    )
+    got = [p.relative_to(tmp_path).as_posix() for p in import_closure(tmp_path / "script.py", lib)]
+    assert got == [
+        "tacgen_lib/__init__.py",
+        "tacgen_lib/a/__init__.py",
+        "tacgen_lib/a/one.py",
+        "tacgen_lib/a/two.py",
+        "tacgen_lib/b/__init__.py",
+        "tacgen_lib/b/four.py",
+        "tacgen_lib/b/three.py",
+    ]
+    assert code_inputs(tmp_path / "script.py", lib, start=tmp_path)[0] == "tacgen_lib/__init__.py"
+
+
+def test_closure_names_a_script_that_does_not_parse(tmp_path):
+    lib = write_library(tmp_path, {"tacgen_lib/__init__.py": "", "bad.py": "import (\n"})
+    with pytest.raises(SyntaxError, match="bad.py"):
+        import_closure(tmp_path / "bad.py", lib)
+    with pytest.raises(FileNotFoundError, match="missing.py"):
+        import_closure(tmp_path / "missing.py", lib)
