@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import os
 import time
+from dataclasses import dataclass
 
 import machine
 import numpy as np
@@ -27,13 +28,17 @@ from sklearn.linear_model import Ridge
 from sklearn.model_selection import GridSearchCV
 from threadpoolctl import threadpool_info, threadpool_limits
 
-from tacgen_lib.probes.fusion import fuse
-from tacgen_lib.probes.linear import FixedLogistic, FixedRidge, fit_ridge_probe, make_folds
-from tacgen_lib.probes.stats import (
-    fixed_test_bootstrap,
+from tacgen_lib.probes.bootstrap import fixed_test_bootstrap
+from tacgen_lib.probes.controls import (
+    PairedRows,
     label_permutation_control,
     tactile_permutation_control,
 )
+from tacgen_lib.probes.folds import make_folds
+from tacgen_lib.probes.fusion import fuse
+from tacgen_lib.probes.logistic import FixedLogistic
+from tacgen_lib.probes.refits import Refits
+from tacgen_lib.probes.ridge import FixedRidge, fit_ridge_probe
 
 
 def synthetic_features(n: int, d: int, rng: np.random.Generator) -> np.ndarray:
@@ -56,14 +61,12 @@ def best_of(fn, repeats: int, name: str = "") -> tuple[float, object]:
     return best[0], out
 
 
-class LoopLogistic:
+@dataclass(frozen=True)
+class LoopLogistic(FixedLogistic):
     """FixedLogistic forced through the controls' per-refit loop (the reference path)."""
 
-    def __init__(self, probe: FixedLogistic):
-        self.probe = probe
-
-    def fit_predict(self, X_train, y_train, X_test):
-        return self.probe.fit_predict(X_train, y_train, X_test)
+    def batches(self, refits: Refits) -> bool:
+        return False
 
 
 def logistic_controls(args) -> list[tuple]:
@@ -75,22 +78,20 @@ def logistic_controls(args) -> list[tuple]:
     score = v[:, :4].sum(axis=1) + 1.5 * t[:, :4].sum(axis=1) + 2.0 * rng.standard_normal(len(v))
     y = np.where(score > np.median(score), "hard", "soft").astype(object)
     tr, te = slice(0, n_tr), slice(n_tr, None)
-    x = fuse("concat", v, t)
-    probe = FixedLogistic(1.0, tol=1e-4)
+    probe, loop = FixedLogistic(1.0, tol=1e-4), LoopLogistic(1.0, tol=1e-4)
+    rows_ = PairedRows(v[tr], t[tr], y[tr], v[te], t[te], y[te])
     b, k = args.logistic_perms, args.logistic_ref
     rows = []
     for name, call in (
         ("label", lambda p, m: label_permutation_control(
-            v[tr], x[tr], y[tr], v[te], x[te], y[te], probe_v=p, probe_vt=p,
-            metric="accuracy", n_permutations=m, seed=0)),
+            rows_, probe_v=p, probe_vt=p, metric="accuracy", n_permutations=m, seed=0)),
         ("tactile", lambda p, m: tactile_permutation_control(
-            v[tr], t[tr], y[tr], v[te], t[te], y[te], fusion="concat", probe=p, probe_v=p,
-            metric="accuracy", n_permutations=m, seed=0)),
+            rows_, probe=p, probe_v=p, metric="accuracy", n_permutations=m, seed=0)),
     ):  # fmt: skip
         refits = 2 * b if name == "label" else b + 1  # V and V+T refits per permutation
         ref_refits = 2 * k if name == "label" else k + 1
         ours, _ = best_of(lambda c=call: c(probe, b), 1, f"logistic {name}")
-        ref, _ = best_of(lambda c=call: c(LoopLogistic(probe), k), 1, f"ref {name}")
+        ref, _ = best_of(lambda c=call: c(loop, k), 1, f"ref {name}")
         rows.append(
             (f"logistic {name} permutations ({b}), per refit", ours / refits,
              f"sklearn lbfgs loop ({k})", ref / ref_refits)
@@ -122,6 +123,7 @@ def main() -> None:
     y = v[:, :8].sum(axis=1) + 0.8 * t[:, :8].sum(axis=1) + rng.standard_normal(n)
     tr, te = np.arange(args.n_train), np.arange(args.n_train, n)
     vt = fuse("concat", v, t)
+    paired = PairedRows(v[tr], t[tr], y[tr], v[te], t[te], y[te])
     lambdas = np.logspace(-1, 3, 5)
     seed = 0
 
@@ -132,8 +134,7 @@ def main() -> None:
             y[te], pv.predict(v[te]), pvt.predict(vt[te]), "r2", args.resamples, seed
         )
         ctrl = tactile_permutation_control(
-            v[tr], t[tr], y[tr], v[te], t[te], y[te], fusion="concat",
-            probe=FixedRidge(pvt.lam), probe_v=FixedRidge(pv.lam), metric="r2",
+            paired, probe=FixedRidge(pvt.lam), probe_v=FixedRidge(pv.lam), metric="r2",
             n_permutations=args.permutations, seed=seed,
         )  # fmt: skip
         return pv, pvt, boot, ctrl
@@ -184,13 +185,7 @@ def main() -> None:
     )
     t_ctrl, ctrl = best_of(
         lambda: tactile_permutation_control(
-            v[tr],
-            t[tr],
-            y[tr],
-            v[te],
-            t[te],
-            y[te],
-            fusion="concat",
+            paired,
             probe=FixedRidge(pvt.lam),
             probe_v=FixedRidge(pv.lam),
             metric="r2",
@@ -202,19 +197,12 @@ def main() -> None:
     )
     t_chol, chol = best_of(
         lambda: tactile_permutation_control(
-            v[tr],
-            t[tr],
-            y[tr],
-            v[te],
-            t[te],
-            y[te],
-            fusion="concat",
-            probe=FixedRidge(pvt.lam),
+            paired,
+            probe=FixedRidge(pvt.lam, solver="cholesky"),
             probe_v=FixedRidge(pv.lam),
             metric="r2",
             n_permutations=args.permutations,
             seed=seed,
-            solver="cholesky",
         ),  # fmt: skip
         1,
         "chol",

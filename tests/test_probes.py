@@ -16,7 +16,18 @@ from sklearn.model_selection import GridSearchCV
 from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import StandardScaler
 
-from tacgen_lib.probes import linear as probes
+from tacgen_lib.probes.batched import block_basis, fit_logistic_batch
+from tacgen_lib.probes.folds import make_folds
+from tacgen_lib.probes.logistic import fit_logistic
+from tacgen_lib.probes.metrics import accuracy, r2
+from tacgen_lib.probes.objective import DesignBlock, standardise_block
+from tacgen_lib.probes.ridge import (
+    FixedRidge,
+    fit_ridge_probe,
+    ridge_fixed,
+    ridge_path,
+    select_lambda_cv,
+)
 
 
 def ridge_reference(X, y, lam):
@@ -42,7 +53,7 @@ LAMBDAS = [1e-2, 1.0, 10.0, 100.0, 1e3]
 @pytest.mark.parametrize("n,p", [(60, 12), (25, 70)])
 def test_ridge_path_equals_sklearn_ridge(n, p):
     X, y = regression_data(n, p)
-    path = probes.ridge_path(X, y, LAMBDAS)
+    path = ridge_path(X, y, LAMBDAS)
     preds = path.predict(X)
     for i, lam in enumerate(LAMBDAS):
         ref = Ridge(alpha=lam).fit(X, y)
@@ -75,7 +86,7 @@ def _hard_case(name):
 )
 def test_ridge_path_hard_cases_match_float64_reference_and_sklearn(case):
     X, y, lams = _hard_case(case)
-    path = probes.ridge_path(X, y, lams)
+    path = ridge_path(X, y, lams)
     preds = path.predict(X)
     assert np.isfinite(path.coefs).all() and np.isfinite(preds).all()
     for i, lam in enumerate(lams):
@@ -97,7 +108,7 @@ def test_ridge_path_hard_cases_match_float64_reference_and_sklearn(case):
 def test_ridge_path_property_equals_sklearn(n, p, log_lam, seed):
     X, y = regression_data(n, p, seed)
     lam = 10.0**log_lam
-    path = probes.ridge_path(X, y, [lam])
+    path = ridge_path(X, y, [lam])
     ref = Ridge(alpha=lam, solver="svd").fit(X, y)
     np.testing.assert_allclose(path.predict(X)[0], ref.predict(X), rtol=1e-8, atol=1e-8)
     np.testing.assert_allclose(path.coefs[0], ref.coef_, rtol=1e-7, atol=1e-8)
@@ -119,7 +130,7 @@ def test_select_lambda_cv_equals_gridsearchcv(n, p, lams, dup, expected):
     X, y = regression_data(n, p, seed=5)
     if dup:
         X[1::4] = X[0::4]  # rows 4k+1 duplicate rows 4k, with other targets
-    sel = probes.select_lambda_cv(X, y, lams, n_folds=5, seed=11)
+    sel = select_lambda_cv(X, y, lams, n_folds=5, seed=11)
     cv = [(np.setdiff1d(np.arange(n), f), f) for f in sel.folds]
     gs = GridSearchCV(Ridge(solver="svd"), {"alpha": lams}, cv=cv).fit(X, y)
     assert sel.lam == gs.best_params_["alpha"]
@@ -128,22 +139,22 @@ def test_select_lambda_cv_equals_gridsearchcv(n, p, lams, dup, expected):
 
 
 def test_folds_are_deterministic_partitions():
-    a = probes.make_folds(103, 5, seed=4)
-    b = probes.make_folds(103, 5, seed=4)
+    a = make_folds(103, 5, seed=4)
+    b = make_folds(103, 5, seed=4)
     assert all(np.array_equal(x, y) for x, y in zip(a, b, strict=True))
     assert np.array_equal(np.sort(np.concatenate(a)), np.arange(103))
     labels = np.repeat([0, 1, 2], [50, 30, 23])
-    strat = probes.make_folds(103, 5, seed=4, labels=labels)
+    strat = make_folds(103, 5, seed=4, labels=labels)
     for f in strat:
         assert set(np.bincount(labels[f], minlength=3)) <= {4, 5, 6, 10, 11}
 
 
 def test_fit_ridge_probe_refit_equals_sklearn():
     X, y = regression_data(90, 20, seed=2)
-    probe = probes.fit_ridge_probe(X[:70], y[:70], LAMBDAS, seed=1)
+    probe = fit_ridge_probe(X[:70], y[:70], LAMBDAS, seed=1)
     ref = Ridge(alpha=probe.lam).fit(X[:70], y[:70])
     np.testing.assert_allclose(probe.predict(X[70:]), ref.predict(X[70:]), rtol=1e-9)
-    fixed = probes.FixedRidge(probe.lam).fit_predict(X[:70], y[:70], X[70:])
+    fixed = FixedRidge(probe.lam).fit_predict(X[:70], y[:70], X[70:])
     np.testing.assert_allclose(fixed, ref.predict(X[70:]), rtol=1e-9)
 
 
@@ -153,7 +164,7 @@ def test_fit_ridge_probe_refit_equals_sklearn():
 def test_ridge_fixed_multi_target_equals_sklearn(n, p, lam):
     X, y = regression_data(n, p, seed=8)
     Y = np.column_stack([y, y[::-1], 2 * y + 1])
-    coef, icpt, _ = probes.ridge_fixed(X, Y, lam)
+    coef, icpt, _ = ridge_fixed(X, Y, lam)
     ref = Ridge(alpha=lam, solver="svd").fit(X, Y)
     np.testing.assert_allclose(coef.T, ref.coef_, rtol=1e-8, atol=1e-10)
     np.testing.assert_allclose(icpt, ref.intercept_, rtol=1e-8)
@@ -162,13 +173,13 @@ def test_ridge_fixed_multi_target_equals_sklearn(n, p, lam):
 def test_metrics_equal_sklearn_and_constant_target_rule():
     rng = np.random.default_rng(0)
     y, p = rng.standard_normal(30), rng.standard_normal(30)
-    assert probes.r2(y, p) == pytest.approx(r2_score(y, p), rel=1e-12)
+    assert r2(y, p) == pytest.approx(r2_score(y, p), rel=1e-12)
     labels = rng.integers(0, 3, 30)
     guess = rng.integers(0, 3, 30)
-    assert probes.accuracy(labels, guess) == accuracy_score(labels, guess)
+    assert accuracy(labels, guess) == accuracy_score(labels, guess)
     const = np.full(7, 0.1)  # mean of 0.1s rounds; constancy must still be recognised
-    assert probes.r2(const, const) == 1.0
-    assert probes.r2(const, const + 1.0) == 0.0
+    assert r2(const, const) == 1.0
+    assert r2(const, const + 1.0) == 0.0
 
 
 @pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
@@ -177,24 +188,24 @@ def test_non_finite_feature_names_the_sample(bad):
     X[7, 2] = bad
     ids = [f"p-{i:04d}" for i in range(12)]
     with pytest.raises(ValueError, match=r"sample_id 'p-0007'.*column 2"):
-        probes.ridge_path(X, y, [1.0], sample_ids=ids)
+        ridge_path(X, y, [1.0], sample_ids=ids)
     with pytest.raises(ValueError, match=r"sample_id 'p-0007'"):
-        probes.select_lambda_cv(X, y, [1.0], sample_ids=ids)
+        select_lambda_cv(X, y, [1.0], sample_ids=ids)
     with pytest.raises(ValueError, match=r"sample_id 'p-0007'"):
-        probes.fit_logistic(X, (y > 0).astype(int), [1.0], seed=0, sample_ids=ids)
+        fit_logistic(X, (y > 0).astype(int), [1.0], seed=0, sample_ids=ids)
 
 
 def test_shape_mismatches_are_named():
     X, y = regression_data(12, 4)
     with pytest.raises(ValueError, match=r"y: 11 targets for 12 feature rows"):
-        probes.ridge_path(X, y[:11], [1.0])
+        ridge_path(X, y[:11], [1.0])
     with pytest.raises(ValueError, match=r"12 rows but 3 sample_ids"):
-        probes.ridge_path(X, y, [1.0], sample_ids=["a", "b", "c"])
-    path = probes.ridge_path(X, y, [1.0])
+        ridge_path(X, y, [1.0], sample_ids=["a", "b", "c"])
+    path = ridge_path(X, y, [1.0])
     with pytest.raises(ValueError, match=r"X_new: 5 features, the path was fitted on 4"):
         path.predict(np.ones((2, 5)))
     with pytest.raises(ValueError, match=r"lambdas"):
-        probes.ridge_path(X, y, [0.0])
+        ridge_path(X, y, [0.0])
 
 
 def separable_three_class(n_per=30, seed=0):
@@ -236,10 +247,10 @@ def test_logistic_separable_converges_without_warnings_and_matches_reference():
     X, y = separable_three_class()
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # any swallowed-then-leaked warning fails the test
-        probe = probes.fit_logistic(X, y, [0.1, 1.0, 10.0], seed=0)
+        probe = fit_logistic(X, y, [0.1, 1.0, 10.0], seed=0)
     assert probe.converged and probe.cv_converged
     assert 0 < probe.n_iter < probe.fit.max_iter
-    assert probes.accuracy(y, probe.predict(X)) == 1.0
+    assert accuracy(y, probe.predict(X)) == 1.0
     ref = logistic_reference_proba(X, y, probe.C)
     np.testing.assert_allclose(probe.predict_proba(X), ref, atol=1e-4)
 
@@ -248,10 +259,10 @@ def test_logistic_raises_max_iter_instead_of_swallowing():
     X, y = separable_three_class(seed=1)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        probe = probes.fit_logistic(X, y, [10.0], seed=0, max_iter=2)
+        probe = fit_logistic(X, y, [10.0], seed=0, max_iter=2)
     assert probe.converged and probe.fit.max_iter > 2
     with pytest.warns(ConvergenceWarning, match="did not converge within max_iter=2"):
-        capped = probes.fit_logistic(X, y, [10.0], seed=0, max_iter=1, max_iter_cap=2)
+        capped = fit_logistic(X, y, [10.0], seed=0, max_iter=1, max_iter_cap=2)
     assert not capped.converged and not capped.cv_converged
 
 
@@ -260,8 +271,8 @@ def test_logistic_C_selection_equals_gridsearchcv_on_same_folds():
     X = rng.standard_normal((120, 6))
     y = np.digitize(X[:, 0] + X[:, 1] + 0.8 * rng.standard_normal(120), [-0.7, 0.7])
     grid = [1e-3, 1e-2, 0.1, 1.0]
-    probe = probes.fit_logistic(X, y, grid, seed=3)
-    folds = probes.make_folds(120, 5, 3, labels=y)
+    probe = fit_logistic(X, y, grid, seed=3)
+    folds = make_folds(120, 5, 3, labels=y)
     cv = [(np.setdiff1d(np.arange(120), f), f) for f in folds]
     pipe = Pipeline([("s", StandardScaler()), ("m", LogisticRegression(max_iter=10000, tol=1e-6))])
     gs = GridSearchCV(pipe, {"m__C": grid}, cv=cv).fit(X, y)
@@ -275,7 +286,7 @@ def test_logistic_C_selection_equals_gridsearchcv_on_same_folds():
 @pytest.mark.parametrize("n,p", [(60, 12), (25, 70)])  # primal and dual deletion paths
 def test_ridge_probe_grid_refit_equals_sklearn_at_every_lambda(n, p):
     X, y = regression_data(n + 15, p, seed=9)
-    probe = probes.fit_ridge_probe(X[:n], y[:n], LAMBDAS, seed=2)
+    probe = fit_ridge_probe(X[:n], y[:n], LAMBDAS, seed=2)
     assert set(probe.selection.solver) == {"deletion"}
     grid = probe.predict_grid(X[n:])
     for i, lam in enumerate(LAMBDAS):
@@ -356,12 +367,12 @@ def test_logistic_batch_equals_sklearn_on_permuted_targets(n_classes, C):
     X = rng.standard_normal((90, 7)) * rng.uniform(0.1, 20, 7) + rng.uniform(-50, 50, 7)
     y = np.digitize(X[:, 0] / X[:, 0].std() + rng.standard_normal(90), [-0.5, 0.5][: n_classes - 1])
     perm = np.argsort(rng.random((5, 90)), axis=1)
-    blk = probes.standardise_block(X)
+    blk = standardise_block(X)
     scaler = StandardScaler().fit(X)
     np.testing.assert_allclose(blk.offset, scaler.mean_, rtol=1e-13)
     np.testing.assert_allclose(blk.scale, scaler.scale_, rtol=1e-12)
-    fit = probes.fit_logistic_batch([blk], y[perm], C, tol=1e-10)  # ends by tol or ftol
-    loose = probes.fit_logistic_batch([blk], y[perm], C, tol=1e-6)  # ends by tol
+    fit = fit_logistic_batch([blk], y[perm], C, tol=1e-10)  # ends by tol or ftol
+    loose = fit_logistic_batch([blk], y[perm], C, tol=1e-6)  # ends by tol
     assert fit.converged.all() and loose.converged.all()
     Z = scaler.transform(X)
     for b in range(5):
@@ -372,7 +383,7 @@ def test_logistic_batch_equals_sklearn_on_permuted_targets(n_classes, C):
         g = objective_gradient(Z, y[perm[b]], np.ones(90), loose.coef[b], loose.intercept[b], C,
                                fit.classes)  # fmt: skip
         assert np.abs(g).max() <= 1e-6  # the stopping rule, checked by an independent formula
-        test = probes.DesignBlock(X, None, blk.offset, blk.scale)
+        test = DesignBlock(X, None, blk.offset, blk.scale)
         got = fit.predict([test])[b]
         margin = np.sort(np.abs(ref.decision_function(Z)).reshape(90, -1), axis=1)
         clear = margin[:, 0] > 1e-6 if n_classes == 2 else np.ones(90, bool)
@@ -389,11 +400,11 @@ def test_logistic_batch_wide_design_low_rank_basis_equals_sklearn(n_classes):
         (n, d)
     )
     y = np.arange(n) % n_classes
-    blk = probes.standardise_block(X)
-    basis = probes._block_basis(blk, 0.25 if n_classes == 2 else 1.0 / n_classes, 1.0 / n)
+    blk = standardise_block(X)
+    basis = block_basis(blk, 0.25 if n_classes == 2 else 1.0 / n_classes, 1.0 / n)
     assert basis.dense is None and basis.vecs.shape[1] <= n  # the low-rank form is used
     perm = np.argsort(rng.random((3, n)), axis=1)
-    fit = probes.fit_logistic_batch([blk], y[perm], 1.0, tol=1e-10)
+    fit = fit_logistic_batch([blk], y[perm], 1.0, tol=1e-10)
     assert fit.converged.all()
     Z = StandardScaler().fit_transform(X)
     for b in range(3):
@@ -407,7 +418,7 @@ def test_logistic_batch_separable_converges_by_the_l2_term():
     X, y = separable_three_class(seed=2)
     y2 = (y > 0).astype(int)
     for labels, k in ((y, 3), (y2, 2)):
-        fit = probes.fit_logistic_batch([probes.standardise_block(X)], labels, 100.0, tol=1e-8)
+        fit = fit_logistic_batch([standardise_block(X)], labels, 100.0, tol=1e-8)
         assert fit.converged.all() and 0 < fit.n_iter[0] < 12800  # iterations are recorded
         n = len(labels)
         # objective at the optimum <= at zero (log K): ||coef||^2 <= 2 C n log K
@@ -417,7 +428,7 @@ def test_logistic_batch_separable_converges_by_the_l2_term():
         assert_same_optimum(
             Z, labels, np.ones(n), 100.0, fit.coef[0], fit.intercept[0], ref, fit.classes
         )
-        assert probes.accuracy(labels, fit.predict([probes.DesignBlock(Z)])[0]) == 1.0
+        assert accuracy(labels, fit.predict([DesignBlock(Z)])[0]) == 1.0
 
 
 def test_logistic_batch_weights_equal_duplicated_rows_and_own_scaler():
@@ -426,8 +437,8 @@ def test_logistic_batch_weights_equal_duplicated_rows_and_own_scaler():
     y = np.digitize(X[:, 0] + 0.3 * X[:, 2] + 0.7 * rng.standard_normal(60), [-0.4, 0.6])
     idx = rng.integers(0, 60, (4, 60))
     counts = np.stack([np.bincount(i, minlength=60) for i in idx]).astype(float)
-    blk = probes.standardise_block(X, weights=counts)
-    fit = probes.fit_logistic_batch([blk], y, 1.0, sample_weight=counts, tol=1e-10)
+    blk = standardise_block(X, weights=counts)
+    fit = fit_logistic_batch([blk], y, 1.0, sample_weight=counts, tol=1e-10)
     for b in range(4):
         scaler = StandardScaler().fit(X[idx[b]])
         np.testing.assert_allclose(blk.offset[b], scaler.mean_, rtol=1e-12, atol=1e-12)
@@ -445,6 +456,6 @@ def test_logistic_batch_refuses_a_problem_missing_a_class():
     w = np.ones((3, 20))
     w[1, y == 2] = 0.0  # resample 1 holds classes 0 and 1 only
     with pytest.raises(ValueError, match="problem 1 holds 2 of 3 classes; refit it alone"):
-        probes.fit_logistic_batch([probes.standardise_block(X)], y, 1.0, sample_weight=w)
+        fit_logistic_batch([standardise_block(X)], y, 1.0, sample_weight=w)
     with pytest.raises(ValueError, match="single class"):
-        probes.fit_logistic_batch([probes.standardise_block(X)], np.zeros(20), 1.0)
+        fit_logistic_batch([standardise_block(X)], np.zeros(20), 1.0)

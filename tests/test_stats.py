@@ -7,9 +7,22 @@ import pytest
 import scipy.stats
 from sklearn.metrics import accuracy_score, r2_score
 
-from tacgen_lib.probes import stats
+from tacgen_lib.probes.batched import concat_ridge_permuted
+from tacgen_lib.probes.bootstrap import fixed_test_bootstrap, resample_indices
+from tacgen_lib.probes.controls import (
+    PairedRows,
+    label_permutation_control,
+    paper_criterion,
+    random_feature_control,
+    tactile_permutation_control,
+    train_resample_diagnostic,
+)
 from tacgen_lib.probes.fusion import fuse
-from tacgen_lib.probes.linear import FixedLogistic, FixedRidge, r2
+from tacgen_lib.probes.logistic import FixedLogistic
+from tacgen_lib.probes.metrics import r2
+from tacgen_lib.probes.objective import DesignBlock
+from tacgen_lib.probes.refits import Refits
+from tacgen_lib.probes.ridge import FixedRidge
 
 
 def make_preds(n=80, seed=0):
@@ -41,8 +54,8 @@ def test_bootstrap_equals_scipy_percentile_ci_on_identical_resamples():
         (np.arange(y.size),), delta_r2, n_resamples=2000, vectorized=True,
         method="percentile", rng=np.random.default_rng(5),
     )  # fmt: skip
-    got = stats.fixed_test_bootstrap(y, pv, pvt, "r2", n_resamples=2000, seed=5)
-    idx = stats.resample_indices(y.size, 2000, seed=5)
+    got = fixed_test_bootstrap(y, pv, pvt, "r2", n_resamples=2000, seed=5)
+    idx = resample_indices(y.size, 2000, seed=5)
     assert np.array_equal(np.concatenate(seen), idx)  # same Generator call -> same resamples
     assert got["ci_low"] == pytest.approx(ref.confidence_interval.low, rel=1e-12)
     assert got["ci_high"] == pytest.approx(ref.confidence_interval.high, rel=1e-12)
@@ -53,8 +66,8 @@ def test_bootstrap_equals_plain_loop_reference(metric):
     y, pv, pvt = make_preds(60, seed=1)
     if metric == "accuracy":
         y, pv, pvt = (np.digitize(a, [-0.5, 0.5]) for a in (y, pv, pvt))
-    got = stats.fixed_test_bootstrap(y, pv, pvt, metric, 500, seed=2, return_distribution=True)
-    idx = stats.resample_indices(y.size, 500, seed=2)
+    got = fixed_test_bootstrap(y, pv, pvt, metric, 500, seed=2, return_distribution=True)
+    idx = resample_indices(y.size, 500, seed=2)
     ref = delta_loop(metric, y, pv, pvt, idx)
     np.testing.assert_allclose(got["deltas"], ref, rtol=1e-12, atol=1e-14)
     lo, hi = np.quantile(ref, [0.025, 0.975])
@@ -68,9 +81,9 @@ def test_bootstrap_equals_plain_loop_reference(metric):
 def test_stratified_resamples_keep_strata_and_match_loop():
     y, pv, pvt = make_preds(45, seed=3)
     strata = np.repeat(["cube-dense-s", "sphere-soft-m", "cyl-dense-l"], [20, 15, 10])
-    idx = stats.resample_indices(45, 300, seed=9, strata=strata)
+    idx = resample_indices(45, 300, seed=9, strata=strata)
     assert np.all(strata[idx] == strata[None, :])  # every column drawn from its own stratum
-    got = stats.fixed_test_bootstrap(y, pv, pvt, "r2", 300, 9, strata, return_distribution=True)
+    got = fixed_test_bootstrap(y, pv, pvt, "r2", 300, 9, strata, return_distribution=True)
     np.testing.assert_allclose(got["deltas"], delta_loop("r2", y, pv, pvt, idx), rtol=1e-12)
 
 
@@ -79,7 +92,7 @@ def test_constant_target_resample_is_defined_and_finite():
     pv = np.array([2.0, 2.0, 2.0, 4.0, 8.0])  # exact on the constant rows
     pvt = np.array([2.5, 2.0, 1.0, 5.0, 7.0])
     idx = np.array([[0, 1, 2, 0, 1], [0, 0, 0, 0, 0], [1, 2, 3, 4, 0], [3, 3, 3, 3, 3]])
-    got = stats.fixed_test_bootstrap(y, pv, pvt, "r2", indices=idx, return_distribution=True)
+    got = fixed_test_bootstrap(y, pv, pvt, "r2", indices=idx, return_distribution=True)
     # Resamples 0 and 1 are constant (y = 2): V exact -> R2 := 1, V+T off on row 0 -> 0.
     # Resample 3 is constant (y = 5): V off -> 0, V+T exact -> 1. Resample 2 is ordinary.
     ref = [0.0 - 1.0, 0.0 - 1.0, r2(y[idx[2]], pvt[idx[2]]) - r2(y[idx[2]], pv[idx[2]]), 1.0]
@@ -93,7 +106,7 @@ def test_single_class_resample_accuracy():
     y = np.array([0, 0, 1, 2])
     pv, pvt = np.array([0, 1, 1, 2]), np.array([0, 0, 2, 2])
     idx = np.array([[0, 1, 0, 1], [0, 1, 2, 3]])
-    got = stats.fixed_test_bootstrap(y, pv, pvt, "accuracy", indices=idx, return_distribution=True)
+    got = fixed_test_bootstrap(y, pv, pvt, "accuracy", indices=idx, return_distribution=True)
     np.testing.assert_allclose(got["deltas"], [1.0 - 0.5, 0.75 - 0.75])
 
 
@@ -110,10 +123,9 @@ def control_data(n_tr=70, n_te=40, dv=6, dt=9, seed=0):
 )  # primal refit loop (p < n); batched dual kernel path (p >= n) by PCG or Cholesky
 def test_tactile_permutation_fast_path_equals_refit_loop(dims, solver):
     v_tr, t_tr, y_tr, v_te, t_te, y_te = control_data(dv=dims[0], dt=dims[1])
-    kw = dict(fusion="concat", metric="r2", n_permutations=12, seed=4, solver=solver)
-    fast = stats.tactile_permutation_control(
-        v_tr, t_tr, y_tr, v_te, t_te, y_te, probe=FixedRidge(2.0), **kw
-    )
+    kw = dict(metric="r2", n_permutations=12, seed=4)
+    rows = PairedRows(v_tr, t_tr, y_tr, v_te, t_te, y_te)
+    fast = tactile_permutation_control(rows, probe=FixedRidge(2.0, solver=solver), **kw)
     rng = np.random.default_rng(4)  # the documented draw: train permutations, then test
     p_tr = np.argsort(rng.random((12, 70)), axis=1, kind="stable")
     p_te = np.argsort(rng.random((12, 40)), axis=1, kind="stable")
@@ -135,10 +147,10 @@ def test_pcg_stragglers_fall_back_to_cholesky():
     p_tr = np.argsort(rng.random((6, 70)), axis=1)
     p_te = np.argsort(rng.random((6, 40)), axis=1)
     args = (v_tr, t_tr, y_tr, v_te, t_te, 1e-3, p_tr, p_te)
-    capped, info = stats._concat_ridge_permuted(*args, solver="pcg", max_iter=3, deflate=4)
+    capped, info = concat_ridge_permuted(*args, solver="pcg", max_iter=3, deflate=4)
     assert info == {"pcg_iterations": 3, "cholesky_solves": 6}  # none converged: all direct
-    direct, _ = stats._concat_ridge_permuted(*args, solver="cholesky")
-    pcg, info = stats._concat_ridge_permuted(*args, solver="pcg", max_iter=500)
+    direct, _ = concat_ridge_permuted(*args, solver="cholesky")
+    pcg, info = concat_ridge_permuted(*args, solver="pcg", max_iter=500)
     assert info["cholesky_solves"] == 0
     np.testing.assert_allclose(capped, direct, rtol=1e-12)
     np.testing.assert_allclose(pcg, direct, rtol=1e-7, atol=1e-8)
@@ -155,10 +167,10 @@ def test_pcg_preconditioner_any_deflation_converges_to_cholesky(deflate):
     p_tr = np.argsort(rng.random((7, 90)), axis=1)
     p_te = np.argsort(rng.random((7, 40)), axis=1)
     args = (v_tr, t_tr, y_tr, v_te, t_te, 0.5, p_tr, p_te)
-    direct, _ = stats._concat_ridge_permuted(*args, solver="cholesky")
+    direct, _ = concat_ridge_permuted(*args, solver="cholesky")
     # residual tolerance far below the default 1e-10: the claim is convergence to the same
     # solution, so the comparison must not hinge on kappa x 1e-10 and this CPU's rounding
-    pcg, info = stats._concat_ridge_permuted(*args, tol=1e-13, max_iter=400, deflate=deflate)
+    pcg, info = concat_ridge_permuted(*args, tol=1e-13, max_iter=400, deflate=deflate)
     assert info["cholesky_solves"] == 0
     np.testing.assert_allclose(pcg, direct, rtol=1e-8, atol=1e-9)
     if deflate >= 60:
@@ -168,14 +180,11 @@ def test_pcg_preconditioner_any_deflation_converges_to_cholesky(deflate):
 def test_tactile_permutation_generic_fusion_and_logistic():
     v_tr, t_tr, y_tr, v_te, t_te, y_te = control_data(dt=6)
     c_tr, c_te = (y_tr > 0).astype(int), (y_te > 0).astype(int)
-    out = stats.tactile_permutation_control(
-        v_tr, t_tr, c_tr, v_te, t_te, c_te, fusion="mean", probe=FixedLogistic(1.0),
-        metric="accuracy", n_permutations=5, seed=1,
-    )  # fmt: skip
-    again = stats.tactile_permutation_control(
-        v_tr, t_tr, c_tr, v_te, t_te, c_te, fusion="mean", probe=FixedLogistic(1.0),
-        metric="accuracy", n_permutations=5, seed=1,
-    )  # fmt: skip
+    rows = PairedRows(v_tr, t_tr, c_tr, v_te, t_te, c_te, fusion="mean")
+    kw = dict(probe=FixedLogistic(1.0), metric="accuracy", n_permutations=5, seed=1)
+    out = tactile_permutation_control(rows, **kw)
+    again = tactile_permutation_control(rows, **kw)
+    assert out["solver"] == {"refits": 5}  # mean fusion is not linear in the blocks: a loop
     assert np.array_equal(out["deltas"], again["deltas"])  # seeded => identical
     assert out["deltas"].shape == (5,) and np.isfinite(out["deltas"]).all()
 
@@ -183,9 +192,9 @@ def test_tactile_permutation_generic_fusion_and_logistic():
 def test_label_permutation_batched_equals_loop():
     v_tr, t_tr, y_tr, v_te, t_te, y_te = control_data()
     x_tr, x_te = fuse("concat", v_tr, t_tr), fuse("concat", v_te, t_te)
-    out = stats.label_permutation_control(
-        v_tr, x_tr, y_tr, v_te, x_te, y_te, probe_v=FixedRidge(1.0), probe_vt=FixedRidge(3.0),
-        metric="r2", n_permutations=10, seed=6,
+    out = label_permutation_control(
+        PairedRows(v_tr, t_tr, y_tr, v_te, t_te, y_te), probe_v=FixedRidge(1.0),
+        probe_vt=FixedRidge(3.0), metric="r2", n_permutations=10, seed=6,
     )  # fmt: skip
     perm = np.argsort(np.random.default_rng(6).random((10, 70)), axis=1, kind="stable")
     ref = [
@@ -199,9 +208,9 @@ def test_label_permutation_batched_equals_loop():
 
 def test_random_feature_control_is_seeded_and_dimension_matched():
     v_tr, t_tr, y_tr, v_te, t_te, y_te = control_data()
-    kw = dict(fusion="concat", probe=FixedRidge(1.0), metric="r2", n_draws=4, seed=2)
-    a = stats.random_feature_control(v_tr, t_tr, y_tr, v_te, t_te, y_te, **kw)
-    b = stats.random_feature_control(v_tr, t_tr, y_tr, v_te, t_te, y_te, **kw)
+    kw = dict(probe=FixedRidge(1.0), metric="r2", n_draws=4, seed=2)
+    a = random_feature_control(PairedRows(v_tr, t_tr, y_tr, v_te, t_te, y_te), **kw)
+    b = random_feature_control(PairedRows(v_tr, t_tr, y_tr, v_te, t_te, y_te), **kw)
     assert np.array_equal(a["deltas"], b["deltas"])
     rng = np.random.default_rng(2)
     mu, sd = t_tr.mean(axis=0), t_tr.std(axis=0)
@@ -215,11 +224,11 @@ def test_random_feature_control_is_seeded_and_dimension_matched():
 def test_train_resample_diagnostic_equals_loop():
     v_tr, t_tr, y_tr, v_te, t_te, y_te = control_data()
     x_tr, x_te = fuse("concat", v_tr, t_tr), fuse("concat", v_te, t_te)
-    out = stats.train_resample_diagnostic(
-        v_tr, x_tr, y_tr, v_te, x_te, y_te, probe_v=FixedRidge(1.0), probe_vt=FixedRidge(1.0),
-        metric="r2", n_resamples=8, seed=3,
+    out = train_resample_diagnostic(
+        PairedRows(v_tr, t_tr, y_tr, v_te, t_te, y_te), probe_v=FixedRidge(1.0),
+        probe_vt=FixedRidge(1.0), metric="r2", n_resamples=8, seed=3,
     )  # fmt: skip
-    idx = stats.resample_indices(70, 8, seed=3)
+    idx = resample_indices(70, 8, seed=3)
     ref = [
         r2_score(y_te, FixedRidge(1.0).fit_predict(x_tr[i], y_tr[i], x_te))
         - r2_score(y_te, FixedRidge(1.0).fit_predict(v_tr[i], y_tr[i], v_te))
@@ -240,21 +249,21 @@ def test_train_resample_diagnostic_equals_loop():
     ],
 )
 def test_paper_criterion(delta, ci_low, ctrl, expected):
-    assert stats.paper_criterion(delta, ci_low, ctrl) is expected
+    assert paper_criterion(delta, ci_low, ctrl) is expected
 
 
 def test_criterion_and_bootstrap_refuse_non_finite():
     with pytest.raises(ValueError, match="ci_low is nan"):
-        stats.paper_criterion(0.1, float("nan"), 0.0)
+        paper_criterion(0.1, float("nan"), 0.0)
     y, pv, pvt = make_preds(10)
     pv[3] = np.inf
     with pytest.raises(ValueError, match="pred_v is non-finite at test row 3"):
-        stats.fixed_test_bootstrap(y, pv, pvt, "r2", 10)
+        fixed_test_bootstrap(y, pv, pvt, "r2", 10)
     ids = [f"t-{i}" for i in range(10)]
     with pytest.raises(ValueError, match="pred_v is non-finite at test sample_id 't-3'"):
-        stats.fixed_test_bootstrap(y, pv, pvt, "r2", 10, sample_ids=ids)
+        fixed_test_bootstrap(y, pv, pvt, "r2", 10, sample_ids=ids)
     with pytest.raises(ValueError, match="metric must be"):
-        stats.fixed_test_bootstrap(y, pvt, pvt, "mse", 10)
+        fixed_test_bootstrap(y, pvt, pvt, "mse", 10)
 
 
 # ------------------------------------------------------------------ batched logistic controls
@@ -271,8 +280,8 @@ def class_data(n_tr=80, n_te=40, seed=0, n_classes=2):
 @pytest.mark.parametrize("n_classes", [2, 3])
 def test_logistic_tactile_permutation_batched_equals_refit_loop(n_classes):
     v_tr, t_tr, y_tr, v_te, t_te, y_te = class_data(n_classes=n_classes)
-    kw = dict(fusion="concat", metric="accuracy", n_permutations=6, seed=4, probe=TIGHT)
-    fast = stats.tactile_permutation_control(v_tr, t_tr, y_tr, v_te, t_te, y_te, **kw)
+    kw = dict(metric="accuracy", n_permutations=6, seed=4, probe=TIGHT)
+    fast = tactile_permutation_control(PairedRows(v_tr, t_tr, y_tr, v_te, t_te, y_te), **kw)
     assert fast["solver"] == {"batched_logistic": 6}  # one shared design: batched
     rng = np.random.default_rng(4)
     p_tr = np.argsort(rng.random((6, 80)), axis=1, kind="stable")
@@ -290,8 +299,8 @@ def test_logistic_tactile_permutation_batched_equals_refit_loop(n_classes):
 def test_logistic_label_permutation_batched_equals_refit_loop():
     v_tr, t_tr, y_tr, v_te, t_te, y_te = class_data(n_classes=3, seed=1)
     x_tr, x_te = fuse("concat", v_tr, t_tr), fuse("concat", v_te, t_te)
-    out = stats.label_permutation_control(
-        v_tr, x_tr, y_tr, v_te, x_te, y_te, probe_v=TIGHT, probe_vt=TIGHT,
+    out = label_permutation_control(
+        PairedRows(v_tr, t_tr, y_tr, v_te, t_te, y_te), probe_v=TIGHT, probe_vt=TIGHT,
         metric="accuracy", n_permutations=6, seed=6,
     )  # fmt: skip
     perm = np.argsort(np.random.default_rng(6).random((6, 80)), axis=1, kind="stable")
@@ -303,8 +312,8 @@ def test_logistic_label_permutation_batched_equals_refit_loop():
 
 def test_logistic_random_features_batched_equals_refit_loop():
     v_tr, t_tr, y_tr, v_te, t_te, y_te = class_data(seed=2)
-    kw = dict(fusion="concat", metric="accuracy", n_draws=4, seed=2)
-    fast = stats.random_feature_control(v_tr, t_tr, y_tr, v_te, t_te, y_te, probe=TIGHT, **kw)
+    kw = dict(metric="accuracy", n_draws=4, seed=2)
+    fast = random_feature_control(PairedRows(v_tr, t_tr, y_tr, v_te, t_te, y_te), probe=TIGHT, **kw)
     rng = np.random.default_rng(2)
     mu, sd = t_tr.mean(axis=0), t_tr.std(axis=0)
     loop = []
@@ -322,11 +331,11 @@ def test_logistic_train_resample_batched_equals_loop_with_missing_class_resample
     y_tr[:] = np.where(y_tr == 2, 1, y_tr)
     y_tr[:2] = 2  # a class of two rows: about one resample in eight misses it
     x_tr, x_te = fuse("concat", v_tr, t_tr), fuse("concat", v_te, t_te)
-    out = stats.train_resample_diagnostic(
-        v_tr, x_tr, y_tr, v_te, x_te, y_te, probe_v=TIGHT, probe_vt=TIGHT,
+    out = train_resample_diagnostic(
+        PairedRows(v_tr, t_tr, y_tr, v_te, t_te, y_te), probe_v=TIGHT, probe_vt=TIGHT,
         metric="accuracy", n_resamples=16, seed=3,
     )  # fmt: skip
-    idx = stats.resample_indices(30, 16, seed=3)
+    idx = resample_indices(30, 16, seed=3)
     missing = [len(np.unique(y_tr[i])) < 3 for i in idx]
     assert any(missing) and not all(missing)  # both paths are exercised
     vt = [accuracy_score(y_te, TIGHT.fit_predict(x_tr[i], y_tr[i], x_te)) for i in idx]
@@ -340,26 +349,30 @@ def test_logistic_controls_batch_only_where_the_shared_preconditioner_fits():
     problem (bootstrap weights, random blocks) batch only with at least as many rows as
     columns; ridge never goes through the logistic batch."""
     y = np.repeat([0, 1, 2], 10)
-    assert stats._batched(TIGHT, y)
-    assert stats._batched(TIGHT, y, n_features=30)
-    assert not stats._batched(TIGHT, y, n_features=31)
-    assert not stats._batched(FixedRidge(1.0), y)
+    rng = np.random.default_rng(0)
+    x30, x31 = rng.standard_normal((30, 30)), rng.standard_normal((30, 31))
+    perm = np.argsort(rng.random((4, 30)), axis=1)
+
+    def refits(x, **kw):
+        return Refits((DesignBlock(x),), (DesignBlock(x[:5]),), y, **kw)
+
+    rows = resample_indices(30, 4, seed=0)
+    assert TIGHT.batches(refits(x31))  # shared unweighted design: any width
+    assert TIGHT.batches(Refits((DesignBlock(x31), DesignBlock(x31, perm)),
+                                (DesignBlock(x31[:5]), DesignBlock(x31[:5], perm[:, :5])), y))  # fmt: skip
+    assert TIGHT.batches(refits(x30, rows=rows))
+    assert not TIGHT.batches(refits(x31, rows=rows))
+    assert not TIGHT.batches(Refits((DesignBlock(x30), DesignBlock(x30, perm)),
+                                    (DesignBlock(x30[:5]), DesignBlock(x30[:5], perm[:, :5])),
+                                    y, fusion="mean"))  # fmt: skip
+    assert not FixedRidge(1.0).batches(refits(x30, rows=rows))  # ridge: its own paths only
     v_tr, t_tr, y_tr, v_te, t_te, y_te = class_data(n_tr=12, n_classes=3, seed=5)
     wide_tr, wide_te = np.hstack([v_tr, v_tr**2, t_tr]), np.hstack([v_te, v_te**2, t_te])
     # 13 columns > 12 rows: the train resamples take the refit loop and equal scikit-learn
-    out = stats.train_resample_diagnostic(
-        v_tr,
-        wide_tr,
-        y_tr,
-        v_te,
-        wide_te,
-        y_te,
-        probe_v=TIGHT,
-        probe_vt=TIGHT,
-        metric="accuracy",
-        n_resamples=4,
-        seed=5,
-    )
-    idx = stats.resample_indices(12, 4, seed=5)
+    out = train_resample_diagnostic(
+        PairedRows(v_tr, np.hstack([v_tr**2, t_tr]), y_tr, v_te, np.hstack([v_te**2, t_te]), y_te),
+        probe_v=TIGHT, probe_vt=TIGHT, metric="accuracy", n_resamples=4, seed=5,
+    )  # fmt: skip
+    idx = resample_indices(12, 4, seed=5)
     vt = [accuracy_score(y_te, TIGHT.fit_predict(wide_tr[i], y_tr[i], wide_te)) for i in idx]
     np.testing.assert_array_equal(out["vt_scores"], vt)

@@ -2,7 +2,7 @@
 
 A linear (logistic) probe on frozen features of each backbone, fitted on the train rows and
 scored on the fixed test rows; the difference in accuracy gets a fixed-test bootstrap CI
-(tacgen_lib.probes.stats.fixed_test_bootstrap), so "pretraining helps" is a statement with an interval.
+(tacgen_lib.probes.bootstrap.fixed_test_bootstrap), so "pretraining helps" is a statement with an interval.
 """
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from tacgen_lib.probes.linear import fit_logistic
-from tacgen_lib.probes.stats import fixed_test_bootstrap
+from tacgen_lib.probes.bootstrap import fixed_test_bootstrap
+from tacgen_lib.probes.logistic import fit_logistic
 
 __all__ = ["pretrained_vs_random"]
 

@@ -3,8 +3,9 @@
 This module owns the orchestration of a probe family (``probes.families.<name>`` in config):
 which rows train and test the probes, which target is predicted, which V vs V+T comparisons
 are made, which controls run on which comparison, and how every outcome becomes one tidy row.
-The numerics it calls live in `probes` (ridge/logistic probes), `fusion` (V+T variants) and
-`stats` (bootstrap, controls, the paper's criterion); file I/O lives in the rule scripts.
+The numerics it calls live in the sibling modules `ridge` and `logistic` (the probes), `fusion`
+(V+T variants), `bootstrap` (the fixed-test CI) and `controls` (the controls and the paper's
+criterion); file I/O lives in the rule scripts.
 
 Protocol (paper, "Probes")
 - Rows: train = the corpus's ``train`` + ``val`` split (the probe has no early stopping, so
@@ -48,9 +49,19 @@ import numpy as np
 import pandas as pd
 from sklearn.exceptions import ConvergenceWarning
 
-from tacgen_lib.probes import stats
+from tacgen_lib.probes.bootstrap import fixed_test_bootstrap
+from tacgen_lib.probes.controls import (
+    PairedRows,
+    label_permutation_control,
+    paper_criterion,
+    random_feature_control,
+    tactile_permutation_control,
+    train_resample_diagnostic,
+)
 from tacgen_lib.probes.fusion import FUSIONS, fuse
-from tacgen_lib.probes.linear import FixedLogistic, FixedRidge, fit_logistic, fit_ridge_probe
+from tacgen_lib.probes.logistic import FixedLogistic, fit_logistic
+from tacgen_lib.probes.metrics import score
+from tacgen_lib.probes.ridge import FixedRidge, fit_ridge_probe
 
 __all__ = [
     "BANDS",
@@ -475,7 +486,7 @@ def compare(
     vt_probe = fit_probe(
         x_vt_tr, y_tr, x_vt_te, settings, train_ids=rows.train_ids, test_ids=rows.test_ids
     )
-    boot = stats.fixed_test_bootstrap(
+    boot = fixed_test_bootstrap(
         y_te,
         v_probe.pred_test,
         vt_probe.pred_test,
@@ -518,8 +529,8 @@ def compare(
     result = Comparison(main, pred_v=v_probe.pred_test, pred_vt=vt_probe.pred_test)
     test_v = test_vt = np.full(v_probe.grid.size, np.nan)
     if kind == "ridge":
-        test_v = np.array([stats.score("r2", y_te, p) for p in v_probe.pred_grid])
-        test_vt = np.array([stats.score("r2", y_te, p) for p in vt_probe.pred_grid])
+        test_v = np.array([score("r2", y_te, p) for p in v_probe.pred_grid])
+        test_vt = np.array([score("r2", y_te, p) for p in vt_probe.pred_grid])
     for i, reg in enumerate(v_probe.grid):
         result.sweep.append(
             {
@@ -538,22 +549,22 @@ def compare(
         return result
     fixed_v, fixed_vt = v_probe.fixed(kind), vt_probe.fixed(kind)
     common = {"metric": metric, "seed": settings.seed}
+    paired = PairedRows(v_train, t_train, y_tr, v_test, t_test, y_te, fusion)
     runs = {
-        "train_resample": (settings.train_resamples, lambda: stats.train_resample_diagnostic(
-            v_train, x_vt_tr, y_tr, v_test, x_vt_te, y_te, probe_v=fixed_v, probe_vt=fixed_vt,
-            n_resamples=settings.train_resamples, **common,
+        "train_resample": (settings.train_resamples, lambda: train_resample_diagnostic(
+            paired, probe_v=fixed_v, probe_vt=fixed_vt, n_resamples=settings.train_resamples,
+            **common,
         )),
-        "tactile_permutation": (settings.permutations, lambda: stats.tactile_permutation_control(
-            v_train, t_train, y_tr, v_test, t_test, y_te, fusion=fusion, probe=fixed_vt,
-            probe_v=fixed_v, n_permutations=settings.permutations, **common,
+        "tactile_permutation": (settings.permutations, lambda: tactile_permutation_control(
+            paired, probe=fixed_vt, probe_v=fixed_v, n_permutations=settings.permutations,
+            **common,
         )),
-        "label_permutation": (settings.label_permutations, lambda: stats.label_permutation_control(
-            v_train, x_vt_tr, y_tr, v_test, x_vt_te, y_te, probe_v=fixed_v, probe_vt=fixed_vt,
+        "label_permutation": (settings.label_permutations, lambda: label_permutation_control(
+            paired, probe_v=fixed_v, probe_vt=fixed_vt,
             n_permutations=settings.label_permutations, **common,
         )),
-        "random_features": (settings.random_draws, lambda: stats.random_feature_control(
-            v_train, t_train, y_tr, v_test, t_test, y_te, fusion=fusion, probe=fixed_vt,
-            probe_v=fixed_v, n_draws=settings.random_draws, **common,
+        "random_features": (settings.random_draws, lambda: random_feature_control(
+            paired, probe=fixed_vt, probe_v=fixed_v, n_draws=settings.random_draws, **common,
         )),
     }  # fmt: skip
     for name in CONTROLS:
@@ -580,7 +591,7 @@ def compare(
     if math.isnan(main["delta_ctrl"]):
         main["notes"] = "no tactile-permutation control (probes.permutations = 0, or it failed)"
     else:
-        main["criterion_met"] = stats.paper_criterion(
+        main["criterion_met"] = paper_criterion(
             main["delta"], main["ci_low"], main["delta_ctrl"], settings.min_delta
         )
     return result
