@@ -133,11 +133,15 @@ def main() -> None:
         boot = fixed_test_bootstrap(
             y[te], pv.predict(v[te]), pvt.predict(vt[te]), "r2", args.resamples, seed
         )
-        ctrl = tactile_permutation_control(
-            paired, probe=FixedRidge(pvt.lam), probe_v=FixedRidge(pv.lam), metric="r2",
-            n_permutations=args.permutations, seed=seed,
+        return pv, pvt, boot, permutation_control("pcg", pv, pvt)
+
+    def permutation_control(solver, pv=None, pvt=None):
+        """The ridge tactile-permutation control at the selected lambdas (kernel path)."""
+        pv, pvt = pv or selected[0], pvt or selected[1]
+        return tactile_permutation_control(
+            paired, probe=FixedRidge(pvt.lam, solver=solver), probe_v=FixedRidge(pv.lam),
+            metric="r2", n_permutations=args.permutations, seed=seed,
         )  # fmt: skip
-        return pv, pvt, boot, ctrl
 
     # pieces, each timed on its own
     t_cv, (pv, pvt) = best_of(
@@ -148,6 +152,7 @@ def main() -> None:
         args.repeats,
         "cv",
     )
+    selected = (pv, pvt)
     folds = make_folds(args.n_train, 5, seed)
     cv = [(np.setdiff1d(tr, f), f) for f in folds]
 
@@ -183,30 +188,8 @@ def main() -> None:
         args.repeats,
         "scipy",
     )
-    t_ctrl, ctrl = best_of(
-        lambda: tactile_permutation_control(
-            paired,
-            probe=FixedRidge(pvt.lam),
-            probe_v=FixedRidge(pv.lam),
-            metric="r2",
-            n_permutations=args.permutations,
-            seed=seed,
-        ),  # fmt: skip
-        1,
-        "ctrl",
-    )
-    t_chol, chol = best_of(
-        lambda: tactile_permutation_control(
-            paired,
-            probe=FixedRidge(pvt.lam, solver="cholesky"),
-            probe_v=FixedRidge(pv.lam),
-            metric="r2",
-            n_permutations=args.permutations,
-            seed=seed,
-        ),  # fmt: skip
-        1,
-        "chol",
-    )
+    t_ctrl, ctrl = best_of(lambda: permutation_control("pcg"), 1, "ctrl")
+    t_chol, chol = best_of(lambda: permutation_control("cholesky"), 1, "chol")
     assert np.allclose(chol["deltas"], ctrl["deltas"], rtol=1e-6, atol=1e-9)
     t_all, _ = best_of(whole_probe, args.repeats, "all")
 
