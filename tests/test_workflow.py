@@ -116,12 +116,12 @@ def test_changed_library_module_reruns_only_its_users(run_dir, tmp_path):
 
 
 def test_edit_to_an_indirectly_imported_module_reruns_exactly_its_users(run_dir, tmp_path):
-    """fusion.py is imported by no script, only through probes.protocol and report.probes."""
+    """controls.py is imported by no script, only through probes.protocol."""
     from tacgen_lib.io.imports import import_closure
 
-    module = "tacgen_lib/probes/fusion.py"
+    module = "tacgen_lib/probes/controls.py"
     scripts = ROOT / "workflow/scripts"
-    direct = [p.name for p in scripts.glob("*.py") if "probes.fusion" in p.read_text()]
+    direct = [p.name for p in scripts.glob("*.py") if "probes.controls" in p.read_text()]
     users = {
         p.stem
         for p in scripts.glob("*.py")
