@@ -43,6 +43,7 @@ from tacgen_lib.align.heads import (
     make_optimizer,
     train_step,
 )
+from tacgen_lib.align.settings import AlignSettings
 
 PAPER_STEPS = 6000
 BATCH = 256
@@ -153,12 +154,9 @@ def time_fit(in_dim: int, steps: int) -> float:
         np.arange(n_train, n_train + n_val),
         tau=0.07,
         seed=0,
-        budget="steps",
-        epochs=1,
-        steps=steps,
-        batch_size=BATCH,
-        patience=0,
-        eval_every=50,
+        settings=AlignSettings(
+            budget="steps", steps=steps, batch_size=BATCH, patience=0, eval_every=50
+        ),  # fmt: skip
     )
     return res.seconds / steps
 

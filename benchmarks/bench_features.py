@@ -30,6 +30,7 @@ from sklearn.preprocessing import StandardScaler
 
 from tacgen_lib.features.dino import pretrain_dino
 from tacgen_lib.features.extract import extract_features, pixel_features
+from tacgen_lib.features.settings import DinoSettings
 from tacgen_lib.features.vit import build_vit
 
 
@@ -91,12 +92,9 @@ def dino_cost(args: argparse.Namespace) -> None:
     frames, _ = shapes_dataset(args.dino_n, args.image_size, seed=1)
     res = pretrain_dino(
         frames,
+        DinoSettings(epochs=2, batch_size=64, lr=1e-3, seed=0),
         arch=args.dino_arch,
         image_size=args.image_size,
-        epochs=2,
-        batch_size=64,
-        lr=1e-3,
-        seed=0,
     )
     secs = [r["seconds"] for r in res.curve]
     print(f"\n[2] DINO pretraining, {args.dino_arch}, {args.dino_n} frames, {args.image_size} px")
@@ -117,12 +115,9 @@ def probe(args: argparse.Namespace) -> None:
     t0 = time.perf_counter()
     res = pretrain_dino(
         frames[tr],
+        DinoSettings(epochs=args.dino_epochs, batch_size=64, lr=args.dino_lr, seed=0),
         arch=args.dino_arch,
         image_size=size,
-        epochs=args.dino_epochs,
-        batch_size=64,
-        lr=args.dino_lr,
-        seed=0,
         progress=lambda m: print("   ", m),
     )
     print(f"    pretraining took {time.perf_counter() - t0:.0f} s")

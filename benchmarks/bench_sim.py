@@ -43,7 +43,7 @@ def pressed_states(n: int):
     model = mujoco.MjModel.from_xml_string(xml)
     model.light_castshadow[:] = 0
     rt = physics.SceneRuntime(scene, model)
-    cfg = corpus._config(dict(PAIRED, n=n))
+    cfg = corpus.CorpusSettings.from_config(dict(PAIRED, n=n))
     states = []
     for i in range(n):
         spec = corpus.sample_spec(cfg, scene, i)
@@ -62,7 +62,7 @@ def frames(method: str, n_frames: int, n_states: int = 40) -> float:
     bg = tactile.sensor_background([1, 0, 0xB6], optics.image_size)
     renderer = None
     if method == "depth":
-        corpus._prefer_headless_egl()
+        corpus.prefer_headless_egl()
         renderer = mujoco.Renderer(rt.model, *optics.image_size)
         renderer.enable_depth_rendering()
         cam = mujoco.mj_name2id(rt.model, mujoco.mjtObj.mjOBJ_CAMERA, "gel_cam")

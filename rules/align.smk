@@ -51,22 +51,7 @@ rule train_heads:
         mem_mb=4000,
         runtime=60,
     params:
-        feature=ALIGN["features"],
-        train={
-            k: ALIGN[k]
-            for k in (
-                "budget",
-                "epochs",
-                "steps",
-                "batch_size",
-                "lr",
-                "weight_decay",
-                "warmup_frac",
-                "clip_grad",
-                "patience",
-                "eval_every",
-            )
-        },
+        settings=ALIGN,  # the whole subtree; tacgen_lib.align.settings reads it
     script:
         "../workflow/scripts/train_heads.py"
 
@@ -96,7 +81,7 @@ rule project_aligned:
         mem_mb=2000,
         runtime=10,
     params:
-        feature=ALIGN["features"],
+        settings=ALIGN,
     script:
         "../workflow/scripts/project_aligned.py"
 

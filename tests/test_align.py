@@ -31,6 +31,7 @@ from tacgen_lib.align.heads import (
     save_heads,
 )
 from tacgen_lib.align.retrieval import paired_retrieval
+from tacgen_lib.align.settings import AlignSettings
 
 
 def near_duplicate_pairs(batch: int, dim: int, scale: float, seed: int = 0):
@@ -237,9 +238,6 @@ def synthetic_pairs(n: int, dv: int, dt: int, noise: float, seed: int):
     return v, t
 
 
-FAST = dict(batch_size=64, lr=1e-3, weight_decay=0.01, warmup_frac=0.05, clip_grad=1.0)
-
-
 def saved_bytes(result) -> bytes:
     buf = io.BytesIO()
     torch.save(align._payload(result), buf)
@@ -249,7 +247,7 @@ def saved_bytes(result) -> bytes:
 def test_fit_heads_is_bit_reproducible_and_seeded(tmp_path):
     v, t = synthetic_pairs(300, 16, 12, noise=0.5, seed=1)
     tr, va = np.arange(240), np.arange(240, 300)
-    kw = dict(tau=0.07, budget="steps", epochs=1, steps=30, patience=0, eval_every=10, **FAST)
+    kw = dict(tau=0.07, settings=AlignSettings.tiny(steps=30, eval_every=10))
     before = torch.get_rng_state()
     r1 = fit_heads(v, t, tr, va, seed=11, **kw)
     assert torch.equal(before, torch.get_rng_state())  # global RNG untouched
@@ -274,8 +272,8 @@ def test_fit_heads_reaches_clearly_above_chance_on_noisy_linear_pairs():
     v, t = synthetic_pairs(800, 32, 24, noise=1.0, seed=0)
     tr, va = np.arange(600), np.arange(600, 800)
     res = fit_heads(
-        v, t, tr, va, tau=0.07, seed=0, budget="epochs", epochs=30, steps=0,
-        patience=0, eval_every=100, **{**FAST, "batch_size": 128},
+        v, t, tr, va, tau=0.07, seed=0,
+        settings=AlignSettings.tiny(budget="epochs", epochs=30, eval_every=100, batch_size=128),
     )  # fmt: skip
     assert res.total_steps == 30 * (600 // 128) == res.steps_run
     z_v, z_t = project(res, v[va], t[va])
@@ -302,8 +300,8 @@ def test_early_stopping_keeps_best_weights():
     t[scrambled] = t[np.random.default_rng(0).permutation(scrambled)]
     patience, every = 3, 5
     res = fit_heads(
-        v, t, tr, va, tau=0.07, seed=0, budget="steps", epochs=1, steps=400,
-        patience=patience, eval_every=every, **{**FAST, "batch_size": 100},
+        v, t, tr, va, tau=0.07, seed=0,
+        settings=AlignSettings.tiny(steps=400, patience=patience, eval_every=every, batch_size=100),
     )  # fmt: skip
     assert res.stopped_early and res.steps_run < res.total_steps == 400
     losses = [c["val_loss"] for c in res.curve]
@@ -322,8 +320,8 @@ def test_progress_gets_one_line_per_evaluation():
     v, t = synthetic_pairs(120, 8, 8, noise=0.5, seed=3)
     lines: list[str] = []
     res = fit_heads(
-        v, t, np.arange(100), np.arange(100, 120), tau=0.1, seed=0, budget="steps", epochs=1,
-        steps=12, patience=0, eval_every=5, progress=lines.append, **FAST,
+        v, t, np.arange(100), np.arange(100, 120), tau=0.1, seed=0,
+        settings=AlignSettings.tiny(steps=12, eval_every=5), progress=lines.append,
     )  # fmt: skip
     assert [c["step"] for c in res.curve] == [0, 5, 10, 12]
     assert len(lines) == 4 and "val_loss" in lines[-1] and "step 12/12" in lines[-1]
@@ -332,8 +330,8 @@ def test_progress_gets_one_line_per_evaluation():
 def test_save_load_project_round_trip(tmp_path):
     v, t = synthetic_pairs(150, 10, 6, noise=0.5, seed=4)
     res = fit_heads(
-        v, t, np.arange(120), np.arange(120, 150), tau=0.1, seed=3, budget="steps", epochs=1,
-        steps=8, patience=0, eval_every=4, **FAST,
+        v, t, np.arange(120), np.arange(120, 150), tau=0.1, seed=3,
+        settings=AlignSettings.tiny(steps=8, eval_every=4),
     )  # fmt: skip
     path = tmp_path / "sub" / "heads.pt"
     save_heads(res, path)
@@ -351,13 +349,13 @@ def test_save_load_project_round_trip(tmp_path):
 
 def test_fit_heads_refuses_overlap_and_misaligned_rows():
     v, t = synthetic_pairs(50, 4, 4, noise=0.5, seed=5)
-    kw = dict(tau=0.1, seed=0, budget="steps", epochs=1, steps=2, patience=0, eval_every=1)
+    kw = dict(tau=0.1, seed=0, settings=AlignSettings.tiny(steps=2, eval_every=1))
     with pytest.raises(ValueError, match="both train_idx and val_idx"):
         fit_heads(v, t, np.arange(30), np.arange(25, 50), **kw)
     with pytest.raises(ValueError, match="rows"):
         fit_heads(v, t[:40], np.arange(30), np.arange(30, 40), **kw)
     with pytest.raises(ValueError, match="budget"):
-        fit_heads(v, t, np.arange(30), np.arange(30, 50), **{**kw, "budget": "minutes"})
+        AlignSettings.tiny(budget="minutes")
     bad = v.copy()
     bad[7, 1] = np.nan
     with pytest.raises(ValueError, match="row 7"):

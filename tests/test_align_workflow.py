@@ -8,6 +8,7 @@ library path the rule scripts call (split guard, cell ids, summary and tables).
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +17,8 @@ import pytest
 from snakemake_run import copy_tree, smk
 
 from tacgen_lib.align import heads as align  # noqa: E402
-from tacgen_lib.align.cells import cell_name  # noqa: E402
+from tacgen_lib.align.cells import cell_name
+from tacgen_lib.align.settings import AlignSettings  # noqa: E402
 from tacgen_lib.corpus.splits import LeakageError  # noqa: E402
 from tacgen_lib.io import edges  # noqa: E402
 from tacgen_lib.report import align as align_report  # noqa: E402
@@ -127,10 +129,7 @@ def _edges_in_memory(n: int = 40):
     return vision, tactile, splits
 
 
-TRAIN = dict(
-    budget="steps", epochs=1, steps=4, batch_size=8, lr=1e-3, weight_decay=0.0,
-    warmup_frac=0.05, clip_grad=1.0, patience=0, eval_every=2,
-)  # fmt: skip
+TRAIN = AlignSettings.tiny(steps=4, batch_size=8, weight_decay=0.0, eval_every=2)
 
 
 def test_split_guard_refuses_a_poisoned_split():
@@ -139,31 +138,29 @@ def test_split_guard_refuses_a_poisoned_split():
     test_id = ids["test"][0]
     poisoned = {**ids, "train": np.append(ids["train"], test_id)}
     with pytest.raises(LeakageError, match=f"train_heads.*{test_id}.*'test'"):
-        align.fit_cell(vision, tactile, splits, poisoned, feature="vit", tau=0.1, seed=0, **TRAIN)
+        align.fit_cell(vision, tactile, splits, poisoned, tau=0.1, seed=0, settings=TRAIN)
     # validation rows only steer early stopping: a train row among them is refused too
     val_poisoned = {**ids, "val": np.append(ids["val"], ids["train"][0])}
     with pytest.raises(LeakageError, match=str(ids["train"][0])):
-        align.fit_cell(
-            vision, tactile, splits, val_poisoned, feature="vit", tau=0.1, seed=0, **TRAIN
-        )
+        align.fit_cell(vision, tactile, splits, val_poisoned, tau=0.1, seed=0, settings=TRAIN)
     # and a split edge that calls a test row "train" is caught by the train/test overlap check
     relabelled = splits.copy()
     relabelled.loc[relabelled["sample_id"] == test_id, "split"] = "train"
     with pytest.raises(ValueError, match=f"{test_id}.*both a test row and a training row"):
-        align.fit_cell(
-            vision, tactile, relabelled, poisoned, feature="vit", tau=0.1, seed=0, **TRAIN
-        )
+        align.fit_cell(vision, tactile, relabelled, poisoned, tau=0.1, seed=0, settings=TRAIN)
 
 
 def test_fit_cell_evaluates_on_test_rows_only():
     vision, tactile, splits = _edges_in_memory()
     ids = align.cell_ids(splits, corpus="c", n_train=16, seed=1)
-    fit = align.fit_cell(vision, tactile, splits, ids, feature="vit", tau=0.1, seed=1, **TRAIN)
+    fit = align.fit_cell(vision, tactile, splits, ids, tau=0.1, seed=1, settings=TRAIN)
     assert fit.metrics["n_test"] == 8 and fit.metrics["n_train_rows"] == 16
     assert fit.metrics["chance_top1"] == 1 / 8 and fit.metrics["steps_run"] == 4
     assert list(fit.curve["eval"]) == ["step~0", "step~2", "step~4"]
     with pytest.raises(edges.EdgeError, match="no vector column 'pixel'"):
-        align.fit_cell(vision, tactile, splits, ids, feature="pixel", tau=0.1, seed=1, **TRAIN)
+        align.fit_cell(
+            vision, tactile, splits, ids, tau=0.1, seed=1, settings=replace(TRAIN, feature="pixel")
+        )
 
 
 def test_train_subset_is_seeded_nested_and_bounded():

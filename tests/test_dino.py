@@ -18,6 +18,7 @@ from tacgen_lib.features.dino import (
     pretrain_dino,
     sinkhorn_knopp,
 )
+from tacgen_lib.features.settings import DinoSettings
 from tacgen_lib.features.vit import build_vit
 
 
@@ -139,6 +140,13 @@ def test_crops_of_a_flat_frame_without_jitter_keep_its_colour_or_its_grey():
     assert 0 < n_grey < 4 * 16  # greyscale is applied to some views, not all
 
 
+def pretrain(images, *, arch: str, image_size: int, progress=None, **settings):
+    """`pretrain_dino` with the recipe given as `DinoSettings` fields (defaults: the config's)."""
+    return pretrain_dino(
+        images, DinoSettings(**settings), arch=arch, image_size=image_size, progress=progress
+    )
+
+
 def _tiny_images(n: int, seed: int) -> np.ndarray:
     return np.random.default_rng(seed).integers(0, 256, (n, 30, 30, 3), dtype=np.uint8)
 
@@ -148,8 +156,8 @@ def test_pretrain_dino_is_deterministic_and_reports_a_curve():
     kw = dict(arch="vit_tiny", image_size=28, epochs=2, batch_size=6, lr=1e-3, seed=11)
     kw |= dict(n_local_crops=2, local_size=14, out_dim=64, hidden_dim=32, bottleneck_dim=16)
     msgs: list[str] = []
-    a = pretrain_dino(imgs, progress=msgs.append, **kw)
-    b = pretrain_dino(imgs, **kw)
+    a = pretrain(imgs, progress=msgs.append, **kw)
+    b = pretrain(imgs, **kw)
     assert len(msgs) == 2 and msgs[0].startswith("dino epoch 1/2")
     assert a.backbone_state.keys() == build_vit("vit_tiny", img_size=28).state_dict().keys()
     for k, v in a.backbone_state.items():
@@ -159,7 +167,7 @@ def test_pretrain_dino_is_deterministic_and_reports_a_curve():
     for row in a.curve:
         assert 0 <= row["teacher_entropy"] <= math.log(64) + 1e-6
         assert row["kl"] >= -1e-6 and np.isfinite(row["loss"])
-    c = pretrain_dino(imgs, **(kw | {"seed": 12}))
+    c = pretrain(imgs, **(kw | {"seed": 12}))
     assert not torch.equal(a.backbone_state["cls_token"], c.backbone_state["cls_token"])
     # the global RNG and determinism flag are left as they were
     assert not torch.are_deterministic_algorithms_enabled()
@@ -168,7 +176,7 @@ def test_pretrain_dino_is_deterministic_and_reports_a_curve():
 
 def test_pretrain_dino_moves_the_teacher_and_loads_as_backbone():
     imgs = _tiny_images(8, 1)
-    res = pretrain_dino(
+    res = pretrain(
         imgs,
         arch="vit_tiny",
         image_size=28,
@@ -207,7 +215,7 @@ def test_pretrain_dino_degenerate_data_stays_finite():
         bottleneck_dim=8,
     )
     for imgs, bs in ((np.repeat(one, 6, axis=0), 3), (one, 4)):
-        res = pretrain_dino(imgs, batch_size=bs, **kw)
+        res = pretrain(imgs, batch_size=bs, **kw)
         assert all(np.isfinite(r["loss"]) for r in res.curve)
         assert all(torch.isfinite(v).all() for v in res.backbone_state.values())
 
@@ -216,11 +224,11 @@ def test_pretrain_dino_input_errors():
     imgs = _tiny_images(4, 2)
     kw = dict(arch="vit_tiny", epochs=1, batch_size=2, lr=1e-3, seed=0)
     with pytest.raises(ValueError, match="multiple of 14"):
-        pretrain_dino(imgs, image_size=30, **kw)
+        pretrain(imgs, image_size=30, **kw)
     with pytest.raises(ValueError, match="uint8 frames"):
-        pretrain_dino(imgs.astype(np.float32), image_size=28, **kw)
+        pretrain(imgs.astype(np.float32), image_size=28, **kw)
     with pytest.raises(ValueError, match="unknown ViT arch"):
-        pretrain_dino(imgs, image_size=28, **(kw | {"arch": "vit_giant"}))
+        pretrain(imgs, image_size=28, **(kw | {"arch": "vit_giant"}))
 
 
 # ---- Sinkhorn-Knopp centring ---------------------------------------------------------------
@@ -369,7 +377,7 @@ def test_pretrain_dino_teacher_does_not_collapse_on_four_texture_classes():
     # information survives in each target). Stricter: the halfway mark ln K - ln(C)/2 is only
     # just met at lr 5e-4 and missed at 1e-3 (targets drift towards uniform in short runs).
     c, k = 4, 16
-    res = pretrain_dino(
+    res = pretrain(
         _pattern_classes(64, 28, 0),
         arch="vit_tiny",
         image_size=28,
@@ -393,6 +401,6 @@ def test_pretrain_dino_recipe_errors():
     imgs = _tiny_images(4, 3)
     kw = dict(arch="vit_tiny", image_size=28, epochs=1, batch_size=2, lr=1e-3, seed=0)
     with pytest.raises(ValueError, match="centering must be"):
-        pretrain_dino(imgs, centering="mean", **kw)
+        pretrain(imgs, centering="mean", **kw)
     with pytest.raises(ValueError, match="must be >= 0"):
-        pretrain_dino(imgs, koleo_weight=-0.1, **kw)
+        pretrain(imgs, koleo_weight=-0.1, **kw)

@@ -41,6 +41,7 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from tacgen_lib.align.retrieval import CHANCE_COLUMNS, RETRIEVAL_METRICS, paired_retrieval
+from tacgen_lib.align.settings import AlignSettings
 from tacgen_lib.corpus.splits import assert_trainable, ids_in_split
 from tacgen_lib.io import edges
 
@@ -347,16 +348,7 @@ def fit_heads(
     *,
     tau: float,
     seed: int,
-    budget: Literal["epochs", "steps"],
-    epochs: int,
-    steps: int,
-    batch_size: int = 256,
-    lr: float = 1e-4,
-    weight_decay: float = 0.01,
-    warmup_frac: float = 0.05,
-    clip_grad: float = 1.0,
-    patience: int,
-    eval_every: int,
+    settings: AlignSettings,
     progress: Callable[[str], Any] | None = None,
 ) -> AlignResult:
     """Train the two projection heads with symmetric InfoNCE (paper eq. 1).
@@ -365,6 +357,7 @@ def fit_heads(
     train_idx / val_idx: disjoint row positions of the alignment train and held-out validation
     samples (the caller takes them from the split edge; test rows must not be here).
 
+    settings: the training budget and optimiser (`AlignSettings`, from config ``align``).
     Budget: ``"epochs"`` runs ``epochs * (n_train // B)`` steps, ``"steps"`` runs `steps`
     steps, with ``B = min(batch_size, n_train)``. Each epoch is a fresh seeded permutation of
     train_idx cut into full batches of B (the remainder of a permutation is dropped, so every
@@ -380,6 +373,10 @@ def fit_heads(
     thread count give bit-identical weights.
     """
     started = time.perf_counter()
+    s = settings
+    budget, epochs, steps, batch_size = s.budget, s.epochs, s.steps, s.batch_size
+    lr, weight_decay, warmup_frac, clip_grad = s.lr, s.weight_decay, s.warmup_frac, s.clip_grad
+    patience, eval_every = s.patience, s.eval_every
     v_t = _as_features(v, "fit_heads: vision features v")
     t_t = _as_features(t, "fit_heads: tactile features t")
     if v_t.shape[0] != t_t.shape[0]:
@@ -680,22 +677,20 @@ def fit_cell(
     splits: pd.DataFrame,
     ids: dict[str, Sequence[str] | np.ndarray],
     *,
-    feature: str,
     tau: float,
     seed: int,
+    settings: AlignSettings,
     rule: str = "train_heads",
     progress: Callable[[str], Any] | None = None,
-    **train: Any,
 ) -> CellFit:
     """Train one alignment cell and evaluate it on held-out pairs (paper eq. 1, retrieval).
 
-    vision, tactile: the corpus's feature edges (keyed by sample_id); `feature` names the
-    vector column both use (``vit`` or ``pixel``). ids: {"train", "val", "test"} sample ids
+    vision, tactile: the corpus's feature edges (keyed by sample_id); `settings.feature`
+    names the vector column both use (``vit`` or ``pixel``). ids: {"train", "val", "test"} sample ids
     (from `cell_ids`). The split guard runs first: `assert_trainable` refuses any train id not
     in the train split and any validation id not in the val split (validation rows only steer
     early stopping), naming the rule and the sample_id. Rows are joined on sample_id, never on
-    order. `train` holds `fit_heads`'s keyword arguments (budget, epochs, steps, batch_size,
-    lr, weight_decay, warmup_frac, clip_grad, patience, eval_every).
+    order. `settings` is passed on to `fit_heads`.
 
     metrics: `paired_retrieval` of the projected test rows (top1/top5 both ways, median ranks,
     chance levels), n_test, n_train_rows, n_val, best-step validation loss, best_step,
@@ -711,6 +706,7 @@ def fit_cell(
         raise ValueError(
             f"rule {rule}: sample_id {sorted(held)[0]!r} is both a test row and a training row"
         )
+    feature = settings.feature
     for edge in (vision, tactile):
         if feature not in edge.vectors:
             raise edges.EdgeError(
@@ -728,8 +724,8 @@ def fit_cell(
         np.arange(n_tr, len(fit_ids)),
         tau=tau,
         seed=seed,
+        settings=settings,
         progress=progress,
-        **train,
     )
     z_v, z_t = project(
         result, vision.subset(test_ids).vectors[feature], tactile.subset(test_ids).vectors[feature]

@@ -44,6 +44,7 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from tacgen_lib.features.extract import imagenet_normalise, to_unit_tensor
+from tacgen_lib.features.settings import DinoSettings
 from tacgen_lib.features.vit import PATCH_SIZE, DinoVisionTransformer, build_vit
 
 __all__ = [
@@ -371,35 +372,16 @@ def _cosine(start: float, end: float, n: int) -> np.ndarray:
 
 def pretrain_dino(
     images: np.ndarray,
+    settings: DinoSettings,
     *,
     arch: str,
     image_size: int,
-    epochs: int,
-    batch_size: int,
-    lr: float,
-    seed: int,
     progress: Callable[[str], None] | None = None,
-    n_local_crops: int = 4,
-    local_size: int | None = None,
-    out_dim: int = 1024,
-    hidden_dim: int = 512,
-    bottleneck_dim: int = 128,
-    student_temp: float = 0.1,
-    teacher_temp: float = 0.04,
-    warmup_teacher_temp: float | None = None,
-    warmup_teacher_temp_epochs: int = 0,
-    centering: str = "sinkhorn_knopp",
-    sinkhorn_iterations: int = 3,
-    center_momentum: float = 0.9,
-    koleo_weight: float = 0.1,
-    freeze_last_layer_epochs: int = 1,
-    momentum_teacher: float = 0.99,
-    weight_decay: float = 0.04,
-    warmup_epochs: int = 1,
-    clip_grad: float = 3.0,
-    jitter: float = 0.4,
 ) -> PretrainResult:
     """Pretrain a backbone of `arch` on uint8 frames (N, H, W, 3) with DINO; see module doc.
+
+    settings: every term of the recipe (`DinoSettings`, from config ``features.pretrain``);
+    the names below are its fields.
 
     Frames are resized once to image_size x image_size (features.to_unit_tensor); global crops
     are image_size, local crops `local_size` (default: the multiple of 14 nearest 3/7 of
@@ -421,6 +403,23 @@ def pretrain_dino(
     machine 2 OpenMP threads were measured ~5x slower than 1 (spin-waits). Bit-identical
     reruns need the same thread count.
     """
+    s = settings
+    epochs, batch_size, lr, seed = s.epochs, s.batch_size, s.lr, s.seed
+    n_local_crops, local_size, jitter = s.n_local_crops, s.local_size, s.jitter
+    out_dim, hidden_dim, bottleneck_dim = s.out_dim, s.hidden_dim, s.bottleneck_dim
+    student_temp, teacher_temp = s.student_temp, s.teacher_temp
+    warmup_teacher_temp, warmup_teacher_temp_epochs = (
+        s.warmup_teacher_temp,
+        s.warmup_teacher_temp_epochs,
+    )
+    centering, sinkhorn_iterations, center_momentum = (
+        s.centering,
+        s.sinkhorn_iterations,
+        s.center_momentum,
+    )
+    koleo_weight, freeze_last_layer_epochs = s.koleo_weight, s.freeze_last_layer_epochs
+    momentum_teacher, weight_decay = s.momentum_teacher, s.weight_decay
+    warmup_epochs, clip_grad = s.warmup_epochs, s.clip_grad
     if images.ndim != 4 or images.shape[3] != 3 or images.dtype != np.uint8:
         raise ValueError(
             f"pretrain_dino: expected uint8 frames (N, H, W, 3), got {images.dtype} {images.shape}"

@@ -2,19 +2,20 @@
 
 import pandas as pd
 
-from tacgen_lib.corpus.sim.corpus import sensor_backgrounds
+from tacgen_lib.corpus.sim.corpus import CorpusSettings, sensor_backgrounds
 from tacgen_lib.io import edges, log
 
 logger = log.for_rule(snakemake)
+settings = CorpusSettings.from_config(snakemake.params.corpus)
 shards = [edges.read(path).frame for path in snakemake.input.shards]
 samples = pd.concat(shards, ignore_index=True).sort_values("sample_id", ignore_index=True)
-n_expected = snakemake.params.corpus["n"]
+n_expected = settings.n
 if len(samples) != n_expected:
     raise ValueError(
         f"rule merge_corpus: corpus {snakemake.wildcards.corpus!r} has {len(samples)} samples "
         f"across {len(shards)} shards, config asks for n={n_expected}"
     )
-sensors = sensor_backgrounds(snakemake.params.corpus)
+sensors = sensor_backgrounds(settings)
 unknown = set(samples["sensor_id"]) - set(sensors["sensor_id"])
 if unknown:
     raise ValueError(f"rule merge_corpus: sensor(s) {sorted(unknown)} have no background image")

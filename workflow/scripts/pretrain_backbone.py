@@ -5,6 +5,7 @@ import torch
 
 from tacgen_lib.corpus.splits import assert_trainable, ids_in_split
 from tacgen_lib.features.dino import pretrain_dino
+from tacgen_lib.features.settings import DinoSettings
 from tacgen_lib.features.vit import build_vit, load_pretrained, save_backbone
 from tacgen_lib.io import edges, log
 from tacgen_lib.preprocess.frames import decode_frames
@@ -37,12 +38,9 @@ else:
     )
     result = pretrain_dino(
         images,
+        DinoSettings.from_config(pretrain),
         arch=backbone["arch"],
         image_size=image_size,
-        epochs=pretrain["epochs"],
-        batch_size=pretrain["batch_size"],
-        lr=pretrain["lr"],
-        seed=pretrain["seed"],
         progress=logger.info,
     )
     model = result.backbone()

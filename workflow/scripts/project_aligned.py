@@ -4,11 +4,13 @@ import pandas as pd
 import torch
 
 from tacgen_lib.align import heads
+from tacgen_lib.align.settings import AlignSettings
 from tacgen_lib.io import edges, log
 
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
-feature, target = snakemake.params.feature, snakemake.wildcards.target
+feature = AlignSettings.from_config(snakemake.params.settings).feature
+target = snakemake.wildcards.target
 
 model = heads.load_heads(snakemake.input.heads)
 vision = edges.read(snakemake.input.v, columns=[feature], require={feature: "vector"})

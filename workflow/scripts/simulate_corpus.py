@@ -1,12 +1,13 @@
 """Simulate one shard of a corpus (rule simulate_corpus)."""
 
-from tacgen_lib.corpus.sim.corpus import simulate_shard
+from tacgen_lib.corpus.sim.corpus import CorpusSettings, simulate_shard
 from tacgen_lib.io import edges, log
 from tacgen_lib.io.config import load_yaml
 
 logger = log.for_rule(snakemake)
+settings = CorpusSettings.from_config(snakemake.params.corpus)
 frame = simulate_shard(
-    snakemake.params.corpus,
+    settings,
     load_yaml(snakemake.input.scenes),
     shard=int(snakemake.wildcards.shard),
     n_shards=int(snakemake.params.n_shards),

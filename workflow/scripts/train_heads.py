@@ -6,11 +6,14 @@ from threadpoolctl import threadpool_limits
 
 from tacgen_lib.align import heads
 from tacgen_lib.align.cells import cell_name
+from tacgen_lib.align.settings import AlignSettings
 from tacgen_lib.io import edges, log
 
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
-w, feature = snakemake.wildcards, snakemake.params.feature
+w = snakemake.wildcards
+settings = AlignSettings.from_config(snakemake.params.settings)
+feature = settings.feature
 seed, n_train = int(w.seed), heads.parse_n_train(w.n_train)
 
 vision = edges.read(snakemake.input.v, columns=[feature], require={feature: "vector"})
@@ -33,12 +36,11 @@ with threadpool_limits(snakemake.threads):
         tactile,
         splits,
         ids,
-        feature=feature,
         tau=float(w.tau),
         seed=seed,
+        settings=settings,
         rule=snakemake.rule,
         progress=logger.info,
-        **snakemake.params.train,
     )
 cell = cell_name(w.corpus, w.variant, seed, w.tau, w.n_train)
 row = {

@@ -28,9 +28,9 @@ from __future__ import annotations
 import functools
 import os
 import time
-from collections.abc import Callable, Mapping
-from dataclasses import dataclass
-from typing import Any
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, fields, replace
+from typing import Any, Literal
 
 import mujoco
 import numpy as np
@@ -41,6 +41,8 @@ from tacgen_lib.corpus.sim.scenes import Scene, compile_scene, validate_scene
 from tacgen_lib.io.images import encode_png
 
 __all__ = [
+    "CorpusSettings",
+    "prefer_headless_egl",
     "SampleSpec",
     "simulate_shard",
     "sensor_backgrounds",
@@ -73,11 +75,6 @@ TEXTURE_WORDS = {"plain": "plain", "checkered": "checkered", "striped": "striped
 SOFT_RANGE = (600.0, 2000.0)  # N/m, contact stiffness of soft objects (log-uniform)
 HARD_RANGE = (8000.0, 25000.0)  # N/m, hard objects
 FRICTION_RANGE = (0.3, 1.2)
-_KNOWN_KEYS = {
-    "name", "kind", "design", "n", "seed", "scene", "null", "sensors", "presses", "image_size",
-    "tactile_size", "shapes", "size_range", "scales", "size_per_scale", "densities",
-    "png_compression", "shards",
-}  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -103,60 +100,102 @@ def scene_seed(seed: int, i: int) -> int:
     return int((int(state[0]) << 31) ^ int(state[1])) & ((1 << 63) - 1)
 
 
-def _config(corpus: Mapping[str, Any]) -> dict[str, Any]:
-    name = corpus.get("name", "<unnamed>")
-    for key in ("name", "design", "n", "seed", "scene"):
-        if key not in corpus:
-            raise ValueError(f"corpus {name!r}: missing key {key!r}")
-    bad = sorted(set(corpus) - _KNOWN_KEYS)
-    if bad:
-        raise ValueError(f"corpus {name!r}: unknown key {bad[0]!r} (known: {sorted(_KNOWN_KEYS)})")
-    if corpus["design"] not in ("paired", "controlled"):
-        raise ValueError(f"corpus {name!r}: key 'design' must be 'paired' or 'controlled'")
-    cfg = {
-        "null": False, "sensors": 4, "presses": 8, "image_size": [224, 224],
-        "tactile_size": [120, 160], "size_range": [0.02, 0.04], "scales": [0.15, 0.20, 0.25],
-        "size_per_scale": 0.15, "densities": [500.0, 2000.0, 5000.0], "png_compression": 1,
-    }  # fmt: skip
-    cfg.update(corpus)
-    if int(cfg["n"]) < 1 or int(cfg["sensors"]) < 1 or int(cfg["presses"]) < 1:
-        raise ValueError(f"corpus {name!r}: n, sensors and presses must be >= 1")
-    return cfg
+@dataclass(frozen=True)
+class CorpusSettings:
+    """One simulated corpus of config ``corpora.<name>`` (plus its ``name``), defaults filled.
+
+    design "paired" draws shape, size (``size_range``, m) and density per sample; "controlled"
+    crosses shapes x ``scales`` (size = scale x ``size_per_scale``) x ``densities`` so that
+    density varies within every appearance group. ``null``: tactile frames from an unrelated
+    sample's physics. ``presses``: repeated noisy presses per sample (the force bands);
+    ``sensors``: tactile sensors (backgrounds); ``image_size`` / ``tactile_size``: RGB and
+    tactile frame sizes (H, W); ``shapes``: a subset of the scene's shapes (None: all).
+    ``kind`` and ``shards`` are read by the rules.
+    """
+
+    name: str
+    design: Literal["paired", "controlled"]
+    n: int
+    seed: int
+    scene: str
+    kind: str = "simulated"
+    shards: int = 1
+    null: bool = False
+    sensors: int = 4
+    presses: int = 8
+    image_size: Sequence[int] = (224, 224)
+    tactile_size: Sequence[int] = (120, 160)
+    shapes: Sequence[str] | None = None
+    size_range: Sequence[float] = (0.02, 0.04)
+    scales: Sequence[float] = (0.15, 0.20, 0.25)
+    size_per_scale: float = 0.15
+    densities: Sequence[float] = (500.0, 2000.0, 5000.0)
+    png_compression: int = 1
+
+    def __post_init__(self) -> None:
+        if self.design not in ("paired", "controlled"):
+            raise ValueError(f"corpus {self.name!r}: key 'design' must be 'paired' or 'controlled'")
+        if int(self.n) < 1 or int(self.sensors) < 1 or int(self.presses) < 1:
+            raise ValueError(f"corpus {self.name!r}: n, sensors and presses must be >= 1")
+
+    @classmethod
+    def from_config(cls, corpus: Mapping[str, Any]) -> CorpusSettings:
+        """Settings of one corpus from its config mapping (which must include ``name``)."""
+        name = corpus.get("name", "<unnamed>")
+        for key in ("name", "design", "n", "seed", "scene"):
+            if key not in corpus:
+                raise ValueError(f"corpus {name!r}: missing key {key!r}")
+        known = {f.name for f in fields(cls)}
+        bad = sorted(set(corpus) - known)
+        if bad:
+            raise ValueError(f"corpus {name!r}: unknown key {bad[0]!r} (known: {sorted(known)})")
+        return cls(**corpus)
+
+    @classmethod
+    def tiny(cls, **changes: Any) -> CorpusSettings:
+        """A six-sample paired corpus of small frames with two presses, for tests."""
+        small = cls(name="tiny", design="paired", n=6, seed=0, scene="paired_press", sensors=2,
+                    presses=2, image_size=(56, 56), tactile_size=(48, 64))  # fmt: skip
+        return replace(small, **changes)
 
 
-def _shapes(cfg: Mapping[str, Any], scene: Scene) -> tuple[str, ...]:
-    shapes = tuple(cfg.get("shapes") or scene.shapes)
+def _settings(corpus: CorpusSettings | Mapping[str, Any]) -> CorpusSettings:
+    return corpus if isinstance(corpus, CorpusSettings) else CorpusSettings.from_config(corpus)
+
+
+def _shapes(cfg: CorpusSettings, scene: Scene) -> tuple[str, ...]:
+    shapes = tuple(cfg.shapes or scene.shapes)
     bad = [s for s in shapes if s not in scene.shapes]
     if bad:
         raise ValueError(
-            f"corpus {cfg['name']!r}: shape {bad[0]!r} is not declared by scene {scene.name!r}"
+            f"corpus {cfg.name!r}: shape {bad[0]!r} is not declared by scene {scene.name!r}"
         )
     return shapes
 
 
-def sample_spec(cfg: Mapping[str, Any], scene: Scene, i: int) -> SampleSpec:
+def sample_spec(cfg: CorpusSettings, scene: Scene, i: int) -> SampleSpec:
     """Draw sample i of a corpus from its scene seed (independent of shards)."""
-    seed = int(cfg["seed"])
+    seed = int(cfg.seed)
     ss = scene_seed(seed, i)
     geo, phys, app, jit, pix = (
         np.random.default_rng(s) for s in np.random.SeedSequence(ss).spawn(5)
     )
     shapes = _shapes(cfg, scene)
-    densities = [float(d) for d in cfg["densities"]]
-    if cfg["design"] == "paired":
+    densities = [float(d) for d in cfg.densities]
+    if cfg.design == "paired":
         shape = shapes[int(geo.integers(len(shapes)))]
-        lo, hi = (float(v) for v in cfg["size_range"])
+        lo, hi = (float(v) for v in cfg.size_range)
         size = float(geo.uniform(lo, hi))
         scale = size
         density = densities[int(phys.integers(len(densities)))]
         appearance_id = i
     else:
-        scales = [float(s) for s in cfg["scales"]]
+        scales = [float(s) for s in cfg.scales]
         cell, d_idx = divmod(i, len(densities))  # densities vary fastest within a group
         rest, s_idx = divmod(cell, len(scales))
         rep, sh_idx = divmod(rest, len(shapes))
         shape, scale, density = shapes[sh_idx], scales[s_idx], densities[d_idx]
-        size = scale * float(cfg["size_per_scale"])
+        size = scale * float(cfg.size_per_scale)
         appearance_id = cell
         # Same appearance for every density of a (shape, scale, rep) group.
         app = np.random.default_rng([seed, 1, sh_idx, s_idx, rep])
@@ -167,7 +206,7 @@ def sample_spec(cfg: Mapping[str, Any], scene: Scene, i: int) -> SampleSpec:
     colour = list(PALETTE)[int(app.integers(len(PALETTE)))]
     texture = list(TEXTURE_WORDS)[int(app.integers(len(TEXTURE_WORDS)))]
     yaw = float(app.uniform(0.0, np.pi / 2))
-    presses = int(cfg["presses"])
+    presses = int(cfg.presses)
     jitter = np.column_stack(
         [
             1.0 + scene.jitter_force * jit.standard_normal(presses),
@@ -175,7 +214,7 @@ def sample_spec(cfg: Mapping[str, Any], scene: Scene, i: int) -> SampleSpec:
             scene.jitter_yaw * jit.standard_normal(presses),
         ]
     )
-    sensor = int(pix.integers(int(cfg["sensors"])))
+    sensor = int(pix.integers(int(cfg.sensors)))
     pixel_seed = int(pix.integers(2**63 - 1))
     obj = physics.ObjectPhysics(shape, size, density, stiffness, friction, yaw)
     return SampleSpec(i, ss, obj, scale, hardness, colour, texture, appearance_id, sensor,
@@ -201,13 +240,13 @@ def null_sources(seed: int, n: int) -> np.ndarray:
 _RUNTIMES: dict[tuple, dict[str, Any]] = {}
 
 
-def _runtime(scene: Scene, cfg: Mapping[str, Any]) -> dict[str, Any]:
-    key = (repr(scene), tuple(cfg["image_size"]), tuple(cfg["tactile_size"]))
+def _runtime(scene: Scene, cfg: CorpusSettings) -> dict[str, Any]:
+    key = (repr(scene), tuple(cfg.image_size), tuple(cfg.tactile_size))
     if key not in _RUNTIMES:
         rt = physics.SceneRuntime(scene, compile_scene(scene))
         optics = tactile.GelOptics(
             gel_size=scene.gel_size,
-            image_size=(int(cfg["tactile_size"][0]), int(cfg["tactile_size"][1])),
+            image_size=(int(cfg.tactile_size[0]), int(cfg.tactile_size[1])),
             camera_distance=scene.gel_camera_distance,
             saturation=scene.gel_saturation,
             smoothing=scene.gel_smoothing,
@@ -222,7 +261,7 @@ def _runtime(scene: Scene, cfg: Mapping[str, Any]) -> dict[str, Any]:
     return _RUNTIMES[key]
 
 
-def _prefer_headless_egl() -> None:
+def prefer_headless_egl() -> None:
     """Use EGL when no display exists and MUJOCO_GL asked for nothing else.
 
     mujoco picks its GL backend when first imported; if that happened before tacgen_lib.corpus.sim
@@ -244,7 +283,7 @@ def render_rgb(state: dict[str, Any], image_size: tuple[int, int]) -> np.ndarray
     created on first use, so scenes without `rgb` never create one."""
     rt: physics.SceneRuntime = state["rt"]
     if state["renderer"] is None:
-        _prefer_headless_egl()
+        prefer_headless_egl()
         state["renderer"] = mujoco.Renderer(rt.model, int(image_size[0]), int(image_size[1]))
         flags = state["renderer"].scene.flags
         flags[mujoco.mjtRndFlag.mjRND_SHADOW] = int(rt.scene.has("shadows"))
@@ -262,14 +301,14 @@ def _background_cached(seed: int, k: int, size: tuple[int, int]) -> np.ndarray:
     return img
 
 
-def _background(cfg: Mapping[str, Any], k: int) -> np.ndarray:
+def _background(cfg: CorpusSettings, k: int) -> np.ndarray:
     """Sensor k's background: seeded from (corpus seed, k) only, cached per process."""
-    size = (int(cfg["tactile_size"][0]), int(cfg["tactile_size"][1]))
-    return _background_cached(int(cfg["seed"]), int(k), size)
+    size = (int(cfg.tactile_size[0]), int(cfg.tactile_size[1]))
+    return _background_cached(int(cfg.seed), int(k), size)
 
 
-def _sensor_id(cfg: Mapping[str, Any], k: int) -> str:
-    return f"{cfg['name']}/digit{k}"
+def _sensor_id(cfg: CorpusSettings, k: int) -> str:
+    return f"{cfg.name}/digit{k}"
 
 
 def _tactile_frame(state, spec_phys: SampleSpec, spec_pix: SampleSpec, cfg, press_force) -> bytes:
@@ -288,15 +327,15 @@ def _tactile_frame(state, spec_phys: SampleSpec, spec_pix: SampleSpec, cfg, pres
         height, _background(cfg, spec_pix.sensor), state["optics"], noise=noise,
         markers=state["markers"],
     )  # fmt: skip
-    return encode_png(img, compression=int(cfg["png_compression"])), res
+    return encode_png(img, compression=int(cfg.png_compression)), res
 
 
-def _adjectives(spec: SampleSpec, cfg: Mapping[str, Any]) -> list[str]:
-    if cfg["design"] == "paired":
-        lo, hi = (float(v) for v in cfg["size_range"])
+def _adjectives(spec: SampleSpec, cfg: CorpusSettings) -> list[str]:
+    if cfg.design == "paired":
+        lo, hi = (float(v) for v in cfg.size_range)
         t = (spec.obj.size - lo) / (hi - lo)
     else:
-        scales = sorted(float(s) for s in cfg["scales"])
+        scales = sorted(float(s) for s in cfg.scales)
         t = scales.index(spec.scale) / max(len(scales) - 1, 1)
     size = "small" if t < 1 / 3 else ("medium-sized" if t < 2 / 3 else "large")
     mass = spec.obj.mass
@@ -305,7 +344,7 @@ def _adjectives(spec: SampleSpec, cfg: Mapping[str, Any]) -> list[str]:
 
 
 def simulate_shard(
-    corpus: dict,
+    corpus: CorpusSettings | Mapping[str, Any],
     scenes: dict,
     shard: int,
     n_shards: int,
@@ -313,24 +352,24 @@ def simulate_shard(
 ) -> pd.DataFrame:
     """Simulate the samples i of `corpus` with i % n_shards == shard (columns: `COLUMNS`).
 
-    scenes: the scenes.yaml mapping (scene name -> declaration). Raises ValueError for bad
+    corpus: its settings, or its config mapping (`CorpusSettings.from_config`). scenes: the scenes.yaml mapping (scene name -> declaration). Raises ValueError for bad
     configs and physics.PhysicsWarning if MuJoCo warns during any press.
     """
-    cfg = _config(corpus)
+    cfg = _settings(corpus)
     if not 0 <= shard < n_shards:
-        raise ValueError(f"corpus {cfg['name']!r}: shard {shard} not in [0, {n_shards})")
-    if cfg["scene"] not in scenes:
-        raise ValueError(f"corpus {cfg['name']!r}: scene {cfg['scene']!r} not in scenes file")
-    scene = validate_scene(cfg["scene"], scenes[cfg["scene"]])
+        raise ValueError(f"corpus {cfg.name!r}: shard {shard} not in [0, {n_shards})")
+    if cfg.scene not in scenes:
+        raise ValueError(f"corpus {cfg.name!r}: scene {cfg.scene!r} not in scenes file")
+    scene = validate_scene(cfg.scene, scenes[cfg.scene])
     if scene.kind != "press":
         raise ValueError(
-            f"corpus {cfg['name']!r}: scene {scene.name!r} is a {scene.kind!r} scene; corpora "
+            f"corpus {cfg.name!r}: scene {scene.name!r} is a {scene.kind!r} scene; corpora "
             "need a 'press' scene"
         )
     state = _runtime(scene, cfg)
     rt: physics.SceneRuntime = state["rt"]
-    n, name = int(cfg["n"]), str(cfg["name"])
-    perm = null_sources(int(cfg["seed"]), n) if cfg["null"] else None
+    n, name = int(cfg.n), str(cfg.name)
+    perm = null_sources(int(cfg.seed), n) if cfg.null else None
     press_force = scene.press_force
     rows = []
     t0 = time.perf_counter()
@@ -342,8 +381,8 @@ def simulate_shard(
         rgb = None
         if scene.has("rgb"):
             physics.presentation_pose(rt)
-            rgb = encode_png(render_rgb(state, cfg["image_size"]),
-                             compression=int(cfg["png_compression"]))  # fmt: skip
+            rgb = encode_png(render_rgb(state, cfg.image_size),
+                             compression=int(cfg.png_compression))  # fmt: skip
         tac, null_source = None, None
         if scene.has("tactile") and perm is None:
             tac, res = _tactile_frame(state, spec, spec, cfg, press_force)
@@ -418,14 +457,14 @@ def simulate_shard(
     return df
 
 
-def sensor_backgrounds(corpus: dict) -> pd.DataFrame:
+def sensor_backgrounds(corpus: CorpusSettings | Mapping[str, Any]) -> pd.DataFrame:
     """The exact background (PNG) each sensor's frames were built on: sensor_id, background,
     corpus."""
-    cfg = _config(corpus)
+    cfg = _settings(corpus)
     return pd.DataFrame(
         {
-            "sensor_id": [_sensor_id(cfg, k) for k in range(int(cfg["sensors"]))],
-            "background": [encode_png(_background(cfg, k)) for k in range(int(cfg["sensors"]))],
-            "corpus": [str(cfg["name"])] * int(cfg["sensors"]),
+            "sensor_id": [_sensor_id(cfg, k) for k in range(int(cfg.sensors))],
+            "background": [encode_png(_background(cfg, k)) for k in range(int(cfg.sensors))],
+            "corpus": [str(cfg.name)] * int(cfg.sensors),
         }
     )

@@ -1,0 +1,69 @@
+"""The features stage's settings: DINO pretraining from config ``features.pretrain``.
+
+Every field that changes a pretrained backbone is a key of ``features.pretrain`` (the schema,
+config/config.schema.yaml, gives the optional ones their defaults, which are these fields'
+defaults), so a run can be reproduced from its config alone. ``corpus`` and ``variant`` (which
+frames the backbone learns from) are read by the rules, not here. `DinoSettings.tiny()` is a
+seconds-long run for tests.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, fields, replace
+from typing import Any, Literal
+
+__all__ = ["DinoSettings"]
+
+
+@dataclass(frozen=True)
+class DinoSettings:
+    """DINO self-distillation with DINOv2's safeguards; see `dino.pretrain_dino` for each term.
+
+    epochs, batch_size, lr, seed: the run. Crops: `n_local_crops` local crops of `local_size`
+    pixels (None: the multiple of 14 nearest 3/7 of the image size, at least 28). Head:
+    `out_dim` prototypes behind a `hidden_dim` MLP with a `bottleneck_dim` bottleneck.
+    Targets: `student_temp`, `teacher_temp` (warmed up linearly from `warmup_teacher_temp`
+    over `warmup_teacher_temp_epochs`), `centering` ("sinkhorn_knopp" with
+    `sinkhorn_iterations`, or "centre" with `center_momentum`). Regularisers: `koleo_weight`,
+    `freeze_last_layer_epochs`. Optimiser: AdamW with `weight_decay`, `warmup_epochs` of lr
+    warm-up, gradient clipping at `clip_grad`; teacher EMA from `momentum_teacher` to 1.
+    Augmentation: colour `jitter` strength.
+    """
+
+    epochs: int = 8
+    batch_size: int = 64
+    lr: float = 5e-4
+    seed: int = 0
+    n_local_crops: int = 4
+    local_size: int | None = None
+    out_dim: int = 1024
+    hidden_dim: int = 512
+    bottleneck_dim: int = 128
+    student_temp: float = 0.1
+    teacher_temp: float = 0.04
+    warmup_teacher_temp: float | None = None
+    warmup_teacher_temp_epochs: int = 0
+    centering: Literal["sinkhorn_knopp", "centre"] = "sinkhorn_knopp"
+    sinkhorn_iterations: int = 3
+    center_momentum: float = 0.9
+    koleo_weight: float = 0.1
+    freeze_last_layer_epochs: int = 1
+    momentum_teacher: float = 0.99
+    weight_decay: float = 0.04
+    warmup_epochs: int = 1
+    clip_grad: float = 3.0
+    jitter: float = 0.4
+
+    @classmethod
+    def from_config(cls, pretrain: Mapping[str, Any]) -> DinoSettings:
+        """Settings from config ``features.pretrain`` (defaults already filled by the schema;
+        a key missing here keeps the field's default). Unknown keys are refused by the schema."""
+        return cls(**{f.name: pretrain[f.name] for f in fields(cls) if f.name in pretrain})
+
+    @classmethod
+    def tiny(cls, **changes: Any) -> DinoSettings:
+        """One epoch of a small head on small batches, for tests; `changes` override."""
+        small = cls(epochs=1, batch_size=4, lr=1e-3, n_local_crops=2, out_dim=64, hidden_dim=32,
+                    bottleneck_dim=16)  # fmt: skip
+        return replace(small, **changes)
