@@ -240,7 +240,7 @@ def synthetic_pairs(n: int, dv: int, dt: int, noise: float, seed: int):
 
 def saved_bytes(result) -> bytes:
     buf = io.BytesIO()
-    torch.save(align._payload(result), buf)
+    torch.save(align.heads_payload(result), buf)
     return buf.getvalue()
 
 

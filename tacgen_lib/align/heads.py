@@ -60,6 +60,7 @@ __all__ = [
     "train_step",
     "fit_heads",
     "project",
+    "heads_payload",
     "save_heads",
     "load_heads",
     "parse_n_train",
@@ -543,7 +544,8 @@ def project(
     return out[0], out[1]
 
 
-def _payload(result: AlignResult) -> dict[str, Any]:
+def heads_payload(result: AlignResult) -> dict[str, Any]:
+    """What `save_heads` serialises: format, dims, config, curve and both heads' weights."""
     return {
         "format": _FORMAT,
         "dims": dict(result.dims),
@@ -570,7 +572,7 @@ def save_heads(result: AlignResult, path: str | os.PathLike[str], *, producer: s
     report's edge manifest lists it and `load_heads` refuses a file changed after it was written.
     """
     buf = io.BytesIO()
-    torch.save(_payload(result), buf)
+    torch.save(heads_payload(result), buf)
     data = buf.getvalue()
     dims = result.dims
     layers = f"{dims['hidden_dim']}->{dims['out_dim']}"

@@ -1,0 +1,80 @@
+"""One settings object per stage: built from the validated config, every field reachable."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import pytest
+import yaml
+from snakemake.utils import update_config
+from snakemake_run import ROOT
+
+from tacgen_lib.align.settings import AlignSettings
+from tacgen_lib.corpus.sim.corpus import CorpusSettings
+from tacgen_lib.features.settings import DinoSettings
+from tacgen_lib.io.config import validate_config
+
+SCHEMA = ROOT / "config" / "config.schema.yaml"
+
+
+def validated(overlay: str | None = None) -> dict:
+    """config/config.yaml (merged with an overlay, as Snakemake merges), validated."""
+    cfg = yaml.safe_load((ROOT / "config/config.yaml").read_text())
+    if overlay:
+        update_config(cfg, yaml.safe_load((ROOT / "config" / overlay).read_text()))
+    cfg["scenes_file"] = str(ROOT / cfg["scenes_file"])
+    return validate_config(cfg, SCHEMA)
+
+
+def schema_keys(*path: str) -> set[str]:
+    node = yaml.safe_load(SCHEMA.read_text())
+    for key in path:
+        node = node["properties"][key]
+    return set(node["properties"])
+
+
+@pytest.mark.parametrize("overlay", [None, "test.yaml", "paper.yaml"])
+def test_every_config_builds_every_settings_object(overlay):
+    cfg = validated(overlay)
+    align = AlignSettings.from_config(cfg["align"])
+    assert align.feature == cfg["align"]["features"] and align.epochs == cfg["align"]["epochs"]
+    dino = DinoSettings.from_config(cfg["features"]["pretrain"])
+    assert dino.epochs == cfg["features"]["pretrain"]["epochs"]
+    for name, corpus in cfg["corpora"].items():
+        if corpus["kind"] == "simulated":
+            assert CorpusSettings.from_config({"name": name, **corpus}).n == corpus["n"]
+
+
+def test_every_settings_field_is_a_config_key():
+    """A field that changes results but cannot be set from config would be a hidden knob."""
+    align = {f.name for f in dataclasses.fields(AlignSettings)} - {"feature"} | {"features"}
+    assert align <= schema_keys("align")
+    assert {f.name for f in dataclasses.fields(DinoSettings)} <= schema_keys("features", "pretrain")
+
+
+def test_dino_defaults_filled_by_the_schema_equal_the_dataclass_defaults():
+    filled = validated()["features"]["pretrain"]
+    for f in dataclasses.fields(DinoSettings):
+        if f.name not in ("epochs", "batch_size", "lr", "seed"):  # set by config.yaml itself
+            assert filled[f.name] == f.default, f.name
+
+
+def test_settings_refuse_bad_values_naming_the_key():
+    with pytest.raises(ValueError, match="align.budget"):
+        AlignSettings.tiny(budget="minutes")
+    with pytest.raises(ValueError, match="align.batch_size"):
+        AlignSettings.tiny(batch_size=1)
+    with pytest.raises(KeyError, match="lr"):
+        AlignSettings.from_config({k: v for k, v in validated()["align"].items() if k != "lr"})
+    with pytest.raises(ValueError, match="unknown key 'colour'"):
+        CorpusSettings.from_config({**dataclasses.asdict(CorpusSettings.tiny()), "colour": 1})
+    with pytest.raises(ValueError, match="missing key 'seed'"):
+        CorpusSettings.from_config({"name": "x", "design": "paired", "n": 2, "scene": "s"})
+    with pytest.raises(ValueError, match="'design' must be"):
+        CorpusSettings.tiny(design="mixed")
+
+
+def test_tiny_settings_are_small_and_overridable():
+    assert AlignSettings.tiny().steps <= 30 and AlignSettings.tiny(steps=5).steps == 5
+    assert DinoSettings.tiny().epochs == 1 and DinoSettings.tiny().out_dim < 1024
+    assert CorpusSettings.tiny().n <= 8 and CorpusSettings.tiny(null=True).null
