@@ -65,13 +65,35 @@ def _one(x_train: np.ndarray, x_test: np.ndarray, y: np.ndarray, **kw) -> Refits
     return Refits((DesignBlock(x_train),), (DesignBlock(x_test),), y, **kw)
 
 
-def _v_score(
-    probe: FixedProbe, rows: PairedRows, v_train, v_test, metric: Metric, *, batched: bool
-) -> float:
-    """Score of the V probe refitted on all training rows; through the batched solver (B = 1)
-    when the control's V+T side is batched, so both sides of its Delta share a solver."""
-    refit = probe.refit_many(_one(v_train, v_test, np.asarray(rows.y_train)), batched=batched)
-    return float(score_rows(metric, np.asarray(rows.y_test), refit.pred)[0])
+def _t_replaced(
+    rows: PairedRows,
+    refits: Refits,
+    *,
+    probe: FixedProbe,
+    probe_v: FixedProbe,
+    metric: Metric,
+    v_train: np.ndarray,
+    v_test: np.ndarray,
+) -> dict:
+    """Delta of a control that replaces T per problem (permuted, or random draws): the V+T
+    probe refitted for every problem of `refits`, the V probe once on all training rows. The
+    V probe goes through the batched solver (B = 1) when the V+T side does, so both sides of
+    every Delta share a solver."""
+    batched = probe.batches(refits)
+    y_train, y_test = np.asarray(rows.y_train), np.asarray(rows.y_test)
+    v_refit = probe_v.refit_many(_one(v_train, v_test, y_train), batched=batched)
+    v_score = float(score_rows(metric, y_test, v_refit.pred)[0])
+    refit = probe.refit_many(refits, batched=batched)
+    vt = score_rows(metric, y_test, refit.pred)
+    deltas = vt - v_score
+    return {
+        "v_score": v_score,
+        "vt_scores": vt,
+        "deltas": deltas,
+        "delta_ctrl": float(deltas.mean()),
+        "solver": refit.solver,
+        **_summary(deltas),
+    }
 
 
 def _summary(deltas: np.ndarray) -> dict:
@@ -143,7 +165,6 @@ def tactile_permutation_control(
     check_metric(metric)
     v_train, t_train = np.asarray(rows.v_train, np.float64), np.asarray(rows.t_train, np.float64)
     v_test, t_test = np.asarray(rows.v_test, np.float64), np.asarray(rows.t_test, np.float64)
-    y_train, y_test = np.asarray(rows.y_train), np.asarray(rows.y_test)
     if v_train.shape[0] != t_train.shape[0] or v_test.shape[0] != t_test.shape[0]:
         raise ValueError("tactile_permutation_control: V and T must have the same rows")
     rng = np.random.default_rng(seed)
@@ -152,23 +173,14 @@ def tactile_permutation_control(
     refits = Refits(
         (DesignBlock(v_train), DesignBlock(t_train, perm_tr)),
         (DesignBlock(v_test), DesignBlock(t_test, perm_te)),
-        y_train,
+        np.asarray(rows.y_train),
         fusion=rows.fusion,
     )
-    batched = probe.batches(refits)
-    v_score = _v_score(probe_v or probe, rows, v_train, v_test, metric, batched=batched)
-    refit = probe.refit_many(refits, batched=batched)
-    vt = score_rows(metric, y_test, refit.pred)
-    deltas = vt - v_score
-    return {
-        "v_score": v_score,
-        "vt_scores": vt,
-        "deltas": deltas,
-        "delta_ctrl": float(deltas.mean()),
-        "n_permutations": n_permutations,
-        "solver": refit.solver,
-        **_summary(deltas),
-    }
+    out = _t_replaced(
+        rows, refits, probe=probe, probe_v=probe_v or probe, metric=metric, v_train=v_train,
+        v_test=v_test,
+    )  # fmt: skip
+    return {**out, "n_permutations": n_permutations}
 
 
 def label_permutation_control(
@@ -237,18 +249,11 @@ def random_feature_control(
         np.asarray(rows.y_train),
         fusion=rows.fusion,
     )
-    batched = probe.batches(refits)
-    v_score = _v_score(probe_v or probe, rows, rows.v_train, rows.v_test, metric, batched=batched)
-    vt = score_rows(metric, np.asarray(rows.y_test), probe.refit_many(refits, batched=batched).pred)
-    deltas = vt - v_score
-    return {
-        "v_score": v_score,
-        "vt_scores": vt,
-        "deltas": deltas,
-        "delta_ctrl": float(deltas.mean()),
-        "n_draws": n_draws,
-        **_summary(deltas),
-    }
+    out = _t_replaced(
+        rows, refits, probe=probe, probe_v=probe_v or probe, metric=metric,
+        v_train=rows.v_train, v_test=rows.v_test,
+    )  # fmt: skip
+    return {**out, "n_draws": n_draws}
 
 
 def paper_criterion(
