@@ -7,9 +7,12 @@ probes fitted directly on the same rows.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 import pytest
+import yaml
 from sklearn.linear_model import Ridge
 from sklearn.metrics import r2_score
 
@@ -208,6 +211,29 @@ def test_plan_skips_same_dim_fusions_on_unequal_raw_dims_with_a_reason():
         dim_t_raw=8,
     )  # fmt: skip
     assert all(p.skip_reason is None for p in equal)
+
+
+def test_families_compare_like_with_like_and_repeat_no_rows():
+    """Aligned rows only where V is ViT (the heads' input); two families whose rows would be
+    identical are refused; the default config passes."""
+    assert ps.has_aligned_rows("vit") and not ps.has_aligned_rows("pixel")
+    fam = {"corpus": "c", "heads_from": "p", "target": "mass", "kind": "ridge"}
+    ps.check_families({"mass": {**fam, "vision": "pixel"}, "mass_vit": {**fam, "vision": "vit"}})
+    with pytest.raises(ValueError, match="'b' and 'a' would produce identical raw rows"):
+        ps.check_families({"b": {**fam, "vision": "vit"}, "a": {**fam, "vision": "vit"}})
+    heads = {**fam, "heads_from": "q", "vision": "vit"}  # other heads: same raw rows
+    with pytest.raises(ValueError, match="identical raw rows"):
+        ps.check_families({"a": {**fam, "vision": "vit"}, "b": heads})
+    root = Path(__file__).resolve().parents[1]
+    families = yaml.safe_load((root / "config/config.yaml").read_text())["probes"]["families"]
+    ps.check_families(families)
+    pixel = [f for f, spec in families.items() if spec["vision"] == "pixel"]
+    assert pixel and all(
+        any(
+            g["vision"] == "vit" and g["target"] == families[f]["target"] for g in families.values()
+        )
+        for f in pixel
+    )  # every pixel-V family's aligned results live in a ViT-V family of the same target
 
 
 # --------------------------------------------------------------------------- T carries y

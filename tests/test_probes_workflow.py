@@ -133,6 +133,14 @@ def test_summary_edge_has_the_documented_columns_and_one_row_per_comparison(summ
     aligned = main.loc[main["input"] == "aligned"]
     assert set(aligned["fusion"]) == set(cfg["probes"]["fusions"])
     assert set(aligned["align_seed"]) == set(cfg["align"]["seeds"])
+    # aligned rows only in ViT-V families, and no two families repeat each other's rows
+    assert (aligned["vision"] == "vit").all()
+    scores = ["v_score", "vt_score", "delta", "ci_low", "ci_high"]
+    by_family = {
+        fam: tuple(g.sort_values(["fusion", "align_seed"])[scores].round(12).to_numpy().ravel())
+        for fam, g in aligned.groupby("family")
+    }
+    assert len(set(by_family.values())) == len(by_family), "identical aligned rows"
     # the tactile ablation covers every preprocessing variant
     raw_concat = main.loc[(main["input"] == "raw") & (main["fusion"] == "concat")]
     assert set(raw_concat["t_variant"]) == set(cfg["preprocess"]["variants"])

@@ -20,7 +20,11 @@ Protocol (paper, "Probes")
     fusion (mean, max, attention, weighted) runs on raw features only when d_V == d_T and is
     otherwise recorded as a ``skipped`` row with the reason.
   * ``raw`` tactile ablation: T of every other preprocessing variant, ``concat`` with raw V.
-  * ``aligned``: V_aligned vs fuse(V_aligned, T_aligned) for every fusion and alignment seed.
+  * ``aligned``: V_aligned vs fuse(V_aligned, T_aligned) for every fusion and alignment seed,
+    in families whose V is ``vit`` only (`has_aligned_rows`): the heads project ViT features,
+    so in a pixel-V family the aligned rows would compare against a ViT-derived V baseline
+    unlike its raw rows, and repeat its ViT twin's rows exactly. A pixel-V family compares
+    raw pixel V vs V+T; its aligned results live in the ``*_vit`` family of the same target.
 - Regulariser: lambda (ridge) or C (logistic) by K-fold CV on the training rows only.
 - Statistics per comparison: fixed-test bootstrap (stratified within strata when given),
   percentile 95% CI, p(Delta > 0).
@@ -75,7 +79,9 @@ __all__ = [
     "compare",
     "confusion_counts",
     "family_rows",
+    "check_families",
     "fit_probe",
+    "has_aligned_rows",
     "plan_comparisons",
     "pool_strata",
     "row_id",
@@ -357,6 +363,41 @@ def fit_probe(
 
 
 # --------------------------------------------------------------------------- plan
+
+
+#: The V features the alignment heads project: only families with this V have aligned rows.
+ALIGNED_VISION = "vit"
+
+
+def has_aligned_rows(vision: str) -> bool:
+    """Whether a family whose V is `vision` ("pixel" | "vit") gets aligned comparisons.
+
+    The heads project ViT features, so aligned V is ViT-derived whatever the family's V; in a
+    pixel-V family aligned rows would set a different V baseline than its raw rows and repeat
+    the rows of the ViT family of the same target. A pixel-V family is raw rows only.
+    """
+    return vision == ALIGNED_VISION
+
+
+def check_families(families: Mapping[str, Mapping]) -> None:
+    """Refuse families whose rows would repeat another's (config ``probes.families``).
+
+    Raw rows are set by (corpus, target, kind, V features); two families that share these
+    would repeat every raw row. Aligned rows exist only for ViT-V families
+    (`has_aligned_rows`), so the same key also keeps two families' aligned rows apart unless
+    they differ in ``heads_from`` -- and then their raw rows would repeat, which is refused.
+    """
+    seen: dict[tuple, str] = {}
+    for name in sorted(families):
+        fam = families[name]
+        key = (fam["corpus"], fam["target"], fam["kind"], fam["vision"])
+        if key in seen:
+            raise ValueError(
+                f"probes.families: {name!r} and {seen[key]!r} would produce identical raw rows "
+                f"({', '.join(map(str, key))}); drop one or change its corpus, target, kind or "
+                "vision"
+            )
+        seen[key] = name
 
 
 @dataclass(frozen=True)
