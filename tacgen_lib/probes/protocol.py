@@ -17,7 +17,7 @@ Protocol (paper, "Probes")
 - Comparisons (`plan_comparisons`), V vs V+T always on the same rows:
   * ``raw``: V = vision features (pixel or vit), T = tactile ``vit`` features of the heads'
     preprocessing variant; every configured fusion (``concat`` always). A same-dimension
-    fusion (mean, max, attention, weighted) runs on raw features only when d_V == d_T and is
+    fusion (mean, max, weighted) runs on raw features only when d_V == d_T and is
     otherwise recorded as a ``skipped`` row with the reason.
   * ``raw`` tactile ablation: T of every other preprocessing variant, ``concat`` with raw V.
   * ``aligned``: V_aligned vs fuse(V_aligned, T_aligned) for every fusion and alignment seed,
