@@ -51,7 +51,7 @@ rule probe:
         fusions=PROBES["fusions"],
         heads_variant=PROBES["heads"]["variant"],
         variants=config["preprocess"]["variants"],
-        align_seeds=config["align"]["seeds"],
+        align_seeds=lambda w: probe_align_seeds(w.family),
     script:
         "../workflow/scripts/probe.py"
 

@@ -1,6 +1,9 @@
 """Helpers of the probes stage (family specs, input lists, report items); included by probes.smk."""
 
+from tacgen_lib.probes.protocol import check_families, has_aligned_rows
+
 PROBES = config["probes"]
+check_families(PROBES["families"])  # no family repeats another's rows
 PROBE_FAMILIES = sorted(PROBES["families"])
 PROBE_DIR = "results/probes/{family}"
 PROBE_REPORT = "results/report/probes"
@@ -19,6 +22,12 @@ PROBE_EDGES = ["seed~{seed}", "sweep~{seed}", "confusion~{seed}"]
 
 def probe_family(family):
     return {"name": family, **PROBES["families"][family]}
+
+
+def probe_align_seeds(family):
+    """Alignment seeds whose aligned projections a family probes (none for pixel-V families)."""
+    fam = probe_family(family)
+    return config["align"]["seeds"] if has_aligned_rows(fam["vision"]) else []
 
 
 def probe_inputs(wildcards):
@@ -42,7 +51,7 @@ def probe_inputs(wildcards):
                 heads["tau"],
                 heads["n_train"],
             )
-            for seed in config["align"]["seeds"]
+            for seed in probe_align_seeds(wildcards.family)
         ],
     }
 

@@ -13,21 +13,9 @@ def pair(n=9, d=5, seed=0):
     return rng.standard_normal((n, d)), 3.0 * rng.standard_normal((n, d))
 
 
-def attention_reference(v, t):
-    """Plain loop: tokens X = [v; t], A = softmax(X X^T / sqrt(d)) rows, mean of A X."""
-    out = np.empty_like(v)
-    for i in range(v.shape[0]):
-        x = np.stack([v[i], t[i]])
-        s = x @ x.T / np.sqrt(x.shape[1])
-        a = np.exp(s - s.max(axis=1, keepdims=True))
-        a /= a.sum(axis=1, keepdims=True)
-        out[i] = (a @ x).mean(axis=0)
-    return out
-
-
 def test_table_lists_the_paper_variants():
     assert set(FUSIONS) == {
-        "concat", "mean", "max", "attention", "weighted_75_25", "weighted_25_75",
+        "concat", "mean", "max", "weighted_75_25", "weighted_25_75",
     }  # fmt: skip
     rows = fusion_table()
     assert [r["name"] for r in rows] == list(FUSIONS)
@@ -41,17 +29,24 @@ def test_values_against_references():
     np.testing.assert_array_equal(fuse("max", v, t), np.where(v > t, v, t))
     np.testing.assert_allclose(fuse("weighted_75_25", v, t), 0.75 * v + 0.25 * t)
     np.testing.assert_allclose(fuse("weighted_25_75", v, t), 0.25 * v + 0.75 * t)
-    np.testing.assert_allclose(fuse("attention", v, t), attention_reference(v, t), rtol=1e-12)
 
 
-def test_attention_is_mean_for_equal_norms_and_stays_finite_for_huge_scores():
+def test_attention_is_dropped_with_the_reason():
+    """Issue 17: parameter-free attention over unit-norm tokens was 'mean' under another name."""
     v, t = pair()
-    v /= np.linalg.norm(v, axis=1, keepdims=True)
-    t /= np.linalg.norm(t, axis=1, keepdims=True)
-    np.testing.assert_allclose(fuse("attention", v, t), fuse("mean", v, t), rtol=1e-12)
-    big = fuse("attention", 1e4 * v, t)  # scores ~1e8: a naive exp overflows
-    assert np.isfinite(big).all()
-    np.testing.assert_allclose(big, attention_reference(1e4 * v, t), rtol=1e-9, atol=1e-9)
+    with pytest.raises(ValueError, match=r"'attention' was dropped.*equals 'mean'"):
+        fuse("attention", v, t)
+    assert "attention" not in FUSIONS
+
+
+def test_a_constant_gate_is_nested_in_concat():
+    """Why no learned gate: g v + (1 - g) t with g fixed over rows is a linear map of [v, t],
+    so a linear probe on it is a linear probe on concat with tied coefficients."""
+    v, t = pair()
+    g = np.random.default_rng(3).random(v.shape[1])
+    w = np.random.default_rng(4).standard_normal(v.shape[1])
+    gated = (g * v + (1 - g) * t) @ w
+    np.testing.assert_allclose(gated, fuse("concat", v, t) @ np.concatenate([g * w, (1 - g) * w]))
 
 
 @pytest.mark.parametrize("name", sorted(FUSIONS))

@@ -7,9 +7,12 @@ probes fitted directly on the same rows.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 import pytest
+import yaml
 from sklearn.linear_model import Ridge
 from sklearn.metrics import r2_score
 
@@ -208,6 +211,70 @@ def test_plan_skips_same_dim_fusions_on_unequal_raw_dims_with_a_reason():
         dim_t_raw=8,
     )  # fmt: skip
     assert all(p.skip_reason is None for p in equal)
+
+
+def test_families_compare_like_with_like_and_repeat_no_rows():
+    """Aligned rows only where V is ViT (the heads' input); two families whose rows would be
+    identical are refused; the default config passes."""
+    assert ps.has_aligned_rows("vit") and not ps.has_aligned_rows("pixel")
+    fam = {"corpus": "c", "heads_from": "p", "target": "mass", "kind": "ridge"}
+    ps.check_families({"mass": {**fam, "vision": "pixel"}, "mass_vit": {**fam, "vision": "vit"}})
+    with pytest.raises(ValueError, match="'b' and 'a' would produce identical raw rows"):
+        ps.check_families({"b": {**fam, "vision": "vit"}, "a": {**fam, "vision": "vit"}})
+    heads = {**fam, "heads_from": "q", "vision": "vit"}  # other heads: same raw rows
+    with pytest.raises(ValueError, match="identical raw rows"):
+        ps.check_families({"a": {**fam, "vision": "vit"}, "b": heads})
+    root = Path(__file__).resolve().parents[1]
+    families = yaml.safe_load((root / "config/config.yaml").read_text())["probes"]["families"]
+    ps.check_families(families)
+    pixel = [f for f, spec in families.items() if spec["vision"] == "pixel"]
+    assert pixel and all(
+        any(
+            g["vision"] == "vit" and g["target"] == families[f]["target"] for g in families.values()
+        )
+        for f in pixel
+    )  # every pixel-V family's aligned results live in a ViT-V family of the same target
+
+
+def test_baseline_score_is_the_train_mean_or_majority_class():
+    from sklearn.dummy import DummyClassifier, DummyRegressor
+
+    rng = np.random.default_rng(0)
+    y_tr, y_te = rng.normal(3.0, 1.0, 40), rng.normal(2.0, 1.0, 20)
+    ref = r2_score(y_te, DummyRegressor().fit(np.zeros((40, 1)), y_tr).predict(np.zeros((20, 1))))
+    assert ps.baseline_score(y_tr, y_te, "r2") == pytest.approx(ref)
+    assert ps.baseline_score(y_tr, y_te, "r2") < 0  # a shifted test mean: below zero
+    c_tr = np.array(["soft"] * 7 + ["hard"] * 5, dtype=object)
+    c_te = np.array(["soft", "hard", "hard", "soft", "soft"], dtype=object)
+    dummy = DummyClassifier(strategy="most_frequent").fit(np.zeros((12, 1)), c_tr)
+    assert (
+        ps.baseline_score(c_tr, c_te, "accuracy")
+        == (dummy.predict(np.zeros((5, 1))) == c_te).mean()
+    )
+
+
+def test_visible_ceiling_recovers_mass_from_shape_and_scale_when_density_is_constant():
+    """mass = density x c_shape x scale^3: with one density the shape-only ceiling is ~1 on
+    an unseen scale (extrapolation in scale^3), and with random density it stays below 1."""
+    rng = np.random.default_rng(1)
+    n = 90
+    shape = rng.choice(["cube", "sphere", "capsule"], n)
+    scale = np.tile([0.15, 0.2, 0.25], n // 3)
+    c = pd.Series(shape).map({"cube": 1.0, "sphere": 0.52, "capsule": 0.3}).to_numpy()
+    for density, lo, hi in (
+        (np.full(n, 1000.0), 0.999, 1.0),
+        (rng.choice([500.0, 5000.0], n), -1, 0.9),
+    ):
+        manifest = pd.DataFrame({
+            "sample_id": [f"s{i:03d}" for i in range(n)], "corpus": "ctrl", "shape": shape,
+            "scale": scale, "density": density, "mass": density * c * scale**3,
+        })  # fmt: skip
+        splits = manifest[["sample_id", "corpus"]].assign(
+            split=np.where(scale == 0.25, "test", "train")
+        )
+        rows = ps.family_rows(manifest, splits, corpus="ctrl", target="mass", kind="ridge")
+        got = ps.visible_score(rows, settings("ridge"))
+        assert lo <= got <= hi, got
 
 
 # --------------------------------------------------------------------------- T carries y

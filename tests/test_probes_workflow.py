@@ -34,7 +34,7 @@ SUMMARY_COLUMNS = {
     "probe_seed", "control", "status", "metric", "v_score", "vt_score", "delta", "ci_low",
     "ci_high", "p_gt0", "criterion_met", "delta_ctrl", "controls", "v_reg", "vt_reg",
     "reg_name", "n_train", "n_test", "converged", "notes", "null_corpus", "design",
-    "bootstrap_strata",
+    "bootstrap_strata", "baseline_score", "visible_score",
 }  # fmt: skip
 
 
@@ -133,6 +133,14 @@ def test_summary_edge_has_the_documented_columns_and_one_row_per_comparison(summ
     aligned = main.loc[main["input"] == "aligned"]
     assert set(aligned["fusion"]) == set(cfg["probes"]["fusions"])
     assert set(aligned["align_seed"]) == set(cfg["align"]["seeds"])
+    # aligned rows only in ViT-V families, and no two families repeat each other's rows
+    assert (aligned["vision"] == "vit").all()
+    scores = ["v_score", "vt_score", "delta", "ci_low", "ci_high"]
+    by_family = {
+        fam: tuple(g.sort_values(["fusion", "align_seed"])[scores].round(12).to_numpy().ravel())
+        for fam, g in aligned.groupby("family")
+    }
+    assert len(set(by_family.values())) == len(by_family), "identical aligned rows"
     # the tactile ablation covers every preprocessing variant
     raw_concat = main.loc[(main["input"] == "raw") & (main["fusion"] == "concat")]
     assert set(raw_concat["t_variant"]) == set(cfg["preprocess"]["variants"])
@@ -151,6 +159,10 @@ def test_summary_edge_has_the_documented_columns_and_one_row_per_comparison(summ
     assert force["vt_in_band"].between(0, 1).all() and force["band_low_mean"].notna().all()
     ctrl = main.loc[main["design"] == "controlled", "bootstrap_strata"]
     assert ctrl.str.startswith("shape x density x scale").all()
+    # every row carries the baselines that size its Delta (constant within a family)
+    assert main["baseline_score"].notna().all()
+    assert (main.groupby("family")["baseline_score"].nunique() == 1).all()
+    assert main.loc[main["design"] == "controlled", "visible_score"].notna().all()
 
 
 def test_null_corpus_rows_are_present_and_show_no_gain(summary):

@@ -21,7 +21,7 @@ from tacgen_lib.probes.fusion import fuse
 from tacgen_lib.probes.logistic import FixedLogistic
 from tacgen_lib.probes.metrics import r2
 from tacgen_lib.probes.objective import DesignBlock
-from tacgen_lib.probes.refits import Refits
+from tacgen_lib.probes.refits import Refits, Refitted
 from tacgen_lib.probes.ridge import FixedRidge
 
 
@@ -126,19 +126,71 @@ def test_tactile_permutation_fast_path_equals_refit_loop(dims, solver):
     kw = dict(metric="r2", n_permutations=12, seed=4)
     rows = PairedRows(v_tr, t_tr, y_tr, v_te, t_te, y_te)
     fast = tactile_permutation_control(rows, probe=FixedRidge(2.0, solver=solver), **kw)
-    rng = np.random.default_rng(4)  # the documented draw: train permutations, then test
+    rng = np.random.default_rng(4)  # the documented draw: training permutations only
     p_tr = np.argsort(rng.random((12, 70)), axis=1, kind="stable")
-    p_te = np.argsort(rng.random((12, 40)), axis=1, kind="stable")
     v_score = r2_score(y_te, FixedRidge(2.0).fit_predict(v_tr, y_tr, v_te))
     loop = []
-    for a, b in zip(p_tr, p_te, strict=True):
+    for a in p_tr:  # the paper's control: permuted training T, intact test T
         pred = FixedRidge(2.0).fit_predict(fuse("concat", v_tr, t_tr[a]), y_tr,
-                                           fuse("concat", v_te, t_te[b]))  # fmt: skip
+                                           fuse("concat", v_te, t_te))  # fmt: skip
         loop.append(r2_score(y_te, pred) - v_score)
     np.testing.assert_allclose(fast["deltas"], loop, rtol=1e-9, atol=1e-11)
     real = r2_score(y_te, FixedRidge(2.0).fit_predict(fuse("concat", v_tr, t_tr), y_tr,
                                                       fuse("concat", v_te, t_te))) - v_score  # fmt: skip
     assert fast["delta_ctrl"] < real  # T carries signal only when paired
+
+
+class SpyProbe:
+    """Wraps a fixed probe, records every (X_train, X_test) its refit loop is given."""
+
+    def __init__(self, probe):
+        self.probe, self.calls = probe, []
+
+    def fit_predict(self, X_train, y_train, X_test):
+        self.calls.append((X_train.copy(), X_test.copy()))
+        return self.probe.fit_predict(X_train, y_train, X_test)
+
+    def batches(self, refits):
+        return False
+
+    def refit_many(self, refits, *, batched=None):
+        return Refitted(refits.loop(self.fit_predict), {"refits": refits.n_problems})
+
+
+@pytest.mark.parametrize("fusion", ["concat", "mean"])
+def test_tactile_permutation_keeps_test_tactile_intact(fusion):
+    """The paper's control permutes the TRAINING T only: every refit sees the test rows'
+    own fuse(V, T), and its training T is a permutation of the real one."""
+    v_tr, t_tr, y_tr, v_te, t_te, y_te = control_data(dv=6, dt=6)
+    spy = SpyProbe(FixedRidge(2.0))
+    rows = PairedRows(v_tr, t_tr, y_tr, v_te, t_te, y_te, fusion=fusion)
+    tactile_permutation_control(rows, probe=spy, probe_v=FixedRidge(2.0), metric="r2",
+                                n_permutations=5, seed=3)  # fmt: skip
+    assert len(spy.calls) == 5
+    x_te = fuse(fusion, v_te, t_te)
+    moved = 0
+    for x_train, x_test in spy.calls:
+        np.testing.assert_array_equal(x_test, x_te)  # the test block is untouched
+        moved += not np.array_equal(x_train, fuse(fusion, v_tr, t_tr))
+    assert moved == 5  # every training T was permuted
+
+
+def test_tactile_permutation_batched_equals_loop_with_intact_test():
+    """Kernel path (ridge) and batched solver (logistic) against the refit loop."""
+    v_tr, t_tr, y_tr, v_te, t_te, y_te = control_data(dv=40, dt=50)
+    rows = PairedRows(v_tr, t_tr, y_tr, v_te, t_te, y_te)
+    kw = dict(metric="r2", n_permutations=8, seed=2)
+    fast = tactile_permutation_control(rows, probe=FixedRidge(2.0), **kw)
+    assert "pcg_iterations" in fast["solver"]  # the batched kernel path ran
+    loop = tactile_permutation_control(rows, probe=SpyProbe(FixedRidge(2.0)), **kw)
+    np.testing.assert_allclose(fast["deltas"], loop["deltas"], rtol=1e-9, atol=1e-11)
+    v_tr, t_tr, c_tr, v_te, t_te, c_te = class_data(n_classes=3)
+    rows = PairedRows(v_tr, t_tr, c_tr, v_te, t_te, c_te)
+    kw = dict(metric="accuracy", n_permutations=6, seed=5)
+    fast = tactile_permutation_control(rows, probe=TIGHT, **kw)
+    assert fast["solver"] == {"batched_logistic": 6}
+    loop = tactile_permutation_control(rows, probe=SpyProbe(TIGHT), probe_v=TIGHT, **kw)
+    np.testing.assert_array_equal(fast["vt_scores"], loop["vt_scores"])
 
 
 def test_pcg_stragglers_fall_back_to_cholesky():
@@ -283,15 +335,14 @@ def test_logistic_tactile_permutation_batched_equals_refit_loop(n_classes):
     kw = dict(metric="accuracy", n_permutations=6, seed=4, probe=TIGHT)
     fast = tactile_permutation_control(PairedRows(v_tr, t_tr, y_tr, v_te, t_te, y_te), **kw)
     assert fast["solver"] == {"batched_logistic": 6}  # one shared design: batched
-    rng = np.random.default_rng(4)
+    rng = np.random.default_rng(4)  # training permutations only; test T intact
     p_tr = np.argsort(rng.random((6, 80)), axis=1, kind="stable")
-    p_te = np.argsort(rng.random((6, 40)), axis=1, kind="stable")
     loop = [
         accuracy_score(
             y_te,
-            TIGHT.fit_predict(fuse("concat", v_tr, t_tr[a]), y_tr, fuse("concat", v_te, t_te[b])),
+            TIGHT.fit_predict(fuse("concat", v_tr, t_tr[a]), y_tr, fuse("concat", v_te, t_te)),
         )  # fmt: skip
-        for a, b in zip(p_tr, p_te, strict=True)
+        for a in p_tr
     ]
     np.testing.assert_array_equal(fast["vt_scores"], loop)
 

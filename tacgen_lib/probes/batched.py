@@ -384,15 +384,18 @@ def concat_ridge_permuted(
     t_te: np.ndarray,
     lam: float,
     perm_tr: np.ndarray,
-    perm_te: np.ndarray,
+    perm_te: np.ndarray | None = None,
     *,
     solver: Literal["pcg", "cholesky"] = "pcg",
     tol: float = 1e-10,
     max_iter: int = 100,
     deflate: int = 64,
 ) -> tuple[np.ndarray, dict]:
-    """Test predictions (B, m) of ridge on [V, T[perm]] for every permutation pair (dual form),
-    and solver counts (PCG iterations, permutations solved by Cholesky).
+    """Test predictions (B, m) of ridge on [V, T[perm_tr]] for every training permutation
+    (dual form), and solver counts (PCG iterations, permutations solved by Cholesky).
+
+    perm_te: (B, m) permutations of the test T rows, or None (the tactile-permutation
+    control's case: test row i keeps its own t_te[i]).
 
     Kernel form: the centred Gram of [V, P T] is Kv + P Kt P^T (a row permutation keeps the
     column means), so no feature product is recomputed per permutation. Solved for all
@@ -423,5 +426,7 @@ def concat_ridge_permuted(
     kvx = (v_te - mv) @ vc.T  # (m, n)
     ktx = (t_te - mt) @ tc.T
     pv = alphas @ kvx.T  # (B, m)
-    pt = np.take_along_axis(z @ ktx.T, perm_te, axis=1)  # test row i is paired with t_te[p(i)]
+    pt = z @ ktx.T  # (B, m): test row i paired with its own t_te[i] ...
+    if perm_te is not None:  # ... or with t_te[perm_te[j, i]]
+        pt = np.take_along_axis(pt, perm_te, axis=1)
     return ym + pv + pt, info

@@ -10,12 +10,21 @@ Variants
 - ``concat``: [v, t]; raw backbone features (e.g. 384 + 768) or aligned projections.
 - ``mean``: (v + t) / 2; aligned projections of the same dimension.
 - ``max``: element-wise maximum; aligned, same dimension.
-- ``attention``: parameter-free scaled dot-product self-attention over the two modality
-  tokens of a sample: ``A = softmax([v; t] [v; t]^T / sqrt(d))`` (2 x 2, row-wise softmax),
-  output = mean over the two tokens of ``A [v; t]``. The weight of each modality grows with
-  its norm and its agreement with the other token; with equal-norm tokens it reduces to
-  ``mean``. Aligned, same dimension.
 - ``weighted_75_25`` / ``weighted_25_75``: 0.75 v + 0.25 t and 0.25 v + 0.75 t; aligned.
+
+No ``attention`` (dropped in issue 17). The parameter-free form that stood here, scaled
+dot-product self-attention over the two tokens {v, t} of a sample, weights each modality by
+its norm and its agreement with the other; aligned projections have unit norm (and raw ViT
+CLS vectors all have norm ~13.9), so its weight on V was 0.5 to six digits on every test row
+and every ``attention`` row equalled its ``mean`` row. A real attention needs fitted
+parameters (a gate or a temperature), fitted on the training rows inside every refit of
+every control, which the fixed, row-wise contract above (and the batched control solvers
+built on it) excludes. And for the linear probes here a learned gate adds nothing that is
+not already probed: any gate that is the same for every row (a scalar or per-dimension
+g . v + (1 - g) . t) gives a linear probe nested in the ``concat`` probe, whose coefficients
+on v and t are free; only a row-dependent gate would differ, which is a non-linear probe.
+Families of fusion covered: concatenation (``concat``), averaging (``mean``), element-wise
+max (``max``) and fixed weighted sums (``weighted_*``); not attention or learned gates.
 """
 
 from __future__ import annotations
@@ -24,9 +33,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import expit
 
-__all__ = ["FUSIONS", "Fusion", "fuse", "fusion_table"]
+__all__ = ["DROPPED", "FUSIONS", "Fusion", "fuse", "fusion_table"]
 
 
 @dataclass(frozen=True)
@@ -56,19 +64,6 @@ def _max(v: np.ndarray, t: np.ndarray) -> np.ndarray:
     return np.maximum(v, t)
 
 
-def _attention(v: np.ndarray, t: np.ndarray) -> np.ndarray:
-    d = v.shape[1]
-    scale = 1.0 / np.sqrt(d)
-    s_vv = np.einsum("ij,ij->i", v, v) * scale
-    s_tt = np.einsum("ij,ij->i", t, t) * scale
-    s_vt = np.einsum("ij,ij->i", v, t) * scale
-    # row "v" attends over (v, t) with scores (s_vv, s_vt); row "t" with (s_vt, s_tt).
-    a_vv = expit(s_vv - s_vt)  # softmax of two scores = logistic of their difference
-    a_tt = expit(s_tt - s_vt)
-    w_v = 0.5 * (a_vv + (1.0 - a_tt))  # mean over the two output tokens
-    return w_v[:, None] * v + (1.0 - w_v)[:, None] * t
-
-
 def _weighted(w_v: float) -> Callable[[np.ndarray, np.ndarray], np.ndarray]:
     def fn(v: np.ndarray, t: np.ndarray) -> np.ndarray:
         return w_v * v + (1.0 - w_v) * t
@@ -82,17 +77,16 @@ FUSIONS: dict[str, Fusion] = {
         Fusion("concat", "[v, t] concatenated", "raw or aligned", False, _concat),
         Fusion("mean", "(v + t) / 2", "aligned", True, _mean),
         Fusion("max", "element-wise max(v, t)", "aligned", True, _max),
-        Fusion(
-            "attention",
-            "parameter-free self-attention over the tokens {v, t}: "
-            "softmax(x x^T / sqrt(d)), mean of the attended tokens",
-            "aligned",
-            True,
-            _attention,
-        ),
         Fusion("weighted_75_25", "0.75 v + 0.25 t", "aligned", True, _weighted(0.75)),
         Fusion("weighted_25_75", "0.25 v + 0.75 t", "aligned", True, _weighted(0.25)),
     ]
+}
+
+
+#: Fusions that existed once, and why they are gone (a clear error for an old config).
+DROPPED = {
+    "attention": "parameter-free attention over unit-norm tokens equals 'mean' (see the "
+    "tacgen_lib.probes.fusion docstring); use 'mean' or 'concat'",
 }
 
 
@@ -108,6 +102,8 @@ def fuse(name: str, v: np.ndarray, t: np.ndarray) -> np.ndarray:
 
     v: (n, d_v), t: (n, d_t); row i of each belongs to the same sample. Returns float64.
     """
+    if name in DROPPED:
+        raise ValueError(f"fuse: fusion {name!r} was dropped: {DROPPED[name]}")
     if name not in FUSIONS:
         raise ValueError(f"fuse: unknown fusion {name!r}; choose one of {sorted(FUSIONS)}")
     spec = FUSIONS[name]

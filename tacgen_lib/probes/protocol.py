@@ -17,10 +17,14 @@ Protocol (paper, "Probes")
 - Comparisons (`plan_comparisons`), V vs V+T always on the same rows:
   * ``raw``: V = vision features (pixel or vit), T = tactile ``vit`` features of the heads'
     preprocessing variant; every configured fusion (``concat`` always). A same-dimension
-    fusion (mean, max, attention, weighted) runs on raw features only when d_V == d_T and is
+    fusion (mean, max, weighted) runs on raw features only when d_V == d_T and is
     otherwise recorded as a ``skipped`` row with the reason.
   * ``raw`` tactile ablation: T of every other preprocessing variant, ``concat`` with raw V.
-  * ``aligned``: V_aligned vs fuse(V_aligned, T_aligned) for every fusion and alignment seed.
+  * ``aligned``: V_aligned vs fuse(V_aligned, T_aligned) for every fusion and alignment seed,
+    in families whose V is ``vit`` only (`has_aligned_rows`): the heads project ViT features,
+    so in a pixel-V family the aligned rows would compare against a ViT-derived V baseline
+    unlike its raw rows, and repeat its ViT twin's rows exactly. A pixel-V family compares
+    raw pixel V vs V+T; its aligned results live in the ``*_vit`` family of the same target.
 - Regulariser: lambda (ridge) or C (logistic) by K-fold CV on the training rows only.
 - Statistics per comparison: fixed-test bootstrap (stratified within strata when given),
   percentile 95% CI, p(Delta > 0).
@@ -33,6 +37,13 @@ Protocol (paper, "Probes")
   ``controls = "not run"``; their ``delta_ctrl`` and ``criterion_met`` are null, not guessed.
 - The paper's criterion (Delta >= 0.03, CI lower bound > 0, Delta_ctrl < Delta, with
   Delta_ctrl the tactile-permutation mean) is a column; nothing is filtered on it.
+- Baselines that size a Delta (columns of every row of a family): ``baseline_score``, the
+  test score of predicting the training mean (ridge) or the majority training class
+  (logistic), `baseline_score`; and ``visible_score``, the test score of the same kind of
+  probe on the attributes vision can see, shape and scale (`visible_design`: the best
+  shape-only predictor of mass = density x volume(shape, scale) is linear in
+  one-hot(shape) x scale^3, of log-mass in one-hot(shape) and log(scale)); NaN where the
+  manifest has no shape and scale.
 
 Every row carries ``row_id`` = ``family|input|t~variant|fusion|a~align_seed|s~probe_seed|control``,
 unique within a run, the key of the probe edges.
@@ -75,13 +86,18 @@ __all__ = [
     "compare",
     "confusion_counts",
     "family_rows",
+    "baseline_score",
+    "check_families",
     "fit_probe",
+    "has_aligned_rows",
     "plan_comparisons",
     "pool_strata",
     "row_id",
     "run_family",
     "target_values",
     "tidy",
+    "visible_design",
+    "visible_score",
 ]
 
 #: The controls, in the order their rows are written.
@@ -198,6 +214,8 @@ class FamilyRows:
     bands_test: pd.DataFrame | None  # (low, high) band columns of the test rows (or None)
     n_unlabelled: int  # rows of the corpus dropped for a missing label
     strata_note: str = "none"  # how the bootstrap strata were formed (a summary column)
+    visible_train: np.ndarray | None = None  # `visible_design` of the train rows (or None)
+    visible_test: np.ndarray | None = None
 
     @property
     def n_train(self) -> int:
@@ -278,6 +296,11 @@ def family_rows(
     if target in BANDS and all(c in rows.columns for c in BANDS[target]):
         bands_test = rows.loc[test, list(BANDS[target])].reset_index(drop=True).astype(float)
     ids = rows["sample_id"].to_numpy(dtype=object)
+    visible = (None, None)
+    if all(c in rows.columns for c in VISIBLE) and rows[list(VISIBLE)].notna().all().all():
+        visible = visible_design(
+            rows.loc[train], rows.loc[test], log_target=target.startswith("log_")
+        )
     return FamilyRows(
         corpus=corpus,
         target=target,
@@ -290,7 +313,68 @@ def family_rows(
         strata_note=strata_note,
         bands_test=bands_test,
         n_unlabelled=int((~labelled).sum()),
+        visible_train=visible[0],
+        visible_test=visible[1],
     )
+
+
+#: Manifest columns of what vision can see of an object (the appearance-controlled design).
+VISIBLE = ("shape", "scale")
+
+
+def visible_design(
+    train: pd.DataFrame, test: pd.DataFrame, *, log_target: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
+    """Design of the visible attributes shape and scale, for the shape-only ceiling.
+
+    The best shape-only predictor of mass = density x c_shape x scale^3 (density unseen) is
+    E[density] c_shape scale^3, linear in one-hot(shape) x scale^3; of log-mass
+    (``log_target``) it is E[log density] + log c_shape + 3 log scale, linear in one-hot(shape)
+    and log(scale). One form per target: the controlled split holds two training scales, on
+    which scale^3 and log(scale) are collinear within a shape, so a design holding both would
+    extrapolate to the test scale by an arbitrary mix of them. Columns are standardised with
+    the TRAINING rows' mean and SD (a constant column is centred only); shapes are the union of
+    both row sets' (a shape seen only in test has an all-zero training column).
+    """
+    shapes = sorted(set(train["shape"].astype(str)) | set(test["shape"].astype(str)))
+
+    def design(frame: pd.DataFrame) -> np.ndarray:
+        onehot = (frame["shape"].astype(str).to_numpy()[:, None] == np.array(shapes)).astype(float)
+        scale = frame["scale"].to_numpy(dtype=np.float64)
+        if log_target:
+            return np.column_stack([onehot, np.log(scale)])
+        return onehot * scale[:, None] ** 3
+
+    x_tr, x_te = design(train), design(test)
+    mu, sd = x_tr.mean(axis=0), x_tr.std(axis=0)
+    sd = np.where(sd > 0, sd, 1.0)
+    return (x_tr - mu) / sd, (x_te - mu) / sd
+
+
+def baseline_score(y_train: np.ndarray, y_test: np.ndarray, metric: str) -> float:
+    """Test score of the constant predictor fitted on the training rows: their mean (R^2) or
+    their majority class (accuracy; ties to the first class in `class_order`)."""
+    if metric == "r2":
+        mean = float(np.mean(np.asarray(y_train, dtype=np.float64)))
+        return score("r2", y_test, np.full(len(y_test), mean))
+    labels = np.asarray(y_train, dtype=object)
+    classes = class_order(labels)
+    counts = [int(np.sum(labels == c)) for c in classes]
+    majority = classes[int(np.argmax(counts))]
+    return score("accuracy", np.asarray(y_test, dtype=object), np.full(len(y_test), majority))
+
+
+def visible_score(rows: FamilyRows, settings: ProbeSettings) -> float:
+    """Test score of the family's probe kind (regulariser by CV on the training rows) on the
+    visible attributes (`visible_design`): the best a shape-only predictor attains, NaN when
+    the manifest has no shape and scale."""
+    if rows.visible_train is None:
+        return math.nan
+    try:
+        fit = fit_probe(rows.visible_train, rows.y_train, rows.visible_test, settings)
+    except ValueError:  # e.g. a class with one training row: no CV, no ceiling
+        return math.nan
+    return score(settings.metric, rows.y_test, fit.pred_test)
 
 
 # --------------------------------------------------------------------------- probes
@@ -357,6 +441,41 @@ def fit_probe(
 
 
 # --------------------------------------------------------------------------- plan
+
+
+#: The V features the alignment heads project: only families with this V have aligned rows.
+ALIGNED_VISION = "vit"
+
+
+def has_aligned_rows(vision: str) -> bool:
+    """Whether a family whose V is `vision` ("pixel" | "vit") gets aligned comparisons.
+
+    The heads project ViT features, so aligned V is ViT-derived whatever the family's V; in a
+    pixel-V family aligned rows would set a different V baseline than its raw rows and repeat
+    the rows of the ViT family of the same target. A pixel-V family is raw rows only.
+    """
+    return vision == ALIGNED_VISION
+
+
+def check_families(families: Mapping[str, Mapping]) -> None:
+    """Refuse families whose rows would repeat another's (config ``probes.families``).
+
+    Raw rows are set by (corpus, target, kind, V features); two families that share these
+    would repeat every raw row. Aligned rows exist only for ViT-V families
+    (`has_aligned_rows`), so the same key also keeps two families' aligned rows apart unless
+    they differ in ``heads_from`` -- and then their raw rows would repeat, which is refused.
+    """
+    seen: dict[tuple, str] = {}
+    for name in sorted(families):
+        fam = families[name]
+        key = (fam["corpus"], fam["target"], fam["kind"], fam["vision"])
+        if key in seen:
+            raise ValueError(
+                f"probes.families: {name!r} and {seen[key]!r} would produce identical raw rows "
+                f"({', '.join(map(str, key))}); drop one or change its corpus, target, kind or "
+                "vision"
+            )
+        seen[key] = name
 
 
 @dataclass(frozen=True)
@@ -667,6 +786,8 @@ def run_family(
         "n_test": rows.n_test,
         "n_unlabelled": rows.n_unlabelled,
         "bootstrap_strata": rows.strata_note,
+        "baseline_score": baseline_score(rows.y_train, rows.y_test, settings.metric),
+        "visible_score": visible_score(rows, settings),
         **(labels or {}),
     }
     classes = class_order([*rows.y_train, *rows.y_test]) if settings.kind == "logistic" else []

@@ -84,6 +84,19 @@ def _headline(rows: pd.DataFrame) -> pd.DataFrame:
     return rows.loc[rows["t_variant"] == rows["heads_variant"]]
 
 
+def _col(rows: pd.DataFrame, name: str) -> pd.Series:
+    """A column of the summary, or NaN for a summary written before it existed."""
+    return rows[name] if name in rows else pd.Series(math.nan, index=rows.index)
+
+
+def _baselines(r: pd.Series) -> str:
+    """V, V+T and the baselines that size a Delta, as one short text."""
+    text = f"V {_num(r['v_score'])}  V+T {_num(r['vt_score'])}"
+    text += f"  mean {_num(r.get('baseline_score', math.nan))}"
+    shape = _num(r.get("visible_score", math.nan))
+    return text + (f"  shape {shape}" if shape else "")
+
+
 def _comparison_columns(rows: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(
         {
@@ -97,6 +110,8 @@ def _comparison_columns(rows: pd.DataFrame) -> pd.DataFrame:
             "metric": rows["metric"],
             "V": rows["v_score"].map(_num),
             "V+T": rows["vt_score"].map(_num),
+            "train mean": _col(rows, "baseline_score").map(_num),
+            "shape-only": _col(rows, "visible_score").map(_num),
             "Δ [95% CI]": rows.apply(_delta_ci, axis=1),
             "p(Δ>0)": rows["p_gt0"].map(_num),
             "Δ_ctrl": rows["delta_ctrl"].map(lambda x: _num(x, "{:+.3f}")),
@@ -277,7 +292,9 @@ def forest_plot(summary: pd.DataFrame, *, min_delta: float = 0.03, ncols: int = 
     A panel's lines are labelled ``input / fusion  a~align seed s~probe seed``; each panel has
     its own Delta axis (R^2 and accuracy gains differ in scale), with 0 (solid) and the paper's
     min Delta (dashed). Null-corpus families are drawn in grey; a diamond marks a comparison
-    that meets the paper's criterion.
+    that meets the paper's criterion. Beside each line, the scores that size its Delta: V,
+    V+T, the train-mean baseline and (where the manifest has shape and scale) the shape-only
+    ceiling; a grey bar marks where Delta would be if V+T scored the shape-only ceiling.
     """
     rows = _headline(main_rows(summary))
     rows = rows.loc[rows["status"] == "ok"]
@@ -286,7 +303,7 @@ def forest_plot(summary: pd.DataFrame, *, min_delta: float = 0.03, ncols: int = 
     nrows = -(-len(families) // ncols)
     height = max((rows["family"] == f).sum() for f in families) if len(rows) else 1
     fig, axes = plt.subplots(
-        nrows, ncols, figsize=(4.6 * ncols, nrows * (1.3 + 0.2 * height)), squeeze=False
+        nrows, ncols, figsize=(7.4 * ncols, nrows * (1.3 + 0.2 * height)), squeeze=False
     )
     for ax in axes.flat[len(families) :]:
         ax.axis("off")
@@ -301,6 +318,11 @@ def forest_plot(summary: pd.DataFrame, *, min_delta: float = 0.03, ncols: int = 
             ax.plot(
                 [r["delta"]], [yi], marker="D" if met else "o", color=colour, ms=6 if met else 4
             )
+            shape = r.get("visible_score", math.nan)
+            if shape is not None and np.isfinite(shape):
+                ax.plot([shape - r["v_score"]], [yi], marker="|", color="#999999", ms=9)
+            ax.text(1.02, yi, _baselines(r), transform=ax.get_yaxis_transform(), fontsize=6,
+                    va="center")  # fmt: skip
         labels = [
             f"{r['input']} / {r['fusion']}  a~{_seed(r['align_seed'])} s~{_seed(r['probe_seed'])}"
             for _, r in part.iterrows()
@@ -317,7 +339,8 @@ def forest_plot(summary: pd.DataFrame, *, min_delta: float = 0.03, ncols: int = 
         ax.grid(axis="x", color="#dddddd", lw=0.6)
     fig.suptitle(
         "Probe gains with 95% fixed-test bootstrap CIs (blue: main corpora, grey: null corpus; "
-        "◆: criterion met; dashed: the paper's min Δ)",
+        "◆: criterion met; dashed: the paper's min Δ; grey |: Δ at the shape-only ceiling; "
+        "right: V, V+T, train-mean baseline, shape-only ceiling)",
         fontsize=10,
     )
     fig.tight_layout()
