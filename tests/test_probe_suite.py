@@ -429,7 +429,7 @@ def test_report_tables_and_figures_from_a_summary(ridge_signal, logistic_signal)
     )
     assert {"lambda=0.1", "lambda=100", "C=0.1", "C=1"} <= set(sweep.columns)
     assert sweep.filter(like="lambda=").apply(lambda c: c.str.endswith("*")).to_numpy().any()
-    assert len(probe_report.fusions_frame()) == 6
+    assert len(probe_report.fusions_frame()) == 5  # concat, mean, max, two weighted sums
     fig = probe_report.forest_plot(summary)
     shown = summary.loc[(summary["control"] == "none") & (summary["status"] == "ok")
                         & (summary["t_variant"] == summary["heads_variant"])]  # fmt: skip
