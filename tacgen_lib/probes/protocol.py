@@ -45,8 +45,15 @@ Protocol (paper, "Probes")
   one-hot(shape) x scale^3, of log-mass in one-hot(shape) and log(scale)); NaN where the
   manifest has no shape and scale.
 
-Every row carries ``row_id`` = ``family|input|t~variant|fusion|a~align_seed|s~probe_seed|control``,
-unique within a run, the key of the probe edges.
+Protocol variants (issue 16; `variants.PROTOCOLS`): ``settings.protocol`` picks the probe
+`fit_probe` fits -- ``raw`` (the above), ``standardised`` (`scaling`) or ``mlp2`` (`mlp`) --
+and every row carries a ``protocol`` column. `run_family` can restrict a variant to the
+headline comparisons (``concat`` with the heads' variant, raw and aligned) and leave its
+controls out (the default budget); the paper config runs everything under every variant.
+
+Every row carries ``row_id`` = ``family|input|t~variant|fusion|a~align_seed|s~probe_seed|control``
+(``...|s~probe_seed|p~protocol|control`` for a protocol other than ``raw``, so raw keys are
+those from before the variants existed), unique within a run, the key of the probe edges.
 """
 
 from __future__ import annotations
@@ -54,7 +61,7 @@ from __future__ import annotations
 import math
 import warnings
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
@@ -72,7 +79,12 @@ from tacgen_lib.probes.controls import (
 from tacgen_lib.probes.fusion import FUSIONS, fuse
 from tacgen_lib.probes.logistic import FixedLogistic, fit_logistic
 from tacgen_lib.probes.metrics import score
+from tacgen_lib.probes.mlp import FixedMLP, MLPGrid, fit_mlp_probe
+from tacgen_lib.probes.refits import FixedProbe
 from tacgen_lib.probes.ridge import FixedRidge, fit_ridge_probe
+from tacgen_lib.probes.scaling import FixedStandardisedRidge, fit_standardised_ridge
+from tacgen_lib.probes.subsets import within_scale_split
+from tacgen_lib.probes.variants import check_protocol
 
 __all__ = [
     "BANDS",
@@ -90,6 +102,7 @@ __all__ = [
     "check_families",
     "fit_probe",
     "has_aligned_rows",
+    "headline_plan",
     "plan_comparisons",
     "pool_strata",
     "row_id",
@@ -136,10 +149,13 @@ class ProbeSettings:
     random_draws: int
     seed: int
     min_delta: float = 0.03
+    protocol: str = "raw"  # a name of `variants.PROTOCOLS`
+    mlp: MLPGrid = field(default_factory=MLPGrid)  # the ``mlp2`` probe's grid
 
     def __post_init__(self) -> None:
         if self.kind not in ("ridge", "logistic"):
             raise ValueError(f"ProbeSettings.kind must be 'ridge' or 'logistic', got {self.kind!r}")
+        check_protocol(self.protocol)
 
     @property
     def metric(self) -> str:
@@ -147,12 +163,27 @@ class ProbeSettings:
 
     @property
     def reg_name(self) -> str:
+        if self.protocol == "mlp2":
+            return "weight_decay"
         return "lambda" if self.kind == "ridge" else "C"
 
     @classmethod
-    def from_config(cls, probes_cfg: Mapping, kind: str, seed: int) -> ProbeSettings:
-        """Settings from the config section ``probes`` (validated by the schema)."""
+    def from_config(
+        cls, probes_cfg: Mapping, kind: str, seed: int, protocol: str = "raw"
+    ) -> ProbeSettings:
+        """Settings from the config section ``probes`` (validated by the schema); the ``mlp2``
+        grid from ``probes.robustness.mlp`` when present."""
+        mlp = (probes_cfg.get("robustness") or {}).get("mlp")
         return cls(
+            protocol=check_protocol(protocol),
+            mlp=MLPGrid(
+                widths=tuple(int(w) for w in mlp["widths"]),
+                weight_decays=tuple(float(a) for a in mlp["weight_decays"]),
+                folds=int(mlp["folds"]),
+                max_iter=int(mlp["max_iter"]),
+            )
+            if mlp
+            else MLPGrid(),
             kind=kind,
             lambdas=tuple(float(x) for x in probes_cfg["lambdas"]),
             C=tuple(float(x) for x in probes_cfg["C"]),
@@ -255,11 +286,15 @@ def family_rows(
     target: str,
     kind: str,
     strata: Sequence[str] | None = None,
+    within_scale: tuple[float, int] | None = None,
 ) -> FamilyRows:
     """Train (train + val) and test rows of `corpus` with their targets (sorted by sample_id).
 
     strata: manifest columns whose joint value defines bootstrap strata of the test rows
     (e.g. `CONTROLLED_STRATA`); None for unstratified resampling.
+    within_scale: (test_fraction, seed) for the held-out-scale diagnosis: the train + val rows
+    ONLY are re-split at random within each object scale (`subsets.within_scale_split`); the
+    corpus's test rows are left out entirely (they never train anything).
     """
     rows = manifest.loc[manifest["corpus"] == corpus]
     if rows.empty:
@@ -277,6 +312,13 @@ def family_rows(
     rows, y = rows.loc[labelled].reset_index(drop=True), y[labelled]
     train = rows["split"].isin(["train", "val"]).to_numpy()
     test = (rows["split"] == "test").to_numpy()
+    if within_scale is not None:
+        if "scale" not in rows.columns:
+            raise ValueError(f"corpus {corpus!r}: within-scale split needs a 'scale' column")
+        pool = np.flatnonzero(train)
+        tr_i, te_i = within_scale_split(rows["scale"].to_numpy()[pool], *within_scale)
+        train, test = np.zeros(len(rows), bool), np.zeros(len(rows), bool)
+        train[pool[tr_i]], test[pool[te_i]] = True, True
     if not train.any() or not test.any():
         raise ValueError(
             f"corpus {corpus!r}, target {target!r}: {int(train.sum())} labelled train/val and "
@@ -391,9 +433,13 @@ class FittedProbe:
     converged: bool
     n_iter: int | None  # lbfgs iterations (logistic); None for ridge (closed form)
     pred_grid: np.ndarray | None = None  # (L, m) test predictions at every lambda (ridge)
+    fixed_probe: FixedProbe | None = None  # set by protocols other than raw
+    notes: str = ""  # what the protocol chose beyond `reg` (e.g. the MLP's width)
 
-    def fixed(self, kind: str) -> FixedRidge | FixedLogistic:
+    def fixed(self, kind: str) -> FixedProbe:
         """The probe at its chosen regulariser, for controls and resampling diagnostics."""
+        if self.fixed_probe is not None:
+            return self.fixed_probe
         if kind == "ridge":
             return FixedRidge(self.reg)
         return FixedLogistic(self.reg, tol=CONTROL_TOL)
@@ -408,11 +454,37 @@ def fit_probe(
     train_ids: Sequence | np.ndarray | None = None,
     test_ids: Sequence | np.ndarray | None = None,
 ) -> FittedProbe:
-    """Ridge (CV over ``lambdas``) or logistic (stratified CV over ``C``) on the training rows.
+    """Ridge (CV over ``lambdas``) or logistic (stratified CV over ``C``) on the training rows,
+    under ``settings.protocol``: ``standardised`` ridge scales on the training rows first
+    (`scaling`), ``mlp2`` fits the 2-layer probe (`mlp`); the logistic probe standardises
+    under every protocol but ``mlp2``.
 
     The number of folds is capped at the number of training rows (ridge) or the smallest
     class count (logistic, inside `probes.fit_logistic`).
     """
+    if settings.protocol == "mlp2":
+        mlp = fit_mlp_probe(X_train, y_train, settings.kind, settings.mlp, settings.seed,
+                            sample_ids=train_ids)  # fmt: skip
+        pred = mlp.predict(X_test, sample_ids=test_ids)
+        if settings.kind == "logistic":
+            pred = np.asarray(pred, dtype=object)
+        return FittedProbe(
+            pred, mlp.weight_decay, np.asarray(settings.mlp.weight_decays, dtype=np.float64),
+            np.full(len(settings.mlp.weight_decays), np.nan), mlp.converged, mlp.n_iter,
+            fixed_probe=FixedMLP(settings.kind, mlp.width, mlp.weight_decay, settings.seed,
+                                 settings.mlp.max_iter),
+            notes=f"width {mlp.width}, weight decay {mlp.weight_decay:g}",
+        )  # fmt: skip
+    if settings.kind == "ridge" and settings.protocol == "standardised":
+        sp = fit_standardised_ridge(
+            X_train, y_train, settings.lambdas, n_folds=min(settings.folds, len(y_train)),
+            seed=settings.seed, sample_ids=train_ids,
+        )  # fmt: skip
+        grid = sp.predict_grid(X_test, sample_ids=test_ids)
+        return FittedProbe(
+            grid[sp.best], sp.lam, sp.lambdas, sp.cv_scores, True, None, grid,
+            fixed_probe=FixedStandardisedRidge(sp.lam),
+        )  # fmt: skip
     if settings.kind == "ridge":
         probe = fit_ridge_probe(
             X_train,
@@ -534,10 +606,31 @@ def plan_comparisons(
     return plan
 
 
-def row_id(family: str, spec: ComparisonSpec, probe_seed: int, control: str = "none") -> str:
-    """The key of a result row (unique within a run)."""
+def row_id(
+    family: str,
+    spec: ComparisonSpec,
+    probe_seed: int,
+    control: str = "none",
+    protocol: str = "raw",
+) -> str:
+    """The key of a result row (unique within a run); ``raw`` rows keep their older key."""
     a = "-" if spec.align_seed is None else str(spec.align_seed)
-    return f"{family}|{spec.input}|t~{spec.t_variant}|{spec.fusion}|a~{a}|s~{probe_seed}|{control}"
+    p = "" if protocol == "raw" else f"p~{protocol}|"
+    return (
+        f"{family}|{spec.input}|t~{spec.t_variant}|{spec.fusion}|a~{a}|s~{probe_seed}|{p}{control}"
+    )
+
+
+def headline_plan(
+    plan: Sequence[ComparisonSpec], heads_variant: str, *, controls: bool = True
+) -> list[ComparisonSpec]:
+    """The headline comparisons of a plan: ``concat`` with the heads' tactile variant (raw,
+    and aligned per alignment seed), with controls only if `controls`."""
+    return [
+        replace(s, controls=s.controls and controls)
+        for s in plan
+        if s.fusion == "concat" and s.t_variant == heads_variant and s.skip_reason is None
+    ]
 
 
 # --------------------------------------------------------------------------- one comparison
@@ -639,6 +732,7 @@ def compare(
         "criterion_met": None,
         "notes": "",
     }
+    chosen = "; ".join(f"{m}: {p.notes}" for m, p in (("V", v_probe), ("V+T", vt_probe)) if p.notes)
     if rows.bands_test is not None:
         lo, hi = (rows.bands_test[c].to_numpy() for c in rows.bands_test.columns)
         main["band_low_mean"] = float(np.mean(lo))
@@ -647,10 +741,11 @@ def compare(
         main["vt_in_band"] = float(np.mean((vt_probe.pred_test >= lo) & (vt_probe.pred_test <= hi)))
     result = Comparison(main, pred_v=v_probe.pred_test, pred_vt=vt_probe.pred_test)
     test_v = test_vt = np.full(v_probe.grid.size, np.nan)
-    if kind == "ridge":
+    if kind == "ridge" and v_probe.pred_grid is not None and vt_probe.pred_grid is not None:
         test_v = np.array([score("r2", y_te, p) for p in v_probe.pred_grid])
         test_vt = np.array([score("r2", y_te, p) for p in vt_probe.pred_grid])
-    for i, reg in enumerate(v_probe.grid):
+    # the mlp2 grid is 2-D (width x weight decay): its choice is in the notes, not the sweep
+    for i, reg in enumerate(v_probe.grid if settings.protocol != "mlp2" else []):
         result.sweep.append(
             {
                 "reg": float(reg),
@@ -664,7 +759,10 @@ def compare(
             }
         )
     if not controls:
-        main["notes"] = "controls not run (run on the concat comparisons only; see probe_suite)"
+        main["notes"] = "; ".join(
+            x for x in ("controls not run (see the plan: concat comparisons only, and none "
+                        "under a protocol variant in the default budget)", chosen) if x
+        )  # fmt: skip
         return result
     fixed_v, fixed_vt = v_probe.fixed(kind), vt_probe.fixed(kind)
     common = {"metric": metric, "seed": settings.seed}
@@ -707,6 +805,7 @@ def compare(
         result.controls.append(row)
         if name == "tactile_permutation" and row.get("status", "ok") == "ok":
             main["delta_ctrl"] = row["delta"]
+    main["notes"] = chosen
     if math.isnan(main["delta_ctrl"]):
         main["notes"] = "no tactile-permutation control (probes.permutations = 0, or it failed)"
     else:
@@ -748,8 +847,13 @@ def run_family(
     settings: ProbeSettings,
     labels: Mapping[str, object] | None = None,
     progress: Callable[[str], None] | None = None,
+    headline_only: bool = False,
+    controls: bool = True,
 ) -> FamilyResult:
     """Run every planned comparison of one family and probe seed.
+
+    headline_only: only the `headline_plan` comparisons; controls: False leaves every control
+    out (the bootstrap CI stays). Both serve the protocol variants' budget.
 
     vision: raw V features (train rows, test rows), rows in ``rows.train_ids`` /
         ``rows.test_ids`` order; tactile: variant -> raw T features (train, test);
@@ -773,6 +877,10 @@ def run_family(
         dim_t_raw=tactile[heads_variant][0].shape[1],
         control_align_seeds=None if settings.kind == "ridge" else LOGISTIC_CONTROL_ALIGN_SEEDS,
     )
+    if headline_only:
+        plan = headline_plan(plan, heads_variant, controls=controls)
+    elif not controls:
+        plan = [replace(s, controls=False) for s in plan]
     base = {
         "family": family,
         "corpus": rows.corpus,
@@ -781,6 +889,7 @@ def run_family(
         "metric": settings.metric,
         "reg_name": settings.reg_name,
         "probe_seed": settings.seed,
+        "protocol": settings.protocol,
         "heads_variant": heads_variant,
         "n_train": rows.n_train,
         "n_test": rows.n_test,
@@ -800,7 +909,7 @@ def run_family(
             "fusion": spec.fusion,
             "align_seed": spec.align_seed,
         }
-        key = row_id(family, spec, settings.seed)
+        key = row_id(family, spec, settings.seed, protocol=settings.protocol)
         if spec.skip_reason is not None:
             out_rows.append(
                 {"row_id": key, **base, **ident, "control": "none", "status": "skipped",
@@ -834,7 +943,8 @@ def run_family(
         out_rows.append({"row_id": key, **base, **ident, **res.main})
         for c in res.controls:
             out_rows.append(
-                {"row_id": row_id(family, spec, settings.seed, c["control"]), **base, **ident,
+                {"row_id": row_id(family, spec, settings.seed, c["control"], settings.protocol),
+                 **base, **ident,
                  "controls": "run", **c}
             )  # fmt: skip
         for s in res.sweep:
@@ -842,7 +952,7 @@ def run_family(
                 {"row_id": f"{key}|{settings.reg_name}={s['reg']:g}", "comparison": key,
                  "family": family, "corpus": rows.corpus, "target": rows.target,
                  "metric": settings.metric, **ident, "probe_seed": settings.seed,
-                 "heads_variant": heads_variant, "reg_name": settings.reg_name, **s}
+                 "protocol": settings.protocol, "heads_variant": heads_variant, "reg_name": settings.reg_name, **s}
             )  # fmt: skip
         if settings.kind == "logistic":
             for model, pred in (("V", res.pred_v), ("V+T", res.pred_vt)):
@@ -850,7 +960,8 @@ def run_family(
                     conf_rows.append(
                         {"row_id": f"{key}|{model}|{a}|{b}", "comparison": key,
                          "family": family, "corpus": rows.corpus, "target": rows.target,
-                         **ident, "probe_seed": settings.seed, "heads_variant": heads_variant,
+                         **ident, "probe_seed": settings.seed, "protocol": settings.protocol,
+                         "heads_variant": heads_variant,
                          "model": model,
                          "true": a, "pred": b, "count": n}
                     )  # fmt: skip
@@ -869,7 +980,7 @@ def run_family(
 _IDENT = {
     "row_id": "str", "comparison": "str", "family": "str", "corpus": "str", "target": "str",
     "input": "str", "t_variant": "str", "fusion": "str", "align_seed": "Int64",
-    "probe_seed": "int64", "heads_variant": "str",
+    "probe_seed": "int64", "protocol": "str", "heads_variant": "str",
 }  # fmt: skip
 #: Columns of the lambda/C sweep table (one row per comparison and regulariser value).
 SWEEP_COLUMNS = {
