@@ -13,17 +13,14 @@ include: "probes_common.smk"
 TARGETS += ["results/probes/summary.parquet"]
 TARGETS += expand("{d}/{t}.html", d=PROBE_REPORT, t=PROBE_TABLES)
 TARGETS += expand("{d}/{f}.png", d=PROBE_REPORT, f=PROBE_FIGURES)
-EDGES += [
-    f"results/probes/{family}/{edge.format(seed=seed)}.parquet"
-    for family in PROBE_FAMILIES
-    for edge in PROBE_EDGES
-    for seed in PROBES["seeds"]
-]
+EDGES += [path for edge in PROBE_EDGES for path in probe_job_edges(edge)]
 EDGES += expand("results/probes/{t}.parquet", t=["summary", "sweep", "confusion"])
 
 
 rule probe:
-    """V vs V+T probes of one family and probe seed: CV-chosen regulariser, bootstrap, controls."""
+    """V vs V+T probes of one family, protocol variant and probe seed: CV-chosen regulariser,
+    bootstrap, controls (the raw protocol; the variants as configured in probes.robustness).
+    """
     input:
         unpack(probe_inputs),
         code=imports_of("probe"),
@@ -32,11 +29,12 @@ rule probe:
         sweep=f"{PROBE_DIR}/sweep~{{seed}}.parquet",
         confusion=f"{PROBE_DIR}/confusion~{{seed}}.parquet",
     log:
-        "results/logs/probe/{family}/seed~{seed}.log",
+        "results/logs/probe/{family}/protocol~{protocol}/seed~{seed}.log",
     benchmark:
-        "results/benchmarks/probe/{family}/seed~{seed}.tsv"
+        "results/benchmarks/probe/{family}/protocol~{protocol}/seed~{seed}.tsv"
     wildcard_constraints:
         family=one_of(PROBE_FAMILIES),
+        protocol=one_of(PROTOCOLS),
         seed=r"0|[1-9]\d*",
     conda:
         "../envs/probes.yaml"
@@ -52,6 +50,7 @@ rule probe:
         heads_variant=PROBES["heads"]["variant"],
         variants=config["preprocess"]["variants"],
         align_seeds=lambda w: probe_align_seeds(w.family),
+        run=lambda w: probe_run_options(w.protocol),
     script:
         "../workflow/scripts/probe.py"
 
@@ -59,21 +58,9 @@ rule probe:
 rule aggregate_probes:
     """One summary of every probe family and seed; the probe tables and figures of the report."""
     input:
-        rows=expand(
-            f"{PROBE_DIR}/seed~{{seed}}.parquet",
-            family=PROBE_FAMILIES,
-            seed=PROBES["seeds"],
-        ),
-        sweep=expand(
-            f"{PROBE_DIR}/sweep~{{seed}}.parquet",
-            family=PROBE_FAMILIES,
-            seed=PROBES["seeds"],
-        ),
-        confusion=expand(
-            f"{PROBE_DIR}/confusion~{{seed}}.parquet",
-            family=PROBE_FAMILIES,
-            seed=PROBES["seeds"],
-        ),
+        rows=probe_job_edges("seed~{seed}"),
+        sweep=probe_job_edges("sweep~{seed}"),
+        confusion=probe_job_edges("confusion~{seed}"),
         code=imports_of("aggregate_probes"),
     output:
         summary="results/probes/summary.parquet",
@@ -108,3 +95,134 @@ rule aggregate_probes:
         runtime=10,
     script:
         "../workflow/scripts/aggregate_probes.py"
+
+
+# --- probe robustness (issue 16): training-size sweep, within-scale split, robustness report ---
+TARGETS += ["results/probes/robustness.parquet"]
+TARGETS += expand("{d}/{t}.html", d=PROBE_REPORT, t=ROBUSTNESS_TABLES)
+TARGETS += [f"{PROBE_REPORT}/training_size.png"]
+EDGES += [f"results/probes/{f}/training_size.parquet" for f in ROBUST.size_families]
+EDGES += [f"results/probes/{f}/within_scale.parquet" for f in ROBUST.within_families]
+EDGES += expand(
+    "results/probes/{t}.parquet",
+    t=["robustness", "training_size", "within_scale", "multiplicity"],
+)
+
+
+rule probe_training_size:
+    """Raw V vs V+T (concat) of one family on nested training subsets, several subset seeds."""
+    input:
+        unpack(probe_raw_inputs),
+        code=imports_of("probe_training_size"),
+    output:
+        rows="results/probes/{family}/training_size.parquet",
+    log:
+        "results/logs/probe_training_size/{family}.log",
+    benchmark:
+        "results/benchmarks/probe_training_size/{family}.tsv"
+    wildcard_constraints:
+        family=one_of(ROBUST.size_families or ["-"]),
+    conda:
+        "../envs/probes.yaml"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=30,
+    params:
+        family=lambda w: probe_family(w.family),
+        corpus=lambda w: CORPORA[probe_family(w.family)["corpus"]],
+        settings={k: v for k, v in PROBES.items() if k not in ("families", "seeds")},
+        heads_variant=PROBES["heads"]["variant"],
+        variants=config["preprocess"]["variants"],
+    script:
+        "../workflow/scripts/probe_training_size.py"
+
+
+rule probe_within_scale:
+    """Held-out-scale diagnosis: one family's headline comparison on a random within-scale split
+    of its training rows, under every protocol variant."""
+    input:
+        unpack(probe_raw_inputs),
+        code=imports_of("probe_within_scale"),
+    output:
+        rows="results/probes/{family}/within_scale.parquet",
+    log:
+        "results/logs/probe_within_scale/{family}.log",
+    benchmark:
+        "results/benchmarks/probe_within_scale/{family}.tsv"
+    wildcard_constraints:
+        family=one_of(ROBUST.within_families or ["-"]),
+    conda:
+        "../envs/probes.yaml"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=30,
+    params:
+        family=lambda w: probe_family(w.family),
+        corpus=lambda w: CORPORA[probe_family(w.family)["corpus"]],
+        settings={k: v for k, v in PROBES.items() if k not in ("families", "seeds")},
+        heads_variant=PROBES["heads"]["variant"],
+        variants=config["preprocess"]["variants"],
+    script:
+        "../workflow/scripts/probe_within_scale.py"
+
+
+rule aggregate_robustness:
+    """Robustness of the headline probes: protocol variants, multiplicity, training sizes and
+    the within-scale split, as tables and a figure of the report."""
+    input:
+        summary="results/probes/summary.parquet",
+        training_size=[
+            f"results/probes/{f}/training_size.parquet" for f in ROBUST.size_families
+        ],
+        within_scale=[
+            f"results/probes/{f}/within_scale.parquet" for f in ROBUST.within_families
+        ],
+        code=imports_of("aggregate_robustness"),
+    output:
+        robustness="results/probes/robustness.parquet",
+        training_size="results/probes/training_size.parquet",
+        within_scale="results/probes/within_scale.parquet",
+        multiplicity="results/probes/multiplicity.parquet",
+        robustness_html=probe_report_item(
+            "robustness", "html", "robustness", "protocol variants", "Robustness"
+        ),
+        multiplicity_html=probe_report_item(
+            "multiplicity",
+            "html",
+            "multiplicity",
+            "multiple comparisons",
+            "Robustness",
+        ),
+        within_scale_html=probe_report_item(
+            "within_scale", "html", "within_scale", "held-out scale", "Robustness"
+        ),
+        training_size_html=probe_report_item(
+            "training_size", "html", "training_size", "training sizes", "Robustness"
+        ),
+        training_size_png=probe_report_item(
+            "training_size",
+            "png",
+            "training_size",
+            "training-size curves",
+            "Robustness",
+        ),
+    log:
+        "results/logs/aggregate_robustness.log",
+    benchmark:
+        "results/benchmarks/aggregate_robustness.tsv"
+    conda:
+        "../envs/probes.yaml"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    params:
+        robustness=PROBES["robustness"],
+        families=PROBES["families"],
+    script:
+        "../workflow/scripts/aggregate_robustness.py"
+
+
+# --- end probe robustness ---

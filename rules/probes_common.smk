@@ -1,11 +1,17 @@
 """Helpers of the probes stage (family specs, input lists, report items); included by probes.smk."""
 
 from tacgen_lib.probes.protocol import check_families, has_aligned_rows
+from tacgen_lib.probes.robustness import RobustnessSettings
+from tacgen_lib.probes.variants import PROTOCOLS
 
 PROBES = config["probes"]
 check_families(PROBES["families"])  # no family repeats another's rows
 PROBE_FAMILIES = sorted(PROBES["families"])
-PROBE_DIR = "results/probes/{family}"
+# probe robustness (issue 16): every family under raw, the robustness families under each
+# other protocol variant (not where it equals raw); (family, protocol) pairs
+ROBUST = RobustnessSettings.from_config(PROBES["robustness"], PROBES["families"])
+PROBE_JOBS = ROBUST.jobs(PROBES["families"])
+PROBE_DIR = "results/probes/{family}/protocol~{protocol}"
 PROBE_REPORT = "results/report/probes"
 PROBE_TABLES = [
     "controlled",
@@ -17,7 +23,25 @@ PROBE_TABLES = [
     "fusions",
 ]
 PROBE_FIGURES = ["forest", "confusion"]
+ROBUSTNESS_TABLES = ["robustness", "multiplicity", "within_scale", "training_size"]
 PROBE_EDGES = ["seed~{seed}", "sweep~{seed}", "confusion~{seed}"]
+
+
+def probe_job_edges(edge):
+    """`edge` ("seed~{seed}", ...) of every probe job: (family, protocol) x probe seed."""
+    return [
+        f"{PROBE_DIR}/{edge}.parquet".format(family=f, protocol=p, seed=s)
+        for f, p in PROBE_JOBS
+        for s in PROBES["seeds"]
+    ]
+
+
+def probe_run_options(protocol):
+    """How much a protocol variant runs (headline comparisons only? controls?)."""
+    return {
+        "headline_only": ROBUST.headline_only(protocol),
+        "controls": ROBUST.run_controls(protocol),
+    }
 
 
 def probe_family(family):
@@ -56,11 +80,16 @@ def probe_inputs(wildcards):
     }
 
 
-def probe_report_item(name, ext, caption, label):
+def probe_raw_inputs(wildcards):
+    """`probe_inputs` without the aligned projections (the raw-feature robustness rules)."""
+    return {k: v for k, v in probe_inputs(wildcards).items() if k != "aligned"}
+
+
+def probe_report_item(name, ext, caption, label, category="Probes"):
     return report(
         f"{PROBE_REPORT}/{name}.{ext}",
         caption=f"../workflow/report/probe_{caption}.rst",
-        category="Probes",
+        category=category,
         subcategory="Figures" if ext == "png" else "Tables",
         labels={"item": label},
     )

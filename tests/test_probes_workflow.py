@@ -21,13 +21,20 @@ from tacgen_lib.probes import protocol as probe_suite  # noqa: E402
 
 pytestmark = pytest.mark.workflow
 
-PROBE_RULES = ["--allowed-rules", "probe", "aggregate_probes"]
+PROBE_RULES = [
+    "--allowed-rules", "probe", "aggregate_probes", "probe_training_size", "probe_within_scale",
+    "aggregate_robustness",
+]  # fmt: skip
 TABLES = ["controlled", "paired", "sweep", "align_seeds", "variants", "controls", "fusions"]
+ROBUSTNESS = ["robustness", "multiplicity", "within_scale", "training_size"]
 TARGETS = [
     "results/probes/summary.parquet",
     *[f"results/report/probes/{t}.html" for t in TABLES],
     "results/report/probes/forest.png",
     "results/report/probes/confusion.png",
+    "results/probes/robustness.parquet",
+    *[f"results/report/probes/{t}.html" for t in ROBUSTNESS],
+    "results/report/probes/training_size.png",
 ]
 SUMMARY_COLUMNS = {
     "row_id", "family", "corpus", "target", "input", "t_variant", "fusion", "align_seed",
@@ -116,8 +123,14 @@ def probes_run(tmp_path_factory, cfg) -> Path:
 
 
 @pytest.fixture(scope="module")
-def summary(probes_run) -> pd.DataFrame:
+def full_summary(probes_run) -> pd.DataFrame:
     return probe_suite.tidy(edges.read(probes_run / "results/probes/summary.parquet").frame)
+
+
+@pytest.fixture(scope="module")
+def summary(full_summary) -> pd.DataFrame:
+    """The paper's protocol (raw); the variants are tested in test_protocol_variants_*."""
+    return full_summary.loc[full_summary["protocol"] == "raw"].reset_index(drop=True)
 
 
 def test_summary_edge_has_the_documented_columns_and_one_row_per_comparison(summary, cfg):
@@ -188,16 +201,72 @@ def test_report_items_exist(probes_run):
 
 def test_probe_edges_are_verified_and_keyed_by_row_id(probes_run, cfg):
     seed = cfg["probes"]["seeds"][0]
-    rows = edges.read(probes_run / f"results/probes/hardness/seed~{seed}.parquet")
+    raw = "protocol~raw"
+    rows = edges.read(probes_run / f"results/probes/hardness/{raw}/seed~{seed}.parquet")
     assert rows.key == "row_id" and len(rows)
-    conf = edges.read(probes_run / f"results/probes/hardness/confusion~{seed}.parquet").frame
+    conf = edges.read(probes_run / f"results/probes/hardness/{raw}/confusion~{seed}.parquet").frame
     assert set(conf["model"]) == {"V", "V+T"} and set(conf["true"]) == {"hard", "soft"}
-    empty = edges.read(probes_run / f"results/probes/force/confusion~{seed}.parquet")
+    empty = edges.read(probes_run / f"results/probes/force/{raw}/confusion~{seed}.parquet")
     assert len(empty) == 0
-    log = (probes_run / f"results/logs/probe/hardness/seed~{seed}.log").read_text()
+    log = (probes_run / f"results/logs/probe/hardness/{raw}/seed~{seed}.log").read_text()
     assert "train/val rows" in log and "|none: V " in log
 
 
 def test_second_run_has_nothing_to_do(probes_run):
     proc = smk(probes_run, "--dry-run", *TARGETS, *PROBE_RULES)  # targets follow a flag
     assert "Nothing to be done" in proc.stdout + proc.stderr
+
+
+# --------------------------------------------------------------------------- robustness (issue 16)
+
+
+def test_protocol_variants_run_the_headline_families_with_a_protocol_column(full_summary, cfg):
+    rob = cfg["probes"]["robustness"]
+    main = full_summary.loc[full_summary["control"] == "none"]
+    assert set(main["protocol"]) == set(rob["protocols"])
+    for protocol in set(rob["protocols"]) - {"raw"}:
+        part = main.loc[main["protocol"] == protocol]
+        kinds = dict(zip(part["family"], part["kind"], strict=False))
+        expected = {
+            f for f in rob["families"]
+            if not (protocol == "standardised" and cfg["probes"]["families"][f]["kind"] == "logistic")
+        }  # fmt: skip
+        assert set(part["family"]) == expected, (protocol, kinds)
+        # the default budget: headline comparisons only, no controls under a variant
+        assert (part["fusion"] == "concat").all() and (part["controls"] == "not run").all()
+        assert (full_summary.loc[full_summary["protocol"] == protocol, "control"] == "none").all()
+    assert full_summary["row_id"].is_unique
+    # multiplicity columns: adjusted p at least the raw p, criterion (Holm) implies criterion
+    ok = main.loc[main["status"] == "ok"]
+    assert (ok["p_holm"] >= ok["p_boot"] - 1e-15).all() and (
+        ok["p_bh"] >= ok["p_boot"] - 1e-15
+    ).all()
+    adj = ok["criterion_adjusted"].fillna(False).astype(bool)
+    assert ok.loc[adj, "criterion_met"].astype(bool).all()
+
+
+def test_robustness_outputs(probes_run, cfg):
+    rob = cfg["probes"]["robustness"]
+    long = edges.read(probes_run / "results/probes/robustness.parquet").frame
+    assert set(long["protocol"]) == set(rob["protocols"])
+    hard_std = long.loc[(long["family"] == "hardness") & (long["protocol"] == "standardised")]
+    assert len(hard_std) and hard_std["same_as_raw"].all()
+    html = (probes_run / "results/report/probes/robustness.html").read_text()
+    assert "under every protocol variant" in html and "force" in html
+    size = edges.read(probes_run / "results/probes/training_size.parquet").frame
+    assert set(size["family"]) == set(rob["training_size"]["families"])
+    for (_fam, _seed), g in size.groupby(["family", "subset_seed"]):
+        assert g["n_train"].is_monotonic_increasing and (g["n_test"].nunique() == 1)
+    splits = edges.read(probes_run / "results/corpus/splits.parquet").frame.set_index("sample_id")
+    within = edges.read(probes_run / "results/probes/within_scale.parquet").frame
+    assert (
+        set(within["protocol"]) == set(rob["protocols"])
+        and (within["split"] == "within_scale").all()
+    )
+    counts = edges.read(probes_run / "results/probes/multiplicity.parquet").frame
+    assert {"all", "null corpora"} <= set(counts["family"])
+    log = (probes_run / "results/logs/probe_within_scale/mass.log").read_text()
+    assert "within-scale split of the train/val rows" in log
+    assert (splits.loc[splits.index.str.startswith("sim_controlled"), "split"] == "test").any()
+    for name in ROBUSTNESS:
+        assert "<table>" in (probes_run / f"results/report/probes/{name}.html").read_text(), name

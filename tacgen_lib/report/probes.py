@@ -116,6 +116,8 @@ def _comparison_columns(rows: pd.DataFrame) -> pd.DataFrame:
             "p(Δ>0)": rows["p_gt0"].map(_num),
             "Δ_ctrl": rows["delta_ctrl"].map(lambda x: _num(x, "{:+.3f}")),
             "criterion": rows["criterion_met"].map(_criterion),
+            "criterion (Holm)": _col(rows, "criterion_adjusted").map(_criterion),
+            "p (Holm, all)": _col(rows, "p_holm").map(lambda x: _num(x, "{:.4f}")),
             "n train/test": rows["n_train"].astype(str) + "/" + rows["n_test"].astype(str),
             "notes": rows["notes"],
         }

@@ -1,4 +1,5 @@
-"""One probe family at one probe seed: V vs V+T on raw and aligned features (rule probe)."""
+"""One probe family under one protocol variant at one probe seed: V vs V+T on raw and aligned
+features (rule probe)."""
 
 from threadpoolctl import threadpool_limits
 
@@ -10,8 +11,12 @@ logger = log.for_rule(snakemake)
 family = snakemake.params.family
 corpus = snakemake.params.corpus
 settings = ProbeSettings.from_config(
-    snakemake.params.settings, family["kind"], int(snakemake.wildcards.seed)
+    snakemake.params.settings,
+    family["kind"],
+    int(snakemake.wildcards.seed),
+    protocol=snakemake.wildcards.protocol,
 )
+run = snakemake.params.run  # the protocol variant's budget: headline only? controls?
 heads_variant = snakemake.params.heads_variant
 manifest = edges.read(snakemake.input.manifest).frame
 splits = edges.read(snakemake.input.splits).frame
@@ -26,9 +31,10 @@ rows = family_rows(
 # The probes train on train + val rows (no early stopping); test rows only score them.
 assert_trainable(rows.train_ids, splits, rule=snakemake.rule, allowed=("train", "val"))
 logger.info(
-    "%s: %s probe of %s on %s: %d train/val rows, %d test rows (%d unlabelled dropped)",
-    family["name"], family["kind"], family["target"], family["corpus"],
-    rows.n_train, rows.n_test, rows.n_unlabelled,
+    "%s (protocol %s): %s probe of %s on %s: %d train/val rows, %d test rows (%d unlabelled "
+    "dropped); headline only: %s, controls: %s",
+    family["name"], settings.protocol, family["kind"], family["target"], family["corpus"],
+    rows.n_train, rows.n_test, rows.n_unlabelled, run["headline_only"], run["controls"],
 )  # fmt: skip
 
 
@@ -66,6 +72,8 @@ with threadpool_limits(snakemake.threads):
             "null_corpus": bool(corpus.get("null", False)),
         },
         progress=logger.info,
+        headline_only=run["headline_only"],
+        controls=run["controls"],
     )
 edges.write(snakemake.output.rows, result.rows, key="row_id", producer=snakemake.rule)
 edges.write(snakemake.output.sweep, result.sweep, key="row_id", producer=snakemake.rule)
