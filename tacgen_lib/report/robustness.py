@@ -20,6 +20,7 @@ import math
 from collections.abc import Mapping, Sequence
 
 import matplotlib.pyplot as plt
+from matplotlib.ticker import NullFormatter
 import numpy as np
 import pandas as pd
 
@@ -296,6 +297,9 @@ def training_size_figure(size: pd.DataFrame, *, ncols: int = 3) -> plt.Figure:
             )  # fmt: skip
         ax.axhline(0.0, color="black", lw=0.8)
         ax.set_xscale("log")
+        sizes = sorted(set(part["n_train"].astype(int)))
+        ax.xaxis.set_minor_formatter(NullFormatter())
+        ax.set_xticks(sizes, [str(n) for n in sizes])
         null = bool(size.loc[size["family"] == fam, "null_corpus"].astype(bool).any())
         metric = part["metric"].iloc[0] if len(part) else ""
         ax.set_title(f"{fam}{' (null corpus)' if null else ''}, {metric}", fontsize=9)
