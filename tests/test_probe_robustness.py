@@ -274,7 +274,7 @@ def test_robustness_settings_from_every_config_and_jobs():
         jobs = rs.jobs(cfg["families"])
         assert len(set(jobs)) == len(jobs)
         assert ("hardness", "standardised") not in jobs  # logistic: standardised is raw
-        assert {("force", "standardised"), ("hardness", "mlp2")} <= set(jobs)
+        assert {("force_null", "standardised"), ("hardness", "mlp2")} <= set(jobs)
         ps = ProbeSettings.from_config(cfg, "ridge", 42, protocol="mlp2")
         assert ps.mlp.widths == tuple(cfg["robustness"]["mlp"]["widths"])
     with pytest.raises(ValueError, match="not in probes.families"):
