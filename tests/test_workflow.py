@@ -98,7 +98,11 @@ def test_changed_probe_param_reruns_only_the_probes(run_dir, tmp_path):
         cfg.read_text().replace("probes:\n  bootstrap: 200", "probes:\n  bootstrap: 150")
     )
     assert "probes:\n  bootstrap: 150" in cfg.read_text()
-    assert set(planned_rules(work)) == {"probe", "aggregate_probes", "edge_manifest", "all"}
+    # the robustness rules (issue 16) read the same probes subtree: they are downstream too
+    robustness = {"probe_training_size", "probe_within_scale", "aggregate_robustness"}
+    assert set(planned_rules(work)) == {"probe", "aggregate_probes", "edge_manifest", "all"} | (
+        robustness
+    )
 
 
 def test_changed_library_module_reruns_only_its_users(run_dir, tmp_path):
@@ -127,7 +131,8 @@ def test_edit_to_an_indirectly_imported_module_reruns_exactly_its_users(run_dir,
         for p in scripts.glob("*.py")
         if ROOT / module in import_closure(p, ROOT / "tacgen_lib")
     }
-    assert not direct and users == {"probe", "aggregate_probes"}
+    robustness = {"probe_training_size", "probe_within_scale", "aggregate_robustness"}
+    assert not direct and users == {"probe", "aggregate_probes"} | robustness
     work = copy_tree(tmp_path / "f")
     shutil.copytree(run_dir / "results", work / "results")
     shutil.copytree(run_dir / ".snakemake", work / ".snakemake")
