@@ -226,6 +226,10 @@ def test_real_corpus_path_runs_on_fixtures(tmp_path):
             "vision": "vit",
         }
     }
+    # the robustness runs name families too: a config that replaces the families says which
+    rob = cfg["probes"]["robustness"]
+    rob["families"] = rob["training_size"]["families"] = ["hardness"]
+    rob["within_scale"]["families"] = []  # no appearance-controlled corpus here
     (work / "config/real.yaml").write_text(yaml.safe_dump(cfg))
     targets = [
         "results/features/ssvtp/vision.parquet",
