@@ -61,6 +61,9 @@ KILL_STAGES: dict[str, str] = {
 RESUME = [sys.executable, str(ROOT / "tools/resume.py"), "--cores", "2"]
 CONFIG = ["--configfile", "config/test.yaml"]
 START_TIMEOUT = 600  # seconds to wait for a job of a stage to start
+# `smk` ends its command with `--configfile config/test.yaml`: an option must come between
+# that and a target, or the target is read as one more config file
+TARGETS = ("--cores", "2")
 
 
 def _scripts_of_rules() -> dict[str, str]:
@@ -283,11 +286,12 @@ def test_full_disk_names_the_file_leaves_no_half_edge_and_recovers(reference_run
         shutil.copytree(reference_run / "results", results, dirs_exist_ok=True)
         target = "results/preprocess/sim_controlled/clip128.parquet"
         size = (reference_run / target).stat().st_size
+        (work / target).unlink()  # the job to redo (background subtraction of one corpus)
         # fill the disk, leaving a third of what the edge needs
-        free = os.statvfs(results).f_bavail * os.statvfs(results).f_frsize
+        stat = os.statvfs(results)
         filler = results / "filler.bin"
-        filler.write_bytes(b"\0" * max(free - size // 3 - size, 0))  # the job frees `size`
-        full = smk(work, "--forcerun", "background_subtract", target, check=False)
+        filler.write_bytes(b"\0" * (stat.f_bavail * stat.f_frsize - size // 3))
+        full = smk(work, *TARGETS, target, check=False)
         out = full.stdout + full.stderr
         assert full.returncode != 0
         assert f"{target}: cannot write" in out and "No space left on device" in out, out[-4000:]
@@ -296,7 +300,7 @@ def test_full_disk_names_the_file_leaves_no_half_edge_and_recovers(reference_run
         assert not [p for p in results.rglob("*.tmp")]
         filler.unlink()  # space freed
         t0 = time.monotonic()
-        smk(work, target)
+        smk(work, *TARGETS, target)
         seconds = time.monotonic() - t0
         got, want = edge_hashes(work), edge_hashes(reference_run)
         assert got == want
@@ -368,7 +372,7 @@ def test_corrupt_data_in_a_well_hashed_edge_is_named(reference_run, tmp_path, ca
     edge, edit, target, column = CORRUPTIONS[case]
     work = copy_run(reference_run, tmp_path / case)
     sid = _rewrite(work / edge, edit)
-    proc = smk(work, target, check=False)
+    proc = smk(work, *TARGETS, target, check=False)
     out = proc.stdout + proc.stderr
     assert proc.returncode != 0
     message = next((line for line in out.splitlines() if sid in line and column in line), None)
@@ -383,6 +387,7 @@ def test_empty_corpus_shard_is_named(reference_run, tmp_path):
     edges.write(work / shard, samples.frame.iloc[:0], producer="test_faults")
     proc = smk(
         work,
+        *TARGETS,
         "results/corpus/sim_paired/samples.parquet",
         "--forcerun",
         "merge_corpus",

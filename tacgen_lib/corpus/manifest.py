@@ -44,7 +44,7 @@ def check_labels(frame: pd.DataFrame, *, where: str) -> None:
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
             raise ValueError(
-                f"{where}: sample_id {frame['sample_id'].iloc[i]!r} has {frame[col].iloc[i]!r} "
+                f"{where}: sample_id {frame['sample_id'].iloc[i]!r} has {frame[col].iloc[i]} "
                 f"in label column {col!r}; labels must be finite numbers: rebuild the corpus "
                 "edge or drop the sample"
             )
