@@ -3,7 +3,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 CORES ?= 2
 
-.PHONY: setup run report test lint
+.PHONY: setup run report test lint resume
 
 setup:
 	@bash tools/setup.sh $(VENV)
@@ -13,6 +13,15 @@ run: setup
 	$(BIN)/snakemake --cores $(CORES)
 	$(BIN)/snakemake --cores 1 --report results/report.html
 	@echo "report: results/report.html"
+
+# ---- issue 15: recovery is one command ---- begin
+## Continue an interrupted run (kill -9, lost session, OOM): refuses while a Snakemake of this
+## directory is alive; else clears the dead run's stale lock and temporary files and reruns
+## incomplete jobs. Extra Snakemake arguments through ARGS:
+##   make resume ARGS='--configfile config/test.yaml'
+resume:
+	$(BIN)/python tools/resume.py --cores $(CORES) $(ARGS)
+# ---- issue 15 ---- end
 
 report:
 	$(BIN)/snakemake --cores 1 --report results/report.html

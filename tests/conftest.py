@@ -7,9 +7,11 @@ in `fixtures_real.py` (plain modules: pytest puts tests/ on sys.path).
 from __future__ import annotations
 
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 import torch
+from snakemake_run import copy_tree, smk
 
 
 @pytest.fixture(autouse=True)
@@ -20,3 +22,13 @@ def one_torch_thread() -> Iterator[None]:
     torch.set_num_threads(1)
     yield
     torch.set_num_threads(before)
+
+
+@pytest.fixture(scope="session")
+def reference_run(tmp_path_factory) -> Path:
+    """One clean cold run of config/test.yaml in a copy of the repository, shared by every
+    module that needs finished edges (workflow, faults). Tests copy it (`copy_run`) before
+    changing anything; they never change it."""
+    work = copy_tree(tmp_path_factory.mktemp("reference") / "run")
+    smk(work)
+    return work

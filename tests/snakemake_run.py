@@ -30,6 +30,15 @@ def copy_tree(dest: Path) -> Path:
     return dest
 
 
+def copy_run(src: Path, dest: Path) -> Path:
+    """A copy of the repository with the finished run of `src` (results and .snakemake, mtimes
+    kept), so Snakemake sees nothing to do until the test changes something."""
+    work = copy_tree(dest)
+    shutil.copytree(src / "results", work / "results")
+    shutil.copytree(src / ".snakemake", work / ".snakemake")
+    return work
+
+
 def smk(
     workdir: Path, *args: str, check: bool = True, timeout: int = 600
 ) -> subprocess.CompletedProcess:

@@ -32,7 +32,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from snakemake_run import SNAKEMAKE, copy_tree, smk
+from snakemake_run import SNAKEMAKE, copy_tree, edge_hashes, smk
 
 pytestmark = [pytest.mark.slurm, pytest.mark.workflow]
 
@@ -201,6 +201,28 @@ def single_node_slurm(state: Path) -> Iterator[Path]:
             SLURM_CONF.unlink(missing_ok=True)
 
 
+# ---- issue 15: a dying cluster job ---- begin
+def _cancel_one_running(proc: subprocess.Popen, rule: str, timeout: float = 300) -> str | None:
+    """scancel the first job of `rule` seen RUNNING (a node failure, a preemption, an admin's
+    scancel); returns its job id, or None if the run ended before one ran."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline and proc.poll() is None:
+        with contextlib.suppress(subprocess.TimeoutExpired):
+            running = _run(["squeue", "-h", "-t", "R", "-o", "%i|%k"], timeout=10).stdout
+            for line in running.splitlines():
+                job_id, _, comment = line.partition("|")
+                if rule in comment:
+                    time.sleep(1.0)  # let it get going
+                    _run(["scancel", job_id.strip()], timeout=30)
+                    print(f"scancel {job_id.strip()} ({rule}) mid-run", flush=True)
+                    return job_id.strip()
+        time.sleep(0.5)
+    return None
+
+
+# ---- issue 15 ---- end
+
+
 @pytest.mark.skipif(
     os.environ.get("TACGEN_SLURM_TEST") != "1",
     reason="set TACGEN_SLURM_TEST=1 to run the alignment grid through a real one-node SLURM "
@@ -231,6 +253,8 @@ def test_align_grid_through_slurm_profile(tmp_path):
         "config/slurm_test.yaml",
     )
     print(f"upstream built locally in {time.monotonic() - started:.0f} s", flush=True)
+    local = tmp_path / "local"  # issue 15: the same grid run locally, for the edges' sake
+    shutil.copytree(work, local, symlinks=True)
 
     with single_node_slurm(tmp_path / "slurm") as state:
         cmd = [
@@ -248,38 +272,47 @@ def test_align_grid_through_slurm_profile(tmp_path):
             "--slurm-keep-successful-logs",
         ]
         t0 = time.monotonic()
-        try:
-            proc = subprocess.run(
-                cmd,
-                cwd=work,
-                capture_output=True,
-                text=True,
-                timeout=RUN_TIMEOUT,
-            )
-        except subprocess.TimeoutExpired as exc:
-            ctld = (state / "slurmctld.log").read_text()[-3000:]
-            pytest.fail(
-                f"the SLURM run did not finish in {RUN_TIMEOUT} s\n{(exc.stderr or b'')[-4000:]}"
-                f"\n--- slurmctld.log\n{ctld}"
-            )
+        # ---- issue 15: a dying cluster job ---- begin
+        # scancel one running train_heads job mid-run: the profile's `retries` resubmit it
+        run_log = tmp_path / "slurm_run.log"
+        with run_log.open("w") as out:
+            proc = subprocess.Popen(cmd, cwd=work, stdout=out, stderr=subprocess.STDOUT)
+            cancelled = _cancel_one_running(proc, "train_heads")
+            try:
+                proc.wait(timeout=RUN_TIMEOUT)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+                ctld = (state / "slurmctld.log").read_text()[-3000:]
+                pytest.fail(
+                    f"the SLURM run did not finish in {RUN_TIMEOUT} s\n"
+                    f"{run_log.read_text()[-4000:]}\n--- slurmctld.log\n{ctld}"
+                )
         elapsed = time.monotonic() - t0
-        print(f"alignment grid through SLURM in {elapsed:.0f} s", flush=True)
-        assert proc.returncode == 0, proc.stderr[-6000:]
+        print(f"alignment grid through SLURM in {elapsed:.0f} s (cancelled job {cancelled})")
+        assert proc.returncode == 0, run_log.read_text()[-6000:]
+        assert cancelled is not None, "no train_heads job was seen running to cancel"
+        # ---- issue 15 ---- end
         ctld_log = (state / "slurmctld.log").read_text()
         # finished jobs stay visible for MinJobAge: what each sbatch job asked for
         jobs = _run(["squeue", "-h", "-t", "all", "-o", "%k|%C|%m|%T"], timeout=10).stdout
 
     n_cells = len(corpora) * len(GRID["seeds"]) * len(GRID["taus"])
     slurm_logs = list((work / ".snakemake/slurm_logs/rule_train_heads").rglob("*.log"))
-    assert len(slurm_logs) == n_cells, slurm_logs  # one sbatch job per grid cell
+    # one sbatch job per grid cell, and one more: the resubmission of the cancelled one
+    assert n_cells <= len(slurm_logs) <= n_cells + 1, slurm_logs
     assert not (work / ".snakemake/slurm_logs/rule_aggregate_align").exists()  # localrule
     # every cell ran and exited 0 as a SLURM job (started by the main scheduler or backfill,
     # whose log lines differ: count completions, not one scheduler's wording)
     assert len(set(re.findall(r"_job_complete: JobId=(\d+) WEXITSTATUS 0", ctld_log))) >= n_cells
     heads_jobs = [line.split("|") for line in jobs.splitlines() if "train_heads" in line]
-    assert len(heads_jobs) == n_cells, jobs
-    for _comment, cpus, mem, status in heads_jobs:  # the profile's set-resources, attempt 1
-        assert (cpus, mem, status) == ("2", "4000M", "COMPLETED"), jobs
+    assert len(heads_jobs) == n_cells + 1, jobs  # the cancelled job and its resubmission
+    states = sorted((cpus, mem, status) for _comment, cpus, mem, status in heads_jobs)
+    # the profile's set-resources: attempt 1 asks 4000M; the retry of the cancelled cell is
+    # attempt 2 and asks twice that ("4000 * attempt")
+    assert states.count(("2", "4000M", "CANCELLED")) == 1, jobs
+    assert states.count(("2", "8000M", "COMPLETED")) == 1, jobs
+    assert states.count(("2", "4000M", "COMPLETED")) == n_cells - 1, jobs
     summary = __import__("pandas").read_parquet(work / "results/align/summary.parquet")
     assert len(summary) == n_cells
     assert sorted(set(summary["tau"])) == ["0.07", "0.1"]
@@ -289,3 +322,20 @@ def test_align_grid_through_slurm_profile(tmp_path):
         edges.verify(work / "results/align" / cell / "metrics.parquet")
         edges.verify(work / "results/align" / cell / "heads.pt")
     assert (work / "results/report/align/seeds.html").stat().st_size > 500
+    # ---- issue 15: the same grid run locally gives the same edges ---- begin
+    smk(
+        local,
+        "results/align/summary.parquet",
+        "results/report/align/seeds.html",
+        "--configfile",
+        "config/test.yaml",
+        "config/slurm_test.yaml",
+    )
+    # every edge the SLURM run made equals the local run's (the local run may also keep
+    # on-demand edges the SLURM run has already removed as temporary)
+    got, want = edge_hashes(work), edge_hashes(local)
+    for cell in summary["cell"]:
+        for name in ("heads.pt", "metrics.parquet", "curve.parquet"):
+            assert f"results/align/{cell}/{name}.sha256.json" in got, cell
+    assert {k: v for k, v in got.items() if want.get(k) != v} == {}
+    # ---- issue 15 ---- end

@@ -19,10 +19,9 @@ pytestmark = pytest.mark.workflow
 
 
 @pytest.fixture(scope="module")
-def run_dir(tmp_path_factory) -> Path:
-    work = copy_tree(tmp_path_factory.mktemp("wf") / "a")
-    smk(work)
-    return work
+def run_dir(reference_run) -> Path:
+    """The session's clean run (conftest.reference_run), shared with the fault tests."""
+    return reference_run
 
 
 def test_dry_run_plans_the_whole_dag(tmp_path):

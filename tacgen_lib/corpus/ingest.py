@@ -232,6 +232,28 @@ def _relative(path: Path, root: Path) -> str:
         return path.as_posix()
 
 
+# ---- issue 15: hostile dataset folders (paths that leave the dataset root) ---- begin
+def _inside_root(path: Path, root: Path, *, where: str, sample_id: str, role: str) -> Path:
+    """``path`` if the file it names, symlinks followed, lies inside the dataset ``root``.
+
+    A CSV row naming an absolute path, a ``../`` path that climbs out of the root, or a
+    symlink pointing out of it is refused: a dataset folder must not make the workflow read
+    (and copy into an edge) files elsewhere on the machine.
+    """
+    real_root = root.resolve()
+    real = path.resolve()
+    if not real.is_relative_to(real_root):
+        raise ValueError(
+            f"{where}: sample_id '{sample_id}': {role} path {path} resolves to {real}, outside "
+            f"the dataset root {real_root}; absolute paths, '../' paths that leave the root and "
+            "symlinks out of it are refused: copy the file into the dataset folder"
+        )
+    return path
+
+
+# ---- issue 15 ---- end
+
+
 def _parsed_caption(caption: str, *, where: str, sample_id: str) -> list[str]:
     adjectives = parse_caption(caption)
     if not adjectives:
@@ -386,6 +408,8 @@ def ingest_ssvtp(
         rgb_path = rgb_files.get(index, folder / "images_rgb" / f"image_{index}_rgb.jpg")
         tac_path = tac_files.get(index, folder / "images_tac" / f"image_{index}_tac.jpg")
         text_path = text_files.get(index, folder / "text" / f"labels_{index}.txt")
+        for role, path in (("RGB", rgb_path), ("tactile", tac_path), ("caption", text_path)):
+            _inside_root(path, root, where=str(folder), sample_id=sample_id, role=role)
         rgb = _load_image(rgb_path, sample_id=sample_id, role="RGB")
         tactile = _load_image(tac_path, sample_id=sample_id, role="tactile")
         _check_same_shape(tactile, bg, sample_id=sample_id, tactile_path=tac_path, bg_path=bg_path)
@@ -518,6 +542,12 @@ def ingest_hct(root: Path, *, corpus: str = "hct") -> tuple[pd.DataFrame, pd.Dat
                         f"nor a {HCT_FALLBACK_BACKGROUND} between its folder and {hct}; restore "
                         "the trajectory's background"
                     )
+                for role, path in (
+                    ("vision", rgb_path),
+                    ("tactile", tac_path),
+                    ("background", bg_path),
+                ):
+                    _inside_root(path, root, where=where, sample_id=sample_id, role=role)
                 if bg_path not in backgrounds:
                     sensor_id = f"{corpus}-bg:{_relative(bg_path, hct)}"
                     backgrounds[bg_path] = (

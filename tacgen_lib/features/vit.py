@@ -24,9 +24,11 @@ plain matmuls (no fused kernel), so outputs are deterministic on CPU.
 from __future__ import annotations
 
 import math
+import pickle
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import torch
 import torch.nn.functional as F
@@ -40,6 +42,7 @@ __all__ = [
     "build_vit",
     "interpolate_pos_embed",
     "load_pretrained",
+    "load_tensors",
     "load_backbone",
     "save_backbone",
     "unwrap_state_dict",
@@ -347,6 +350,22 @@ def unwrap_state_dict(obj: object, *, where: str = "checkpoint") -> dict[str, Te
     return sd
 
 
+def load_tensors(path: str | Path) -> Any:
+    """`torch.load` with ``weights_only=True``: tensors and plain containers only.
+
+    A checkpoint that needs arbitrary objects (a crafted pickle could run code when unpickled)
+    is refused with a ValueError naming the file; nothing in it is executed.
+    """
+    try:
+        return torch.load(path, map_location="cpu", weights_only=True)
+    except pickle.UnpicklingError as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise ValueError(
+            f"{path}: not a tensor state dict; refused to unpickle it (weights_only=True: only "
+            f"tensors and plain containers are loaded, no code is run): {first}"
+        ) from exc
+
+
 def load_pretrained(model: DinoVisionTransformer, path: str | Path) -> DinoVisionTransformer:
     """Load an official-format DINOv2 checkpoint into `model` (in place; also returned).
 
@@ -355,7 +374,7 @@ def load_pretrained(model: DinoVisionTransformer, path: str | Path) -> DinoVisio
     unexpected or shape-mismatched key is refused with a ValueError listing them all.
     """
     path = Path(path)
-    raw = torch.load(path, map_location="cpu", weights_only=True)
+    raw = load_tensors(path)
     sd = unwrap_state_dict(raw, where=str(path))
     own = model.state_dict()
 
@@ -410,7 +429,7 @@ def load_backbone(path: str | Path) -> DinoVisionTransformer:
     depth (heads cannot be read from shapes).
     """
     path = Path(path)
-    sd = unwrap_state_dict(torch.load(path, map_location="cpu", weights_only=True), where=str(path))
+    sd = unwrap_state_dict(load_tensors(path), where=str(path))
     if "cls_token" not in sd or "pos_embed" not in sd:
         raise ValueError(f"{path}: no cls_token/pos_embed; not a DINOv2-format ViT checkpoint")
     dim = int(sd["cls_token"].shape[-1])

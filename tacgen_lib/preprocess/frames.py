@@ -6,6 +6,7 @@ module does that conversion once, with errors that name the edge, the column and
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Callable
 
 import numpy as np
@@ -21,20 +22,23 @@ def decode_frames(frame: pd.DataFrame, column: str, *, where: str = "edge") -> n
     """Stack the PNG images of `column` into (N, H, W, 3) uint8; all frames must share a shape."""
     if column not in frame.columns:
         raise ValueError(f"{where}: no image column {column!r}")
-    out: np.ndarray | None = None
-    for i, (sid, data) in enumerate(zip(frame["sample_id"], frame[column], strict=True)):
+    images = []
+    for sid, data in zip(frame["sample_id"], frame[column], strict=True):
         if data is None:
             raise ValueError(f"{where}: sample_id {sid!r} has no image in column {column!r}")
-        img = decode_png(data, where=f"{where}: sample_id {sid!r} column {column!r}")
-        if out is None:
-            out = np.empty((len(frame), *img.shape), dtype=np.uint8)
-        elif img.shape != out.shape[1:]:
-            raise ValueError(
-                f"{where}: sample_id {sid!r} has a {img.shape} image in column {column!r}, "
-                f"the others are {out.shape[1:]}"
-            )
-        out[i] = img
-    return out if out is not None else np.empty((0, 1, 1, 3), dtype=np.uint8)
+        images.append(decode_png(data, where=f"{where}: sample_id {sid!r} column {column!r}"))
+    if not images:
+        return np.empty((0, 1, 1, 3), dtype=np.uint8)
+    shapes = Counter(img.shape for img in images)
+    if len(shapes) > 1:
+        # name the odd one out: the first frame whose size differs from most frames'
+        common = shapes.most_common(1)[0][0]
+        i = next(i for i, img in enumerate(images) if img.shape != common)
+        raise ValueError(
+            f"{where}: sample_id {frame['sample_id'].iloc[i]!r} has a {images[i].shape} image in "
+            f"column {column!r}, the others are {common}"
+        )
+    return np.stack(images)
 
 
 def sensor_background_map(
@@ -72,7 +76,9 @@ def subtract_backgrounds(
         try:
             proc = background_subtract(tac, backgrounds[sensor], variant)
         except ValueError as exc:
-            raise ValueError(f"{where}: sample_id {sid!r} (sensor {sensor!r}): {exc}") from exc
+            raise ValueError(
+                f"{where}: sample_id {sid!r} column 'tactile' (sensor {sensor!r}): {exc}"
+            ) from exc
         out.append((sid, sensor, encode_png(proc, compression=1)))
         if progress is not None:
             progress(i + 1)

@@ -11,6 +11,6 @@ for path in snakemake.input.samples:
     edges.verify(path)
     names = pq.read_schema(path).names
     frames.append(edges.read(path, columns=[c for c in names if c not in ("rgb", "tactile")]).frame)
-manifest = fuse_manifest(frames)
+manifest = fuse_manifest(frames, sources=[str(p) for p in snakemake.input.samples])
 edges.write(snakemake.output[0], manifest, producer=snakemake.rule)
 logger.info("manifest: %d samples from %d corpora", len(manifest), manifest["corpus"].nunique())

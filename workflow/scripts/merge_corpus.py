@@ -8,6 +8,13 @@ from tacgen_lib.io import edges, log
 logger = log.for_rule(snakemake)
 settings = CorpusSettings.from_config(snakemake.params.corpus)
 shards = [edges.read(path).frame for path in snakemake.input.shards]
+for shard, (path, frame) in enumerate(zip(snakemake.input.shards, shards, strict=True)):
+    if len(frame) == 0 and shard < settings.n:
+        raise ValueError(
+            f"rule merge_corpus: {path}: shard {shard} has no rows, expected the samples i with "
+            f"i % {len(shards)} == {shard} (sample_id '{settings.name}-{shard:06d}' first); "
+            "delete the shard and rerun simulate_corpus"
+        )
 samples = pd.concat(shards, ignore_index=True).sort_values("sample_id", ignore_index=True)
 n_expected = settings.n
 if len(samples) != n_expected:

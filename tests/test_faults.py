@@ -1,0 +1,599 @@
+"""Fault injection (issue 15): a crash, a full disk or a bad input never costs a result or
+gives a wrong one.
+
+Every workflow fault runs on config/test.yaml against one clean run (`reference_run`, shared
+with test_workflow.py): recovery must end with every hashed edge (the `.sha256.json`
+sidecars) equal to the clean run's.
+
+- SIGKILL of the whole run (scheduler and jobs: its process group) while a job of each stage
+  in `KILL_STAGES` is running. The stages share one run: it is started cold, killed while a
+  job of the first stage runs, resumed with `tools/resume.py` (what `make resume` runs), killed
+  again while a job of the next stage runs, and so on; the last resume runs to the end. So
+  the whole table costs about one cold run, not one per stage.
+- SIGKILL of one job's process; a full disk under results/ (a tmpfs the test mounts); corrupt
+  data inside well-hashed edges; two runs in one directory.
+- Hostile inputs: dataset CSV rows and symlinks leaving the dataset root, a crafted pickle
+  checkpoint, fuzzed configs.
+- 5,000 tactile + RGB frames rendered in one process without RSS growth.
+
+Run with `-s` to see the figures (recovery seconds, RSS growth) the README's Reliability
+table quotes.
+"""
+
+from __future__ import annotations
+
+import copy
+import json
+import os
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+from snakemake_run import ROOT, SNAKEMAKE, copy_run, copy_tree, edge_hashes, planned_rules, smk
+
+from tacgen_lib.io import edges
+
+sys.path.insert(0, str(ROOT / "tools"))
+import resume  # noqa: E402 - tools/ is not a package
+
+pytestmark = pytest.mark.workflow
+
+#: stage -> the rule whose running job the whole-run kill interrupts, in DAG order. One row per
+#: stage; a new stage (generator, policy) is one more row.
+KILL_STAGES: dict[str, str] = {
+    "corpus": "simulate_corpus",
+    "preprocess": "background_subtract",
+    "features": "pretrain_backbone",
+    "align": "train_heads",
+    "probes": "probe",
+    "report": "edge_manifest",
+}
+
+RESUME = [sys.executable, str(ROOT / "tools/resume.py"), "--cores", "2"]
+CONFIG = ["--configfile", "config/test.yaml"]
+START_TIMEOUT = 600  # seconds to wait for a job of a stage to start
+# `smk` ends its command with `--configfile config/test.yaml`: an option must come between
+# that and a target, or the target is read as one more config file
+TARGETS = ("--cores", "2")
+
+
+def _scripts_of_rules() -> dict[str, str]:
+    """rule -> the stem of its script (`script: "../workflow/scripts/<stem>.py"`)."""
+    out: dict[str, str] = {}
+    text = "\n".join(p.read_text() for p in sorted((ROOT / "rules").glob("*.smk")))
+    for block in re.split(r"(?m)^(?=rule \w+:)", text):
+        name = re.match(r"rule (\w+):", block)
+        script = re.search(r'script:\s*"\.\./workflow/scripts/(\w+)\.py"', block)
+        if name and script:
+            out[name.group(1)] = script.group(1)
+    return out
+
+
+SCRIPTS = _scripts_of_rules()
+
+
+def _job_pids(work: Path, rule: str) -> list[int]:
+    """Live job processes of `rule` in `work` (Snakemake runs a script as
+    `python <work>/.snakemake/scripts/tmpXXXX.<script>.py`)."""
+    tail = f".{SCRIPTS[rule]}.py"
+    return [
+        pid for pid, cmd in resume.live_runs(work) if ".snakemake/scripts/" in cmd and tail in cmd
+    ]
+
+
+def _scheduled(work: Path, rule: str) -> bool:
+    """Snakemake's own log of the newest run says a job of `rule` was started."""
+    logs = sorted((work / ".snakemake/log").glob("*.snakemake.log"))
+    return bool(logs) and re.search(rf"(?m)^(local)?rule {rule}:", logs[-1].read_text()) is not None
+
+
+def _wait_for_job(proc: subprocess.Popen, work: Path, rule: str) -> list[int] | None:
+    """Pids of a running job of `rule`, or None if the run ended first."""
+    deadline = time.monotonic() + START_TIMEOUT
+    while time.monotonic() < deadline:
+        pids = _job_pids(work, rule)
+        if pids and _scheduled(work, rule):
+            return pids
+        if proc.poll() is not None:
+            return None
+        time.sleep(0.1)
+    os.killpg(proc.pid, signal.SIGKILL)
+    raise AssertionError(f"no job of rule {rule} started within {START_TIMEOUT} s")
+
+
+def _wait_dead(work: Path, timeout: float = 30) -> None:
+    deadline = time.monotonic() + timeout
+    while resume.live_runs(work):
+        assert time.monotonic() < deadline, resume.live_runs(work)
+        time.sleep(0.1)
+
+
+def _launch(work: Path, cmd: list[str], log: Path) -> subprocess.Popen:
+    """Start `cmd` in `work` in its own process group (so the whole run can be killed)."""
+    return subprocess.Popen(
+        cmd, cwd=work, stdout=log.open("ab"), stderr=subprocess.STDOUT, start_new_session=True
+    )
+
+
+def assert_no_half_written_edge(work: Path) -> int:
+    """Every edge present beside its sidecar verifies (the atomic writers only ever rename a
+    complete file into place). Returns how many were checked."""
+    checked = 0
+    for side in (work / "results").rglob("*" + edges.SIDECAR_SUFFIX):
+        edge = side.with_name(side.name.removesuffix(edges.SIDECAR_SUFFIX))
+        if edge.exists():
+            edges.verify(edge)
+            checked += 1
+    return checked
+
+
+def _report(what: str, **figures) -> None:
+    print(f"\nRELIABILITY {what}: " + json.dumps(figures), flush=True)
+
+
+# --------------------------------------------------------------------- kill -9 of the whole run
+
+
+@pytest.fixture(scope="module")
+def killed_run(tmp_path_factory) -> dict:
+    """The run the kill-per-stage tests interrupt one stage after another (state shared)."""
+    work = copy_tree(tmp_path_factory.mktemp("faults") / "killed")
+    return {"work": work, "log": work / "run.log", "started": False, "kills": []}
+
+
+@pytest.mark.parametrize("stage", list(KILL_STAGES))
+def test_sigkill_of_the_whole_run_during_each_stage(killed_run, stage):
+    rule = KILL_STAGES[stage]
+    work, log = killed_run["work"], killed_run["log"]
+    # cold the first time; afterwards the one recovery command after the previous kill
+    cmd = RESUME + CONFIG if killed_run["started"] else [*SNAKEMAKE, "--cores", "2", *CONFIG]
+    t0 = time.monotonic()
+    proc = _launch(work, cmd, log)
+    killed_run["started"] = True
+    pids = _wait_for_job(proc, work, rule)
+    if pids is None:  # the run finished before reaching the stage: force the stage again
+        assert proc.returncode == 0, log.read_text()[-4000:]
+        proc = _launch(work, [*SNAKEMAKE, "--cores", "2", *CONFIG, "--forcerun", rule], log)
+        pids = _wait_for_job(proc, work, rule)
+        assert pids is not None, log.read_text()[-4000:]
+    os.killpg(proc.pid, signal.SIGKILL)  # the whole run: scheduler, resume wrapper and jobs
+    proc.wait()
+    _wait_dead(work)
+    killed_run["kills"].append((stage, rule, round(time.monotonic() - t0, 1)))
+    # what a user finds: a stale lock and the killed job's incomplete marker ...
+    assert list((work / ".snakemake/locks").iterdir()), "the killed run left no lock"
+    assert list((work / ".snakemake/incomplete").iterdir()), "no incomplete marker"
+    # ... and never a half-written edge
+    n = assert_no_half_written_edge(work)
+    if len(killed_run["kills"]) == 1:  # once: a plain rerun is refused, as the issue found
+        plain = smk(work, check=False)
+        assert plain.returncode != 0
+        assert "LockException" in plain.stdout + plain.stderr or "locked" in plain.stderr
+    _report(f"kill -9 during {stage} ({rule})", edges_verified=n, job_pids=pids)
+
+
+def test_one_resume_after_the_kills_gives_a_clean_runs_edges(killed_run, reference_run):
+    work, log = killed_run["work"], killed_run["log"]
+    assert killed_run["kills"], "run the kill-per-stage tests first (same module)"
+    t0 = time.monotonic()
+    proc = _launch(work, RESUME + CONFIG, log)
+    assert proc.wait(timeout=900) == 0, log.read_text()[-6000:]
+    seconds = time.monotonic() - t0
+    text = log.read_text()
+    assert "resume: lock cleared" in text
+    got, want = edge_hashes(work), edge_hashes(reference_run)
+    assert want and got == want, {k: (got.get(k), v) for k, v in want.items() if got.get(k) != v}
+    assert not resume.stale_temporaries(work)
+    assert planned_rules(work) == {}
+    _report(
+        "resume after kills",
+        kills=killed_run["kills"],
+        edges_equal=f"{len(got)}/{len(want)}",
+        last_resume_seconds=round(seconds, 1),
+    )
+
+
+# --------------------------------------------------------------------- one job killed
+
+
+def test_sigkill_of_one_job_is_reported_and_only_it_and_its_downstream_rerun(
+    reference_run, tmp_path
+):
+    rule = "pretrained_vs_random"
+    work = copy_run(reference_run, tmp_path / "job")
+    planned = planned_rules(work, "--forcerun", rule)
+    assert planned.get(rule) == 1 and "probe" not in planned, planned
+    log = tmp_path / "job.log"
+    proc = _launch(work, [*SNAKEMAKE, "--cores", "2", *CONFIG, "--forcerun", rule], log)
+    pids = _wait_for_job(proc, work, rule)
+    assert pids, log.read_text()[-4000:]
+    for pid in pids:
+        os.kill(pid, signal.SIGKILL)  # the job only; Snakemake lives on
+    assert proc.wait(timeout=300) != 0
+    out = log.read_text()
+    assert f"Error in rule {rule}" in out, out[-4000:]
+    # the scheduler cleaned up (no lock, no incomplete marker): the plan is exactly the killed
+    # job and what reads its outputs, and nothing else
+    assert planned_rules(work) == planned
+    t0 = time.monotonic()
+    smk(work)
+    seconds = time.monotonic() - t0
+    got, want = edge_hashes(work), edge_hashes(reference_run)
+    assert got == want
+    _report(
+        f"kill -9 of one {rule} job",
+        rerun=planned,
+        edges_equal=f"{len(got)}/{len(want)}",
+        rerun_seconds=round(seconds, 1),
+    )
+
+
+# --------------------------------------------------------------------- two runs, one directory
+
+
+def test_second_run_in_the_same_directory_is_refused_and_the_first_completes(
+    reference_run, tmp_path
+):
+    rule = "pretrained_vs_random"
+    work = copy_run(reference_run, tmp_path / "two")
+    log = tmp_path / "first.log"
+    first = _launch(work, [*SNAKEMAKE, "--cores", "2", *CONFIG, "--forcerun", rule], log)
+    try:
+        assert _wait_for_job(first, work, rule), log.read_text()[-4000:]
+        second = smk(work, check=False)
+        assert second.returncode != 0
+        assert "LockException" in second.stdout + second.stderr, second.stderr[-3000:]
+        refused = subprocess.run(
+            RESUME + CONFIG, cwd=work, capture_output=True, text=True, timeout=60
+        )
+        assert refused.returncode == 3, refused.stderr
+        assert f"pid {first.pid}" in refused.stderr and "refused" in refused.stderr
+        assert first.poll() is None  # neither attempt touched the first run
+    finally:
+        rc = first.wait(timeout=600)
+    assert rc == 0, log.read_text()[-4000:]
+    assert edge_hashes(work) == edge_hashes(reference_run)
+
+
+# --------------------------------------------------------------------- full disk
+
+
+def test_full_disk_names_the_file_leaves_no_half_edge_and_recovers(reference_run, tmp_path):
+    if os.geteuid() != 0 or not shutil.which("mount"):
+        pytest.skip("needs root and mount(8) to put results/ on a small tmpfs")
+    work = copy_tree(tmp_path / "disk")
+    shutil.copytree(reference_run / ".snakemake", work / ".snakemake")
+    results = work / "results"
+    results.mkdir()
+    size_mb = 64
+    mounted = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", f"size={size_mb}m", "tacgen-full-disk", str(results)],
+        capture_output=True,
+        text=True,
+    )
+    if mounted.returncode != 0:
+        pytest.skip(f"cannot mount a tmpfs for results/: {mounted.stderr.strip()}")
+    try:
+        shutil.copytree(reference_run / "results", results, dirs_exist_ok=True)
+        target = "results/preprocess/sim_controlled/clip128.parquet"
+        size = (reference_run / target).stat().st_size
+        (work / target).unlink()  # the job to redo (background subtraction of one corpus)
+        # fill the disk, leaving a third of what the edge needs
+        stat = os.statvfs(results)
+        filler = results / "filler.bin"
+        filler.write_bytes(b"\0" * (stat.f_bavail * stat.f_frsize - size // 3))
+        full = smk(work, *TARGETS, target, check=False)
+        out = full.stdout + full.stderr
+        assert full.returncode != 0
+        assert f"{target}: cannot write" in out and "No space left on device" in out, out[-4000:]
+        assert not (work / target).exists()
+        assert assert_no_half_written_edge(work) > 10
+        assert not [p for p in results.rglob("*.tmp")]
+        filler.unlink()  # space freed
+        t0 = time.monotonic()
+        smk(work, *TARGETS, target)
+        seconds = time.monotonic() - t0
+        got, want = edge_hashes(work), edge_hashes(reference_run)
+        assert got == want
+        _report(
+            "full disk",
+            failed_writing=target,
+            edges_equal=f"{len(got)}/{len(want)}",
+            rerun_seconds=round(seconds, 1),
+        )
+    finally:
+        subprocess.run(["umount", str(results)], check=False)
+
+
+# --------------------------------------------------------------------- corrupt data, good hash
+
+
+def _rewrite(path: Path, edit) -> str:
+    """Rewrite a corpus edge with `edit(frame)` applied and a fresh, valid sidecar: the hash
+    is right, the content is bad. Returns the sample_id that was corrupted."""
+    edge = edges.read(path)
+    frame = edge.frame.copy()
+    sid = edit(frame)
+    edges.write(path, frame, edge.vectors, key=edge.key, producer="test_faults")
+    return sid
+
+
+def _undecodable_tactile(frame: pd.DataFrame) -> str:
+    frame.at[3, "tactile"] = b"\x89PNG\r\n\x1a\n" + b"\0" * 64
+    return frame.at[3, "sample_id"]
+
+
+def _wrong_size_rgb(frame: pd.DataFrame) -> str:
+    from tacgen_lib.io.images import encode_png
+
+    frame.at[5, "rgb"] = encode_png(np.zeros((17, 23, 3), np.uint8))
+    return frame.at[5, "sample_id"]
+
+
+def _nan_label(frame: pd.DataFrame) -> str:
+    frame.at[7, "mass"] = float("nan")
+    return frame.at[7, "sample_id"]
+
+
+CORRUPTIONS = {
+    # name: (edge, edit, target whose rule consumes the edge, column named)
+    "undecodable_png": (
+        "results/corpus/sim_paired/samples.parquet",
+        _undecodable_tactile,
+        "results/preprocess/sim_paired/clip128.parquet",
+        "tactile",
+    ),
+    "wrong_size_image": (
+        "results/corpus/sim_controlled/samples.parquet",
+        _wrong_size_rgb,
+        "results/features/sim_controlled/vision.parquet",
+        "rgb",
+    ),
+    "nan_label": (
+        "results/corpus/sim_controlled/samples.parquet",
+        _nan_label,
+        "results/corpus/manifest.parquet",
+        "mass",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", list(CORRUPTIONS))
+def test_corrupt_data_in_a_well_hashed_edge_is_named(reference_run, tmp_path, case):
+    edge, edit, target, column = CORRUPTIONS[case]
+    work = copy_run(reference_run, tmp_path / case)
+    sid = _rewrite(work / edge, edit)
+    proc = smk(work, *TARGETS, target, check=False)
+    out = proc.stdout + proc.stderr
+    assert proc.returncode != 0
+    message = next((line for line in out.splitlines() if sid in line and column in line), None)
+    assert message is not None and edge in message, out[-5000:]
+    print(f"\n{case}: {message.strip()[:300]}")
+
+
+def test_empty_corpus_shard_is_named(reference_run, tmp_path):
+    work = copy_run(reference_run, tmp_path / "shard")
+    samples = edges.read(work / "results/corpus/sim_paired/samples.parquet")
+    shard = "results/corpus/sim_paired/shards/0.parquet"
+    edges.write(work / shard, samples.frame.iloc[:0], producer="test_faults")
+    proc = smk(
+        work,
+        *TARGETS,
+        "results/corpus/sim_paired/samples.parquet",
+        "--forcerun",
+        "merge_corpus",
+        "--allowed-rules",
+        "merge_corpus",
+        check=False,
+    )
+    out = proc.stdout + proc.stderr
+    assert proc.returncode != 0
+    assert f"{shard}: shard 0 has no rows" in out and "'sim_paired-000000'" in out, out[-4000:]
+
+
+# --------------------------------------------------------------------- hostile inputs
+
+
+def _hct(tmp_path: Path) -> tuple[Path, Path]:
+    from fixtures_real import write_hct_fixture
+
+    root = write_hct_fixture(tmp_path / "tvl", n_traj=1, per_traj=4)
+    return root, next((root / "hct").glob("data*/train.csv"))
+
+
+def _edit_first_row(csv_path: Path, column: int, value: str) -> None:
+    rows = [line.split(",") for line in csv_path.read_text().splitlines()]
+    rows[1][column] = value
+    csv_path.write_text("\n".join(",".join(r) for r in rows) + "\n")
+
+
+@pytest.mark.parametrize("how", ["absolute", "dotdot", "symlink"])
+def test_dataset_paths_leaving_the_root_are_refused(tmp_path, how):
+    from tacgen_lib.corpus.ingest import ingest_hct
+
+    root, csv_path = _hct(tmp_path)
+    secret = tmp_path / "outside" / "secret.jpg"
+    secret.parent.mkdir()
+    first_tactile = csv_path.parent / csv_path.read_text().splitlines()[1].split(",")[1]
+    shutil.copy(first_tactile, secret)  # a readable image: only its place is wrong
+    if how == "absolute":
+        _edit_first_row(csv_path, 1, str(secret))
+    elif how == "dotdot":
+        _edit_first_row(csv_path, 1, os.path.relpath(secret, csv_path.parent))
+    else:
+        first_tactile.unlink()
+        first_tactile.symlink_to(secret)
+    with pytest.raises(ValueError, match=r"outside the dataset root") as err:
+        ingest_hct(root)
+    assert "sample_id 'hct-data1-00000'" in str(err.value) and "secret.jpg" in str(err.value)
+
+
+def test_ssvtp_symlink_out_of_the_root_is_refused(tmp_path):
+    from fixtures_real import write_ssvtp_fixture
+
+    from tacgen_lib.corpus.ingest import ingest_ssvtp
+
+    root = write_ssvtp_fixture(tmp_path / "tvl", n=4)
+    outside = tmp_path / "elsewhere.txt"
+    outside.write_text("hard, smooth")
+    label = root / "ssvtp/text/labels_2.txt"
+    label.unlink()
+    label.symlink_to(outside)
+    with pytest.raises(ValueError, match=r"sample_id 'ssvtp-000002': caption path .* outside"):
+        ingest_ssvtp(root)
+
+
+class _Payload:
+    """Unpickling this calls open(marker, "w"): a stand-in for any code a pickle may run."""
+
+    def __init__(self, marker: Path):
+        self.marker = marker
+
+    def __reduce__(self):
+        return (open, (str(self.marker), "w"))
+
+
+def test_crafted_pickle_checkpoint_is_refused_without_running_code(tmp_path):
+    import torch
+
+    from tacgen_lib.align.heads import load_heads
+    from tacgen_lib.features.vit import load_backbone
+
+    marker = tmp_path / "side_effect"
+    ckpt = tmp_path / "dinov2_vits14_pretrain.pth"
+    torch.save({"cls_token": torch.zeros(1, 1, 8), "evil": _Payload(marker)}, ckpt)
+    with pytest.raises(ValueError, match=r"not a tensor state dict; refused to unpickle"):
+        load_backbone(ckpt)
+    with pytest.raises(ValueError, match=r"not a readable heads file"):
+        load_heads(ckpt, verify=False)
+    assert not marker.exists(), "unpickling ran the payload"
+    # control: the payload is live; an unsafe load would have run it
+    torch.load(ckpt, weights_only=False)
+    assert marker.exists()
+
+
+# fuzzed configs: every value the schema constrains, replaced by a hostile one
+_HOSTILE = st.one_of(
+    st.none(),
+    st.booleans(),
+    st.integers(-(10**12), 10**12),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.text(max_size=8),
+    st.lists(st.one_of(st.integers(-5, 5), st.text(max_size=3)), max_size=3),
+    st.dictionaries(st.text(max_size=4), st.integers(), max_size=2),
+)
+
+
+def _leaf_paths(node, prefix=()) -> list[tuple]:
+    if isinstance(node, dict):
+        out = [prefix] if prefix else []
+        for k, v in node.items():
+            out += _leaf_paths(v, (*prefix, k))
+        return out
+    if isinstance(node, list):
+        return [prefix] + [p for i, v in enumerate(node) for p in _leaf_paths(v, (*prefix, i))]
+    return [prefix]
+
+
+def _dotted(path: tuple) -> str:
+    out = ""
+    for p in path:
+        out += f"[{p}]" if isinstance(p, int) else (f".{p}" if out else str(p))
+    return out
+
+
+def _base_config() -> dict:
+    from snakemake_run import merged_config
+
+    cfg = merged_config()
+    cfg["scenes_file"] = str(ROOT / cfg["scenes_file"])
+    return cfg
+
+
+_BASE = _base_config()
+_PATHS = [p for p in _leaf_paths(_BASE) if p and p != ("scenes_file",)]
+
+
+def _build_every_settings_object(cfg: dict) -> None:
+    """What the rules build from a validated config (rules/common.smk and the scripts)."""
+    from tacgen_lib.align.settings import AlignSettings
+    from tacgen_lib.corpus.sim.corpus import CorpusSettings
+    from tacgen_lib.features.settings import DinoSettings
+    from tacgen_lib.probes.protocol import ProbeSettings
+
+    AlignSettings.from_config(cfg["align"])
+    DinoSettings.from_config(cfg["features"]["pretrain"])
+    for name, corpus in cfg["corpora"].items():
+        if corpus["kind"] == "simulated":
+            CorpusSettings.from_config({"name": name, **corpus})
+    for spec in cfg["probes"]["families"].values():
+        for seed in cfg["probes"]["seeds"]:
+            ProbeSettings.from_config(cfg["probes"], spec["kind"], seed)
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(where=st.sampled_from(_PATHS), value=_HOSTILE)
+def test_fuzzed_config_validates_or_names_the_key(where, value):
+    from tacgen_lib.io.config import ConfigError, validate_config
+
+    cfg = copy.deepcopy(_BASE)
+    node = cfg
+    for part in where[:-1]:
+        node = node[part]
+    node[where[-1]] = value
+    try:
+        validate_config(cfg, ROOT / "config/config.schema.yaml", source="fuzz.yaml")
+    except ConfigError as err:
+        # the message names the changed key, or the key above it (a list or mapping)
+        named = [_dotted(where[:k]) for k in range(len(where), 0, -1)]
+        assert any(name in str(err) for name in named), (where, value, str(err))
+        return
+    # valid: then no rule may fail on it while building its settings
+    _build_every_settings_object(cfg)
+
+
+# --------------------------------------------------------------------- long runs do not leak
+
+LEAK_FRAMES, LEAK_WARMUP = 5000, 500
+LEAK_BOUND_MB = 16.0  # over 4,500 frames: < 3.6 kB a frame (a peer simulator leaked 3 MB/frame)
+
+
+def test_rendering_5000_tactile_and_rgb_frames_does_not_grow_rss():
+    proc = subprocess.run(
+        [
+            sys.executable,
+            str(ROOT / "tests/leak_render.py"),
+            str(ROOT / "config/scenes.yaml"),
+            str(LEAK_FRAMES),
+            str(LEAK_WARMUP),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env={**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")},
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    got = json.loads(proc.stdout.strip().splitlines()[-1])
+    _report("render leak", **got, bound_mb=LEAK_BOUND_MB)
+    assert got["png_bytes"] > LEAK_FRAMES * 1000  # the frames were really rendered and encoded
+    assert got["growth_mb"] < LEAK_BOUND_MB, got
+
+
+def test_make_resume_runs_the_resume_tool():
+    dry = subprocess.run(
+        ["make", "-n", "-f", str(ROOT / "Makefile"), "resume", "ARGS=--configfile x.yaml"],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+    )
+    assert dry.returncode == 0, dry.stderr
+    assert "tools/resume.py --cores 2 --configfile x.yaml" in dry.stdout
