@@ -458,3 +458,69 @@ def test_guidance_text_is_canonical():
     assert guidance_text(1.0) == "1" and guidance_text("1.50") == "1.5" and guidance_text(0) == "0"
     with pytest.raises(ValueError):
         guidance_text(-1)
+
+
+# ------------------------------------------------------------------ report
+
+
+def synthetic_summary() -> pd.DataFrame:
+    rows = []
+    for corpus, design, null, target in (
+        ("sim_paired", "paired", False, "force_p50"),
+        ("sim_controlled", "controlled", False, "density"),
+        ("sim_null", "paired", True, "force_p50"),
+    ):
+        for seed in (0, 1):
+            for w in (0.0, 1.0):
+                for inp, d in (("t_real", 0.3), ("t_gen", 0.05 * seed), ("t_gen_shuffled", 0.0),
+                               ("v_nonlinear", 0.02)):  # fmt: skip
+                    rows.append({
+                        "row_id": f"{corpus}|{target}|{seed}|{w}|{inp}", "corpus": corpus,
+                        "target": target, "metric": "r2", "seed": seed, "sampler": "ddim",
+                        "guidance": w, "steps": 10, "input": inp, "score": 0.5 + d,
+                        "v_score": 0.5, "delta": d, "ci_low": d - 0.1, "ci_high": d + 0.1,
+                        "delta_vs_nonlinear": d - 0.02, "ci_low_vs_nonlinear": d - 0.12,
+                        "ci_high_vs_nonlinear": d + 0.08, "design": design, "null_corpus": null,
+                        "cos_matched": 0.3, "cos_offdiag": 0.1, "pairing_p": 0.01,
+                        "frechet": 2.0, "frechet_real_ref": 1.0,
+                    })  # fmt: skip
+    return pd.DataFrame(rows)
+
+
+def test_report_tables_and_figures_from_a_summary():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from tacgen_lib.report import generate as rep
+
+    rows = synthetic_summary()
+    seconds = {("sim_paired", 0, "ddim", 1.0, 10): 2.5}
+    summary = rep.generation_summary(rows, seconds, {("sim_paired", 0): 9.0})
+    assert summary["sample_seconds"].notna().sum() == 4  # one cell: its 4 inputs
+    ref = {"sampler": "ddim", "steps": 10, "guidance": "1"}
+    head = rep.headline_table(summary, ref)
+    assert len(head) == 3 and "Δ_real (protocol-matched)" in head.columns
+    paired = head.set_index("corpus").loc["sim_paired"]
+    assert paired["Δ_gen seed 0 [bootstrap CI]"] == "+0.000 [-0.100, +0.100]"
+    mean, lo, hi = rep.cross_seed_interval(np.array([0.0, 0.05]))
+    assert mean == pytest.approx(0.025) and lo < 0 < hi
+    honesty = rep.honesty_table(summary, ref)
+    verdict = honesty.set_index(["corpus", "seed", "input"])["as expected"]
+    assert verdict[("sim_controlled", 0, "t_real")] == "yes"  # CI (0.2, 0.4) > 0
+    assert verdict[("sim_controlled", 0, "t_gen")] == "yes"  # CI covers 0
+    assert verdict[("sim_null", 0, "t_real")] == "NO"  # real touch "helps" on the null corpus
+    assert len(rep.fidelity_table(summary)) == 12
+    perms = pd.DataFrame({"corpus": "sim_paired", "seed": 0, "target": "force_p50",
+                          "sampler": "ddim", "guidance": 1.0, "steps": 10,
+                          "statistic": np.linspace(-0.1, 0.1, 50), "observed": 0.3})  # fmt: skip
+    curves = pd.DataFrame({"corpus": "sim_paired", "seed": 0, "step": [10, 20],
+                           "train_loss": [1.0, 0.5], "val_loss": [1.1, 0.6]})  # fmt: skip
+    rng = np.random.default_rng(0)
+    for fig in (
+        rep.guidance_seed_figure(summary, "ddim", 10),
+        rep.steps_seconds_figure(summary),
+        rep.permutation_figure(perms, ref),
+        rep.curve_figure(curves),
+        rep.pca_figure(rng.normal(size=(30, 5)), rng.normal(size=(30, 5)), title="x"),
+    ):
+        assert len(fig.axes) >= 1
