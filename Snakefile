@@ -27,6 +27,7 @@ include: "rules/corpus.smk"
 include: "rules/preprocess.smk"
 include: "rules/features.smk"
 include: "rules/align.smk"
+include: "rules/generate.smk"  # issue 12: latent V->T generator
 include: "rules/probes.smk"
 include: "rules/report.smk"
 

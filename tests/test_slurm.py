@@ -39,6 +39,8 @@ pytestmark = [pytest.mark.slurm, pytest.mark.workflow]
 RUN_TIMEOUT = 600  # seconds for the SLURM run itself; the test fails (and cleans up) after it
 SLURM_CONF = Path("/etc/slurm/slurm.conf")
 GRID = {"seeds": [42, 43], "taus": [0.07, 0.1]}
+#: generate (issue 12): one generator trained through SLURM beside the alignment grid.
+GENERATOR_WEIGHTS = "results/generate/sim_paired/seed~0/generator.pt"
 
 
 def _skip(reason: str) -> None:
@@ -261,6 +263,7 @@ def test_align_grid_through_slurm_profile(tmp_path):
             *SNAKEMAKE,
             "results/align/summary.parquet",
             "results/report/align/seeds.html",
+            GENERATOR_WEIGHTS,  # generate (issue 12): one train_generator job through SLURM
             "--profile",
             "profiles/slurm",
             "--configfile",
@@ -339,3 +342,10 @@ def test_align_grid_through_slurm_profile(tmp_path):
             assert f"results/align/{cell}/{name}.sha256.json" in got, cell
     assert {k: v for k, v in got.items() if want.get(k) != v} == {}
     # ---- issue 15 ---- end
+    # >>> generate (issue 12): the train_generator job ran as an sbatch job with its resources
+    gen_logs = list((work / ".snakemake/slurm_logs/rule_train_generator").rglob("*.log"))
+    assert len(gen_logs) == 1, gen_logs
+    gen_jobs = [line.split("|") for line in jobs.splitlines() if "train_generator" in line]
+    assert [(c, m, st) for _k, c, m, st in gen_jobs] == [("2", "3000M", "COMPLETED")], jobs
+    edges.verify(work / GENERATOR_WEIGHTS)
+    # <<< generate

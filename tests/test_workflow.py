@@ -45,6 +45,12 @@ def test_dry_run_plans_the_whole_dag(tmp_path):
         "cost_of_accuracy",
         "edge_manifest",
         "corpus_examples",
+        # >>> generate (issue 12)
+        "train_generator",
+        "sample_generator",
+        "evaluate_generator",
+        "aggregate_generate",
+        # <<< generate
     ):
         assert rule in rules, rules
     assert rules["merge_corpus"] == 3
@@ -97,10 +103,12 @@ def test_changed_probe_param_reruns_only_the_probes(run_dir, tmp_path):
         cfg.read_text().replace("probes:\n  bootstrap: 200", "probes:\n  bootstrap: 150")
     )
     assert "probes:\n  bootstrap: 150" in cfg.read_text()
-    # the robustness rules (issue 16) read the same probes subtree: they are downstream too
+    # the robustness rules (issue 16) read the same probes subtree, and the generator's
+    # evaluation uses the probes' settings (same probe code): both are downstream too
     robustness = {"probe_training_size", "probe_within_scale", "aggregate_robustness"}
+    generate = {"evaluate_generator", "aggregate_generate"}
     assert set(planned_rules(work)) == {"probe", "aggregate_probes", "edge_manifest", "all"} | (
-        robustness
+        robustness | generate
     )
 
 
@@ -130,14 +138,16 @@ def test_edit_to_an_indirectly_imported_module_reruns_exactly_its_users(run_dir,
         for p in scripts.glob("*.py")
         if ROOT / module in import_closure(p, ROOT / "tacgen_lib")
     }
+    # evaluate_generator reaches it through probes.protocol too (generate, issue 12)
     robustness = {"probe_training_size", "probe_within_scale", "aggregate_robustness"}
-    assert not direct and users == {"probe", "aggregate_probes"} | robustness
+    assert not direct and users == {"probe", "aggregate_probes", "evaluate_generator"} | robustness
     work = copy_tree(tmp_path / "f")
     shutil.copytree(run_dir / "results", work / "results")
     shutil.copytree(run_dir / ".snakemake", work / ".snakemake")
     (work / module).write_text((work / module).read_text() + "\n# an edit\n")
-    # its users rerun, then only what reads their outputs: the edge manifest and `all`
-    assert set(planned_rules(work)) == users | {"edge_manifest", "all"}
+    # its users rerun, then only what reads their outputs: the generation summary (issue 12),
+    # the edge manifest and `all`
+    assert set(planned_rules(work)) == users | {"aggregate_generate", "edge_manifest", "all"}
 
 
 def test_two_clean_runs_give_identical_edges(run_dir, tmp_path):
@@ -206,6 +216,7 @@ def test_real_corpus_path_runs_on_fixtures(tmp_path):
     cfg["features"]["pretrain"]["corpus"] = "ssvtp"
     cfg["features"]["pretrained_vs_random"]["corpus"] = "ssvtp"
     cfg["align"]["corpora"] = ["ssvtp"]
+    cfg["generate"]["corpora"] = {"ssvtp": {"hardness": "logistic"}}  # generate (issue 12)
     # the official-checkpoint path: a ViT-S/14 state dict in DINOv2's key format (random
     # weights, 518-px position grid as released), loaded and interpolated instead of pretraining
     import torch

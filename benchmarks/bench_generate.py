@@ -1,0 +1,146 @@
+"""Generator training and sampling throughput against the float32 GEMM roofline (same run).
+
+Training: one optimiser step of `tacgen_lib.generate.train` at the default size (config
+``generate``: 3 x 256 residual MLP on 192-d ViT-tiny features, batch 128) -- forward, the
+denoising loss, backward, clipping, AdamW and the EMA update -- against the time its matrix
+products would take at the float32 GEMM rate of one 1024^3 torch.matmul measured in the same
+process between the rounds:
+
+    FLOPs of a step = sum over Linear layers of 2 B in out (forward) + 2 B in out (weight grad)
+                      + 2 B in out (input grad, except layers fed by data: inp, cond[0], time[0])
+    fraction        = (FLOPs / GEMM FLOP/s) / measured step seconds      (issue target >= 0.5)
+
+Sampling: DDIM-50 with classifier-free guidance (conditional and unconditional rows in one
+batch of 2n) over n = 1,200 rows: generated vectors per second and the same roofline fraction
+(forward FLOPs only). The machine is shared: each figure is the best of several rounds, and the
+ratio is also given with process CPU seconds (`cpu-frac`), less sensitive to competing load.
+
+    .venv/bin/python benchmarks/bench_generate.py [--rounds 5] [--steps 30] [--threads N]
+        [--hidden 256 --blocks 3 --dim 192 --batch 128]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import machine
+import numpy as np
+import torch
+from torch import nn
+
+from tacgen_lib.generate.model import Denoiser
+from tacgen_lib.generate.sampling import sample
+from tacgen_lib.generate.schedules import make_schedule
+from tacgen_lib.generate.settings import GenerateSettings
+from tacgen_lib.generate.train import diffusion_loss
+
+
+def linear_shapes(model: Denoiser) -> list[tuple[str, int, int]]:
+    return [(n, m.in_features, m.out_features) for n, m in model.named_modules()
+            if isinstance(m, nn.Linear)]  # fmt: skip
+
+
+def step_flops(model: Denoiser, batch: int) -> float:
+    """Matrix-product FLOPs of one training step (see module docstring)."""
+    total = 0.0
+    for name, i, o in linear_shapes(model):
+        total += 4 * batch * i * o  # forward + weight grad
+        if name not in ("inp", "cond.0", "time.0"):
+            total += 2 * batch * i * o  # input grad
+    return total
+
+
+def forward_flops(model: Denoiser, batch: int) -> float:
+    return sum(2 * batch * i * o for _, i, o in linear_shapes(model))
+
+
+def best(fn, reps: int) -> tuple[float, float]:
+    fn()
+    wall, cpu = float("inf"), float("inf")
+    for _ in range(reps):
+        w0, c0 = time.perf_counter(), time.process_time()
+        fn()
+        wall = min(wall, time.perf_counter() - w0)
+        cpu = min(cpu, time.process_time() - c0)
+    return wall, cpu
+
+
+def gemm_rate(n: int = 1024) -> tuple[float, float]:
+    """FLOP/s of one n^3 float32 matmul by wall and by process CPU seconds (best of 5)."""
+    a, b = torch.randn(n, n), torch.randn(n, n)
+    wall, cpu = best(lambda: a @ b, 5)
+    return 2 * n**3 / wall, 2 * n**3 / cpu
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--steps", type=int, default=30)
+    ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--hidden", type=int, default=GenerateSettings.hidden)
+    ap.add_argument("--blocks", type=int, default=GenerateSettings.blocks)
+    ap.add_argument("--dim", type=int, default=192, help="d_t = d_v (ViT-tiny: 192)")
+    ap.add_argument("--batch", type=int, default=GenerateSettings.batch_size)
+    ap.add_argument("--rows", type=int, default=1200, help="rows sampled (DDIM-50, CFG)")
+    args = ap.parse_args()
+    torch.set_num_threads(args.threads)
+    print(machine.describe())
+    print(f"threads {args.threads}; model {args.blocks} x {args.hidden}, d {args.dim}, "
+          f"batch {args.batch}")  # fmt: skip
+
+    torch.manual_seed(0)
+    s = GenerateSettings()
+    model = Denoiser(args.dim, args.dim, args.hidden, args.blocks, s.time_dim)
+    ema = Denoiser(args.dim, args.dim, args.hidden, args.blocks, s.time_dim)
+    ema.load_state_dict(model.state_dict())
+    ema.requires_grad_(False)
+    params, ema_params = list(model.parameters()), list(ema.parameters())
+    opt = torch.optim.AdamW(params, lr=1e-3, weight_decay=0.01)
+    sch = make_schedule("cosine", 1000)
+    sa = torch.from_numpy(np.sqrt(sch.alphas_cumprod)).float()
+    s1 = torch.from_numpy(np.sqrt(1 - sch.alphas_cumprod)).float()
+    n = 4096
+    x0, cond = torch.randn(n, args.dim), torch.randn(n, args.dim)
+    gen = torch.Generator().manual_seed(0)
+
+    def steps() -> None:
+        for _ in range(args.steps):
+            idx = torch.randint(0, n, (args.batch,), generator=gen)
+            t = torch.randint(0, 1000, (args.batch,), generator=gen)
+            noise = torch.randn(args.batch, args.dim, generator=gen)
+            drop = torch.rand(args.batch, generator=gen) < 0.1
+            loss = diffusion_loss(model, x0[idx], cond[idx], t, noise, drop, sa, s1, "v")
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(params, 1.0)
+            opt.step()
+            with torch.no_grad():
+                torch._foreach_lerp_(ema_params, params, 0.005)
+
+    flops = step_flops(model, args.batch)
+    step_w, step_c, rate_w, rate_c = float("inf"), float("inf"), 0.0, 0.0
+    for _ in range(args.rounds):
+        rw, rc = gemm_rate()
+        rate_w, rate_c = max(rate_w, rw), max(rate_c, rc)
+        w, c = best(steps, 1)
+        step_w, step_c = min(step_w, w / args.steps), min(step_c, c / args.steps)
+    rw, rc = gemm_rate()
+    rate_w, rate_c = max(rate_w, rw), max(rate_c, rc)
+    print(f"GEMM 1024^3: {rate_w / 1e9:.1f} GF/s wall, {rate_c / 1e9:.1f} GF/s per CPU second")
+    print(f"training step: {step_w * 1e3:.2f} ms ({flops / 1e9:.3f} GFLOP); roofline fraction "
+          f"{flops / rate_w / step_w:.2f} (cpu-frac {flops / rate_c / step_c:.2f}); "
+          f"{1 / step_w:.0f} steps/s")  # fmt: skip
+
+    model.eval()
+    rows = np.random.default_rng(0).standard_normal((args.rows, args.dim)).astype(np.float32)
+    kw = {"sampler": "ddim", "steps": 50, "guidance": 2.0, "seed": 0, "prediction": "v"}
+    sw, sc = best(lambda: sample(model, sch, rows, **kw), max(1, args.rounds // 2))
+    f_sample = 50 * forward_flops(model, 2 * args.rows)
+    print(f"sampling DDIM-50 + CFG, {args.rows} rows: {sw:.2f} s, {args.rows / sw:.0f} vectors/s;"
+          f" roofline fraction {f_sample / rate_w / sw:.2f} (cpu-frac "
+          f"{f_sample / rate_c / sc:.2f})")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()

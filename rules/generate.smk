@@ -1,0 +1,172 @@
+"""Generate stage: a latent V->T diffusion generator per corpus x seed, sampled over the
+guidance x steps x sampler grid, judged by what generated touch adds to the probes.
+
+train_generator -> sample_generator (per cell) -> evaluate_generator (every cell of one
+generator in one job, so the V fits are shared) -> aggregate_generate (summary + report).
+"""
+
+
+include: "generate_common.smk"
+
+
+TARGETS += ["results/generate/summary.parquet"]
+TARGETS += [f"{GENERATE_REPORT}/{n}.{e}" for n, e in GENERATE_ITEMS.items()]
+EDGES += ["results/generate/evaluation.parquet"]
+EDGES += generator_files(f"{GENERATOR}/generator.pt")
+EDGES += generator_files(f"{GENERATOR}/curve.parquet")
+EDGES += generator_files(f"{GENERATOR}/evaluation.parquet")
+EDGES += generator_files(f"{GENERATOR}/permutations.parquet")
+EDGES += [sample_edge(*cell) for cell in all_sample_cells()]
+
+
+localrules:
+    aggregate_generate,
+
+
+rule train_generator:
+    """Residual-MLP diffusion model of T given V on one corpus's train split, early-stopped on val."""
+    input:
+        v=lambda w: feature_edge(w.corpus, "vision"),
+        t=lambda w: generate_tactile(w.corpus),
+        splits="results/corpus/splits.parquet",
+        code=imports_of("train_generator"),
+    output:
+        weights=f"{GENERATOR}/generator.pt",
+        curve=f"{GENERATOR}/curve.parquet",
+    log:
+        "results/logs/train_generator/{corpus}/seed~{seed}.log",
+    benchmark:
+        "results/benchmarks/train_generator/{corpus}/{seed}.tsv"
+    wildcard_constraints:
+        corpus=one_of(GENERATE_CORPORA),
+        seed=SAMPLE_CONSTRAINTS["seed"],
+    conda:
+        "../envs/generate.yaml"
+    threads: 2
+    resources:
+        mem_mb=3000,
+        runtime=30,
+    params:
+        settings=GENERATE,  # the whole subtree; tacgen_lib.generate.settings reads it
+    script:
+        "../workflow/scripts/train_generator.py"
+
+
+rule sample_generator:
+    """Generated tactile features for every row of the corpus: one sampler, guidance and steps."""
+    input:
+        weights=f"{GENERATOR}/generator.pt",
+        v=lambda w: feature_edge(w.corpus, "vision"),
+        code=imports_of("sample_generator"),
+    output:
+        t_gen=f"{SAMPLE_CELL}/t_gen.parquet",
+    log:
+        "results/logs/sample_generator/{corpus}/{seed}_{sampler}_{guidance}_{steps}.log",
+    benchmark:
+        "results/benchmarks/sample_generator/{corpus}/{seed}_{sampler}_{guidance}_{steps}.tsv"
+    wildcard_constraints:
+        **SAMPLE_CONSTRAINTS,
+        corpus=one_of(GENERATE_CORPORA),
+    conda:
+        "../envs/generate.yaml"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=30,
+    params:
+        settings=GENERATE,
+    script:
+        "../workflow/scripts/sample_generator.py"
+
+
+rule evaluate_generator:
+    """V vs V+T_real vs V+T_gen (shuffled, nonlinear-V baseline, fidelity) for every cell of one generator."""
+    input:
+        manifest="results/corpus/manifest.parquet",
+        splits="results/corpus/splits.parquet",
+        v=lambda w: feature_edge(w.corpus, "vision"),
+        t=lambda w: generate_tactile(w.corpus),
+        t_gen=lambda w: [
+            sample_edge(w.corpus, w.seed, *cell) for cell in GENERATE_CELLS
+        ],
+        code=imports_of("evaluate_generator"),
+    output:
+        rows=f"{GENERATOR}/evaluation.parquet",
+        permutations=f"{GENERATOR}/permutations.parquet",
+    log:
+        "results/logs/evaluate_generator/{corpus}/seed~{seed}.log",
+    benchmark:
+        "results/benchmarks/evaluate_generator/{corpus}/{seed}.tsv"
+    wildcard_constraints:
+        corpus=one_of(GENERATE_CORPORA),
+        seed=SAMPLE_CONSTRAINTS["seed"],
+    conda:
+        "../envs/probes.yaml"
+    threads: 1
+    resources:
+        mem_mb=3000,
+        runtime=30,
+    params:
+        settings=GENERATE,
+        targets=lambda w: GENERATE["corpora"][w.corpus],
+        corpus=lambda w: CORPORA[w.corpus],
+        probes={
+            k: v for k, v in config["probes"].items() if k not in ("families", "seeds")
+        },
+        probe_seed=config["probes"]["seeds"][0],
+        cells=GENERATE_CELLS,  # the order of the t_gen inputs
+    script:
+        "../workflow/scripts/evaluate_generator.py"
+
+
+rule aggregate_generate:
+    """One summary of every generator and cell with its wall times; the Generation report."""
+    input:
+        rows=generator_files(f"{GENERATOR}/evaluation.parquet"),
+        permutations=generator_files(f"{GENERATOR}/permutations.parquet"),
+        curves=generator_files(f"{GENERATOR}/curve.parquet"),
+        train_bench=[
+            f"results/benchmarks/train_generator/{c}/{s}.tsv" for c, s in generators()
+        ],
+        sample_bench=[sample_benchmark(*cell) for cell in all_sample_cells()],
+        splits="results/corpus/splits.parquet",
+        pca_real=generate_tactile(GENERATE_CORPORA[0]),
+        pca_gen=sample_edge(
+            GENERATE_CORPORA[0],
+            GENERATE["seeds"][0],
+            generate_ref()["sampler"],
+            generate_ref()["guidance"],
+            generate_ref()["steps"],
+        ),
+        code=imports_of("aggregate_generate"),
+    output:
+        **{
+            name: report(
+                f"{GENERATE_REPORT}/{name}.{ext}",
+                caption=f"../workflow/report/generate_{name}.rst",
+                category="Generation",
+                subcategory="Figures" if ext == "png" else "Tables",
+                labels={"item": name},
+            )
+            for name, ext in GENERATE_ITEMS.items()
+        },
+        summary="results/generate/summary.parquet",
+        evaluation="results/generate/evaluation.parquet",
+    log:
+        "results/logs/aggregate_generate.log",
+    benchmark:
+        "results/benchmarks/aggregate_generate.tsv"
+    conda:
+        "../envs/report.yaml"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    params:
+        ref=generate_ref(),
+        generators=generators(),
+        sample_cells=all_sample_cells(),
+        pca_corpus=GENERATE_CORPORA[0],
+        pca_seed=GENERATE["seeds"][0],
+    script:
+        "../workflow/scripts/aggregate_generate.py"

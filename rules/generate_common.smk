@@ -1,0 +1,69 @@
+"""Helpers of the generate stage (grid expansion, canonical cell paths); included by generate.smk."""
+
+from tacgen_lib.generate.cells import (
+    GENERATOR,
+    SAMPLE_CELL,
+    SAMPLE_CONSTRAINTS,
+    guidance_text,
+    sample_cells,
+)
+from tacgen_lib.generate.settings import check_grid
+
+GENERATE = config["generate"]
+# config order: the first corpus feeds the PCA figure
+GENERATE_CORPORA = list(GENERATE["corpora"])
+GENERATE_REPORT = "results/report/generate"
+GENERATE_CELLS = sample_cells(GENERATE["guidance"], GENERATE["samplers"])
+GENERATE_ITEMS = {
+    "headline": "html",
+    "honesty": "html",
+    "fidelity": "html",
+    "heatmap": "png",
+    "steps": "png",
+    "pca": "png",
+    "permutation": "png",
+    "curves": "png",
+}
+check_grid(GENERATE["samplers"], GENERATE["train_steps"])
+for _c in GENERATE_CORPORA:
+    if _c not in CORPORA:
+        raise ValueError(
+            f"config generate.corpora: {_c!r} is not a corpus (have {sorted(CORPORA)})"
+        )
+
+
+def generate_ref():
+    """The report's reference cell: first sampler, its most steps, w = 1 if in the grid."""
+    sampler = next(iter(GENERATE["samplers"]))
+    ws = [guidance_text(w) for w in GENERATE["guidance"]]
+    return {
+        "sampler": sampler,
+        "steps": max(int(s) for s in GENERATE["samplers"][sampler]),
+        "guidance": "1" if "1" in ws else ws[0],
+    }
+
+
+def generators():
+    return [(c, str(s)) for c in GENERATE_CORPORA for s in GENERATE["seeds"]]
+
+
+def generator_files(path):
+    return [path.format(corpus=c, seed=s) for c, s in generators()]
+
+
+def all_sample_cells():
+    return [(c, s, *cell) for c, s in generators() for cell in GENERATE_CELLS]
+
+
+def sample_edge(corpus, seed, sampler, guidance, steps):
+    return f"{SAMPLE_CELL}/t_gen.parquet".format(
+        corpus=corpus, seed=seed, sampler=sampler, guidance=guidance, steps=steps
+    )
+
+
+def sample_benchmark(corpus, seed, sampler, guidance, steps):
+    return f"results/benchmarks/sample_generator/{corpus}/{seed}_{sampler}_{guidance}_{steps}.tsv"
+
+
+def generate_tactile(corpus):
+    return feature_edge(corpus, "tactile", GENERATE["variant"])

@@ -1,0 +1,52 @@
+"""Names of the generate stage's grid cells and paths: one source of truth for rules and readers.
+
+A generator is one corpus x seed (`GENERATOR`); a sampling cell adds sampler, guidance w and
+steps (`SAMPLE_CELL`). Guidance is written canonically (`guidance_text`: 1.0 -> "1", 0.50 ->
+"0.5"), so one value has one path.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "GENERATOR",
+    "SAMPLE_CELL",
+    "SAMPLE_CONSTRAINTS",
+    "cell_label",
+    "guidance_text",
+    "sample_cells",
+]
+
+#: Directory of one generator (train_generator's outputs, evaluate_generator's outputs).
+GENERATOR = "results/generate/{corpus}/seed~{seed}"
+#: Directory of one sampling cell of a generator.
+SAMPLE_CELL = GENERATOR + "/sampler~{sampler}/guidance~{guidance}/steps~{steps}"
+#: Wildcard constraints that keep cell text canonical.
+SAMPLE_CONSTRAINTS = {
+    "seed": r"0|[1-9]\d*",
+    "sampler": "ddim|ddpm",
+    "guidance": r"(0|[1-9]\d*)(\.\d*[1-9])?",
+    "steps": r"[1-9]\d*",
+}
+
+
+def guidance_text(w: float | str) -> str:
+    """Canonical text of a guidance scale (no trailing zeros): 1.0 -> "1", 1.50 -> "1.5"."""
+    value = float(w)
+    if value < 0:
+        raise ValueError(f"guidance must be >= 0, got {w!r}")
+    return f"{value:g}"
+
+
+def cell_label(sampler: str, guidance: float | str, steps: int | str) -> str:
+    """A sampling cell's short label, e.g. ``ddim|w=1.5|steps=25``."""
+    return f"{sampler}|w={guidance_text(guidance)}|steps={int(steps)}"
+
+
+def sample_cells(guidance: list, samplers: dict) -> list[tuple[str, str, str]]:
+    """Every (sampler, guidance text, steps text) of config ``generate``, in config order."""
+    return [
+        (sampler, guidance_text(w), str(int(s)))
+        for sampler, steps in samplers.items()
+        for s in steps
+        for w in guidance
+    ]

@@ -1,0 +1,333 @@
+"""Judging generated touch by what it adds to the probes (paper: Delta R^2_gen), with controls.
+
+This module owns the evaluation of one generator (corpus x seed) over all its sampling cells.
+The probes are the probes stage's own (`tacgen_lib.probes.protocol.fit_probe` on the same
+`family_rows` train/test rows, `fixed_test_bootstrap` for the CIs), not a fork. Per target:
+
+- ``v``: V alone (the reference of every Delta); fitted once and shared by every cell;
+- ``t_real``: V + T_real, the protocol-matched real-touch point (ViT tactile features);
+- ``t_gen``: V + T_gen of one sampling cell;
+- ``t_gen_shuffled``: V + T_gen where row i gets the vector generated for another row
+  (a seeded permutation of all rows of the corpus: the pairing is broken, the marginal kept);
+- ``v_nonlinear``: V + phi(V), phi an RBF Nystroem map of V with as many components as T has
+  dimensions, gamma (a multiple of the median heuristic) and the regulariser chosen by CV on
+  the train rows only. T_gen is a function of V, so a gain of V + T_gen over linear V may be
+  nonlinearity, not touch; ``delta_vs_nonlinear`` = score(V + x) - score(V + phi(V)) says.
+
+Every Delta is paired on the same test rows with the same 5,000 fixed-test resamples.
+Fidelity of each cell on the test rows (`fidelity`): matched-pair cosine (gen_i vs real_i)
+against the off-diagonal mean, a pairing-permutation check (one-sided p of the matched mean
+cosine against `permutations` re-pairings) and the Frechet distance between generated and real
+test latents, beside the Frechet distance between the real train and real test latents (the
+distance two real samples of these sizes already have). Cosines are taken after centring on
+the real train mean (ViT features share a large common component that makes every cosine
+near 1).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from scipy import linalg
+from sklearn.kernel_approximation import Nystroem
+
+from tacgen_lib.probes.bootstrap import fixed_test_bootstrap
+from tacgen_lib.probes.protocol import FamilyRows, FittedProbe, ProbeSettings, fit_probe
+
+__all__ = [
+    "INPUTS",
+    "FIDELITY_COLUMNS",
+    "PERMUTATION_COLUMNS",
+    "TargetSpec",
+    "cosine_pairing",
+    "evaluate_generator",
+    "fidelity",
+    "frechet_distance",
+    "nonlinear_baseline",
+    "pairing_permutation",
+    "shuffled_rows",
+]
+
+#: What is added to V in a summary row.
+INPUTS = ("t_real", "t_gen", "t_gen_shuffled", "v_nonlinear")
+FIDELITY_COLUMNS = ("cos_matched", "cos_offdiag", "pairing_p", "frechet", "frechet_real_ref")
+#: Columns of the permutation-draw table (one row per cell, target and permutation).
+PERMUTATION_COLUMNS = ("row_id", "corpus", "seed", "target", "sampler", "guidance", "steps",
+                       "permutation", "statistic", "observed")  # fmt: skip
+
+
+def frechet_distance(a: np.ndarray, b: np.ndarray) -> float:
+    """Frechet distance between Gaussians fitted to the rows of `a` and `b` (float64).
+
+    ||mu_a - mu_b||^2 + tr(S_a + S_b - 2 (S_a^1/2 S_b S_a^1/2)^1/2): the symmetric form, whose
+    square roots are of PSD matrices (eigh, negative round-off eigenvalues set to 0), so it
+    stays real and finite where sqrtm(S_a S_b) can turn complex.
+    """
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    if a.ndim != 2 or b.ndim != 2 or a.shape[1] != b.shape[1] or len(a) < 2 or len(b) < 2:
+        raise ValueError(
+            f"frechet_distance: need (n >= 2, d) arrays of one d, got {a.shape}, {b.shape}"
+        )
+    mu = a.mean(0) - b.mean(0)
+    s_a, s_b = np.cov(a, rowvar=False), np.cov(b, rowvar=False)
+
+    def psd_sqrt(m: np.ndarray) -> np.ndarray:
+        w, v = linalg.eigh((m + m.T) / 2.0)
+        return (v * np.sqrt(np.clip(w, 0.0, None))) @ v.T
+
+    r = psd_sqrt(s_a)
+    cross = psd_sqrt(r @ s_b @ r)
+    return float(max(mu @ mu + np.trace(s_a) + np.trace(s_b) - 2.0 * np.trace(cross), 0.0))
+
+
+def _unit(x: np.ndarray) -> np.ndarray:
+    n = np.linalg.norm(x, axis=1, keepdims=True)
+    return x / np.where(n > 0, n, 1.0)
+
+
+def cosine_pairing(gen: np.ndarray, real: np.ndarray) -> tuple[float, float]:
+    """(mean cos(gen_i, real_i), mean over i != j of cos(gen_i, real_j)); rows already centred."""
+    g, r = _unit(np.asarray(gen, np.float64)), _unit(np.asarray(real, np.float64))
+    sims = g @ r.T
+    n = sims.shape[0]
+    matched = float(np.mean(np.diag(sims)))
+    off = float((sims.sum() - np.trace(sims)) / (n * (n - 1))) if n > 1 else float("nan")
+    return matched, off
+
+
+def pairing_permutation(
+    gen: np.ndarray, real: np.ndarray, n_permutations: int, seed: int
+) -> tuple[float, np.ndarray, float]:
+    """Matched mean cosine against `n_permutations` re-pairings of generated and real rows.
+
+    Returns (observed, permuted statistics, one-sided p = (1 + #{perm >= observed}) / (1 + B)).
+    """
+    g, r = _unit(np.asarray(gen, np.float64)), _unit(np.asarray(real, np.float64))
+    sims = g @ r.T
+    n = sims.shape[0]
+    observed = float(np.mean(np.diag(sims)))
+    if n_permutations <= 0:
+        return observed, np.zeros(0), float("nan")
+    rng = np.random.default_rng(seed)
+    perms = np.argsort(rng.random((n_permutations, n)), axis=1, kind="stable")
+    null = sims[perms, np.arange(n)[None, :]].mean(axis=1)
+    p = float((1 + np.sum(null >= observed)) / (1 + n_permutations))
+    return observed, null, p
+
+
+def fidelity(
+    gen_test: np.ndarray,
+    real_test: np.ndarray,
+    real_train: np.ndarray,
+    *,
+    n_permutations: int,
+    seed: int,
+) -> tuple[dict[str, float], np.ndarray]:
+    """The cell's fidelity columns (`FIDELITY_COLUMNS`) and its permutation distribution."""
+    centre = np.asarray(real_train, np.float64).mean(axis=0)
+    g, r = np.asarray(gen_test, np.float64) - centre, np.asarray(real_test, np.float64) - centre
+    matched, off = cosine_pairing(g, r)
+    _, null, p = pairing_permutation(g, r, n_permutations, seed)
+    out = {
+        "cos_matched": matched,
+        "cos_offdiag": off,
+        "pairing_p": p,
+        "frechet": frechet_distance(gen_test, real_test),
+        "frechet_real_ref": frechet_distance(real_train, real_test),
+    }
+    return out, null
+
+
+def shuffled_rows(n: int, seed: int) -> np.ndarray:
+    """A seeded permutation of n rows with no fixed point when n > 1 (every pairing broken)."""
+    rng = np.random.default_rng(seed)
+    perm = rng.permutation(n)
+    if n > 1:
+        fixed = perm == np.arange(n)
+        perm[fixed] = np.roll(perm[fixed], 1)  # a cycle among the fixed points
+        if (perm == np.arange(n)).any():  # a single fixed point left: swap with a neighbour
+            i = int(np.flatnonzero(perm == np.arange(n))[0])
+            j = (i + 1) % n
+            perm[i], perm[j] = perm[j], perm[i]
+    return perm
+
+
+def _standardise(train: np.ndarray, test: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    mu, sd = train.mean(0), train.std(0)
+    sd = np.where(sd > 0, sd, 1.0)
+    return (train - mu) / sd, (test - mu) / sd
+
+
+def nonlinear_baseline(
+    v_train: np.ndarray,
+    v_test: np.ndarray,
+    rows: FamilyRows,
+    settings: ProbeSettings,
+    *,
+    gammas: Sequence[float],
+    n_components: int,
+    seed: int,
+) -> tuple[FittedProbe, float]:
+    """The nonlinear V-only baseline: the family's probe on [V, phi(V)], tuned on train rows.
+
+    phi: RBF Nystroem features of standardised V (fitted on the train rows), gamma =
+    multiple / median squared train distance; the multiple with the best CV score wins.
+    Returns the fitted probe and the chosen gamma.
+    """
+    z_tr, z_te = _standardise(np.asarray(v_train, np.float64), np.asarray(v_test, np.float64))
+    sub = z_tr[: min(len(z_tr), 500)]
+    d2 = ((sub[:, None, :] - sub[None, :, :]) ** 2).sum(-1)
+    med = float(np.median(d2[np.triu_indices(len(sub), 1)])) if len(sub) > 1 else 1.0
+    med = med if med > 0 else 1.0
+    best: tuple[float, FittedProbe, float] | None = None
+    for mult in gammas:
+        gamma = float(mult) / med
+        k = min(n_components, len(z_tr))
+        phi = Nystroem(kernel="rbf", gamma=gamma, n_components=k, random_state=seed).fit(z_tr)
+        x_tr = np.hstack([v_train, phi.transform(z_tr)])
+        x_te = np.hstack([v_test, phi.transform(z_te)])
+        fit = fit_probe(x_tr, rows.y_train, x_te, settings,
+                        train_ids=rows.train_ids, test_ids=rows.test_ids)  # fmt: skip
+        cv = float(np.nanmax(fit.cv_scores))
+        if best is None or cv > best[0]:
+            best = (cv, fit, gamma)
+    assert best is not None
+    return best[1], best[2]
+
+
+@dataclass(frozen=True)
+class TargetSpec:
+    """One generator target: a probe family's rows and settings, and its name."""
+
+    name: str
+    rows: FamilyRows
+    settings: ProbeSettings
+
+
+def _row(base: dict, inp: str, boot: dict, vs_nl: dict | None) -> dict:
+    return {
+        **base,
+        "input": inp,
+        "score": boot["vt_score"],
+        "v_score": boot["v_score"],
+        "delta": boot["delta"],
+        "ci_low": boot["ci_low"],
+        "ci_high": boot["ci_high"],
+        "p_gt0": boot["p_gt0"],
+        "delta_vs_nonlinear": np.nan if vs_nl is None else vs_nl["delta"],
+        "ci_low_vs_nonlinear": np.nan if vs_nl is None else vs_nl["ci_low"],
+        "ci_high_vs_nonlinear": np.nan if vs_nl is None else vs_nl["ci_high"],
+    }
+
+
+def evaluate_generator(
+    targets: Sequence[TargetSpec],
+    *,
+    corpus: str,
+    seed: int,
+    vision: Mapping[str, np.ndarray],
+    t_real: Mapping[str, np.ndarray],
+    t_gen: Mapping[tuple[str, str, str], Mapping[str, np.ndarray]],
+    permutations: int,
+    gammas: Sequence[float],
+    labels: Mapping[str, object] | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """Summary rows (one per target x cell x input) and permutation draws of one generator.
+
+    vision, t_real: sample_id -> vector, for every row of the corpus (dicts keep this
+    function free of edge I/O); t_gen: (sampler, guidance, steps) -> sample_id -> vector.
+    """
+    say = progress or (lambda _m: None)
+
+    def block(source: Mapping[str, np.ndarray], ids: np.ndarray) -> np.ndarray:
+        return np.stack([source[i] for i in ids]).astype(np.float64)
+
+    all_ids = np.array(sorted(vision), dtype=object)
+    perm = shuffled_rows(len(all_ids), seed)
+    shuffled_of = dict(zip(all_ids, all_ids[perm], strict=True))
+    out_rows: list[dict] = []
+    perm_rows: list[dict] = []
+    fid_cache: dict[tuple, dict] = {}
+    for spec in targets:
+        rows, ps = spec.rows, spec.settings
+        v_tr, v_te = block(vision, rows.train_ids), block(vision, rows.test_ids)
+        t_tr, t_te = block(t_real, rows.train_ids), block(t_real, rows.test_ids)
+
+        def fit(
+            x_tr: np.ndarray, x_te: np.ndarray, ps: ProbeSettings = ps, rows: FamilyRows = rows
+        ) -> FittedProbe:
+            return fit_probe(x_tr, rows.y_train, x_te, ps,
+                             train_ids=rows.train_ids, test_ids=rows.test_ids)  # fmt: skip
+
+        def boot(
+            pred_a: np.ndarray, pred_b: np.ndarray, ps: ProbeSettings = ps, rows: FamilyRows = rows
+        ) -> dict:
+            return fixed_test_bootstrap(rows.y_test, pred_a, pred_b, ps.metric,
+                                        n_resamples=ps.bootstrap, seed=ps.seed,
+                                        strata=rows.strata_test, sample_ids=rows.test_ids)  # fmt: skip
+
+        p_v = fit(v_tr, v_te).pred_test
+        p_real = fit(np.hstack([v_tr, t_tr]), np.hstack([v_te, t_te])).pred_test
+        nl, gamma = nonlinear_baseline(v_tr, v_te, rows, ps, gammas=gammas,
+                                       n_components=t_tr.shape[1], seed=seed)  # fmt: skip
+        p_nl = nl.pred_test
+        base = {
+            "corpus": corpus, "target": spec.name, "kind": ps.kind, "metric": ps.metric,
+            "seed": int(seed), "probe_seed": ps.seed, "n_train": rows.n_train,
+            "n_test": rows.n_test, "nonlinear_gamma": gamma, **(labels or {}),
+        }  # fmt: skip
+        real_row = _row({}, "t_real", boot(p_v, p_real), boot(p_nl, p_real))
+        nl_row = _row({}, "v_nonlinear", boot(p_v, p_nl), None)
+        say(f"{spec.name}: V {real_row['v_score']:.3f}, V+T_real delta {real_row['delta']:+.3f} "
+            f"[{real_row['ci_low']:+.3f}, {real_row['ci_high']:+.3f}], nonlinear V delta "
+            f"{nl_row['delta']:+.3f}")  # fmt: skip
+        for cell, gen in t_gen.items():
+            sampler, guidance, steps = cell
+            cell_base = {**base, "sampler": sampler, "guidance": float(guidance),
+                         "steps": int(steps)}  # fmt: skip
+            g_tr, g_te = block(gen, rows.train_ids), block(gen, rows.test_ids)
+            shuf = {i: gen[shuffled_of[i]] for i in vision}
+            s_tr, s_te = block(shuf, rows.train_ids), block(shuf, rows.test_ids)
+            p_gen = fit(np.hstack([v_tr, g_tr]), np.hstack([v_te, g_te])).pred_test
+            p_shuf = fit(np.hstack([v_tr, s_tr]), np.hstack([v_te, s_te])).pred_test
+            key = (cell, tuple(rows.test_ids))
+            if key not in fid_cache:
+                fid, null = fidelity(g_te, t_te, t_tr, n_permutations=permutations, seed=seed)
+                fid_cache[key] = fid
+                label = f"{sampler}|w={guidance}|steps={steps}"
+                perm_rows += [
+                    {"row_id": f"{corpus}|seed~{seed}|{label}|{spec.name}|perm~{k}",
+                     "corpus": corpus, "seed": int(seed), "target": spec.name,
+                     "sampler": sampler, "guidance": float(guidance), "steps": int(steps),
+                     "permutation": k, "statistic": float(s), "observed": fid["cos_matched"]}
+                    for k, s in enumerate(null)
+                ]  # fmt: skip
+            fid = fid_cache[key]
+            rows_cell = [
+                _row(cell_base, "t_real", boot(p_v, p_real), boot(p_nl, p_real)),
+                _row(cell_base, "t_gen", boot(p_v, p_gen), boot(p_nl, p_gen)),
+                _row(cell_base, "t_gen_shuffled", boot(p_v, p_shuf), boot(p_nl, p_shuf)),
+                _row(cell_base, "v_nonlinear", boot(p_v, p_nl), None),
+            ]
+            for r in rows_cell:
+                r.update(fid)
+                r["row_id"] = (f"{corpus}|{spec.name}|seed~{seed}|{sampler}|w={guidance}|"
+                               f"steps={steps}|{r['input']}")  # fmt: skip
+            out_rows += rows_cell
+            g = rows_cell[1]
+            say(f"{spec.name} {sampler} w={guidance} steps={steps}: V+T_gen delta "
+                f"{g['delta']:+.3f} [{g['ci_low']:+.3f}, {g['ci_high']:+.3f}], vs nonlinear V "
+                f"{g['delta_vs_nonlinear']:+.3f}; shuffled {rows_cell[2]['delta']:+.3f}; "
+                f"cos {fid['cos_matched']:.3f} vs {fid['cos_offdiag']:.3f} "
+                f"(p {fid['pairing_p']:.3f}), FD {fid['frechet']:.2f}")  # fmt: skip
+    perm_frame = pd.DataFrame(perm_rows, columns=list(PERMUTATION_COLUMNS))
+    if perm_frame.empty:
+        perm_frame = perm_frame.astype({"row_id": "str", "corpus": "str", "target": "str",
+                                        "sampler": "str", "seed": "int64", "steps": "int64",
+                                        "permutation": "int64", "guidance": "float64",
+                                        "statistic": "float64", "observed": "float64"})  # fmt: skip
+    return pd.DataFrame(out_rows), perm_frame

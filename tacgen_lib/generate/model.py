@@ -1,0 +1,124 @@
+"""The denoiser of the latent generator: a residual MLP over tactile feature vectors.
+
+This module owns the network (after RCG's representation diffusion model: an MLP denoiser over
+SSL feature vectors whose residual blocks add the time and condition embeddings, with a
+zero-initialised output layer), the sinusoidal timestep embedding, the learned null condition
+of classifier-free guidance, and the standardisation of the target features.
+
+- Input x_t: a standardised tactile feature (d_t), the vision feature (d_v) as condition.
+- Output: epsilon (``prediction = "eps"``) or v = sqrt(abar) eps - sqrt(1 - abar) x0
+  (``prediction = "v"``, Salimans & Ho 2022); `sampling` converts both to (eps, x0).
+- A condition row is replaced by the learned ``null_condition`` where ``drop`` is True
+  (training: with probability p_uncond; sampling: the unconditional half of the CFG batch).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+from torch import Tensor, nn
+
+__all__ = [
+    "Denoiser",
+    "Standardiser",
+    "fit_standardiser",
+    "sinusoidal_embedding",
+]
+
+
+def sinusoidal_embedding(t: Tensor, dim: int, max_period: float = 10_000.0) -> Tensor:
+    """Transformer-style sinusoidal embedding of (integer) timesteps: (B,) -> (B, dim).
+
+    Frequencies max_period^(-k / half), k = 0 .. half-1; cos then sin (an odd `dim` gets a zero
+    column). Computed in float32 from float64 frequencies, so t up to 1000 stays exact enough.
+    """
+    if dim < 2:
+        raise ValueError(f"time embedding dim must be >= 2, got {dim}")
+    half = dim // 2
+    freqs = torch.from_numpy(
+        np.exp(-math.log(max_period) * np.arange(half, dtype=np.float64) / half)
+    ).to(torch.float32)
+    args = t.to(torch.float32)[:, None] * freqs[None, :]
+    emb = torch.cat([torch.cos(args), torch.sin(args)], dim=1)
+    if dim % 2:
+        emb = torch.cat([emb, torch.zeros_like(emb[:, :1])], dim=1)
+    return emb
+
+
+class ResidualBlock(nn.Module):
+    """x + MLP(LayerNorm(x) + emb): the time/condition embedding is added inside each block."""
+
+    def __init__(self, width: int):
+        super().__init__()
+        self.norm = nn.LayerNorm(width)
+        self.emb = nn.Linear(width, width)
+        self.fc1 = nn.Linear(width, width)
+        self.fc2 = nn.Linear(width, width)
+        self.act = nn.SiLU()
+
+    def forward(self, x: Tensor, emb: Tensor) -> Tensor:
+        h = self.norm(x) + self.emb(emb)
+        h = self.fc2(self.act(self.fc1(self.act(h))))
+        return x + h
+
+
+class Denoiser(nn.Module):
+    """eps- (or v-) prediction residual MLP conditioned on the vision feature and the timestep."""
+
+    def __init__(self, dim_t: int, dim_v: int, hidden: int, blocks: int, time_dim: int = 128):
+        super().__init__()
+        self.dims = {"dim_t": dim_t, "dim_v": dim_v, "hidden": hidden, "blocks": blocks,
+                     "time_dim": time_dim}  # fmt: skip
+        self.time_dim = time_dim
+        self.inp = nn.Linear(dim_t, hidden)
+        self.time = nn.Sequential(nn.Linear(time_dim, hidden), nn.SiLU(), nn.Linear(hidden, hidden))
+        self.cond = nn.Sequential(nn.Linear(dim_v, hidden), nn.SiLU(), nn.Linear(hidden, hidden))
+        self.null_condition = nn.Parameter(torch.zeros(dim_v))
+        self.blocks = nn.ModuleList(ResidualBlock(hidden) for _ in range(blocks))
+        self.out_norm = nn.LayerNorm(hidden)
+        self.out = nn.Linear(hidden, dim_t)
+        nn.init.zeros_(self.out.weight)  # zero-initialised last layer (RCG): starts at eps = 0
+        nn.init.zeros_(self.out.bias)
+
+    def forward(self, x_t: Tensor, t: Tensor, cond: Tensor, drop: Tensor | None = None) -> Tensor:
+        """x_t (B, d_t), t (B,) integer steps, cond (B, d_v); drop (B,) bool -> null condition."""
+        if drop is not None:
+            cond = torch.where(drop[:, None], self.null_condition[None, :].expand_as(cond), cond)
+        emb = self.time(sinusoidal_embedding(t, self.time_dim).to(x_t.dtype)) + self.cond(cond)
+        h = self.inp(x_t)
+        for block in self.blocks:
+            h = block(h, emb)
+        return self.out(torch.nn.functional.silu(self.out_norm(h)))
+
+
+@dataclass(frozen=True)
+class Standardiser:
+    """Per-dimension standardisation with train-split statistics (stored beside the weights).
+
+    A dimension whose train values are constant (sd = 0, or below `min_sd` relative to the
+    largest sd) has scale 1: it is centred, never divided by zero, and comes back exactly.
+    """
+
+    mean: np.ndarray  # (d,) float64
+    scale: np.ndarray  # (d,) float64, > 0
+
+    def forward(self, x: np.ndarray) -> np.ndarray:
+        return (np.asarray(x, dtype=np.float64) - self.mean) / self.scale
+
+    def inverse(self, z: np.ndarray) -> np.ndarray:
+        return np.asarray(z, dtype=np.float64) * self.scale + self.mean
+
+
+def fit_standardiser(x: np.ndarray, min_sd: float = 1e-6) -> Standardiser:
+    """Mean and sd of the training rows (float64); zero-variance dimensions get scale 1."""
+    x = np.asarray(x, dtype=np.float64)
+    if x.ndim != 2 or x.shape[0] < 1:
+        raise ValueError(f"standardiser: expected (n >= 1, d) training features, got {x.shape}")
+    mean = x.mean(axis=0)
+    sd = x.std(axis=0)
+    floor = min_sd * max(float(sd.max(initial=0.0)), 1.0)
+    scale = np.where(sd > floor, sd, 1.0)
+    return Standardiser(mean=mean, scale=scale)

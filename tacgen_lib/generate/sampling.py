@@ -1,0 +1,158 @@
+"""Samplers of the latent generator: DDPM ancestral and DDIM, with classifier-free guidance.
+
+This module owns turning a trained denoiser into tactile feature vectors:
+
+- `guided_output`: eps^ = eps_u + w (eps_c - eps_u) (Ho & Salimans 2022), the conditional and
+  unconditional passes in one batch (w = 1: the plain conditional model; w = 0: unconditional).
+  With v-prediction the same combination is applied to v (linear in eps, so equivalent).
+- `predicted_x0_eps`: (x0, eps) from the model output (eps- or v-prediction).
+- `ddpm_step`: ancestral step with the posterior mean/variance (DDPM eq. 6-7), over all T.
+- `ddim_step`: DDIM eq. 12 with eta (eta = 0: deterministic), over any subsequence of steps.
+
+Nothing is clipped: the features are standardised, unbounded vectors (diffusers' default
+``clip_sample=True`` would clamp x0 to [-1, 1] and silently damage them).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from tacgen_lib.generate.model import Denoiser
+from tacgen_lib.generate.schedules import Schedule
+
+__all__ = [
+    "ddim_step",
+    "ddim_timesteps",
+    "ddpm_step",
+    "guided_output",
+    "predicted_x0_eps",
+    "sample",
+]
+
+
+def guided_output(model: Denoiser, x_t: Tensor, t: Tensor, cond: Tensor, guidance: float) -> Tensor:
+    """Classifier-free guidance: out_u + w (out_c - out_u), both passes in one batch of 2B."""
+    b = x_t.shape[0]
+    drop = torch.cat([torch.zeros(b, dtype=torch.bool), torch.ones(b, dtype=torch.bool)])
+    out = model(torch.cat([x_t, x_t]), torch.cat([t, t]), torch.cat([cond, cond]), drop)
+    out_c, out_u = out[:b], out[b:]
+    return out_u + guidance * (out_c - out_u)
+
+
+def predicted_x0_eps(
+    out: Tensor, x_t: Tensor, sqrt_abar: Tensor, sqrt_1m_abar: Tensor, prediction: str
+) -> tuple[Tensor, Tensor]:
+    """(x0, eps) from the model output at one step; no clipping (features are unbounded).
+
+    eps-prediction: x0 = (x_t - sqrt(1 - abar) eps) / sqrt(abar) (DDIM eq. 12's "predicted x0").
+    v-prediction: x0 = sqrt(abar) x_t - sqrt(1 - abar) v, eps = sqrt(1 - abar) x_t + sqrt(abar) v.
+    """
+    if prediction == "eps":
+        return (x_t - sqrt_1m_abar * out) / sqrt_abar, out
+    if prediction == "v":
+        return sqrt_abar * x_t - sqrt_1m_abar * out, sqrt_1m_abar * x_t + sqrt_abar * out
+    raise ValueError(f"prediction must be 'eps' or 'v', got {prediction!r}")
+
+
+def ddpm_step(
+    x0: Tensor, x_t: Tensor, t: int, coef: dict[str, Tensor], noise: Tensor | None
+) -> Tensor:
+    """One ancestral step x_t -> x_{t-1} ~ N(mu~_t(x_t, x0), beta~_t) (DDPM eq. 6-7).
+
+    1. posterior mean mu~ = coef1_t x0 + coef2_t x_t
+    2. add sqrt(beta~_t) z, except at t = 0 (the last step returns the mean)
+    """
+    mean = coef["posterior_mean_coef1"][t] * x0 + coef["posterior_mean_coef2"][t] * x_t
+    if t == 0 or noise is None:
+        return mean
+    return mean + torch.exp(0.5 * coef["posterior_log_variance"][t]) * noise
+
+
+def ddim_step(
+    x0: Tensor, eps: Tensor, abar_t: float, abar_prev: float, eta: float, noise: Tensor | None
+) -> Tensor:
+    """One DDIM step x_t -> x_{t_prev} (Song et al. 2021, eq. 12), alpha-bars in float64.
+
+    1. sigma = eta sqrt((1 - abar_prev) / (1 - abar_t)) sqrt(1 - abar_t / abar_prev)
+    2. direction pointing to x_t: sqrt(1 - abar_prev - sigma^2) eps
+    3. x_prev = sqrt(abar_prev) x0 + direction + sigma z
+    """
+    sigma = 0.0
+    if eta > 0 and abar_prev < 1.0:
+        sigma = (
+            eta * np.sqrt((1.0 - abar_prev) / (1.0 - abar_t)) * np.sqrt(1.0 - abar_t / abar_prev)
+        )
+    direction = float(np.sqrt(max(1.0 - abar_prev - sigma**2, 0.0)))
+    x_prev = float(np.sqrt(abar_prev)) * x0 + direction * eps
+    if sigma > 0 and noise is not None:
+        x_prev = x_prev + float(sigma) * noise
+    return x_prev
+
+
+def ddim_timesteps(n_train: int, steps: int) -> np.ndarray:
+    """`steps` timesteps from T-1 down to 0, evenly spaced ("linear" spacing), strictly decreasing."""
+    if not 1 <= steps <= n_train:
+        raise ValueError(f"DDIM steps must be in 1..{n_train}, got {steps}")
+    if steps == 1:
+        return np.array([n_train - 1])
+    ts = np.round(np.linspace(n_train - 1, 0, steps)).astype(np.int64)
+    return np.unique(ts)[::-1].copy()
+
+
+@torch.no_grad()
+def sample(
+    model: Denoiser,
+    schedule: Schedule,
+    cond: np.ndarray,
+    *,
+    sampler: str,
+    steps: int,
+    guidance: float,
+    seed: int,
+    prediction: str = "eps",
+    eta: float = 0.0,
+    batch: int = 2048,
+) -> np.ndarray:
+    """Standardised tactile features for each condition row (n, d_v) -> (n, d_t) float64.
+
+    Noise comes from one torch.Generator seeded with `seed`, drawn batch after batch in row
+    order, so the same seed, rows and batch give the same vectors (bit for bit on one machine).
+    ``ddpm`` runs all T steps (`steps` must equal T); ``ddim`` runs `ddim_timesteps(T, steps)`.
+    """
+    if sampler not in ("ddpm", "ddim"):
+        raise ValueError(f"sampler must be 'ddpm' or 'ddim', got {sampler!r}")
+    T = schedule.n_steps
+    if sampler == "ddpm" and steps != T:
+        raise ValueError(f"DDPM ancestral sampling runs all T = {T} steps, got steps = {steps}")
+    model.eval()
+    coef = schedule.tensors()
+    abar64 = schedule.alphas_cumprod
+    sqrt_abar = torch.from_numpy(np.sqrt(abar64)).float()
+    sqrt_1m = torch.from_numpy(np.sqrt(-np.expm1(np.cumsum(np.log1p(-schedule.betas))))).float()
+    ts = np.arange(T - 1, -1, -1) if sampler == "ddpm" else ddim_timesteps(T, steps)
+    gen = torch.Generator().manual_seed(int(seed))
+    cond_t = torch.from_numpy(np.ascontiguousarray(cond, dtype=np.float32))
+    d_t = model.dims["dim_t"]
+    out = []
+    for start in range(0, cond_t.shape[0], batch):
+        c = cond_t[start : start + batch]
+        x = torch.randn(c.shape[0], d_t, generator=gen)
+        for i, t in enumerate(ts):
+            t = int(t)
+            tt = torch.full((c.shape[0],), t, dtype=torch.int64)
+            o = guided_output(model, x, tt, c, guidance)
+            x0, eps = predicted_x0_eps(o, x, sqrt_abar[t], sqrt_1m[t], prediction)
+            if sampler == "ddpm":
+                noise = torch.randn(x.shape, generator=gen) if t > 0 else None
+                x = ddpm_step(x0, x, t, coef, noise)
+            else:
+                t_prev = int(ts[i + 1]) if i + 1 < len(ts) else -1
+                abar_prev = float(abar64[t_prev]) if t_prev >= 0 else 1.0
+                noise = torch.randn(x.shape, generator=gen) if eta > 0 and t_prev >= 0 else None
+                x = ddim_step(x0, eps, float(abar64[t]), abar_prev, eta, noise)
+        out.append(x.double().numpy())
+    if not out:
+        return np.zeros((0, d_t))
+    return np.concatenate(out)

@@ -1,0 +1,258 @@
+"""Training the latent generator: the denoising objective, AdamW + EMA, early stopping, save/load.
+
+This module owns `fit_generator` (one generator per corpus x seed, on the train split's V -> T
+pairs, early-stopped on the val split's loss), its objective `diffusion_loss` and the hashed
+weights file (`save_generator` / `load_generator`: EMA weights, the train-split standardisation
+statistics, the settings and the curve in one file with a sidecar, like the alignment heads).
+
+Bit-reproducible on one machine: the initial weights come from torch.manual_seed(seed), every
+random draw of training (batches, timesteps, noise, condition drops) from one torch.Generator
+seeded with `seed`, validation noise from a second generator seeded with seed + 1.
+"""
+
+from __future__ import annotations
+
+import copy
+import io
+import os
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from tacgen_lib.generate.model import Denoiser, Standardiser, fit_standardiser
+from tacgen_lib.generate.sampling import sample
+from tacgen_lib.generate.schedules import Schedule, make_schedule
+from tacgen_lib.generate.settings import GenerateSettings
+from tacgen_lib.io import edges
+
+__all__ = [
+    "GeneratorFit",
+    "diffusion_loss",
+    "fit_generator",
+    "generate",
+    "load_generator",
+    "save_generator",
+]
+
+_FORMAT = "tacgen-generator-v1"
+#: Validation rows are cut into batches of this many (the loss is a row mean either way).
+_VAL_REPEATS = 4
+
+
+def diffusion_loss(
+    model: Denoiser,
+    x0: Tensor,
+    cond: Tensor,
+    t: Tensor,
+    noise: Tensor,
+    drop: Tensor | None,
+    sqrt_abar: Tensor,
+    sqrt_1m_abar: Tensor,
+    prediction: str,
+) -> Tensor:
+    """Simple DDPM loss (Ho et al. 2020, eq. 14), eps- or v-target.
+
+    1. x_t = sqrt(abar_t) x0 + sqrt(1 - abar_t) eps   (DDPM eq. 4)
+    2. target: eps, or v = sqrt(abar_t) eps - sqrt(1 - abar_t) x0 (Salimans & Ho 2022)
+    3. mean squared error of the model output against the target
+    """
+    a, s = sqrt_abar[t][:, None], sqrt_1m_abar[t][:, None]
+    x_t = a * x0 + s * noise
+    target = noise if prediction == "eps" else a * noise - s * x0
+    return torch.mean((model(x_t, t, cond, drop) - target) ** 2)
+
+
+@dataclass
+class GeneratorFit:
+    """A trained generator: EMA denoiser (eval mode), standardiser, schedule and its curve."""
+
+    model: Denoiser
+    standardiser: Standardiser
+    settings: GenerateSettings
+    seed: int
+    curve: list[dict] = field(default_factory=list)
+    best_step: int = 0
+    best_val_loss: float = float("nan")
+    steps_run: int = 0
+    stopped_early: bool = False
+
+    @property
+    def schedule(self) -> Schedule:
+        return make_schedule(self.settings.schedule, self.settings.train_steps)
+
+
+def _as_f32(x: np.ndarray, name: str) -> Tensor:
+    arr = np.asarray(x, dtype=np.float64)
+    if arr.ndim != 2 or not np.isfinite(arr).all():
+        raise ValueError(f"{name}: expected a finite (n, d) array, got shape {arr.shape}")
+    return torch.from_numpy(arr.astype(np.float32))
+
+
+def fit_generator(
+    t_train: np.ndarray,
+    v_train: np.ndarray,
+    t_val: np.ndarray,
+    v_val: np.ndarray,
+    settings: GenerateSettings,
+    *,
+    seed: int,
+    progress: Callable[[str], Any] | None = None,
+) -> GeneratorFit:
+    """Train the eps- (or v-) prediction denoiser on train pairs, early-stopped on val pairs.
+
+    t_*: real tactile features (n, d_t), v_*: vision features (n, d_v), row i a pair. The
+    tactile features are standardised with the train rows' statistics (`fit_standardiser`).
+    Returns the EMA weights of the evaluation with the lowest validation loss.
+    """
+    say = progress or (lambda _m: None)
+    if len(t_train) != len(v_train) or len(t_val) != len(v_val):
+        raise ValueError("fit_generator: tactile and vision rows differ in number")
+    if len(t_train) < 2:
+        raise ValueError(f"fit_generator: need >= 2 train rows, got {len(t_train)}")
+    std = fit_standardiser(t_train)
+    x_tr = _as_f32(std.forward(t_train), "t_train")
+    c_tr = _as_f32(v_train, "v_train")
+    x_va = _as_f32(std.forward(t_val), "t_val") if len(t_val) else x_tr[:0]
+    c_va = _as_f32(v_val, "v_val") if len(v_val) else c_tr[:0]
+    schedule = make_schedule(settings.schedule, settings.train_steps)
+    sqrt_abar = torch.from_numpy(np.sqrt(schedule.alphas_cumprod)).float()
+    sqrt_1m = torch.from_numpy(np.sqrt(-np.expm1(np.cumsum(np.log1p(-schedule.betas))))).float()
+    T = schedule.n_steps
+
+    torch.manual_seed(int(seed))
+    model = Denoiser(x_tr.shape[1], c_tr.shape[1], settings.hidden, settings.blocks,
+                     settings.time_dim)  # fmt: skip
+    ema = copy.deepcopy(model)
+    ema.requires_grad_(False)
+    params, ema_params = list(model.parameters()), list(ema.parameters())
+    opt = torch.optim.AdamW(params, lr=settings.lr, weight_decay=settings.weight_decay)
+    gen = torch.Generator().manual_seed(int(seed))
+    # Fixed validation draws: every evaluation scores the same (t, noise) for each val row.
+    vgen = torch.Generator().manual_seed(int(seed) + 1)
+    n_va = x_va.shape[0]
+    val_t = torch.randint(0, T, (_VAL_REPEATS, n_va), generator=vgen)
+    val_noise = torch.randn(_VAL_REPEATS, n_va, x_tr.shape[1], generator=vgen)
+
+    def val_loss() -> float:
+        if n_va == 0:
+            return float("nan")
+        ema.eval()
+        with torch.no_grad():
+            losses = [
+                diffusion_loss(ema, x_va, c_va, val_t[r], val_noise[r], None, sqrt_abar, sqrt_1m,
+                               settings.prediction).item()
+                for r in range(_VAL_REPEATS)
+            ]  # fmt: skip
+        return float(np.mean(losses))
+
+    n = x_tr.shape[0]
+    bs = min(settings.batch_size, n)
+    curve: list[dict] = []
+    best = (float("inf"), 0, copy.deepcopy(ema.state_dict()))
+    bad, stopped, running, step = 0, False, [], 0
+    for step in range(1, settings.steps + 1):
+        model.train()
+        idx = torch.randint(0, n, (bs,), generator=gen)
+        t = torch.randint(0, T, (bs,), generator=gen)
+        noise = torch.randn(bs, x_tr.shape[1], generator=gen)
+        drop = torch.rand(bs, generator=gen) < settings.p_uncond
+        loss = diffusion_loss(model, x_tr[idx], c_tr[idx], t, noise, drop, sqrt_abar, sqrt_1m,
+                              settings.prediction)  # fmt: skip
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        if settings.clip_grad > 0:
+            torch.nn.utils.clip_grad_norm_(params, settings.clip_grad)
+        opt.step()
+        with torch.no_grad():
+            torch._foreach_lerp_(ema_params, params, 1.0 - settings.ema_decay)
+        running.append(loss.item())
+        if step % settings.eval_every == 0 or step == settings.steps:
+            vl = val_loss()
+            curve.append({"step": step, "train_loss": float(np.mean(running)), "val_loss": vl})
+            running = []
+            say(f"step {step}/{settings.steps}: train loss {curve[-1]['train_loss']:.4f} "
+                f"val loss {vl:.4f}")  # fmt: skip
+            score = vl if np.isfinite(vl) else curve[-1]["train_loss"]
+            if score < best[0]:
+                best, bad = (score, step, copy.deepcopy(ema.state_dict())), 0
+            else:
+                bad += 1
+                if settings.patience and bad >= settings.patience:
+                    stopped = True
+                    break
+    ema.load_state_dict(best[2])
+    ema.eval()
+    return GeneratorFit(ema, std, settings, int(seed), curve, best[1], best[0], step, stopped)
+
+
+def generate(fit: GeneratorFit, cond: np.ndarray, **sample_kw: Any) -> np.ndarray:
+    """Generated tactile features in the original (unstandardised) units, float32 (n, d_t)."""
+    z = sample(fit.model, fit.schedule, cond, prediction=fit.settings.prediction, **sample_kw)
+    return fit.standardiser.inverse(z).astype(np.float32)
+
+
+def _payload(fit: GeneratorFit) -> dict[str, Any]:
+    return {
+        "format": _FORMAT,
+        "dims": dict(fit.model.dims),
+        "settings": {
+            k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(fit.settings).items()
+        },  # fmt: skip
+        "seed": fit.seed,
+        "mean": torch.from_numpy(fit.standardiser.mean.copy()),
+        "scale": torch.from_numpy(fit.standardiser.scale.copy()),
+        "state": fit.model.state_dict(),
+        "curve": [dict(c) for c in fit.curve],
+        "best_step": int(fit.best_step),
+        "best_val_loss": float(fit.best_val_loss),
+        "steps_run": int(fit.steps_run),
+        "stopped_early": bool(fit.stopped_early),
+    }
+
+
+def save_generator(fit: GeneratorFit, path: str | os.PathLike[str], *, producer: str = "") -> str:
+    """Write EMA weights + standardisation statistics + settings + curve atomically, with a
+    sidecar hash (`edges.write_bytes`); the bytes depend only on the fit. Returns SHA-256."""
+    buf = io.BytesIO()
+    torch.save(_payload(fit), buf)
+    d = fit.model.dims
+    return edges.write_bytes(
+        path,
+        buf.getvalue(),
+        rows=1,
+        key="generator",
+        columns={
+            "denoiser": f"residual mlp {d['dim_t']}+{d['dim_v']} -> "
+            f"{d['blocks']} x {d['hidden']} -> {d['dim_t']}"
+        },  # fmt: skip
+        vectors={},
+        producer=producer,
+    )
+
+
+def load_generator(path: str | os.PathLike[str], *, verify: bool = True) -> GeneratorFit:
+    """A generator written by `save_generator` (its hash checked first)."""
+    if verify:
+        edges.verify(path)
+    try:
+        p = torch.load(os.fspath(path), map_location="cpu", weights_only=True)
+    except Exception as exc:  # noqa: BLE001 - re-raised with the file named
+        raise ValueError(
+            f"{path}: not a readable generator ({exc}); rerun train_generator"
+        ) from exc
+    if not isinstance(p, dict) or p.get("format") != _FORMAT:
+        raise ValueError(f"{path}: not a {_FORMAT} file; rerun train_generator")
+    s = dict(p["settings"])
+    s["nonlinear_gammas"] = tuple(s["nonlinear_gammas"])
+    settings = GenerateSettings(**s)
+    d = p["dims"]
+    model = Denoiser(d["dim_t"], d["dim_v"], d["hidden"], d["blocks"], d["time_dim"])
+    model.load_state_dict(p["state"])
+    model.eval()
+    std = Standardiser(p["mean"].numpy(), p["scale"].numpy())
+    return GeneratorFit(model, std, settings, int(p["seed"]), list(p["curve"]), p["best_step"],
+                        p["best_val_loss"], p["steps_run"], p["stopped_early"])  # fmt: skip

@@ -1,0 +1,279 @@
+"""Tables and figures of the generate stage (the report's *Generation* category).
+
+This module owns the generation summary (the evaluation rows of every generator joined with
+the wall times of its training and sampling jobs, read from their Snakemake benchmark files)
+and the report items built from it: the paper-style headline table, the honesty table (where
+generated touch must not help), the fidelity table, the guidance x seed heatmap, the sampling
+steps x seconds figure, PCA of real vs generated test latents, the pairing-permutation
+histogram and the training curves. Pure functions of their arguments.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+from matplotlib.patches import Ellipse
+from scipy import stats
+
+__all__ = [
+    "cross_seed_interval",
+    "curve_figure",
+    "fidelity_table",
+    "generation_summary",
+    "guidance_seed_figure",
+    "headline_table",
+    "honesty_table",
+    "pca_figure",
+    "permutation_figure",
+    "steps_seconds_figure",
+]
+
+
+def generation_summary(
+    rows: pd.DataFrame, sample_seconds: Mapping[tuple, float], train_seconds: Mapping[tuple, float]
+) -> pd.DataFrame:
+    """Evaluation rows + ``sample_seconds`` (corpus, seed, sampler, guidance, steps) and
+    ``train_seconds`` (corpus, seed) from the benchmark files."""
+    out = rows.copy()
+    out["sample_seconds"] = [
+        sample_seconds.get((r.corpus, int(r.seed), r.sampler, float(r.guidance), int(r.steps)),
+                           math.nan)
+        for r in out.itertuples()
+    ]  # fmt: skip
+    out["train_seconds"] = [
+        train_seconds.get((r.corpus, int(r.seed)), math.nan) for r in out.itertuples()
+    ]
+    return out.sort_values("row_id", ignore_index=True)
+
+
+def cross_seed_interval(values: np.ndarray) -> tuple[float, float, float]:
+    """Mean over seeds and its 95 % t-interval (NaN half-width with one seed)."""
+    v = np.asarray(values, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return math.nan, math.nan, math.nan
+    m = float(v.mean())
+    if v.size < 2:
+        return m, math.nan, math.nan
+    h = float(stats.t.ppf(0.975, v.size - 1) * v.std(ddof=1) / math.sqrt(v.size))
+    return m, m - h, m + h
+
+
+def _ci(d: float, lo: float, hi: float) -> str:
+    if not np.isfinite(d):
+        return "–"
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        return f"{d:+.3f} (1 seed)"
+    return f"{d:+.3f} [{lo:+.3f}, {hi:+.3f}]"
+
+
+def _ref(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
+    return summary[(summary["sampler"] == ref["sampler"]) & (summary["steps"] == int(ref["steps"]))
+                   & np.isclose(summary["guidance"], float(ref["guidance"]))]  # fmt: skip
+
+
+def headline_table(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
+    """Paper-style table at the reference cell: per corpus x target, first-seed Delta_gen with
+    its bootstrap CI, the cross-seed mean with its 95 % interval, protocol-matched Delta_real,
+    the nonlinear V-only baseline, Delta_gen against that baseline, and the shuffled control."""
+    s = _ref(summary, ref)
+    out = []
+    for (corpus, target), g in s.groupby(["corpus", "target"], sort=True):
+        first = int(g["seed"].min())
+        by = {k: v for k, v in g.groupby("input")}
+
+        def one(inp: str, col: str = "delta", g1: int = first, by: dict = by) -> str:
+            r = by[inp][by[inp]["seed"] == g1].iloc[0]
+            lo, hi = (
+                ("ci_low", "ci_high")
+                if col == "delta"
+                else ("ci_low_vs_nonlinear", "ci_high_vs_nonlinear")
+            )
+            return _ci(r[col], r[lo], r[hi])
+
+        m, lo, hi = cross_seed_interval(by["t_gen"]["delta"].to_numpy())
+        out.append({
+            "corpus": corpus, "target": target, "metric": g["metric"].iloc[0],
+            "V score": f"{by['t_gen']['v_score'].iloc[0]:.3f}",
+            f"Δ_gen seed {first} [bootstrap CI]": one("t_gen"),
+            f"Δ_gen mean over {g['seed'].nunique()} seeds [95% t]": _ci(m, lo, hi),
+            "Δ_real (protocol-matched)": one("t_real"),
+            "Δ nonlinear V only": one("v_nonlinear"),
+            "Δ_gen − nonlinear V": one("t_gen", "delta_vs_nonlinear"),
+            "Δ_real − nonlinear V": one("t_real", "delta_vs_nonlinear"),
+            "Δ_gen shuffled V rows": one("t_gen_shuffled"),
+        })  # fmt: skip
+    return pd.DataFrame(out)
+
+
+def honesty_table(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
+    """Where generated touch must not help, and whether the pipeline says so.
+
+    Controlled corpus (appearance carries no density): real touch must show Delta > 0 (CI
+    lower bound > 0) and generated touch must not (its CI covers 0 or lies below). Null
+    corpus: touch carries no label, so neither may help. Every cross-seed row is listed."""
+    s = _ref(summary, ref)
+    out = []
+    for r in s[s["input"].isin(["t_real", "t_gen"])].itertuples():
+        if r.design == "controlled":
+            expect = (
+                "Δ > 0 (touch sees density)" if r.input == "t_real" else "no gain (CI ∋ 0 or < 0)"
+            )
+            ok = r.ci_low > 0 if r.input == "t_real" else r.ci_low <= 0
+        elif r.null_corpus:
+            expect, ok = "no gain (null corpus)", r.ci_low <= 0
+        else:
+            continue
+        out.append({"corpus": r.corpus, "target": r.target, "seed": r.seed, "input": r.input,
+                    "Δ [CI]": _ci(r.delta, r.ci_low, r.ci_high), "expected": expect,
+                    "as expected": "yes" if ok else "NO"})  # fmt: skip
+    return pd.DataFrame(out, columns=["corpus", "target", "seed", "input", "Δ [CI]", "expected",
+                                      "as expected"])  # fmt: skip
+
+
+def fidelity_table(summary: pd.DataFrame) -> pd.DataFrame:
+    """Per generator and sampling cell: matched vs off-diagonal cosine, pairing p, Frechet."""
+    cols = ["corpus", "seed", "sampler", "guidance", "steps"]
+    s = summary[summary["input"] == "t_gen"].drop_duplicates(cols).sort_values(cols)
+    return pd.DataFrame({
+        **{c: s[c].to_numpy() for c in cols},
+        "cos matched": s["cos_matched"].map("{:.3f}".format).to_numpy(),
+        "cos off-diagonal": s["cos_offdiag"].map("{:.3f}".format).to_numpy(),
+        "pairing p": s["pairing_p"].map("{:.3f}".format).to_numpy(),
+        "Fréchet gen–real": s["frechet"].map("{:.2f}".format).to_numpy(),
+        "Fréchet real train–test": s["frechet_real_ref"].map("{:.2f}".format).to_numpy(),
+        "sample s": s["sample_seconds"].map("{:.1f}".format).to_numpy(),
+    })  # fmt: skip
+
+
+def _panels(n: int, ncols: int = 3, size: tuple[float, float] = (4.2, 3.4)):
+    ncols = max(1, min(ncols, n))
+    nrows = max(1, math.ceil(n / ncols))
+    fig, axes = plt.subplots(nrows, ncols, figsize=(size[0] * ncols, size[1] * nrows),
+                             squeeze=False)  # fmt: skip
+    for ax in axes.ravel()[n:]:
+        ax.set_visible(False)
+    return fig, axes.ravel()
+
+
+def guidance_seed_figure(summary: pd.DataFrame, sampler: str, steps: int) -> plt.Figure:
+    """Heatmap of Delta_gen per guidance w (rows) x seed (columns), one panel per target,
+    each cell annotated with Delta and its bootstrap CI."""
+    s = summary[(summary["input"] == "t_gen") & (summary["sampler"] == sampler)
+                & (summary["steps"] == int(steps))]  # fmt: skip
+    groups = list(s.groupby(["corpus", "target"], sort=True))
+    fig, axes = _panels(len(groups))
+    for ax, ((corpus, target), g) in zip(axes, groups, strict=False):
+        ws, seeds = sorted(g["guidance"].unique()), sorted(g["seed"].unique())
+        grid = np.full((len(ws), len(seeds)), np.nan)
+        for r in g.itertuples():
+            grid[ws.index(r.guidance), seeds.index(r.seed)] = r.delta
+        lim = max(float(np.nanmax(np.abs(grid))) if np.isfinite(grid).any() else 0.0, 1e-3)
+        ax.imshow(grid, cmap="RdBu_r", vmin=-lim, vmax=lim, aspect="auto")
+        for r in g.itertuples():
+            i, j = ws.index(r.guidance), seeds.index(r.seed)
+            ax.text(j, i, f"{r.delta:+.3f}\n[{r.ci_low:+.2f}, {r.ci_high:+.2f}]", ha="center",
+                    va="center", fontsize=7)  # fmt: skip
+        ax.set_xticks(range(len(seeds)), [str(x) for x in seeds])
+        ax.set_yticks(range(len(ws)), [f"{w:g}" for w in ws])
+        ax.set_xlabel("generator seed")
+        ax.set_ylabel("guidance w")
+        ax.set_title(f"{corpus}: {target}", fontsize=9)
+    fig.suptitle(f"Δ_gen = score(V+T_gen) − score(V), {sampler} {steps} steps", fontsize=10)
+    fig.tight_layout()
+    return fig
+
+
+def steps_seconds_figure(summary: pd.DataFrame) -> plt.Figure:
+    """What accuracy costs in time: sampling seconds (benchmark) against Delta_gen (mean over
+    seeds and guidance, per target) and against the Frechet distance, points labelled by steps."""
+    s = summary[summary["input"] == "t_gen"]
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
+    for (corpus, target, sampler), g in s.groupby(["corpus", "target", "sampler"], sort=True):
+        agg = g.groupby("steps").agg(sec=("sample_seconds", "mean"), d=("delta", "mean"),
+                                      fd=("frechet", "mean")).reset_index()  # fmt: skip
+        line = ax1.plot(agg["sec"], agg["d"], "o-", label=f"{corpus}:{target} ({sampler})")[0]
+        for r in agg.itertuples():
+            ax1.annotate(str(r.steps), (r.sec, r.d), fontsize=7, xytext=(3, 3),
+                         textcoords="offset points")  # fmt: skip
+        ax2.plot(agg["sec"], agg["fd"], "o-", color=line.get_color())
+        for r in agg.itertuples():
+            ax2.annotate(str(r.steps), (r.sec, r.fd), fontsize=7, xytext=(3, 3),
+                         textcoords="offset points")  # fmt: skip
+    ax1.axhline(0, color="grey", lw=0.8)
+    ax1.set_xlabel("sampling job seconds (benchmark file)")
+    ax1.set_ylabel("Δ_gen (mean over seeds and w)")
+    ax2.set_xlabel("sampling job seconds (benchmark file)")
+    ax2.set_ylabel("Fréchet distance, generated vs real test")
+    ax1.legend(fontsize=6)
+    fig.tight_layout()
+    return fig
+
+
+def _ellipse(ax: plt.Axes, pts: np.ndarray, color: str) -> None:
+    cov = np.cov(pts, rowvar=False)
+    w, v = np.linalg.eigh(cov)
+    w = np.clip(w, 0, None)
+    angle = math.degrees(math.atan2(v[1, 1], v[0, 1]))
+    ax.add_patch(Ellipse(pts.mean(0), 4 * math.sqrt(w[1]), 4 * math.sqrt(w[0]), angle=angle,
+                         fill=False, color=color, lw=1.5))  # fmt: skip
+
+
+def pca_figure(real: np.ndarray, gen: np.ndarray, *, title: str) -> plt.Figure:
+    """Real and generated test latents on the first two principal components of the real
+    ones, each with its 2-sd covariance ellipse."""
+    real, gen = np.asarray(real, np.float64), np.asarray(gen, np.float64)
+    mu = real.mean(0)
+    _, _, vt = np.linalg.svd(real - mu, full_matrices=False)
+    pr, pg = (real - mu) @ vt[:2].T, (gen - mu) @ vt[:2].T
+    fig, ax = plt.subplots(figsize=(5, 4.5))
+    ax.scatter(pr[:, 0], pr[:, 1], s=8, alpha=0.5, label="real T", color="tab:blue")
+    ax.scatter(pg[:, 0], pg[:, 1], s=8, alpha=0.5, label="generated T", color="tab:orange")
+    _ellipse(ax, pr, "tab:blue")
+    _ellipse(ax, pg, "tab:orange")
+    ax.set_xlabel("PC 1 (real)")
+    ax.set_ylabel("PC 2 (real)")
+    ax.set_title(title, fontsize=9)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
+def permutation_figure(perms: pd.DataFrame, ref: Mapping) -> plt.Figure:
+    """Pairing-permutation histograms (re-paired matched cosine) with the observed value."""
+    p = perms[(perms["sampler"] == ref["sampler"]) & (perms["steps"] == int(ref["steps"]))
+              & np.isclose(perms["guidance"], float(ref["guidance"]))]  # fmt: skip
+    p = p[p["seed"] == p["seed"].min()] if len(p) else p
+    groups = list(p.groupby(["corpus", "target"], sort=True))
+    fig, axes = _panels(max(len(groups), 1))
+    for ax, ((corpus, target), g) in zip(axes, groups, strict=False):
+        obs = float(g["observed"].iloc[0])
+        ax.hist(g["statistic"], bins=30, color="lightgrey", edgecolor="grey")
+        ax.axvline(obs, color="tab:red", label=f"observed {obs:.3f}")
+        pval = (1 + np.sum(g["statistic"] >= obs)) / (1 + len(g))
+        ax.set_title(f"{corpus}: {target} (p = {pval:.3f})", fontsize=9)
+        ax.set_xlabel("mean matched cosine, re-paired")
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    return fig
+
+
+def curve_figure(curves: pd.DataFrame) -> plt.Figure:
+    """Train and validation denoising loss per generator (corpus x seed)."""
+    groups = list(curves.groupby("corpus", sort=True))
+    fig, axes = _panels(max(len(groups), 1))
+    for ax, (corpus, g) in zip(axes, groups, strict=False):
+        for seed, c in g.groupby("seed"):
+            line = ax.plot(c["step"], c["train_loss"], "-", label=f"seed {seed} train")[0]
+            ax.plot(c["step"], c["val_loss"], "--", color=line.get_color(),
+                    label=f"seed {seed} val")  # fmt: skip
+        ax.set_title(corpus, fontsize=9)
+        ax.set_xlabel("optimiser step")
+        ax.set_ylabel("denoising loss")
+        ax.legend(fontsize=6)
+    fig.tight_layout()
+    return fig

@@ -1,0 +1,526 @@
+"""The latent generator: schedules, denoiser, samplers, training and evaluation.
+
+Hard cases (issue 12) against float64 references written as plain loops here: schedule
+endpoints, the clipped posterior log-variance at t = 0, fp32 posterior coefficients at every
+t, DDIM with one step, guidance 0 and 10, a batch of one, identical conditions, a tactile
+dimension with zero variance, and sampling identical given the same seed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+import torch
+import yaml
+from scipy import linalg
+from snakemake.utils import update_config
+from snakemake_run import ROOT
+
+from tacgen_lib.generate.cells import guidance_text, sample_cells
+from tacgen_lib.generate.evaluate import (
+    TargetSpec,
+    cosine_pairing,
+    evaluate_generator,
+    fidelity,
+    frechet_distance,
+    pairing_permutation,
+    shuffled_rows,
+)
+from tacgen_lib.generate.model import Denoiser, fit_standardiser, sinusoidal_embedding
+from tacgen_lib.generate.sampling import (
+    ddim_timesteps,
+    guided_output,
+    predicted_x0_eps,
+    sample,
+)
+from tacgen_lib.generate.schedules import cosine_betas, linear_betas, make_schedule
+from tacgen_lib.generate.settings import GenerateSettings, check_grid
+from tacgen_lib.generate.train import (
+    fit_generator,
+    generate,
+    load_generator,
+    save_generator,
+)
+from tacgen_lib.io.config import validate_config
+from tacgen_lib.probes.protocol import ProbeSettings, family_rows
+
+SCHEMA = ROOT / "config" / "config.schema.yaml"
+
+
+# ------------------------------------------------------------------ float64 references
+
+
+def schedule_reference(betas: list[float]) -> dict[str, list[float]]:
+    """alpha-bar and the posterior coefficients by plain float64 loops (DDPM eq. 6-7)."""
+    abar, prod = [], 1.0
+    for b in betas:
+        prod *= 1.0 - b
+        abar.append(prod)
+    out = {"abar": abar, "var": [], "coef1": [], "coef2": []}
+    for t, b in enumerate(betas):
+        prev = abar[t - 1] if t > 0 else 1.0
+        out["var"].append(b * (1.0 - prev) / (1.0 - abar[t]))
+        out["coef1"].append(b * math.sqrt(prev) / (1.0 - abar[t]))
+        out["coef2"].append((1.0 - prev) * math.sqrt(1.0 - b) / (1.0 - abar[t]))
+    return out
+
+
+def random_denoiser(dim_t=6, dim_v=5, hidden=16, blocks=2, seed=0) -> Denoiser:
+    """A denoiser with a non-zero output layer (the zero init would make eps = 0)."""
+    torch.manual_seed(seed)
+    model = Denoiser(dim_t, dim_v, hidden, blocks, time_dim=8)
+    with torch.no_grad():
+        model.out.weight.normal_(0, 0.3)
+        model.out.bias.normal_(0, 0.1)
+        model.null_condition.normal_(0, 1)
+    return model.eval()
+
+
+def ddim_reference(model, schedule, cond, x_T, steps, guidance, prediction):
+    """DDIM (eta = 0) in float64: the model run in double, loops over steps."""
+    m = Denoiser(**model.dims).double()
+    m.load_state_dict({k: v.double() for k, v in model.state_dict().items()})
+    m.eval()
+    abar = schedule.alphas_cumprod
+    ts = ddim_timesteps(schedule.n_steps, steps)
+    x = torch.from_numpy(x_T).double()
+    c = torch.from_numpy(cond).double()
+    with torch.no_grad():
+        for i, t in enumerate(ts):
+            tt = torch.full((x.shape[0],), int(t))
+            out_c = m(x, tt, c)
+            out_u = m(x, tt, c, torch.ones(x.shape[0], dtype=torch.bool))
+            o = out_u + guidance * (out_c - out_u)
+            a, s = math.sqrt(abar[t]), math.sqrt(1.0 - abar[t])
+            if prediction == "eps":
+                x0, eps = (x - s * o) / a, o
+            else:
+                x0, eps = a * x - s * o, s * x + a * o
+            prev = abar[ts[i + 1]] if i + 1 < len(ts) else 1.0
+            x = math.sqrt(prev) * x0 + math.sqrt(1.0 - prev) * eps
+    return x.numpy()
+
+
+def initial_noise(n, d, seed):
+    return torch.randn(n, d, generator=torch.Generator().manual_seed(seed)).numpy()
+
+
+# ------------------------------------------------------------------ schedules
+
+
+@pytest.mark.parametrize("name", ["cosine", "linear"])
+def test_schedule_endpoints_are_finite_and_match_float64_loops(name):
+    sch = make_schedule(name, 1000)
+    ref = schedule_reference(list(sch.betas))
+    assert np.all(sch.betas <= 0.999) and np.all(sch.betas > 0)
+    assert 0.0 < sch.alphas_cumprod[-1] < 1e-3  # alpha-bar_T near 0 but not 0
+    assert np.isfinite(1.0 / np.sqrt(sch.alphas_cumprod[-1]))
+    np.testing.assert_allclose(sch.alphas_cumprod, ref["abar"], rtol=1e-12)
+    np.testing.assert_allclose(sch.posterior_variance, ref["var"], rtol=1e-9, atol=1e-300)
+    np.testing.assert_allclose(sch.posterior_mean_coef1, ref["coef1"], rtol=1e-9)
+    np.testing.assert_allclose(sch.posterior_mean_coef2, ref["coef2"], rtol=1e-9, atol=1e-300)
+
+
+def test_cosine_first_alpha_bar_rounds_to_one_in_float32_yet_coefficients_stay_finite():
+    """alpha-bar_0 = 1 - 4e-5 in float64; in float32 1 - alpha-bar_0 loses most digits. The
+    coefficients are formed in float64 first, so the float32 copies are finite and exact."""
+    sch = make_schedule("cosine", 1000)
+    assert np.float32(sch.alphas_cumprod[0]) > 0.9999
+    naive = np.float32(1.0) - np.float32(sch.alphas_cumprod[0])
+    assert abs(naive - (1.0 - sch.alphas_cumprod[0])) / (1.0 - sch.alphas_cumprod[0]) > 1e-4
+    tens = sch.tensors()
+    for name, values in tens.items():
+        assert torch.isfinite(values).all(), name
+        ref = getattr(sch, name)
+        np.testing.assert_allclose(
+            values.double().numpy(), ref, rtol=1e-6, atol=1e-30, err_msg=name
+        )
+
+
+def test_clipped_posterior_log_variance_at_t0():
+    for name in ("cosine", "linear"):
+        sch = make_schedule(name, 1000)
+        assert sch.posterior_variance[0] == 0.0  # the true posterior variance at t = 0
+        assert np.isfinite(sch.posterior_log_variance).all()
+        assert sch.posterior_log_variance[0] == pytest.approx(np.log(sch.posterior_variance[1]))
+        np.testing.assert_allclose(
+            sch.posterior_log_variance[1:], np.log(sch.posterior_variance[1:]), rtol=1e-12
+        )
+
+
+def test_unclipped_cosine_would_end_at_alpha_bar_zero():
+    """Why the clip exists: without it the last beta is 1 and alpha-bar_T is exactly 0."""
+    assert cosine_betas(1000, max_beta=1.0)[-1] == pytest.approx(1.0)
+    assert cosine_betas(1000)[-1] == 0.999
+    assert linear_betas(1000)[0] == pytest.approx(1e-4) and linear_betas(1000)[-1] == 0.02
+
+
+def test_sinusoidal_embedding_matches_float64_formula():
+    t = torch.tensor([0, 1, 500, 999])
+    got = sinusoidal_embedding(t, 9).double().numpy()
+    freqs = np.exp(-np.log(10_000.0) * np.arange(4) / 4)
+    args = np.array([0, 1, 500, 999], dtype=np.float64)[:, None] * freqs
+    ref = np.hstack([np.cos(args), np.sin(args), np.zeros((4, 1))])
+    np.testing.assert_allclose(got, ref, atol=2e-4)
+
+
+# ------------------------------------------------------------------ samplers
+
+
+@pytest.mark.parametrize("prediction", ["eps", "v"])
+@pytest.mark.parametrize("steps", [1, 5])
+def test_ddim_matches_float64_reference(prediction, steps):
+    sch = make_schedule("cosine", 1000)
+    model = random_denoiser()
+    cond = np.random.default_rng(1).normal(size=(7, 5)).astype(np.float32)
+    got = sample(model, sch, cond, sampler="ddim", steps=steps, guidance=1.5, seed=3,
+                 prediction=prediction)  # fmt: skip
+    ref = ddim_reference(model, sch, cond, initial_noise(7, 6, 3), steps, 1.5, prediction)
+    assert np.isfinite(got).all()
+    np.testing.assert_allclose(got, ref, rtol=1e-3, atol=1e-3 * np.abs(ref).max())
+
+
+@pytest.mark.parametrize("guidance", [0.0, 10.0])
+def test_guidance_extremes_stay_finite_and_w0_is_unconditional(guidance):
+    model = random_denoiser()
+    x = torch.randn(4, 6)
+    t = torch.tensor([999, 500, 1, 0])
+    c = torch.randn(4, 5)
+    out = guided_output(model, x, t, c, guidance)
+    assert torch.isfinite(out).all()
+    with torch.no_grad():
+        u = model(x, t, c, torch.ones(4, dtype=torch.bool))
+        cnd = model(x, t, c)
+    torch.testing.assert_close(out, u + guidance * (cnd - u))
+    if guidance == 0.0:
+        torch.testing.assert_close(out, u)
+    sch = make_schedule("cosine", 1000)
+    z = sample(model, sch, c.numpy(), sampler="ddim", steps=10, guidance=guidance, seed=0,
+               prediction="v")  # fmt: skip
+    assert np.isfinite(z).all()
+
+
+def test_batch_of_one_and_identical_conditions():
+    model = random_denoiser()
+    sch = make_schedule("linear", 100)
+    one = sample(model, sch, np.ones((1, 5), np.float32), sampler="ddpm", steps=100,
+                 guidance=2.0, seed=0, prediction="v")  # fmt: skip
+    assert one.shape == (1, 6) and np.isfinite(one).all()
+    same = sample(model, sch, np.ones((32, 5), np.float32), sampler="ddpm", steps=100,
+                  guidance=2.0, seed=0, prediction="v")  # fmt: skip
+    assert np.isfinite(same).all()
+    assert np.unique(same.round(6), axis=0).shape[0] == 32  # the noise still varies rows
+    # one-row guidance equals the batched computation row by row
+    x, t, c = torch.randn(3, 6), torch.tensor([10, 20, 30]), torch.randn(3, 5)
+    batched = guided_output(model, x, t, c, 3.0)
+    rows = torch.cat([guided_output(model, x[i : i + 1], t[i : i + 1], c[i : i + 1], 3.0)
+                      for i in range(3)])  # fmt: skip
+    torch.testing.assert_close(batched, rows, rtol=1e-5, atol=1e-6)
+
+
+def test_ddpm_final_step_is_the_posterior_mean_and_x0_inverts():
+    sch = make_schedule("cosine", 1000)
+    tens = sch.tensors()
+    x0 = torch.randn(5, 3)
+    eps = torch.randn(5, 3)
+    for t in (0, 1, 500, 999):
+        a = torch.tensor(math.sqrt(sch.alphas_cumprod[t])).float()
+        s = torch.tensor(math.sqrt(1 - sch.alphas_cumprod[t])).float()
+        x_t = a * x0 + s * eps
+        v = a * eps - s * x0
+        got_x0, got_eps = predicted_x0_eps(v, x_t, a, s, "v")
+        torch.testing.assert_close(got_x0, x0, rtol=1e-4, atol=1e-4)
+        torch.testing.assert_close(got_eps, eps, rtol=1e-4, atol=1e-4)
+    assert float(tens["posterior_log_variance"][0]) == pytest.approx(
+        float(np.log(sch.posterior_variance[1])), rel=1e-6
+    )
+
+
+def test_sampling_is_identical_given_the_same_seed():
+    model = random_denoiser()
+    sch = make_schedule("cosine", 1000)
+    cond = np.random.default_rng(0).normal(size=(9, 5)).astype(np.float32)
+    kw = {"sampler": "ddim", "steps": 7, "guidance": 2.0, "prediction": "v", "eta": 0.5}
+    a = sample(model, sch, cond, seed=11, **kw)
+    b = sample(model, sch, cond, seed=11, **kw)
+    c = sample(model, sch, cond, seed=12, **kw)
+    np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(a, c)
+
+
+def test_ddim_timesteps_and_sampler_checks():
+    assert list(ddim_timesteps(1000, 1)) == [999]
+    ts = ddim_timesteps(1000, 50)
+    assert ts[0] == 999 and ts[-1] == 0 and np.all(np.diff(ts) < 0) and len(ts) == 50
+    assert len(ddim_timesteps(10, 10)) == 10
+    with pytest.raises(ValueError, match="DDIM steps"):
+        ddim_timesteps(10, 11)
+    with pytest.raises(ValueError, match="all T = 100"):
+        sample(random_denoiser(), make_schedule("linear", 100), np.ones((1, 5), np.float32),
+               sampler="ddpm", steps=10, guidance=1.0, seed=0)  # fmt: skip
+    with pytest.raises(ValueError, match="generate.samplers.ddpm"):
+        check_grid({"ddpm": [50]}, 1000)
+    with pytest.raises(ValueError, match="unknown sampler"):
+        check_grid({"plms": [5]}, 1000)
+    check_grid({"ddim": [1, 1000], "ddpm": [1000]}, 1000)
+
+
+# ------------------------------------------------------------------ standardisation + training
+
+
+def test_zero_variance_dimension_is_centred_not_divided_by_zero():
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(50, 4))
+    x[:, 2] = 3.25  # constant in the train split
+    std = fit_standardiser(x)
+    assert std.scale[2] == 1.0
+    z = std.forward(x)
+    assert np.isfinite(z).all() and np.all(z[:, 2] == 0.0)
+    np.testing.assert_allclose(std.inverse(z), x, rtol=1e-12, atol=1e-12)
+
+
+def linear_pairs(n=160, dv=5, dt=4, seed=0):
+    rng = np.random.default_rng(seed)
+    v = rng.normal(size=(n, dv)).astype(np.float32)
+    w = rng.normal(size=(dv, dt))
+    t = (v @ w + 0.1 * rng.normal(size=(n, dt))).astype(np.float32)
+    return v, t
+
+
+def test_training_with_a_constant_dimension_is_finite_and_bit_reproducible(tmp_path):
+    v, t = linear_pairs()
+    t[:, 1] = 7.0
+    s = GenerateSettings.tiny()
+    a = fit_generator(t[:120], v[:120], t[120:], v[120:], s, seed=4)
+    b = fit_generator(t[:120], v[:120], t[120:], v[120:], s, seed=4)
+    for k, val in a.model.state_dict().items():
+        assert torch.equal(val, b.model.state_dict()[k]), k
+    assert all(np.isfinite(c["val_loss"]) for c in a.curve)
+    gen = generate(a, v[120:], sampler="ddim", steps=5, guidance=1.0, seed=0)
+    assert np.isfinite(gen).all()
+    h1 = save_generator(a, tmp_path / "a.pt")
+    h2 = save_generator(b, tmp_path / "b.pt")
+    assert h1 == h2  # same fit, same bytes
+    back = load_generator(tmp_path / "a.pt")
+    np.testing.assert_array_equal(
+        generate(back, v[120:], sampler="ddim", steps=5, guidance=1.0, seed=0), gen
+    )
+    (tmp_path / "a.pt").write_bytes((tmp_path / "a.pt").read_bytes() + b"x")
+    with pytest.raises(ValueError, match="does not match"):
+        load_generator(tmp_path / "a.pt")
+
+
+def test_v_prediction_generator_learns_a_linear_map():
+    """On T = V W + small noise, generated T must correlate with the truth far above chance."""
+    v, t = linear_pairs(n=400)
+    s = GenerateSettings.tiny(steps=600, hidden=64, blocks=2, lr=2e-3, prediction="v",
+                              train_steps=1000, time_dim=32)  # fmt: skip
+    fit = fit_generator(t[:300], v[:300], t[300:350], v[300:350], s, seed=0)
+    gen = generate(fit, v[350:], sampler="ddim", steps=20, guidance=1.0, seed=0)
+    r = np.corrcoef(gen.ravel(), t[350:].ravel())[0, 1]
+    assert r > 0.8, r
+
+
+# ------------------------------------------------------------------ evaluation
+
+
+def frechet_reference(a, b):
+    """The textbook form with scipy.linalg.sqrtm (complex round-off dropped)."""
+    mu = a.mean(0) - b.mean(0)
+    sa, sb = np.cov(a, rowvar=False), np.cov(b, rowvar=False)
+    cross = linalg.sqrtm(sa @ sb).real
+    return float(mu @ mu + np.trace(sa + sb - 2 * cross))
+
+
+def test_frechet_distance_matches_scipy_and_is_zero_on_itself():
+    rng = np.random.default_rng(0)
+    a, b = rng.normal(size=(200, 5)), rng.normal(1.0, 2.0, size=(150, 5))
+    assert frechet_distance(a, b) == pytest.approx(frechet_reference(a, b), rel=1e-6)
+    assert frechet_distance(a, a) == pytest.approx(0.0, abs=1e-8)
+    low_rank = np.repeat(rng.normal(size=(100, 1)), 4, axis=1)  # singular covariance
+    assert np.isfinite(frechet_distance(low_rank, a[:100, :4]))
+
+
+def test_cosine_pairing_and_permutation_check():
+    rng = np.random.default_rng(0)
+    real = rng.normal(size=(60, 8))
+    gen = real + 0.3 * rng.normal(size=(60, 8))
+    matched, off = cosine_pairing(gen, real)
+    assert matched > 0.9 and abs(off) < 0.1
+    obs, null, p = pairing_permutation(gen, real, 200, seed=0)
+    assert obs == matched and null.shape == (200,) and p == pytest.approx(1 / 201)
+    _, _, p_null = pairing_permutation(rng.normal(size=(60, 8)), real, 200, seed=0)
+    assert p_null > 0.01
+    fid, draws = fidelity(gen[:30], real[:30], real[30:], n_permutations=50, seed=0)
+    assert draws.shape == (50,) and fid["frechet"] >= 0 and fid["frechet_real_ref"] >= 0
+
+
+@pytest.mark.parametrize("n", [2, 3, 10, 101])
+def test_shuffled_rows_break_every_pairing(n):
+    perm = shuffled_rows(n, seed=1)
+    assert sorted(perm) == list(range(n)) and not np.any(perm == np.arange(n))
+
+
+def toy_world(n=240, seed=0):
+    """V sees a visible attribute; touch sees a hidden one that V cannot; labels need both."""
+    rng = np.random.default_rng(seed)
+    visible = rng.normal(size=n)
+    hidden = rng.normal(size=n)
+    ids = [f"s{i:04d}" for i in range(n)]
+    v = np.column_stack([visible, rng.normal(size=(n, 3))]).astype(np.float32)
+    t = np.column_stack([hidden, visible + 0.1 * rng.normal(size=n),
+                         rng.normal(size=(n, 2))]).astype(np.float32)  # fmt: skip
+    manifest = pd.DataFrame({"sample_id": ids, "corpus": "toy",
+                             "force_p50": visible + 2.0 * hidden})  # fmt: skip
+    split = np.where(np.arange(n) % 5 == 0, "test", np.where(np.arange(n) % 5 == 1, "val", "train"))
+    splits = pd.DataFrame({"sample_id": ids, "corpus": "toy", "split": split})
+    return ids, v, t, manifest, splits
+
+
+def test_evaluation_real_touch_helps_where_generated_touch_cannot():
+    """The label depends on an attribute only touch sees: V+T_real gains, V+T_gen (a function
+    of V) does not, and the summary has every input with its CI."""
+    ids, v, t, manifest, splits = toy_world()
+    train = splits["split"] == "train"
+    s = GenerateSettings.tiny(steps=300, hidden=64, blocks=2, lr=2e-3, prediction="v",
+                              train_steps=200, time_dim=32, permutations=100)  # fmt: skip
+    val = (splits["split"] == "val").to_numpy()
+    fit = fit_generator(t[train.to_numpy()], v[train.to_numpy()], t[val], v[val], s, seed=0)
+    gen = generate(fit, v, sampler="ddim", steps=10, guidance=1.0, seed=0)
+    rows = family_rows(manifest, splits, corpus="toy", target="force_p50", kind="ridge")
+    ps = dataclasses.replace(
+        ProbeSettings.from_config(
+            {"lambdas": [0.1, 1, 10], "C": [1], "folds": 3, "bootstrap": 500,
+             "train_resamples": 0, "permutations": 0, "label_permutations": 0,
+             "random_draws": 0}, "ridge", 0)
+    )  # fmt: skip
+    summary, perms = evaluate_generator(
+        [TargetSpec("force_p50", rows, ps)],
+        corpus="toy",
+        seed=0,
+        vision=dict(zip(ids, v, strict=True)),
+        t_real=dict(zip(ids, t, strict=True)),
+        t_gen={("ddim", "1", "10"): dict(zip(ids, gen, strict=True))},
+        permutations=100,
+        gammas=(1.0,),
+    )
+    by = summary.set_index("input")
+    assert set(by.index) == {"t_real", "t_gen", "t_gen_shuffled", "v_nonlinear"}
+    assert summary["row_id"].is_unique and len(perms) == 100
+    assert by.loc["t_real", "ci_low"] > 0.3  # touch sees the hidden attribute
+    assert by.loc["t_gen", "ci_low"] <= 0.0 < by.loc["t_real", "delta"]
+    assert by.loc["t_gen", "cos_matched"] > by.loc["t_gen", "cos_offdiag"]
+    for col in ("score", "delta", "ci_low", "ci_high"):
+        assert np.isfinite(by[col]).all()
+
+
+# ------------------------------------------------------------------ settings + cells
+
+
+def validated(overlay=None):
+    cfg = yaml.safe_load((ROOT / "config/config.yaml").read_text())
+    if overlay:
+        update_config(cfg, yaml.safe_load((ROOT / "config" / overlay).read_text()))
+    cfg["scenes_file"] = str(ROOT / cfg["scenes_file"])
+    return validate_config(cfg, SCHEMA)
+
+
+@pytest.mark.parametrize("overlay", [None, "test.yaml", "paper.yaml"])
+def test_every_config_builds_generate_settings_and_a_valid_grid(overlay):
+    cfg = validated(overlay)["generate"]
+    s = GenerateSettings.from_config(cfg)
+    assert s.hidden == cfg["hidden"] and s.steps == cfg["steps"]
+    check_grid(cfg["samplers"], cfg["train_steps"])
+    assert len(sample_cells(cfg["guidance"], cfg["samplers"])) >= 1
+
+
+def test_every_generate_settings_field_is_a_config_key():
+    schema = yaml.safe_load(SCHEMA.read_text())["properties"]["generate"]["properties"]
+    assert {f.name for f in dataclasses.fields(GenerateSettings)} <= set(schema)
+
+
+def test_generate_settings_refuse_bad_values_naming_the_key():
+    with pytest.raises(ValueError, match="generate.prediction"):
+        GenerateSettings.tiny(prediction="x0")
+    with pytest.raises(ValueError, match="generate.p_uncond"):
+        GenerateSettings.tiny(p_uncond=1.5)
+    with pytest.raises(KeyError, match="hidden"):
+        GenerateSettings.from_config({k: v for k, v in validated()["generate"].items()
+                                      if k != "hidden"})  # fmt: skip
+    assert GenerateSettings.tiny().steps <= 100 and GenerateSettings.tiny(steps=5).steps == 5
+
+
+def test_guidance_text_is_canonical():
+    assert guidance_text(1.0) == "1" and guidance_text("1.50") == "1.5" and guidance_text(0) == "0"
+    with pytest.raises(ValueError):
+        guidance_text(-1)
+
+
+# ------------------------------------------------------------------ report
+
+
+def synthetic_summary() -> pd.DataFrame:
+    rows = []
+    for corpus, design, null, target in (
+        ("sim_paired", "paired", False, "force_p50"),
+        ("sim_controlled", "controlled", False, "density"),
+        ("sim_null", "paired", True, "force_p50"),
+    ):
+        for seed in (0, 1):
+            for w in (0.0, 1.0):
+                for inp, d in (("t_real", 0.3), ("t_gen", 0.05 * seed), ("t_gen_shuffled", 0.0),
+                               ("v_nonlinear", 0.02)):  # fmt: skip
+                    rows.append({
+                        "row_id": f"{corpus}|{target}|{seed}|{w}|{inp}", "corpus": corpus,
+                        "target": target, "metric": "r2", "seed": seed, "sampler": "ddim",
+                        "guidance": w, "steps": 10, "input": inp, "score": 0.5 + d,
+                        "v_score": 0.5, "delta": d, "ci_low": d - 0.1, "ci_high": d + 0.1,
+                        "delta_vs_nonlinear": d - 0.02, "ci_low_vs_nonlinear": d - 0.12,
+                        "ci_high_vs_nonlinear": d + 0.08, "design": design, "null_corpus": null,
+                        "cos_matched": 0.3, "cos_offdiag": 0.1, "pairing_p": 0.01,
+                        "frechet": 2.0, "frechet_real_ref": 1.0,
+                    })  # fmt: skip
+    return pd.DataFrame(rows)
+
+
+def test_report_tables_and_figures_from_a_summary():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from tacgen_lib.report import generate as rep
+
+    rows = synthetic_summary()
+    seconds = {("sim_paired", 0, "ddim", 1.0, 10): 2.5}
+    summary = rep.generation_summary(rows, seconds, {("sim_paired", 0): 9.0})
+    assert summary["sample_seconds"].notna().sum() == 4  # one cell: its 4 inputs
+    ref = {"sampler": "ddim", "steps": 10, "guidance": "1"}
+    head = rep.headline_table(summary, ref)
+    assert len(head) == 3 and "Δ_real (protocol-matched)" in head.columns
+    paired = head.set_index("corpus").loc["sim_paired"]
+    assert paired["Δ_gen seed 0 [bootstrap CI]"] == "+0.000 [-0.100, +0.100]"
+    mean, lo, hi = rep.cross_seed_interval(np.array([0.0, 0.05]))
+    assert mean == pytest.approx(0.025) and lo < 0 < hi
+    honesty = rep.honesty_table(summary, ref)
+    verdict = honesty.set_index(["corpus", "seed", "input"])["as expected"]
+    assert verdict[("sim_controlled", 0, "t_real")] == "yes"  # CI (0.2, 0.4) > 0
+    assert verdict[("sim_controlled", 0, "t_gen")] == "yes"  # CI covers 0
+    assert verdict[("sim_null", 0, "t_real")] == "NO"  # real touch "helps" on the null corpus
+    assert len(rep.fidelity_table(summary)) == 12
+    perms = pd.DataFrame({"corpus": "sim_paired", "seed": 0, "target": "force_p50",
+                          "sampler": "ddim", "guidance": 1.0, "steps": 10,
+                          "statistic": np.linspace(-0.1, 0.1, 50), "observed": 0.3})  # fmt: skip
+    curves = pd.DataFrame({"corpus": "sim_paired", "seed": 0, "step": [10, 20],
+                           "train_loss": [1.0, 0.5], "val_loss": [1.1, 0.6]})  # fmt: skip
+    rng = np.random.default_rng(0)
+    for fig in (
+        rep.guidance_seed_figure(summary, "ddim", 10),
+        rep.steps_seconds_figure(summary),
+        rep.permutation_figure(perms, ref),
+        rep.curve_figure(curves),
+        rep.pca_figure(rng.normal(size=(30, 5)), rng.normal(size=(30, 5)), title="x"),
+    ):
+        assert len(fig.axes) >= 1
