@@ -28,6 +28,9 @@ include: "rules/preprocess.smk"
 include: "rules/features.smk"
 include: "rules/align.smk"
 include: "rules/probes.smk"
+# --- policy stage (issue 13) ---
+include: "rules/policy.smk"
+# --- end policy stage ---
 include: "rules/report.smk"
 
 

@@ -23,6 +23,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from tacgen_lib.io import edges
 from tacgen_lib.policy.settings import LEARNED_CONDITIONS
 
 __all__ = ["condition_features", "null_pairing", "BCPolicy", "fit_bc", "save_bc", "load_bc"]
@@ -124,7 +125,7 @@ def fit_bc(
             opt.zero_grad()
             loss.backward()
             opt.step()
-            total += float(loss) * len(b)
+            total += float(loss.detach()) * len(b)
         losses.append(total / len(xt))
     return BCPolicy(net, mean, sd, y_mean, y_sd), losses
 
@@ -147,6 +148,8 @@ def save_bc(policy: BCPolicy, hidden: int, layers: int) -> bytes:
 
 
 def load_bc(path: str) -> BCPolicy:
+    """Load a policy written by `save_bc` after checking its hash (tacgen_lib.io.edges.verify)."""
+    edges.verify(path)
     obj = torch.load(path, weights_only=False)
     net = _mlp(len(obj["mean"]), obj["hidden"], obj["layers"])
     net.load_state_dict(obj["state"])

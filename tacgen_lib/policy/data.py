@@ -14,8 +14,8 @@ from collections.abc import Callable, Mapping
 import numpy as np
 import pandas as pd
 
-from tacgen_lib.corpus.splits import assert_trainable
 from tacgen_lib.corpus.sim.scenes import Scene
+from tacgen_lib.corpus.splits import assert_trainable
 from tacgen_lib.io.images import encode_png
 from tacgen_lib.policy import oracle, palpation, task
 from tacgen_lib.policy.settings import PolicySettings

@@ -248,7 +248,9 @@ class GraspTask:
     def __init__(self, scene: Scene, settings: PolicySettings):
         self.scene = scene
         self.settings = settings
-        self.model = mujoco.MjModel.from_xml_string(task_xml(scene, settings, settings.size_range[1]))
+        self.model = mujoco.MjModel.from_xml_string(
+            task_xml(scene, settings, settings.size_range[1])
+        )
         m = self.model
         flags = 0
         if not scene.has("gravity"):
@@ -271,10 +273,10 @@ class GraspTask:
         self.obj_qpos = int(m.jnt_qposadr[ids(m, mujoco.mjtObj.mjOBJ_JOINT, "object_free")])
         self.act_lift = ids(m, mujoco.mjtObj.mjOBJ_ACTUATOR, "lift")
         self.act_fingers = [ids(m, mujoco.mjtObj.mjOBJ_ACTUATOR, s) for s in ("left", "right")]
-        self.materials = {
-            t: ids(m, mujoco.mjtObj.mjOBJ_MATERIAL, f"mat_{t}") for t in TEXTURES
-        }
-        self.finger_x0 = [float(m.body_pos[m.jnt_bodyid[m.actuator_trnid[a, 0]]][0]) for a in self.act_fingers]
+        self.materials = {t: ids(m, mujoco.mjtObj.mjOBJ_MATERIAL, f"mat_{t}") for t in TEXTURES}
+        self.finger_x0 = [
+            float(m.body_pos[m.jnt_bodyid[m.actuator_trnid[a, 0]]][0]) for a in self.act_fingers
+        ]
         self.episode: Episode | None = None
         self.carriage_z0 = 0.0
 
