@@ -1,7 +1,8 @@
 """The policy stage's summary tables (rule aggregate_policy), from the rollout edges.
 
 - `summarise`: one row per cell (condition x hidden x epochs x seed) with n_episodes, success
-  and its 95 % bootstrap CI, failure-mode counts, grip-force median and episodes/s;
+  and its 95 % bootstrap CI, failure-mode counts and the median grip force (no wall times:
+  they come from benchmark files and go only into the report's cost table);
 - `deltas`: each condition against `v` (the matched-capacity, same-seed V-only policy, or the
   first main V cell for the references) on the same held-out episodes, with the paired
   bootstrap CI;
@@ -24,7 +25,7 @@ __all__ = ["summarise", "deltas", "sweep"]
 
 SUMMARY_COLUMNS = [
     "cell", "condition", "hidden", "epochs", "seed", "n_episodes", "success", "ci_low", "ci_high",
-    *FAILURE_MODES[1:], "median_force", "episodes_per_s",
+    *FAILURE_MODES[1:], "median_force",
 ]  # fmt: skip
 
 
@@ -35,7 +36,6 @@ def _success(rollouts: Mapping[str, pd.DataFrame], cell: Cell) -> pd.Series:
 
 def summarise(
     rollouts: Mapping[str, pd.DataFrame],
-    seconds: Mapping[str, float],
     cells: Sequence[Cell],
     settings: PolicySettings,
 ) -> pd.DataFrame:
@@ -58,7 +58,6 @@ def summarise(
                 "ci_high": hi,
                 **{m: counts[m] for m in FAILURE_MODES[1:]},
                 "median_force": float(r["grip_force"].median()),
-                "episodes_per_s": len(r) / seconds[name] if seconds.get(name) else float("nan"),
             }
         )
     return pd.DataFrame(rows, columns=SUMMARY_COLUMNS)
