@@ -12,18 +12,19 @@ summary, the paired deltas and the report's Policy section (tacgen_lib.policy).
 include: "policy_common.smk"
 
 
-TARGETS += expand(
-    "{d}/{name}.parquet", d=POLICY_DIR, name=["summary", "deltas", "regression"]
-)
-TARGETS += expand("{d}/{t}.html", d=POLICY_REPORT, t=POLICY_TABLES)
-TARGETS += expand("{d}/{f}.png", d=POLICY_REPORT, f=POLICY_FIGURES)
-EDGES += policy_episodes() + [f"{POLICY_DIR}/palpation.parquet"]
-EDGES += policy_rollouts()
-EDGES += expand(
-    "{d}/{name}.parquet",
-    d=POLICY_DIR,
-    name=["summary", "deltas", "regression", "sweep", "failures"],
-)
+if POLICY_ON:
+    TARGETS += expand(
+        "{d}/{name}.parquet", d=POLICY_DIR, name=["summary", "deltas", "regression"]
+    )
+    TARGETS += expand("{d}/{t}.html", d=POLICY_REPORT, t=POLICY_TABLES)
+    TARGETS += expand("{d}/{f}.png", d=POLICY_REPORT, f=POLICY_FIGURES)
+    EDGES += policy_episodes() + [f"{POLICY_DIR}/palpation.parquet"]
+    EDGES += policy_rollouts()
+    EDGES += expand(
+        "{d}/{name}.parquet",
+        d=POLICY_DIR,
+        name=["summary", "deltas", "regression", "sweep", "failures"],
+    )
 
 
 localrules:

@@ -21,12 +21,15 @@ POLICY_SHARDS = {
 POLICY_TABLES = ["success", "sweep", "regression"]
 POLICY_FIGURES = ["sweep", "failures", "filmstrip"]
 
-if POLICY_SETTINGS.heads_from not in ALIGN_CORPORA:
+# The stage needs the heads of a simulated paired corpus: a config without that corpus (for
+# example real data only, --replace-workflow-config) leaves the policy stage out of `all`.
+POLICY_ON = POLICY_SETTINGS.heads_from in CORPORA
+if POLICY_ON and POLICY_SETTINGS.heads_from not in ALIGN_CORPORA:
     raise ValueError(
         f"config policy.heads_from: {POLICY_SETTINGS.heads_from!r} is not in align.corpora "
         f"{ALIGN_CORPORA}; the palpation features need its alignment heads"
     )
-if POLICY_SETTINGS.heads_seed not in ALIGN["seeds"]:
+if POLICY_ON and POLICY_SETTINGS.heads_seed not in ALIGN["seeds"]:
     raise ValueError(
         f"config policy.heads_seed: {POLICY_SETTINGS.heads_seed} is not in align.seeds {ALIGN['seeds']}"
     )
