@@ -29,6 +29,9 @@ include: "rules/features.smk"
 include: "rules/align.smk"
 include: "rules/generate.smk"  # issue 12: latent V->T generator
 include: "rules/probes.smk"
+# --- policy stage (issue 13) ---
+include: "rules/policy.smk"
+# --- end policy stage ---
 include: "rules/report.smk"
 
 
