@@ -54,7 +54,9 @@ KILL_STAGES: dict[str, str] = {
     "preprocess": "background_subtract",
     "features": "pretrain_backbone",
     "align": "train_heads",
+    "generate": "train_generator",
     "probes": "probe",
+    "policy": "train_policy",
     "report": "edge_manifest",
 }
 
