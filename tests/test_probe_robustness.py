@@ -318,6 +318,28 @@ def test_bootstrap_p_counts_resamples_at_or_below_zero():
     np.testing.assert_allclose(p, [11 / 5001, 1 / 5001, 1.0])
 
 
+def test_holm_over_all_comparisons_is_bounded_by_the_bootstrap_resolution():
+    # the smallest bootstrap p is 1 / (B + 1): Holm over m such p-values gives m / (B + 1)
+    b = 5000
+    for m, can in ((125, True), (126, False), (148, False)):
+        assert multiplicity.holm_can_reject(m, b) is can
+        smallest = multiplicity.holm(np.full(m, 1 / (b + 1))).min()
+        assert bool(smallest < multiplicity.ALPHA_ONE_SIDED) is can
+
+
+def test_adjusted_criterion_uses_holm_within_the_family():
+    # 130 comparisons, all at the smallest bootstrap p: over all of them Holm rejects nothing,
+    # within a family of 10 it rejects every one
+    rows = [{"row_id": f"r{i}", "family": f"f{i // 10}", "control": "none", "status": "ok",
+             "protocol": "raw", "null_corpus": False, "delta": 0.3, "ci_low": 0.1,
+             "ci_high": 0.5, "p_gt0": 1.0, "n_resamples": 5000, "delta_ctrl": 0.0,
+             "criterion_met": True} for i in range(130)]  # fmt: skip
+    out = multiplicity.adjust(pd.DataFrame(rows))
+    assert (out["p_holm"] >= multiplicity.ALPHA_ONE_SIDED).all()
+    assert (out["p_holm_family"] < multiplicity.ALPHA_ONE_SIDED).all()
+    assert out["criterion_adjusted"].all()
+
+
 def test_adjust_and_counts_per_family_and_overall():
     rows = []
     for fam, null, deltas in (("a", False, [0.5, 0.4, 0.01]), ("a_null", True, [0.0, -0.1])):

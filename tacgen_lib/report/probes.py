@@ -116,8 +116,9 @@ def _comparison_columns(rows: pd.DataFrame) -> pd.DataFrame:
             "p(Δ>0)": rows["p_gt0"].map(_num),
             "Δ_ctrl": rows["delta_ctrl"].map(lambda x: _num(x, "{:+.3f}")),
             "criterion": rows["criterion_met"].map(_criterion),
-            "criterion (Holm)": _col(rows, "criterion_adjusted").map(_criterion),
-            "p (Holm, all)": _col(rows, "p_holm").map(lambda x: _num(x, "{:.4f}")),
+            "criterion (Holm, family)": _col(rows, "criterion_adjusted").map(_criterion),
+            "p (Holm, family)": _col(rows, "p_holm_family").map(lambda x: _num(x, "{:.4f}")),
+            "q (BH, all)": _col(rows, "p_bh").map(lambda x: _num(x, "{:.4f}")),
             "n train/test": rows["n_train"].astype(str) + "/" + rows["n_test"].astype(str),
             "notes": rows["notes"],
         }

@@ -207,7 +207,7 @@ def multiplicity_table(counts: pd.DataFrame) -> pd.DataFrame:
             "Holm p < 0.025": counts["holm_rejections"],
             "BH q < 0.025": counts["bh_rejections"],
             "criterion (paper)": counts["criterion_met"],
-            "criterion (Holm)": counts["criterion_adjusted"],
+            "criterion (Holm, family)": counts["criterion_adjusted"],
         }
     )
 
