@@ -27,13 +27,11 @@ from __future__ import annotations
 import argparse
 import math
 import statistics
-import time
-from collections.abc import Callable
-from typing import NamedTuple
 
 import machine
 import numpy as np
 import torch
+from machine import Timing, best_of, gemm_peak
 
 from tacgen_lib.align.heads import (
     HIDDEN_DIM,
@@ -49,16 +47,6 @@ PAPER_STEPS = 6000
 BATCH = 256
 
 
-class Timing(NamedTuple):
-    """Seconds by the wall clock and by process CPU time (all threads)."""
-
-    wall: float
-    cpu: float
-
-    def min(self, other: Timing) -> Timing:
-        return Timing(min(self.wall, other.wall), min(self.cpu, other.cpu))
-
-
 def step_flops(batch: int, in_dim_v: int, in_dim_t: int) -> float:
     """Matrix-product FLOPs of one training step (forward + backward), see module docstring."""
     h, o = HIDDEN_DIM, OUT_DIM
@@ -68,18 +56,6 @@ def step_flops(batch: int, in_dim_v: int, in_dim_t: int) -> float:
         total += 2 * batch * d * h + 4 * batch * h * o  # backward
     total += 2 * batch * batch * o * 3  # logits forward + 2 backward products
     return total
-
-
-def best_of(fn: Callable[[], object], reps: int) -> Timing:
-    """Best wall and best process-CPU seconds of `reps` calls of `fn` (after one warm-up)."""
-    fn()
-    wall, cpu = float("inf"), float("inf")
-    for _ in range(reps):
-        w0, c0 = time.perf_counter(), time.process_time()
-        fn()
-        wall = min(wall, time.perf_counter() - w0)
-        cpu = min(cpu, time.process_time() - c0)
-    return Timing(wall, cpu)
 
 
 def gemm_only(batch: int, in_dim: int, reps: int = 5) -> Timing:
@@ -106,12 +82,6 @@ def gemm_only(batch: int, in_dim: int, reps: int = 5) -> Timing:
         g_logits.T @ z
 
     return best_of(products, reps)
-
-
-def gemm_peak(n: int = 1024, reps: int = 5) -> Timing:
-    """Seconds of one n x n x n float32 torch.matmul (best of `reps`): the roofline's rate."""
-    a, b = torch.randn(n, n), torch.randn(n, n)
-    return best_of(lambda: a @ b, reps)
 
 
 def time_steps(in_dim: int, steps: int, rounds: int) -> tuple[Timing, Timing, list[float]]:

@@ -22,11 +22,11 @@ ratio is also given with process CPU seconds (`cpu-frac`), less sensitive to com
 from __future__ import annotations
 
 import argparse
-import time
 
 import machine
 import numpy as np
 import torch
+from machine import best_of, gemm_peak
 from torch import nn
 
 from tacgen_lib.generate.model import Denoiser
@@ -55,21 +55,9 @@ def forward_flops(model: Denoiser, batch: int) -> float:
     return sum(2 * batch * i * o for _, i, o in linear_shapes(model))
 
 
-def best(fn, reps: int) -> tuple[float, float]:
-    fn()
-    wall, cpu = float("inf"), float("inf")
-    for _ in range(reps):
-        w0, c0 = time.perf_counter(), time.process_time()
-        fn()
-        wall = min(wall, time.perf_counter() - w0)
-        cpu = min(cpu, time.process_time() - c0)
-    return wall, cpu
-
-
 def gemm_rate(n: int = 1024) -> tuple[float, float]:
     """FLOP/s of one n^3 float32 matmul by wall and by process CPU seconds (best of 5)."""
-    a, b = torch.randn(n, n), torch.randn(n, n)
-    wall, cpu = best(lambda: a @ b, 5)
+    wall, cpu = gemm_peak(n)
     return 2 * n**3 / wall, 2 * n**3 / cpu
 
 
@@ -123,7 +111,7 @@ def main() -> None:
     for _ in range(args.rounds):
         rw, rc = gemm_rate()
         rate_w, rate_c = max(rate_w, rw), max(rate_c, rc)
-        w, c = best(steps, 1)
+        w, c = best_of(steps, 1)
         step_w, step_c = min(step_w, w / args.steps), min(step_c, c / args.steps)
     rw, rc = gemm_rate()
     rate_w, rate_c = max(rate_w, rw), max(rate_c, rc)
@@ -135,7 +123,7 @@ def main() -> None:
     model.eval()
     rows = np.random.default_rng(0).standard_normal((args.rows, args.dim)).astype(np.float32)
     kw = {"sampler": "ddim", "steps": 50, "guidance": 2.0, "seed": 0, "prediction": "v"}
-    sw, sc = best(lambda: sample(model, sch, rows, **kw), max(1, args.rounds // 2))
+    sw, sc = best_of(lambda: sample(model, sch, rows, **kw), max(1, args.rounds // 2))
     f_sample = 50 * forward_flops(model, 2 * args.rows)
     print(f"sampling DDIM-50 + CFG, {args.rows} rows: {sw:.2f} s, {args.rows / sw:.0f} vectors/s;"
           f" roofline fraction {f_sample / rate_w / sw:.2f} (cpu-frac "
