@@ -107,6 +107,7 @@ __all__ = [
     "pool_strata",
     "row_id",
     "run_family",
+    "strata_for",
     "target_values",
     "tidy",
     "visible_design",
@@ -255,6 +256,20 @@ class FamilyRows:
     @property
     def n_test(self) -> int:
         return int(self.test_ids.size)
+
+    def train_test(self, edge, column: str) -> tuple[np.ndarray, np.ndarray]:
+        """(train, test) arrays of one vector column of a verified edge
+        (`tacgen_lib.io.edges.Edge`), rows in this family's sample_id order."""
+        return (
+            edge.subset(self.train_ids).vectors[column],
+            edge.subset(self.test_ids).vectors[column],
+        )
+
+
+def strata_for(corpus: Mapping) -> tuple[str, ...] | None:
+    """The bootstrap strata of a corpus's test rows (its config entry): the appearance-
+    controlled design resamples within `CONTROLLED_STRATA`; any other corpus unstratified."""
+    return CONTROLLED_STRATA if corpus.get("design") == "controlled" else None
 
 
 def pool_strata(labels: np.ndarray, min_size: int = 2) -> tuple[np.ndarray, int]:

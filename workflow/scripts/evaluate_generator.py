@@ -6,7 +6,7 @@ from tacgen_lib.corpus.splits import assert_trainable
 from tacgen_lib.generate.evaluate import TargetSpec, evaluate_generator
 from tacgen_lib.generate.settings import GenerateSettings
 from tacgen_lib.io import edges, log
-from tacgen_lib.probes.protocol import CONTROLLED_STRATA, ProbeSettings, family_rows
+from tacgen_lib.probes.protocol import ProbeSettings, family_rows, strata_for
 
 logger = log.for_rule(snakemake)
 w, params = snakemake.wildcards, snakemake.params
@@ -18,7 +18,7 @@ targets = []
 for target, kind in params.targets.items():
     rows = family_rows(
         manifest, splits, corpus=w.corpus, target=target, kind=kind,
-        strata=CONTROLLED_STRATA if corpus_cfg.get("design") == "controlled" else None,
+        strata=strata_for(corpus_cfg),
     )  # fmt: skip
     # The probes train on train + val rows (as in the probes stage); test rows only score.
     assert_trainable(rows.train_ids, splits, rule=snakemake.rule, allowed=("train", "val"))

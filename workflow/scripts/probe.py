@@ -5,7 +5,7 @@ from threadpoolctl import threadpool_limits
 
 from tacgen_lib.corpus.splits import assert_trainable
 from tacgen_lib.io import edges, log
-from tacgen_lib.probes.protocol import CONTROLLED_STRATA, ProbeSettings, family_rows, run_family
+from tacgen_lib.probes.protocol import ProbeSettings, family_rows, run_family, strata_for
 
 logger = log.for_rule(snakemake)
 family = snakemake.params.family
@@ -26,7 +26,7 @@ rows = family_rows(
     corpus=family["corpus"],
     target=family["target"],
     kind=family["kind"],
-    strata=CONTROLLED_STRATA if corpus.get("design") == "controlled" else None,
+    strata=strata_for(corpus),
 )
 # The probes train on train + val rows (no early stopping); test rows only score them.
 assert_trainable(rows.train_ids, splits, rule=snakemake.rule, allowed=("train", "val"))
@@ -38,22 +38,17 @@ logger.info(
 )  # fmt: skip
 
 
-def train_test(edge, column):
-    """(train, test) arrays of one vector column, rows in the family's sample_id order."""
-    return edge.subset(rows.train_ids).vectors[column], edge.subset(rows.test_ids).vectors[column]
-
-
-vision = train_test(
+vision = rows.train_test(
     edges.read(snakemake.input.vision, require={family["vision"]: "vector"}), family["vision"]
 )
 tactile = {
-    variant: train_test(edges.read(path, require={"vit": "vector"}), "vit")
+    variant: rows.train_test(edges.read(path, require={"vit": "vector"}), "vit")
     for variant, path in zip(snakemake.params.variants, snakemake.input.tactile, strict=True)
 }
 aligned = {}
 for seed, path in zip(snakemake.params.align_seeds, snakemake.input.aligned, strict=True):
     edge = edges.read(path, require={"v_aligned": "vector", "t_aligned": "vector"})
-    aligned[int(seed)] = (*train_test(edge, "v_aligned"), *train_test(edge, "t_aligned"))
+    aligned[int(seed)] = (*rows.train_test(edge, "v_aligned"), *rows.train_test(edge, "t_aligned"))
 
 with threadpool_limits(snakemake.threads):
     result = run_family(

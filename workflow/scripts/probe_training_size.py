@@ -5,7 +5,7 @@ from threadpoolctl import threadpool_limits
 
 from tacgen_lib.corpus.splits import assert_trainable
 from tacgen_lib.io import edges, log
-from tacgen_lib.probes.protocol import CONTROLLED_STRATA, ProbeSettings, family_rows
+from tacgen_lib.probes.protocol import ProbeSettings, family_rows, strata_for
 from tacgen_lib.probes.robustness import RobustnessSettings, training_size_sweep
 
 logger = log.for_rule(snakemake)
@@ -20,7 +20,7 @@ rows = family_rows(
     corpus=family["corpus"],
     target=family["target"],
     kind=family["kind"],
-    strata=CONTROLLED_STRATA if corpus.get("design") == "controlled" else None,
+    strata=strata_for(corpus),
 )
 assert_trainable(rows.train_ids, splits, rule=snakemake.rule, allowed=("train", "val"))
 logger.info(
@@ -29,17 +29,13 @@ logger.info(
 )  # fmt: skip
 
 
-def train_test(edge, column):
-    return edge.subset(rows.train_ids).vectors[column], edge.subset(rows.test_ids).vectors[column]
-
-
-vision = train_test(
+vision = rows.train_test(
     edges.read(snakemake.input.vision, require={family["vision"]: "vector"}), family["vision"]
 )
 path = dict(zip(snakemake.params.variants, snakemake.input.tactile, strict=True))[
     snakemake.params.heads_variant
 ]
-tactile = train_test(edges.read(path, require={"vit": "vector"}), "vit")
+tactile = rows.train_test(edges.read(path, require={"vit": "vector"}), "vit")
 with threadpool_limits(snakemake.threads):
     frame = training_size_sweep(
         family["name"],

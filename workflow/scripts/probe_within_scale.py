@@ -8,10 +8,10 @@ from threadpoolctl import threadpool_limits
 from tacgen_lib.corpus.splits import assert_trainable
 from tacgen_lib.io import edges, log
 from tacgen_lib.probes.protocol import (
-    CONTROLLED_STRATA,
     ProbeSettings,
     family_rows,
     run_family,
+    strata_for,
     tidy,
 )
 from tacgen_lib.probes.robustness import RobustnessSettings
@@ -27,7 +27,7 @@ rows = family_rows(
     corpus=family["corpus"],
     target=family["target"],
     kind=family["kind"],
-    strata=CONTROLLED_STRATA if corpus.get("design") == "controlled" else None,
+    strata=strata_for(corpus),
     within_scale=(robust.within_test_fraction, robust.within_seed),
 )
 # Only train/val rows are re-split; the corpus's test rows are never read.
@@ -39,15 +39,11 @@ logger.info(
 )  # fmt: skip
 
 
-def train_test(edge, column):
-    return edge.subset(rows.train_ids).vectors[column], edge.subset(rows.test_ids).vectors[column]
-
-
-vision = train_test(
+vision = rows.train_test(
     edges.read(snakemake.input.vision, require={family["vision"]: "vector"}), family["vision"]
 )
 tactile = {
-    variant: train_test(edges.read(path, require={"vit": "vector"}), "vit")
+    variant: rows.train_test(edges.read(path, require={"vit": "vector"}), "vit")
     for variant, path in zip(snakemake.params.variants, snakemake.input.tactile, strict=True)
     if variant == snakemake.params.heads_variant
 }
