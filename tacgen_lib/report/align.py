@@ -4,13 +4,12 @@ This module owns the alignment summary (one row per grid cell: corpus, variant, 
 n_train, budget, retrieval on the held-out test split, chance levels, and the training wall
 time read from the job's Snakemake benchmark file) and the report items made from it: the τ
 ablation, the N-scaling table, the seed table (mean ± sd over seeds) and the training-curve
-figure. Everything here is a pure function of its arguments, except `benchmark_seconds`,
-which reads one benchmark TSV.
+figure. Everything here is a pure function of its arguments (benchmark files are read by
+`tacgen_lib.cost.benchmarks`).
 """
 
 from __future__ import annotations
 
-import os
 from collections.abc import Mapping, Sequence
 
 import matplotlib.pyplot as plt
@@ -24,7 +23,6 @@ __all__ = [
     "CELL_COLUMNS",
     "METRIC_COLUMNS",
     "SUMMARY_COLUMNS",
-    "benchmark_seconds",
     "alignment_summary",
     "mean_sd",
     "seed_table",
@@ -44,19 +42,6 @@ SUMMARY_COLUMNS = (
     "chance_top5",
     "train_seconds",
 )
-
-
-def benchmark_seconds(path: str | os.PathLike[str]) -> float:
-    """Wall time of a job from its Snakemake benchmark TSV (column ``s``; mean over repeats)."""
-    try:
-        table = pd.read_csv(path, sep="\t")
-    except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
-        raise ValueError(f"{path}: not a readable Snakemake benchmark file ({exc})") from exc
-    if "s" not in table.columns or table.empty:
-        raise ValueError(
-            f"{path}: benchmark file has no 's' column or no rows (columns: {list(table.columns)})"
-        )
-    return float(pd.to_numeric(table["s"], errors="raise").mean())
 
 
 def alignment_summary(metrics: pd.DataFrame, seconds: Mapping[str, float]) -> pd.DataFrame:

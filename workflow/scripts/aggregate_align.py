@@ -7,6 +7,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from tacgen_lib.align.cells import CELL_COLUMNS
+from tacgen_lib.cost.benchmarks import benchmark_seconds
 from tacgen_lib.io import edges, log
 from tacgen_lib.report import align as align_report
 from tacgen_lib.report.write import write_figure, write_table
@@ -33,7 +34,7 @@ for cell, metrics_path, curve_path, bench_path in inputs:
     for col in CELL_COLUMNS:
         curve[col] = row[col].iloc[0]
     curves.append(curve)
-    seconds[cell] = align_report.benchmark_seconds(bench_path)
+    seconds[cell] = benchmark_seconds(bench_path)
 metrics = pd.concat(metrics, ignore_index=True)
 summary = align_report.alignment_summary(metrics, seconds)
 curves = pd.concat(curves, ignore_index=True)

@@ -8,9 +8,9 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from tacgen_lib.corpus.splits import ids_in_split
+from tacgen_lib.cost.benchmarks import benchmark_seconds
 from tacgen_lib.io import edges, log
 from tacgen_lib.report import generate as gen_report
-from tacgen_lib.report.align import benchmark_seconds
 from tacgen_lib.report.write import write_figure, write_table
 
 logger = log.for_rule(snakemake)

@@ -6,13 +6,13 @@ from pathlib import Path
 
 import pandas as pd
 
+from tacgen_lib.cost.benchmarks import benchmark_seconds
 from tacgen_lib.io import edges, log
 from tacgen_lib.policy import summary as policy_summary
 from tacgen_lib.policy.cells import all_cells, cell_name, main_cells
 from tacgen_lib.policy.palpation import frame_names
 from tacgen_lib.policy.settings import PolicySettings
 from tacgen_lib.report import policy as report_policy
-from tacgen_lib.report.align import benchmark_seconds
 from tacgen_lib.report.write import write_figure, write_table
 
 logger = log.for_rule(snakemake)

@@ -4,8 +4,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from tacgen_lib.cost.benchmarks import benchmark_seconds
 from tacgen_lib.io import edges, log
-from tacgen_lib.report.align import benchmark_seconds
 from tacgen_lib.report.cost import cost_figure, cost_rows
 from tacgen_lib.report.write import write_figure, write_table
 

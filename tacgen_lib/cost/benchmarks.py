@@ -1,0 +1,92 @@
+"""Snakemake `benchmark:` files: the one source of a job's run time (never an edge's contents).
+
+A benchmark TSV has one row per repeat with wall seconds `s`, `cpu_time` and memory columns.
+Snakemake samples memory and CPU sparsely (every 0.5 s for the first 30 samples, then every
+30 s: snakemake#851, #2147), so `cpu_time` and `max_rss` of long jobs are under-reported; wall
+`s` is reliable. Where a figure needs peak memory or CPU time, the job measures it itself and
+writes it beside the benchmark, not into an edge.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import pandas as pd
+
+__all__ = ["Benchmark", "read_benchmark", "benchmark_seconds", "benchmark_table", "cpu_label"]
+
+
+@dataclass(frozen=True)
+class Benchmark:
+    """One job's benchmark: wall seconds, CPU seconds (sparsely sampled) and peak RSS (MB),
+    each the mean over the file's repeats."""
+
+    wall: float
+    cpu: float
+    max_rss_mb: float
+
+
+def _read(path: str | os.PathLike[str]) -> pd.DataFrame:
+    try:
+        table = pd.read_csv(path, sep="\t")
+    except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
+        raise ValueError(f"{path}: not a readable Snakemake benchmark file ({exc})") from exc
+    if "s" not in table.columns or table.empty:
+        raise ValueError(
+            f"{path}: benchmark file has no 's' column or no rows (columns: {list(table.columns)})"
+        )
+    return table
+
+
+def _mean(table: pd.DataFrame, column: str) -> float:
+    if column not in table.columns:
+        return float("nan")
+    return float(pd.to_numeric(table[column], errors="coerce").mean())
+
+
+def read_benchmark(path: str | os.PathLike[str]) -> Benchmark:
+    """The job's wall, CPU seconds and peak RSS from its benchmark TSV."""
+    table = _read(path)
+    return Benchmark(
+        wall=float(pd.to_numeric(table["s"], errors="raise").mean()),
+        cpu=_mean(table, "cpu_time"),
+        max_rss_mb=_mean(table, "max_rss"),
+    )
+
+
+def benchmark_seconds(path: str | os.PathLike[str]) -> float:
+    """Wall time of a job from its Snakemake benchmark TSV (column ``s``; mean over repeats)."""
+    return read_benchmark(path).wall
+
+
+def benchmark_table(root: str | os.PathLike[str] = "results/benchmarks") -> pd.DataFrame:
+    """Every benchmark file below `root`, one row each: `rule` (the first folder, which is the
+    rule's name by the workflow's convention), `job` (the rest of the path, without `.tsv`),
+    `path`, `wall`, `cpu`, `max_rss_mb`. Empty (with those columns) if `root` does not exist."""
+    root = Path(root)
+    rows = []
+    for path in sorted(root.rglob("*.tsv")) if root.is_dir() else []:
+        rel = path.relative_to(root).with_suffix("")
+        rule = rel.parts[0]
+        job = "/".join(rel.parts[1:]) or rule
+        b = read_benchmark(path)
+        rows.append((rule, job, str(path), b.wall, b.cpu, b.max_rss_mb))
+    return pd.DataFrame(rows, columns=["rule", "job", "path", "wall", "cpu", "max_rss_mb"])
+
+
+def cpu_label() -> str:
+    """The CPU a figure was measured on: model, core count and widest x86 vector extension
+    (the same code runs 2-3x slower on the 2-core class without AVX-512)."""
+    model, flags = "unknown CPU", set()
+    cpuinfo = Path("/proc/cpuinfo")
+    if cpuinfo.exists():
+        for line in cpuinfo.read_text().splitlines():
+            key, _, value = line.partition(":")
+            if key.strip() == "model name" and model == "unknown CPU":
+                model = value.strip()
+            elif key.strip() == "flags" and not flags:
+                flags = set(value.split())
+    vector = next((f for f in ("avx512f", "avx2", "avx", "sse4_2") if f in flags), "-")
+    return f"{model}, {os.cpu_count()} cores, vector {vector}"
