@@ -1,0 +1,54 @@
+"""The knob-sweep contract: one table per knob, one row per (setting, metric).
+
+Every sweep rule (rules/cost*.smk) writes `results/cost/points/{knob}.parquet` with exactly
+`POINT_COLUMNS`, one row per setting of the knob and metric it reports:
+
+- `knob`: the knob's name in config/cost.yaml; `stage`: corpus | features | align | probes |
+  generate | policy;
+- `setting`: the knob's value as a number (for the log x-axis of the page; categorical knobs
+  such as a sampler use their position), `label`: that value as the user writes it;
+- `is_default`: the embedded default's setting of this knob;
+- `metric`: what the setting buys, named with its unit ("force probe R² (test)", "Δ accuracy
+  pretrained − random"), `value` its point estimate, `ci_low`/`ci_high` its uncertainty (a 95 %
+  bootstrap CI, or mean ± t·sd over seeds; `uncertainty` says which);
+- `wall_s`, `cpu_s`: the seconds the setting costs, summed over the `benchmark:` files of the
+  jobs it needs (`n_jobs` of them), never read from inside an edge.
+"""
+
+from __future__ import annotations
+
+import pandas as pd
+
+__all__ = ["POINT_COLUMNS", "check_points"]
+
+POINT_COLUMNS = [
+    "knob",
+    "stage",
+    "setting",
+    "label",
+    "is_default",
+    "metric",
+    "value",
+    "ci_low",
+    "ci_high",
+    "uncertainty",
+    "wall_s",
+    "cpu_s",
+    "n_jobs",
+]
+
+
+def check_points(table: pd.DataFrame, source: str) -> pd.DataFrame:
+    """The table in `POINT_COLUMNS` order; a missing column, a non-finite time or a CI that
+    does not bracket its value raises, naming `source` and the knob's setting."""
+    missing = [c for c in POINT_COLUMNS if c not in table.columns]
+    if missing:
+        raise ValueError(f"{source}: cost points lack columns {missing}")
+    table = table[POINT_COLUMNS].reset_index(drop=True)
+    for r in table.itertuples(index=False):
+        where = f"{source}: knob {r.knob!r} setting {r.label!r} metric {r.metric!r}"
+        if not (pd.notna(r.wall_s) and r.wall_s >= 0):
+            raise ValueError(f"{where}: wall seconds {r.wall_s!r} is not a finite time")
+        if pd.notna(r.ci_low) and not (r.ci_low <= r.value <= r.ci_high):
+            raise ValueError(f"{where}: value {r.value} outside [{r.ci_low}, {r.ci_high}]")
+    return table
