@@ -31,13 +31,13 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import nnls
 
-from tacgen_lib.cost.benchmarks import benchmark_seconds, cpu_label
+from tacgen_lib.cost.benchmarks import cpu_label, read_benchmark
 from tacgen_lib.cost.dag import DagJob, dag_jobs
 from tacgen_lib.cost.schedule import Task, list_schedule, local_machine
 from tacgen_lib.cost.units import job_units
 
 __all__ = [
-    "POINT_COLUMNS",
+    "CALIBRATION_COLUMNS",
     "RUN_COLUMNS",
     "SHIPPED",
     "Calibration",
@@ -47,11 +47,24 @@ __all__ = [
     "load_calibration",
     "write_calibration",
     "MissingCalibrationError",
+    "load_factors",
+    "last_run",
+    "RunLog",
 ]
 
 SHIPPED = Path(__file__).resolve().parents[2] / "config" / "cost_calibration"
-POINT_COLUMNS = ["run", "cpu", "cost_class", "rule", "job", "threads", "units", "wall"]
-RUN_COLUMNS = ["run", "config", "cpu", "jobs", "cores", "wall", "makespan"]
+CALIBRATION_COLUMNS = [
+    "run",
+    "cpu",
+    "cost_class",
+    "rule",
+    "job",
+    "threads",
+    "units",
+    "wall",
+    "cpu_s",
+]
+RUN_COLUMNS = ["run", "config", "cpu", "jobs", "cores", "wall", "makespan", "load", "note"]
 
 
 class MissingCalibrationError(KeyError):
@@ -115,14 +128,28 @@ def calibration_points(
         if not path.exists():
             continue
         cost_class, units = job_units(job.rule, config, job.wildcards)
-        rows.append(
-            (run, cpu, cost_class, job.rule, rel, job.threads, units, benchmark_seconds(path))
-        )
-    return pd.DataFrame(rows, columns=POINT_COLUMNS)
+        b = read_benchmark(path)
+        rows.append((run, cpu, cost_class, job.rule, rel, job.threads, units, b.wall, b.cpu))
+    return pd.DataFrame(rows, columns=CALIBRATION_COLUMNS)
 
 
-def fit_costs(points: pd.DataFrame) -> dict[str, CostLine]:
-    """One `CostLine` per cost class by non-negative least squares of wall on [1, units].
+def load_factors(points: pd.DataFrame) -> dict[str, float]:
+    """Each run's load factor: the median of wall / CPU seconds over its single-threaded jobs.
+
+    A single-threaded job on an idle core waits for nothing, so its wall is its CPU time plus a
+    little I/O (factor ~1.2 measured on lightly loaded cores); when other processes share the
+    cores it waits for them, and the factor grows (6-10 measured with a dozen other jobs on 2
+    cores). Dividing a run's walls by its factor puts runs measured under different loads on
+    one scale: seconds on cores the job does not share ("unshared seconds")."""
+    one = points[(points["threads"] == 1) & (points["cpu_s"] > 0)]
+    ratio = (one["wall"] / one["cpu_s"]).groupby(one["run"]).median()
+    return {run: max(1.0, float(ratio.get(run, 1.0))) for run in points["run"].unique()}
+
+
+def fit_costs(points: pd.DataFrame, *, unshared: bool = True) -> dict[str, CostLine]:
+    """One `CostLine` per cost class by non-negative least squares of wall on [1, units]; with
+    `unshared`, each run's walls are first divided by its load factor (`load_factors`), so the
+    lines give unshared seconds.
 
     Least squares on relative error (each point weighted by 1 / its wall), so a 2-s job and a
     300-s job count alike. A class whose points all share one units value cannot separate
@@ -130,6 +157,9 @@ def fit_costs(points: pd.DataFrame) -> dict[str, CostLine]:
     (capped at its mean wall), the rest is per-unit cost."""
     lines: dict[str, CostLine] = {}
     pending = []
+    if unshared and len(points):
+        factors = load_factors(points)
+        points = points.assign(wall=points["wall"] / points["run"].map(factors))
     for cost_class, grp in points.groupby("cost_class", sort=True):
         u = grp["units"].to_numpy(float)
         y = grp["wall"].to_numpy(float)
@@ -162,7 +192,7 @@ def load_calibration(folder: str | os.PathLike[str] = SHIPPED) -> Calibration:
     naming the file."""
     folder = Path(folder)
     tables = []
-    for name, columns in (("points.csv", POINT_COLUMNS), ("runs.csv", RUN_COLUMNS)):
+    for name, columns in (("points.csv", CALIBRATION_COLUMNS), ("runs.csv", RUN_COLUMNS)):
         path = folder / name
         if not path.exists():
             raise FileNotFoundError(
@@ -178,7 +208,9 @@ def load_calibration(folder: str | os.PathLike[str] = SHIPPED) -> Calibration:
     label = ", ".join(
         f"{r.run} ({r.jobs} jobs, {r.wall:.0f} s on {r.cores} cores)" for r in runs.itertuples()
     )
-    source = f"shipped calibration {folder} from runs {label}; CPU: {'; '.join(sorted(set(points['cpu'])))}"
+    what = "shipped calibration" if folder.resolve() == SHIPPED.resolve() else "calibration"
+    cpus = "; ".join(sorted(set(points["cpu"])))
+    source = f"{what} {folder} from runs {label}; CPU: {cpus}"
     return Calibration(points, runs, source)
 
 
@@ -193,7 +225,7 @@ def write_calibration(
         "# Regenerate: python -m tacgen_lib.cost.calibration --help\n"
     )
     for name, table, columns in (
-        ("points.csv", points, POINT_COLUMNS),
+        ("points.csv", points, CALIBRATION_COLUMNS),
         ("runs.csv", runs, RUN_COLUMNS),
     ):
         tmp = folder / f".{name}.tmp"
@@ -208,14 +240,15 @@ def run_calibration(
     run: str,
     cpu: str | None = None,
     workdir: str | os.PathLike[str] = ".",
+    partial: bool = False,
 ) -> tuple[pd.DataFrame, list[DagJob]]:
     """Points of one finished run: the DAG of `configfile` matched to the files in
     `benchmarks`. Raises if a job of that DAG has no benchmark file there (the folder is not
-    a complete run of that config)."""
+    a complete run of that config), unless `partial`."""
     jobs, config = dag_jobs([configfile], workdir=workdir)
     points = calibration_points(jobs, config, benchmarks, run=run, cpu=cpu or cpu_label())
     want = sum(1 for j in jobs if j.runs and j.benchmark is not None)
-    if len(points) < want:
+    if len(points) < want and not partial:
         raise ValueError(
             f"{benchmarks}: {want - len(points)} of the {want} jobs of {configfile}'s DAG have no "
             "benchmark file; is this the benchmark folder of a complete run of that config?"
@@ -290,11 +323,20 @@ def main(argv: Sequence[str] | None = None) -> None:
         "--run",
         nargs=2,
         action="append",
-        required=True,
+        default=[],
         metavar=("NAME", "RUNDIR"),
         help="a finished cold run: a name (test, default) and its workflow directory "
         "(repeat for each run)",
     )
+    parser.add_argument(
+        "--partial",
+        nargs=3,
+        action="append",
+        default=[],
+        metavar=("NAME", "CONFIGFILE", "BENCHMARKS"),
+        help="an unfinished run: the jobs with a benchmark file give points, the run no total",
+    )
+    parser.add_argument("--note", default="", help="conditions of the runs (e.g. machine load)")
     parser.add_argument("--out", default=str(SHIPPED), help="calibration folder (default: shipped)")
     parser.add_argument("--cpu", default=None, help="CPU label (default: this machine's)")
     parser.add_argument("--cores", type=int, default=2, help="cores the runs used (default 2)")
@@ -312,10 +354,17 @@ def main(argv: Sequence[str] | None = None) -> None:
         span = measured_makespan(jobs, measured, args.cores)
         n_jobs = sum(j.runs for j in jobs)
         cpu = args.cpu or cpu_label()
-        runs.append((name, configfile, cpu, n_jobs, args.cores, log.wall, span))
+        load = load_factors(p)[name]
+        runs.append((name, configfile, cpu, n_jobs, args.cores, log.wall, span, load, args.note))
         print(
             f"{name}: {configfile}, {len(p)} benchmarked jobs, wall {log.wall:.0f} s ({log.path})"
         )
+    for name, configfile, bench in args.partial:
+        p, _ = run_calibration(configfile, bench, run=name, cpu=args.cpu, partial=True)
+        points.append(p)
+        print(f"{name}: {configfile}, {len(p)} benchmarked jobs (partial run, no total)")
+    if not points:
+        parser.error("give at least one --run or --partial")
     write_calibration(
         pd.concat(points, ignore_index=True), pd.DataFrame(runs, columns=RUN_COLUMNS), args.out
     )

@@ -50,8 +50,8 @@ def dag_jobs(
     cores: int = 2,
     targets: list[str] | None = None,
 ) -> tuple[list[DagJob], dict[str, Any]]:
-    """Every job of the workflow's DAG for `configfiles` (merged over the Snakefile's
-    `configfile:` as `--configfile` does), with `--forceall`, and the merged config.
+    """Every job of the workflow's DAG for `configfiles` (relative to `workdir`; merged over the
+    Snakefile's `configfile:` as `--configfile` does), with `--forceall`, and the merged config.
 
     `cores` caps each job's threads as `--cores` does. `targets` default to the default target
     (`rule all`). Raises the Snakemake error (naming the config key or rule) if the DAG cannot be
@@ -67,13 +67,13 @@ def dag_jobs(
     )
 
     workdir = Path(workdir).absolute()
-    files = [Path(f).absolute() for f in configfiles or []]
+    files = [(workdir / f if not Path(f).is_absolute() else Path(f)) for f in configfiles or []]
     for f in files:
         if not f.exists():
             raise FileNotFoundError(f"{f}: config file not found")
     here = Path.cwd()
     try:
-        with SnakemakeApi(OutputSettings(quiet={Quietness.ALL})) as api:
+        with SnakemakeApi(OutputSettings(quiet={Quietness.ALL}, enable_file_logging=False)) as api:
             wf_api = api.workflow(
                 resource_settings=ResourceSettings(cores=cores),
                 config_settings=ConfigSettings(configfiles=files),

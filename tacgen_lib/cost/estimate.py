@@ -40,6 +40,7 @@ from tacgen_lib.cost.calibration import (
     CostLine,
     MissingCalibrationError,
     fit_costs,
+    last_run,
     load_calibration,
     run_calibration,
 )
@@ -56,6 +57,10 @@ __all__ = [
     "choose_calibration",
     "main",
 ]
+
+#: Wall / CPU seconds of a single-threaded job on idle cores (1.13-1.39 over the corpus and
+#: preprocess jobs of a default run on a lightly loaded 2-core EPYC; README, Run-time estimate).
+IDLE_LOAD = 1.2
 
 RULE_COLUMNS = ["rule", "jobs", "threads", "unit", "units", "job_seconds", "start_s", "end_s"]
 
@@ -101,10 +106,13 @@ def job_seconds(
 
 def workflow_overhead(runs: pd.DataFrame) -> tuple[float, float]:
     """(startup seconds, seconds per job): the workflow's own time, fitted (non-negative least
-    squares) on the calibration runs' total wall minus their scheduled measured job times."""
+    squares) on the calibration runs' total wall minus their scheduled measured job times,
+    divided by each run's load factor (unshared seconds, as the job lines)."""
     if runs.empty:
         return 0.0, 0.0
-    gap = np.maximum(runs["wall"].to_numpy(float) - runs["makespan"].to_numpy(float), 0.0)
+    load = runs["load"].to_numpy(float) if "load" in runs else np.ones(len(runs))
+    gap = runs["wall"].to_numpy(float) - runs["makespan"].to_numpy(float)
+    gap = np.maximum(gap / load, 0.0)
     design = np.column_stack([np.ones(len(runs)), runs["jobs"].to_numpy(float)])
     (a, b), _ = nnls(design, gap)
     return float(a), float(b)
@@ -117,10 +125,19 @@ def estimate_run(
     machine: Machine,
     *,
     machine_label: str = "",
+    speed: float = 1.0,
 ) -> Estimate:
-    """Predict the run of `jobs` (a DAG from `dag_jobs`) on `machine` from `calibration`."""
+    """Predict the run of `jobs` (a DAG from `dag_jobs`) on `machine` from `calibration`.
+
+    The calibration's lines give unshared seconds (`calibration.load_factors`); `speed`
+    multiplies every second (jobs and workflow overhead) into this machine's wall: its load
+    factor (`IDLE_LOAD` on idle cores) times its CPU's slowness against the calibration's
+    (~2.5 for the 2-core class without AVX-512 against an AVX-512 calibration)."""
+    if not speed > 0:
+        raise ValueError(f"speed factor must be > 0, got {speed}")
     lines = fit_costs(calibration.points)
     per_job = job_seconds(jobs, config, lines)
+    per_job["seconds"] *= speed
     seconds = dict(zip(per_job["jobid"], per_job["seconds"], strict=True))
     tasks = [Task(j.jobid, seconds.get(j.jobid, 0.0), j.threads, j.deps, j.local) for j in jobs]
     schedule = list_schedule(tasks, machine)
@@ -143,7 +160,7 @@ def estimate_run(
     )
     per_rule["unit"] = per_rule["rule"].map(lambda r: UNITS[r].unit)
     startup, per_job_s = workflow_overhead(calibration.runs)
-    overhead = startup + per_job_s * len(per_job)
+    overhead = (startup + per_job_s * len(per_job)) * speed
     return Estimate(
         per_rule=per_rule[RULE_COLUMNS].reset_index(drop=True),
         makespan=schedule.makespan,
@@ -157,19 +174,26 @@ def choose_calibration(
     *,
     calibration: str | os.PathLike[str] | None,
     benchmarks: str | os.PathLike[str],
-    benchmarks_config: str | os.PathLike[str],
+    benchmarks_config: str | os.PathLike[str] | None = None,
     workdir: str | os.PathLike[str] = ".",
 ) -> Calibration:
     """The last run's benchmark files when `benchmarks` holds a complete run of
-    `benchmarks_config` (its cost classes, the shipped ones filling any class it lacks; the
-    shipped runs' totals give the workflow overhead), else the shipped calibration (or the
-    folder `calibration`, which always wins). The returned `source` says which, and why."""
+    `benchmarks_config` (default: the config of the newest finished Snakemake run of
+    `workdir`, from its log; the embedded default if none is named there), its cost classes
+    with the shipped ones filling any class it lacks (the shipped runs' totals give the
+    workflow overhead); else the shipped calibration (or the folder `calibration`, which always
+    wins). The returned `source` says which, and why."""
     shipped = load_calibration(calibration or SHIPPED)
     if calibration is not None:
         return shipped
     bench = Path(workdir) / benchmarks
     if not bench.is_dir():
         return Calibration(shipped.points, shipped.runs, f"{shipped.source} (no {benchmarks} here)")
+    if benchmarks_config is None:
+        log = last_run(workdir)
+        benchmarks_config = (
+            log.configfiles[0] if log is not None and log.configfiles else "config/config.yaml"
+        )
     try:
         last, _ = run_calibration(benchmarks_config, bench, run="last run", workdir=workdir)
     except ValueError as exc:
@@ -266,8 +290,21 @@ def main(argv: Sequence[str] | None = None) -> Estimate:
     parser.add_argument("--benchmarks", default="results/benchmarks", help="the last run's folder")
     parser.add_argument(
         "--benchmarks-config",
-        default="config/config.yaml",
-        help="the config the last run used (default: the embedded default)",
+        default=None,
+        help="the config the last run used (default: read from its Snakemake log)",
+    )
+    parser.add_argument(
+        "--load-factor",
+        type=float,
+        default=IDLE_LOAD,
+        help=f"wall / CPU seconds of a single-threaded job here (default {IDLE_LOAD}: idle cores; "
+        "6-10 with a dozen other jobs on 2 cores)",
+    )
+    parser.add_argument(
+        "--speed-factor",
+        type=float,
+        default=1.0,
+        help="CPU seconds here per calibration CPU second (e.g. 2.5 on a CPU without AVX-512)",
     )
     parser.add_argument("--workdir", default=".", help="the workflow's directory")
     parser.add_argument("--out", default=None, help="write the per-rule table (.parquet/.csv/.tsv)")
@@ -296,7 +333,17 @@ def main(argv: Sequence[str] | None = None) -> Estimate:
         workdir=args.workdir,
     )
     configs = " + ".join(["config/config.yaml", *args.configfile])
-    est = estimate_run(jobs, config, calibration, machine, machine_label=f"{label} ({configs})")
+    label += f", load factor {args.load_factor:g}"
+    if args.speed_factor != 1.0:
+        label += f", x{args.speed_factor:g} the calibration CPU's seconds"
+    est = estimate_run(
+        jobs,
+        config,
+        calibration,
+        machine,
+        machine_label=f"{label} ({configs})",
+        speed=args.speed_factor * args.load_factor,
+    )
     print(format_estimate(est))
     if args.out:
         write_table(est, args.out)

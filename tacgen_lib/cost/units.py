@@ -63,11 +63,12 @@ def _train_rows(c: Config, name: str) -> float:
 
 
 def _backbone(c: Config, modality: str) -> float:
-    """Forward cost of one frame through a modality's ViT, in units of 1e6 token·depth·width²."""
+    """Forward cost of one frame through a modality's ViT, in 1e6 multiply-adds per layer stack:
+    depth × tokens × (12 width² + 2 tokens × width) (projections and MLP, attention)."""
     arch = c["features"]["backbones"][modality]["arch"]
     width, depth = _VIT[arch]
     tokens = (int(c["features"]["image_size"]) // _PATCH) ** 2 + 1
-    return tokens * depth * width**2 / 1e6
+    return depth * tokens * (12 * width**2 + 2 * tokens * width) / 1e6
 
 
 def _align_cells(c: Config) -> float:
@@ -187,7 +188,7 @@ UNITS: dict[str, UnitRule] = {
     "background_subtract": UnitRule("frame", lambda c, w: ("", _n(c, w["corpus"]))),
     # features
     "pretrain_backbone": UnitRule(
-        "epoch × train frame × ViT forward (1e6 token·depth·width²)",
+        "epoch × train frame × ViT forward (1e6 multiply-adds)",
         lambda c, w: (
             "",
             int(c["features"]["pretrain"]["epochs"])
