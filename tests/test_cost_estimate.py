@@ -107,7 +107,10 @@ def test_cycle_and_unknown_dependency_raise():
 
 def points(rows) -> pd.DataFrame:
     return pd.DataFrame(
-        [("r", "-", c, c.split(":")[0], f"j{i}", 1, u, w, w) for i, (c, u, w) in enumerate(rows)],
+        [
+            ("r", "-", c, c.split(":")[0], f"j{i}", 1, u, 0.0, w, w)
+            for i, (c, u, w) in enumerate(rows)
+        ],
         columns=CALIBRATION_COLUMNS,
     )
 
@@ -144,9 +147,9 @@ def test_fit_is_non_negative_and_handles_a_single_units_value():
 
 
 def test_runs_under_different_loads_fit_one_line():
-    # the same jobs measured on idle cores (wall = 1.2 x CPU) and shared ones (wall = 6 x CPU)
+    # the same jobs measured on idle cores (wall = 1.2 x CPU) and shared ones (wall = 7.2 x CPU)
     rows = []
-    for run, factor in (("idle", 1.2), ("shared", 6.0)):
+    for run, factor in (("idle", 1.2), ("shared", 7.2)):
         for u in (100.0, 1000.0, 5000.0):
             cpu_s = 2.0 + 0.01 * u
             rows.append(
@@ -158,14 +161,15 @@ def test_runs_under_different_loads_fit_one_line():
                     f"{run}{u}",
                     1,
                     u,
+                    0.0,
                     factor * cpu_s,
                     cpu_s,
                 )
             )
     pts = pd.DataFrame(rows, columns=CALIBRATION_COLUMNS)
-    assert load_factors(pts) == pytest.approx({"idle": 1.2, "shared": 6.0})
-    line = fit_costs(pts)["simulate_corpus"]
-    assert line.overhead == pytest.approx(2.0) and line.per_unit == pytest.approx(0.01)
+    assert load_factors(pts) == pytest.approx({"idle": 1.0, "shared": 6.0})
+    line = fit_costs(pts)["simulate_corpus"]  # idle seconds: 1.2 x CPU
+    assert line.overhead == pytest.approx(2.4) and line.per_unit == pytest.approx(0.012)
     assert line.spread < 1e-9
     raw = fit_costs(pts, unshared=False)["simulate_corpus"]
     assert raw.spread > 0.5  # mixing the two loads unnormalised fits neither

@@ -34,7 +34,7 @@ from scipy.optimize import nnls
 from tacgen_lib.cost.benchmarks import cpu_label, read_benchmark
 from tacgen_lib.cost.dag import DagJob, dag_jobs
 from tacgen_lib.cost.schedule import Task, list_schedule, local_machine
-from tacgen_lib.cost.units import job_units
+from tacgen_lib.cost.units import flop_seconds, job_units
 
 __all__ = [
     "CALIBRATION_COLUMNS",
@@ -48,6 +48,8 @@ __all__ = [
     "write_calibration",
     "MissingCalibrationError",
     "load_factors",
+    "unshared_seconds",
+    "idle_ratio",
     "last_run",
     "RunLog",
 ]
@@ -61,6 +63,7 @@ CALIBRATION_COLUMNS = [
     "job",
     "threads",
     "units",
+    "flops",
     "wall",
     "cpu_s",
 ]
@@ -127,29 +130,49 @@ def calibration_points(
         path = root / rel
         if not path.exists():
             continue
-        cost_class, units = job_units(job.rule, config, job.wildcards)
+        cost_class, units, flops = job_units(job.rule, config, job.wildcards)
         b = read_benchmark(path)
-        rows.append((run, cpu, cost_class, job.rule, rel, job.threads, units, b.wall, b.cpu))
+        rows.append((run, cpu, cost_class, job.rule, rel, job.threads, units, flops, b.wall, b.cpu))
     return pd.DataFrame(rows, columns=CALIBRATION_COLUMNS)
 
 
-def load_factors(points: pd.DataFrame) -> dict[str, float]:
-    """Each run's load factor: the median of wall / CPU seconds over its single-threaded jobs.
+#: Wall / CPU seconds of a job on idle cores, by threads: a single-threaded job waits for
+#: nothing but a little I/O (1.13-1.39 over the corpus and preprocess jobs of a default run on a
+#: lightly loaded 2-core EPYC); each further thread adds ~0.8 of a core (benchmarks/bench_align:
+#: 2 threads train heads 1.7-1.8x faster than one).
+IDLE_WALL_PER_CPU = 1.2
+EXTRA_THREAD_CORES = 0.8
 
-    A single-threaded job on an idle core waits for nothing, so its wall is its CPU time plus a
-    little I/O (factor ~1.2 measured on lightly loaded cores); when other processes share the
-    cores it waits for them, and the factor grows (6-10 measured with a dozen other jobs on 2
-    cores). Dividing a run's walls by its factor puts runs measured under different loads on
-    one scale: seconds on cores the job does not share ("unshared seconds")."""
-    one = points[(points["threads"] == 1) & (points["cpu_s"] > 0)]
-    ratio = (one["wall"] / one["cpu_s"]).groupby(one["run"]).median()
+
+def idle_ratio(threads: int) -> float:
+    """Wall / CPU seconds of a `threads`-thread job on idle cores."""
+    return IDLE_WALL_PER_CPU / (1.0 + EXTRA_THREAD_CORES * (max(1, int(threads)) - 1))
+
+
+def unshared_seconds(points: pd.DataFrame) -> pd.Series:
+    """Each job's wall as on idle cores: its wall, or its CPU seconds × `idle_ratio(threads)`
+    when that is less (the job waited for cores other processes held). Jobs measured under
+    different loads land on one scale. CPU seconds of jobs longer than ~15 s are sampled
+    sparsely (snakemake#851) and read low by up to ~30 s: the idle wall of a long job measured
+    under load is under-estimated by as much."""
+    ratio = points["threads"].map(idle_ratio)
+    idle = points["cpu_s"] * ratio
+    use = (points["cpu_s"] > 0) & (idle < points["wall"])
+    return points["wall"].where(~use, idle)
+
+
+def load_factors(points: pd.DataFrame) -> dict[str, float]:
+    """Each run's load factor: its measured over its idle seconds (`unshared_seconds`), median
+    over its jobs (>= 1). ~1 on idle cores; 6-10 with a dozen other jobs sharing 2 cores."""
+    ratio = (points["wall"] / unshared_seconds(points)).groupby(points["run"]).median()
     return {run: max(1.0, float(ratio.get(run, 1.0))) for run in points["run"].unique()}
 
 
 def fit_costs(points: pd.DataFrame, *, unshared: bool = True) -> dict[str, CostLine]:
-    """One `CostLine` per cost class by non-negative least squares of wall on [1, units]; with
-    `unshared`, each run's walls are first divided by its load factor (`load_factors`), so the
-    lines give unshared seconds.
+    """One `CostLine` per cost class by non-negative least squares of wall (less the FLOP
+    term, `units.flop_seconds`) on [1, units]; with
+    `unshared`, each job's wall is first its idle wall (`unshared_seconds`), so runs measured
+    under different loads fit one line, in seconds on idle cores.
 
     Least squares on relative error (each point weighted by 1 / its wall), so a 2-s job and a
     300-s job count alike. A class whose points all share one units value cannot separate
@@ -158,32 +181,36 @@ def fit_costs(points: pd.DataFrame, *, unshared: bool = True) -> dict[str, CostL
     lines: dict[str, CostLine] = {}
     pending = []
     if unshared and len(points):
-        factors = load_factors(points)
-        points = points.assign(wall=points["wall"] / points["run"].map(factors))
+        points = points.assign(wall=unshared_seconds(points))
     for cost_class, grp in points.groupby("cost_class", sort=True):
         u = grp["units"].to_numpy(float)
-        y = grp["wall"].to_numpy(float)
+        arithmetic = np.array(
+            [flop_seconds(f, t) for f, t in zip(grp["flops"], grp["threads"], strict=True)]
+        )
+        # the FLOP term is charged at the CPU's rate; the line fits what remains
+        wall = grp["wall"].to_numpy(float)
+        y = np.maximum(wall - arithmetic, 0.0)
         if np.unique(u).size > 1:
-            w = 1.0 / np.maximum(y, 1e-3)
+            w = 1.0 / np.maximum(wall, 1e-3)
             design = np.column_stack([np.ones_like(u), u]) * w[:, None]
             (a, b), _ = nnls(design, y * w)
-            lines[cost_class] = _line(cost_class, a, b, u, y, identified=True)
+            lines[cost_class] = _line(cost_class, a, b, u, y, wall, identified=True)
         else:
-            pending.append((cost_class, u, y))
+            pending.append((cost_class, u, y, wall))
     overheads = [ln.overhead for ln in lines.values() if ln.overhead > 0]
     typical = float(np.median(overheads)) if overheads else 0.0
-    for cost_class, u, y in pending:
+    for cost_class, u, y, wall in pending:
         a = min(typical, float(y.mean()))
         b = (float(y.mean()) - a) / float(u[0]) if u[0] > 0 else 0.0
         if u[0] <= 0:
             a = float(y.mean())
-        lines[cost_class] = _line(cost_class, a, b, u, y, identified=False)
+        lines[cost_class] = _line(cost_class, a, b, u, y, wall, identified=False)
     return lines
 
 
-def _line(cost_class: str, a: float, b: float, u, y, *, identified: bool) -> CostLine:
-    pred = a + b * u
-    spread = float(np.sqrt(np.mean(((pred - y) / np.maximum(y, 1e-3)) ** 2)))
+def _line(cost_class: str, a: float, b: float, u, y, wall, *, identified: bool) -> CostLine:
+    pred = a + b * u + (wall - y)  # the line plus the FLOP term, against the measured wall
+    spread = float(np.sqrt(np.mean(((pred - wall) / np.maximum(wall, 1e-3)) ** 2)))
     return CostLine(cost_class, float(a), float(b), int(u.size), spread, identified)
 
 

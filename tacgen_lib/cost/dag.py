@@ -49,11 +49,13 @@ def dag_jobs(
     snakefile: str | os.PathLike[str] = "Snakefile",
     cores: int = 2,
     targets: list[str] | None = None,
+    set_threads: Mapping[str, int] | None = None,
 ) -> tuple[list[DagJob], dict[str, Any]]:
     """Every job of the workflow's DAG for `configfiles` (relative to `workdir`; merged over the
     Snakefile's `configfile:` as `--configfile` does), with `--forceall`, and the merged config.
 
-    `cores` caps each job's threads as `--cores` does. `targets` default to the default target
+    `cores` caps each job's threads as `--cores` does; `set_threads` (rule -> threads)
+    overrides rules' threads as `--set-threads` (or a profile's `set-threads:`) does. `targets` default to the default target
     (`rule all`). Raises the Snakemake error (naming the config key or rule) if the DAG cannot be
     built.
     """
@@ -75,7 +77,9 @@ def dag_jobs(
     try:
         with SnakemakeApi(OutputSettings(quiet={Quietness.ALL}, enable_file_logging=False)) as api:
             wf_api = api.workflow(
-                resource_settings=ResourceSettings(cores=cores),
+                resource_settings=ResourceSettings(
+                    cores=cores, overwrite_threads=dict(set_threads or {})
+                ),
                 config_settings=ConfigSettings(configfiles=files),
                 snakefile=workdir / snakefile,
                 workdir=workdir,

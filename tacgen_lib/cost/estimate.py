@@ -46,7 +46,7 @@ from tacgen_lib.cost.calibration import (
 )
 from tacgen_lib.cost.dag import DagJob, dag_jobs
 from tacgen_lib.cost.schedule import Machine, Task, list_schedule, local_machine, slurm_machine
-from tacgen_lib.cost.units import UNITS, job_units
+from tacgen_lib.cost.units import UNITS, flop_seconds, job_units
 
 __all__ = [
     "Estimate",
@@ -57,10 +57,6 @@ __all__ = [
     "choose_calibration",
     "main",
 ]
-
-#: Wall / CPU seconds of a single-threaded job on idle cores (1.13-1.39 over the corpus and
-#: preprocess jobs of a default run on a lightly loaded 2-core EPYC; README, Run-time estimate).
-IDLE_LOAD = 1.2
 
 RULE_COLUMNS = ["rule", "jobs", "threads", "unit", "units", "job_seconds", "start_s", "end_s"]
 
@@ -92,7 +88,7 @@ def job_seconds(
     for job in jobs:
         if not job.runs:
             continue
-        cost_class, units = job_units(job.rule, config, job.wildcards)
+        cost_class, units, flops = job_units(job.rule, config, job.wildcards)
         if cost_class not in lines:
             have = sorted(c for c in lines if c.split(":")[0] == job.rule)
             raise MissingCalibrationError(
@@ -100,7 +96,8 @@ def job_seconds(
                 f"(calibrated classes of this rule: {have or 'none'}); run a config that has such "
                 "jobs and regenerate the calibration (python -m tacgen_lib.cost.calibration)"
             )
-        rows.append((job.jobid, job.rule, cost_class, units, lines[cost_class].seconds(units)))
+        seconds = lines[cost_class].seconds(units) + flop_seconds(flops, job.threads)
+        rows.append((job.jobid, job.rule, cost_class, units, seconds))
     return pd.DataFrame(rows, columns=["jobid", "rule", "cost_class", "units", "seconds"])
 
 
@@ -129,10 +126,10 @@ def estimate_run(
 ) -> Estimate:
     """Predict the run of `jobs` (a DAG from `dag_jobs`) on `machine` from `calibration`.
 
-    The calibration's lines give unshared seconds (`calibration.load_factors`); `speed`
-    multiplies every second (jobs and workflow overhead) into this machine's wall: its load
-    factor (`IDLE_LOAD` on idle cores) times its CPU's slowness against the calibration's
-    (~2.5 for the 2-core class without AVX-512 against an AVX-512 calibration)."""
+    The calibration's lines give seconds on idle cores (`calibration.unshared_seconds`);
+    `speed` multiplies every second (jobs and workflow overhead) into this machine's wall: its
+    load factor (1 on idle cores; `calibration.load_factors`) times its CPU's slowness against
+    the calibration's (~2.5 for the 2-core class without AVX-512 against an AVX-512 one)."""
     if not speed > 0:
         raise ValueError(f"speed factor must be > 0, got {speed}")
     lines = fit_costs(calibration.points)
@@ -214,6 +211,17 @@ def choose_calibration(
     return Calibration(points, shipped.runs, source)
 
 
+def profile_threads(profile: str | os.PathLike[str]) -> dict[str, int]:
+    """`set-threads:` of a Snakemake profile folder (its config.yaml); {} without one."""
+    path = Path(profile) / "config.yaml"
+    if not str(profile) or not path.is_file():
+        return {}
+    import yaml
+
+    data = yaml.safe_load(path.read_text()) or {}
+    return {str(k): int(v) for k, v in (data.get("set-threads") or {}).items()}
+
+
 def format_estimate(est: Estimate) -> str:
     """The per-rule table and the total, as printed by the command."""
     table = est.per_rule.copy()
@@ -285,6 +293,11 @@ def main(argv: Sequence[str] | None = None) -> Estimate:
         "--max-jobs", type=int, default=50, help="SLURM jobs at once (profile `jobs:`)"
     )
     parser.add_argument(
+        "--profile",
+        default="profiles/slurm",
+        help="SLURM profile whose `set-threads:` apply (default profiles/slurm; '' for none)",
+    )
+    parser.add_argument(
         "--calibration", default=None, help="a calibration folder (default: last run, else shipped)"
     )
     parser.add_argument("--benchmarks", default="results/benchmarks", help="the last run's folder")
@@ -296,9 +309,9 @@ def main(argv: Sequence[str] | None = None) -> Estimate:
     parser.add_argument(
         "--load-factor",
         type=float,
-        default=IDLE_LOAD,
-        help=f"wall / CPU seconds of a single-threaded job here (default {IDLE_LOAD}: idle cores; "
-        "6-10 with a dozen other jobs on 2 cores)",
+        default=1.0,
+        help="wall here over wall on idle cores (default 1: idle; 6-10 with a dozen other "
+        "jobs sharing 2 cores)",
     )
     parser.add_argument(
         "--speed-factor",
@@ -320,12 +333,16 @@ def main(argv: Sequence[str] | None = None) -> Estimate:
         )
         label = (
             f"SLURM, {args.slurm_nodes} nodes x {args.cores_per_node} cores, {args.queue_s:g} s "
-            f"queue per job, <= {args.max_jobs} jobs at once, localrules on {args.cores} cores"
+            f"queue per job, <= {args.max_jobs} jobs at once, localrules on {args.cores} cores, "
+            f"threads of {args.profile or 'the rules'}"
         )
         cap = args.cores_per_node
     else:
         machine, label, cap = local_machine(args.cores), f"{args.cores} local cores", args.cores
-    jobs, config = dag_jobs(args.configfile, workdir=args.workdir, cores=cap)
+    set_threads = profile_threads(Path(args.workdir) / args.profile) if args.slurm_nodes else {}
+    jobs, config = dag_jobs(
+        args.configfile, workdir=args.workdir, cores=cap, set_threads=set_threads
+    )
     calibration = choose_calibration(
         calibration=args.calibration,
         benchmarks=args.benchmarks,
@@ -333,7 +350,8 @@ def main(argv: Sequence[str] | None = None) -> Estimate:
         workdir=args.workdir,
     )
     configs = " + ".join(["config/config.yaml", *args.configfile])
-    label += f", load factor {args.load_factor:g}"
+    if args.load_factor != 1.0:
+        label += f", load factor {args.load_factor:g}"
     if args.speed_factor != 1.0:
         label += f", x{args.speed_factor:g} the calibration CPU's seconds"
     est = estimate_run(

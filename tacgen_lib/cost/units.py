@@ -1,7 +1,9 @@
 """The work units of each rule's jobs: the one table the run-time estimate is built on.
 
-A job's predicted wall time is `overhead + cost_per_unit × units` (tacgen_lib.cost.calibration
-fits both per cost class on benchmark files). `UNITS` has one line per rule: what one unit is,
+A job's predicted wall time is `overhead + cost_per_unit × units + FLOPs / rate`
+(tacgen_lib.cost.calibration fits the first two per cost class on benchmark files; the FLOP term,
+for rules with a model, is charged at the CPU's effective GEMM rate so that a model 100x
+larger than any calibrated one costs 100x its arithmetic, not 100x its calibrated overheads). `UNITS` has one line per rule: what one unit is,
 and how many a job has, read from the merged config and the job's wildcards. A rule may split
 its jobs into cost classes (a probe family's solver kind and protocol variant cost differently
 per row); a class is `rule` or `rule:<what>`.
@@ -19,7 +21,14 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-__all__ = ["UnitRule", "UNITS", "job_units", "MissingUnitsError"]
+__all__ = [
+    "UnitRule",
+    "UNITS",
+    "GFLOPS_PER_THREAD",
+    "job_units",
+    "flop_seconds",
+    "MissingUnitsError",
+]
 
 Config = Mapping[str, Any]
 Wildcards = Mapping[str, str]
@@ -40,10 +49,21 @@ class MissingUnitsError(KeyError):
 @dataclass(frozen=True)
 class UnitRule:
     """How one rule's jobs are counted: `unit` says what one unit is (for the printed table),
-    `count(config, wildcards) -> (class suffix, units)`; an empty suffix is the rule itself."""
+    `count(config, wildcards) -> (class suffix, units)`; an empty suffix is the rule itself.
+    `flops(config, wildcards)`, for rules whose time grows with a model's size, is the job's
+    dense floating-point work (multiply-add = 2): it is charged at the CPU's effective GEMM
+    rate (`GFLOPS_PER_THREAD`), so a bigger model costs more without a fitted term for it."""
 
     unit: str
     count: Callable[[Config, Wildcards], tuple[str, float]]
+    flops: Callable[[Config, Wildcards], float] | None = None
+
+
+#: Effective dense float32 rate per thread of the calibration's CPU (2-core AMD EPYC, AVX-512):
+#: half its measured GEMM peak of 100 GFLOP/s per thread (README, Speed: training reaches
+#: 0.58-0.69 of the roofline at batch 256, less on small layers). Scale with --speed-factor on
+#: another CPU class.
+GFLOPS_PER_THREAD = 50.0
 
 
 # ---- helpers: sizes read from the merged config --------------------------------------------
@@ -63,12 +83,17 @@ def _train_rows(c: Config, name: str) -> float:
 
 
 def _backbone(c: Config, modality: str) -> float:
-    """Forward cost of one frame through a modality's ViT, in 1e6 multiply-adds per layer stack:
-    depth × tokens × (12 width² + 2 tokens × width) (projections and MLP, attention)."""
+    """FLOPs of one frame through a modality's ViT forward: 2 × depth × tokens × (12 width² +
+    2 tokens × width) (projections and MLP, attention)."""
     arch = c["features"]["backbones"][modality]["arch"]
     width, depth = _VIT[arch]
     tokens = (int(c["features"]["image_size"]) // _PATCH) ** 2 + 1
-    return depth * tokens * (12 * width**2 + 2 * tokens * width) / 1e6
+    return 2.0 * depth * tokens * (12 * width**2 + 2 * tokens * width)
+
+
+#: DINO self-distillation per frame and epoch, in ViT forwards: 2 global crops through the
+#: student (forward + backward = 3 forwards) and the teacher (1), local crops left out.
+_DINO_FORWARDS = 8
 
 
 def _align_cells(c: Config) -> float:
@@ -94,8 +119,11 @@ def _align_steps(c: Config, w: Wildcards) -> float:
 
 
 def _generator_mlp(c: Config) -> float:
+    """FLOPs of one row through the residual MLP forward (2 hidden² layers per block, plus the
+    input and output layers of ~3 × 768-d features)."""
     g = c["generate"]
-    return int(g["blocks"]) * int(g["hidden"]) ** 2 / 1e6
+    h = int(g["hidden"])
+    return 2.0 * (int(g["blocks"]) * 2 * h * h + 3 * 768 * h)
 
 
 def _generate_cells(c: Config) -> float:
@@ -188,26 +216,35 @@ UNITS: dict[str, UnitRule] = {
     "background_subtract": UnitRule("frame", lambda c, w: ("", _n(c, w["corpus"]))),
     # features
     "pretrain_backbone": UnitRule(
-        "epoch × train frame × ViT forward (1e6 multiply-adds)",
+        "epoch × train frame (+ ViT FLOPs)",
         lambda c, w: (
             "",
             int(c["features"]["pretrain"]["epochs"])
+            * _train_rows(c, c["features"]["pretrain"]["corpus"]),
+        ),
+        lambda c, w: (
+            int(c["features"]["pretrain"]["epochs"])
             * _train_rows(c, c["features"]["pretrain"]["corpus"])
-            * _backbone(c, w["modality"]),
+            * _DINO_FORWARDS
+            * _backbone(c, w["modality"])
         ),
     ),
     "extract_vision_features": UnitRule(
-        "frame × ViT forward", lambda c, w: ("", _n(c, w["corpus"]) * _backbone(c, "vision"))
+        "frame (+ ViT FLOPs)",
+        lambda c, w: ("", _n(c, w["corpus"])),
+        lambda c, w: _n(c, w["corpus"]) * _backbone(c, "vision"),
     ),
     "extract_tactile_features": UnitRule(
-        "frame × ViT forward", lambda c, w: ("", _n(c, w["corpus"]) * _backbone(c, "tactile"))
+        "frame (+ ViT FLOPs)",
+        lambda c, w: ("", _n(c, w["corpus"])),
+        lambda c, w: _n(c, w["corpus"]) * _backbone(c, "tactile"),
     ),
     "pretrained_vs_random": UnitRule(
-        "frame × ViT forward (both random-init backbones)",
+        "frame (+ FLOPs of both random-init ViTs)",
+        lambda c, w: ("", _n(c, c["features"]["pretrained_vs_random"]["corpus"])),
         lambda c, w: (
-            "",
             _n(c, c["features"]["pretrained_vs_random"]["corpus"])
-            * (_backbone(c, "vision") + _backbone(c, "tactile")),
+            * (_backbone(c, "vision") + _backbone(c, "tactile"))
         ),
     ),
     # align
@@ -221,15 +258,16 @@ UNITS: dict[str, UnitRule] = {
     "aggregate_align": UnitRule("grid cell", lambda c, w: ("", _align_cells(c))),
     # generate
     "train_generator": UnitRule(
-        "optimiser step × batch row × MLP size (1e6 blocks·hidden²; at most)",
+        "optimiser step (at most; + MLP FLOPs)",
+        lambda c, w: ("", float(c["generate"]["steps"])),
         lambda c, w: (
-            "",
-            int(c["generate"]["steps"]) * int(c["generate"]["batch_size"]) * _generator_mlp(c),
+            3.0 * int(c["generate"]["steps"]) * int(c["generate"]["batch_size"]) * _generator_mlp(c)
         ),
     ),
     "sample_generator": UnitRule(
-        "sample × sampling step × MLP size",
-        lambda c, w: ("", _n(c, w["corpus"]) * int(w["steps"]) * _generator_mlp(c)),
+        "sample × sampling step (+ MLP FLOPs, 2 passes for guidance)",
+        lambda c, w: ("", _n(c, w["corpus"]) * int(w["steps"])),
+        lambda c, w: 2.0 * _n(c, w["corpus"]) * int(w["steps"]) * _generator_mlp(c),
     ),
     "evaluate_generator": UnitRule(
         "sample × (sampling cells × targets + permutations / 100)",
@@ -279,19 +317,17 @@ UNITS: dict[str, UnitRule] = {
         ),
     ),
     "palpate": UnitRule(
-        "episode × (V + T ViT forward)",
+        "episode (+ V and T ViT FLOPs)",
+        lambda c, w: ("", _episodes(c, "demos") + _episodes(c, "heldout")),
         lambda c, w: (
-            "",
             (_episodes(c, "demos") + _episodes(c, "heldout"))
-            * (_backbone(c, "vision") + _backbone(c, "tactile")),
+            * (_backbone(c, "vision") + _backbone(c, "tactile"))
         ),
     ),
     "train_policy": UnitRule(
-        "epoch × demo × hidden² / 1e6",
-        lambda c, w: (
-            "",
-            int(w["epochs"]) * _episodes(c, "demos") * int(w["hidden"]) ** 2 / 1e6,
-        ),
+        "epoch × demo (+ MLP FLOPs)",
+        lambda c, w: ("", int(w["epochs"]) * _episodes(c, "demos")),
+        lambda c, w: 6.0 * int(w["epochs"]) * _episodes(c, "demos") * 3 * int(w["hidden"]) ** 2,
     ),
     "rollout_policy": UnitRule(
         "held-out episode in the shard",
@@ -316,8 +352,8 @@ UNITS: dict[str, UnitRule] = {
 }
 
 
-def job_units(rule: str, config: Config, wildcards: Wildcards) -> tuple[str, float]:
-    """(cost class, units) of one job of `rule`. A rule without a line in `UNITS`, or whose
+def job_units(rule: str, config: Config, wildcards: Wildcards) -> tuple[str, float, float]:
+    """(cost class, units, FLOPs) of one job of `rule` (FLOPs 0 for a rule without a model). A rule without a line in `UNITS`, or whose
     line cannot count this config, raises `MissingUnitsError` naming the rule."""
     if rule not in UNITS:
         raise MissingUnitsError(
@@ -327,10 +363,16 @@ def job_units(rule: str, config: Config, wildcards: Wildcards) -> tuple[str, flo
         )
     try:
         suffix, units = UNITS[rule].count(config, wildcards)
+        flops = UNITS[rule].flops(config, wildcards) if UNITS[rule].flops else 0.0
     except (KeyError, TypeError, ValueError, ZeroDivisionError) as exc:
         raise MissingUnitsError(
             f"rule {rule!r}: cannot count its units ({UNITS[rule].unit}) for wildcards "
             f"{dict(wildcards)} from this config ({type(exc).__name__}: {exc}); fix its line in "
             "tacgen_lib/cost/units.py UNITS"
         ) from exc
-    return (f"{rule}:{suffix}" if suffix else rule), float(units)
+    return (f"{rule}:{suffix}" if suffix else rule), float(units), float(flops)
+
+
+def flop_seconds(flops: float, threads: int) -> float:
+    """Seconds of `flops` at the effective GEMM rate of `threads` threads."""
+    return flops / (GFLOPS_PER_THREAD * 1e9 * max(1, threads))
