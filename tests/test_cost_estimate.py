@@ -138,12 +138,13 @@ def test_fit_is_non_negative_and_handles_a_single_units_value():
     # walls falling with units would need a negative per-unit cost: clamped at 0
     lines = fit_costs(points([("merge_corpus", 10, 5.0), ("merge_corpus", 1000, 4.0)]))
     assert lines["merge_corpus"].per_unit >= 0 and lines["merge_corpus"].overhead >= 0
-    # one units value: the typical overhead of identified classes, the rest per unit
-    rows = [("a", 1, 3.0), ("a", 11, 13.0), ("b", 1, 2.0), ("b", 3, 4.0), ("c", 50, 12.0)]
+    # one units value, or units too close: flat at the mean, flagged as not identified
+    rows = [("a", 1, 3.0), ("a", 11, 13.0), ("c", 50, 12.0), ("d", 100, 10.0), ("d", 150, 14.0)]
     lines = fit_costs(points(rows))
-    assert not lines["c"].identified
-    assert lines["c"].overhead == pytest.approx(1.5)  # median of a's 2 and b's 1
-    assert lines["c"].seconds(50) == pytest.approx(12.0)
+    assert lines["a"].identified
+    for cls, mean in (("c", 12.0), ("d", 12.0)):
+        assert not lines[cls].identified
+        assert lines[cls].per_unit == 0.0 and lines[cls].seconds(1e6) == pytest.approx(mean)
 
 
 def test_runs_under_different_loads_fit_one_line():

@@ -81,9 +81,9 @@ class MissingCalibrationError(KeyError):
 class CostLine:
     """Predicted wall seconds of a job of one cost class: `overhead + per_unit × units`.
 
-    `n` points, `spread` their root-mean-square relative residual, `identified` False when
-    every point had the same units (overhead and per-unit cost cannot be told apart: the line
-    then goes through the mean with the calibration's typical overhead, see `fit_costs`)."""
+    `n` points, `spread` their root-mean-square relative residual, `identified` False when the
+    points' units were too close to tell overhead from per-unit cost (the line is then flat at
+    their mean: a lower bound for larger jobs, see `fit_costs`)."""
 
     cost_class: str
     overhead: float
@@ -168,6 +168,10 @@ def load_factors(points: pd.DataFrame) -> dict[str, float]:
     return {run: max(1.0, float(ratio.get(run, 1.0))) for run in points["run"].unique()}
 
 
+#: Units of a class's points must span at least this factor to fit a per-unit cost.
+MIN_UNITS_SPAN = 2.0
+
+
 def fit_costs(points: pd.DataFrame, *, unshared: bool = True) -> dict[str, CostLine]:
     """One `CostLine` per cost class by non-negative least squares of wall (less the FLOP
     term, `units.flop_seconds`) on [1, units]; with
@@ -175,9 +179,10 @@ def fit_costs(points: pd.DataFrame, *, unshared: bool = True) -> dict[str, CostL
     under different loads fit one line, in seconds on idle cores.
 
     Least squares on relative error (each point weighted by 1 / its wall), so a 2-s job and a
-    300-s job count alike. A class whose points all share one units value cannot separate
-    overhead from per-unit cost: its overhead is the median overhead of the identified classes
-    (capped at its mean wall), the rest is per-unit cost."""
+    300-s job count alike. A class whose points span less than a factor `MIN_UNITS_SPAN` of
+    units cannot separate overhead from per-unit cost (one size measured, or sizes too close
+    for the timing noise): its line is flat at the mean (per-unit cost 0, `identified` False),
+    so for larger jobs it is a lower bound, flagged in the estimate's table."""
     lines: dict[str, CostLine] = {}
     pending = []
     if unshared and len(points):
@@ -190,21 +195,15 @@ def fit_costs(points: pd.DataFrame, *, unshared: bool = True) -> dict[str, CostL
         # the FLOP term is charged at the CPU's rate; the line fits what remains
         wall = grp["wall"].to_numpy(float)
         y = np.maximum(wall - arithmetic, 0.0)
-        if np.unique(u).size > 1:
+        if u.min() > 0 and u.max() / u.min() >= MIN_UNITS_SPAN or u.min() <= 0 < u.max():
             w = 1.0 / np.maximum(wall, 1e-3)
             design = np.column_stack([np.ones_like(u), u]) * w[:, None]
             (a, b), _ = nnls(design, y * w)
             lines[cost_class] = _line(cost_class, a, b, u, y, wall, identified=True)
         else:
             pending.append((cost_class, u, y, wall))
-    overheads = [ln.overhead for ln in lines.values() if ln.overhead > 0]
-    typical = float(np.median(overheads)) if overheads else 0.0
     for cost_class, u, y, wall in pending:
-        a = min(typical, float(y.mean()))
-        b = (float(y.mean()) - a) / float(u[0]) if u[0] > 0 else 0.0
-        if u[0] <= 0:
-            a = float(y.mean())
-        lines[cost_class] = _line(cost_class, a, b, u, y, wall, identified=False)
+        lines[cost_class] = _line(cost_class, float(y.mean()), 0.0, u, y, wall, identified=False)
     return lines
 
 

@@ -58,7 +58,17 @@ __all__ = [
     "main",
 ]
 
-RULE_COLUMNS = ["rule", "jobs", "threads", "unit", "units", "job_seconds", "start_s", "end_s"]
+RULE_COLUMNS = [
+    "rule",
+    "jobs",
+    "threads",
+    "unit",
+    "units",
+    "job_seconds",
+    "start_s",
+    "end_s",
+    "per_unit_fitted",
+]
 
 
 @dataclass(frozen=True)
@@ -82,7 +92,8 @@ class Estimate:
 def job_seconds(
     jobs: Sequence[DagJob], config: dict[str, Any], lines: dict[str, CostLine]
 ) -> pd.DataFrame:
-    """One row per job that runs: jobid, rule, cost class, units, predicted seconds. A rule
+    """One row per job that runs: jobid, rule, cost class, units, predicted seconds, and
+    whether its class's per-unit cost was identified (else a lower bound). A rule
     without a `UNITS` line, or a cost class without calibration points, raises naming it."""
     rows = []
     for job in jobs:
@@ -96,9 +107,11 @@ def job_seconds(
                 f"(calibrated classes of this rule: {have or 'none'}); run a config that has such "
                 "jobs and regenerate the calibration (python -m tacgen_lib.cost.calibration)"
             )
-        seconds = lines[cost_class].seconds(units) + flop_seconds(flops, job.threads)
-        rows.append((job.jobid, job.rule, cost_class, units, seconds))
-    return pd.DataFrame(rows, columns=["jobid", "rule", "cost_class", "units", "seconds"])
+        line = lines[cost_class]
+        seconds = line.seconds(units) + flop_seconds(flops, job.threads)
+        rows.append((job.jobid, job.rule, cost_class, units, seconds, line.identified))
+    columns = ["jobid", "rule", "cost_class", "units", "seconds", "identified"]
+    return pd.DataFrame(rows, columns=columns)
 
 
 def workflow_overhead(runs: pd.DataFrame) -> tuple[float, float]:
@@ -151,6 +164,7 @@ def estimate_run(
             job_seconds=("seconds", "sum"),
             start_s=("start", "min"),
             end_s=("end", "max"),
+            per_unit_fitted=("identified", "all"),
         )
         .reset_index()
         .sort_values(["start_s", "rule"])
@@ -232,10 +246,16 @@ def format_estimate(est: Estimate) -> str:
         f"{'rule':28s} {'jobs':>5s} {'thr':>3s} {'job-seconds':>12s} {'start':>8s} {'end':>8s}  unit",
     ]
     for r in table.itertuples():
+        flag = "" if r.per_unit_fitted else " *"
         lines.append(
-            f"{r.rule:28s} {r.jobs:5d} {r.threads:3d} {r.job_seconds:12.1f} {r.start_s:8.1f} "
-            f"{r.end_s:8.1f}  {r.unit}"
+            f"{r.rule + flag:28s} {r.jobs:5d} {r.threads:3d} {r.job_seconds:12.1f} "
+            f"{r.start_s:8.1f} {r.end_s:8.1f}  {r.unit}"
         )
+    if not table["per_unit_fitted"].all():
+        lines += [
+            "* per-unit cost not identified (the calibration measured one size of these jobs, "
+            "or sizes too close): flat at the measured mean, a lower bound for larger jobs"
+        ]
     lines += [
         "",
         f"jobs: {int(table['jobs'].sum())}, job-seconds: {table['job_seconds'].sum():.0f} s",
@@ -260,6 +280,7 @@ def write_table(est: Estimate, out: str | os.PathLike[str]) -> None:
         "job_seconds": float(table["job_seconds"].sum()),
         "start_s": 0.0,
         "end_s": est.total,
+        "per_unit_fitted": bool(table["per_unit_fitted"].all()),
     }
     table = pd.concat([table, pd.DataFrame([total])], ignore_index=True)
     table["machine"] = est.machine
