@@ -21,7 +21,13 @@ from tacgen_lib.cost.calibration import (
     load_factors,
 )
 from tacgen_lib.cost.dag import DagJob
-from tacgen_lib.cost.estimate import estimate_run, job_seconds, workflow_overhead
+from tacgen_lib.cost.estimate import (
+    estimate_run,
+    format_estimate,
+    job_seconds,
+    workflow_overhead,
+    write_table,
+)
 from tacgen_lib.cost.schedule import Machine, Task, list_schedule, local_machine, slurm_machine
 from tacgen_lib.cost.units import UNITS, MissingUnitsError, job_units
 
@@ -221,7 +227,7 @@ def test_every_rule_of_the_workflow_has_a_unit_line():
 # ---- the estimate end to end on a hand DAG ------------------------------------------------------
 
 
-def test_estimate_of_a_hand_dag_from_a_calibration():
+def test_estimate_of_a_hand_dag_from_a_calibration(tmp_path):
     cfg = {"corpora": {"c": {"n": 100, "shards": 2, "presses": 3}}, "splits": {}}
     jobs = [
         DagJob(0, "simulate_corpus", {"corpus": "c", "shard": "0"}),
@@ -252,6 +258,12 @@ def test_estimate_of_a_hand_dag_from_a_calibration():
     assert est.overhead == pytest.approx(0.0)
     one_core = estimate_run(jobs, cfg, Calibration(pts, runs, "hand"), local_machine(1))
     assert one_core.makespan == pytest.approx(36.0)
+    # the table the report can show: per rule, and a total row saying machine and source
+    write_table(est, tmp_path / "estimate.parquet")
+    table = pd.read_parquet(tmp_path / "estimate.parquet").set_index("rule")
+    assert table.loc["total", "end_s"] == pytest.approx(19.0)
+    assert table.loc["simulate_corpus", "jobs"] == 2 and set(table["source"]) == {"hand"}
+    assert "total predicted wall time: 19 s" in format_estimate(est)
 
 
 def test_shipped_calibration_is_labelled_with_its_cpu():
@@ -259,6 +271,24 @@ def test_shipped_calibration_is_labelled_with_its_cpu():
     assert cal.cpus and all("cores" in c and "vector" in c for c in cal.cpus)
     assert set(cal.points["run"]) >= {"test", "default"}
     assert "CPU" in cal.source
+
+
+@pytest.mark.parametrize("configfile", ["config/test.yaml", "config/config.yaml"])
+def test_shipped_calibration_estimates_the_real_dags(configfile):
+    """Snakemake's own DAG of each config (no run): every job has units and a calibrated
+    class; the schedule honours the DAG (a job never starts before what it waits for)."""
+    from pathlib import Path
+
+    from tacgen_lib.cost.dag import dag_jobs
+
+    root = Path(__file__).resolve().parents[1]
+    jobs, config = dag_jobs([configfile], workdir=root)
+    assert {j.rule for j in jobs} >= {"simulate_corpus", "train_heads", "probe"}
+    est = estimate_run(jobs, config, load_calibration(), local_machine(2))
+    per_rule = est.per_rule.set_index("rule")
+    assert per_rule["jobs"].sum() == sum(j.runs for j in jobs)
+    assert est.total > est.makespan >= per_rule["job_seconds"].sum() / 2
+    assert per_rule.loc["make_splits", "start_s"] >= per_rule.loc["fuse_manifest", "end_s"]
 
 
 # ---- validation: predicted vs measured on config/test.yaml --------------------------------------
