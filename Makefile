@@ -3,7 +3,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 CORES ?= 2
 
-.PHONY: setup run report test lint resume
+.PHONY: setup run report test lint resume estimate
 
 setup:
 	@bash tools/setup.sh $(VENV)
@@ -25,6 +25,11 @@ resume:
 
 report:
 	$(BIN)/snakemake --cores 1 --report results/report.html
+
+## Predict per-rule and total wall time of a config before running it (README, Run-time estimate):
+##   make estimate ARGS='--configfile config/paper.yaml --slurm-nodes 8 --cores-per-node 32'
+estimate:
+	$(BIN)/python -m tacgen_lib.cost.estimate --cores $(CORES) $(ARGS)
 
 lint:
 	$(BIN)/ruff check .

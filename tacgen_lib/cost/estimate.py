@@ -1,0 +1,394 @@
+"""Estimate before running: per-rule and total wall time of a config's DAG on N local cores or
+on a SLURM cluster of K nodes, from per-unit costs fitted on benchmark files.
+
+1. The jobs: Snakemake builds the config's DAG (`tacgen_lib.cost.dag.dag_jobs`, `--forceall`).
+2. Each job's seconds: `overhead + per_unit × units` of its cost class
+   (`tacgen_lib.cost.units.UNITS`, one line per rule), the line fitted by non-negative least
+   squares (`tacgen_lib.cost.calibration.fit_costs`) on the last run's benchmark files when
+   they are a complete run of `--benchmarks-config`, else on the shipped calibration
+   (`config/cost_calibration/`), labelled with the CPU it was measured on.
+3. The run's wall: list scheduling of those jobs over the cores, honouring threads and
+   dependencies (`tacgen_lib.cost.schedule`), plus the workflow's own overhead (DAG building
+   and per-job bookkeeping, fitted on the calibration runs' total wall times).
+
+    .venv/bin/python -m tacgen_lib.cost.estimate --configfile config/paper.yaml --cores 2
+    .venv/bin/python -m tacgen_lib.cost.estimate --configfile config/paper.yaml \\
+        --slurm-nodes 8 --cores-per-node 32
+
+The per-unit costs hold for the calibration's CPU; on another CPU class scale them (the
+2-core class without AVX-512 runs the same code 2-3x slower: README, Speed).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from scipy.optimize import nnls
+
+from tacgen_lib.cost.benchmarks import cpu_label
+from tacgen_lib.cost.calibration import (
+    SHIPPED,
+    Calibration,
+    CostLine,
+    MissingCalibrationError,
+    fit_costs,
+    last_run,
+    load_calibration,
+    run_calibration,
+)
+from tacgen_lib.cost.dag import DagJob, dag_jobs
+from tacgen_lib.cost.schedule import Machine, Task, list_schedule, local_machine, slurm_machine
+from tacgen_lib.cost.units import UNITS, flop_seconds, job_units
+
+__all__ = [
+    "Estimate",
+    "RULE_COLUMNS",
+    "job_seconds",
+    "workflow_overhead",
+    "estimate_run",
+    "choose_calibration",
+    "main",
+]
+
+RULE_COLUMNS = [
+    "rule",
+    "jobs",
+    "threads",
+    "unit",
+    "units",
+    "job_seconds",
+    "start_s",
+    "end_s",
+    "per_unit_fitted",
+]
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A predicted run: `per_rule` (RULE_COLUMNS: jobs, summed job seconds, and the rule's span
+    in the schedule, first start to last end), `makespan` (scheduled jobs), `overhead` (the
+    workflow's own), `total` = makespan + overhead, `machine`, and `source` (which calibration
+    and CPU)."""
+
+    per_rule: pd.DataFrame
+    makespan: float
+    overhead: float
+    machine: str
+    source: str
+
+    @property
+    def total(self) -> float:
+        return self.makespan + self.overhead
+
+
+def job_seconds(
+    jobs: Sequence[DagJob], config: dict[str, Any], lines: dict[str, CostLine]
+) -> pd.DataFrame:
+    """One row per job that runs: jobid, rule, cost class, units, predicted seconds, and
+    whether its class's per-unit cost was identified (else a lower bound). A rule
+    without a `UNITS` line, or a cost class without calibration points, raises naming it."""
+    rows = []
+    for job in jobs:
+        if not job.runs:
+            continue
+        cost_class, units, flops = job_units(job.rule, config, job.wildcards)
+        if cost_class not in lines:
+            have = sorted(c for c in lines if c.split(":")[0] == job.rule)
+            raise MissingCalibrationError(
+                f"rule {job.rule!r}: cost class {cost_class!r} has no calibration point "
+                f"(calibrated classes of this rule: {have or 'none'}); run a config that has such "
+                "jobs and regenerate the calibration (python -m tacgen_lib.cost.calibration)"
+            )
+        line = lines[cost_class]
+        seconds = line.seconds(units) + flop_seconds(flops, job.threads)
+        rows.append((job.jobid, job.rule, cost_class, units, seconds, line.identified))
+    columns = ["jobid", "rule", "cost_class", "units", "seconds", "identified"]
+    return pd.DataFrame(rows, columns=columns)
+
+
+def workflow_overhead(runs: pd.DataFrame) -> tuple[float, float]:
+    """(startup seconds, seconds per job): the workflow's own time, fitted (non-negative least
+    squares) on the calibration runs' total wall minus their scheduled measured job times,
+    divided by each run's load factor (unshared seconds, as the job lines)."""
+    if runs.empty:
+        return 0.0, 0.0
+    load = runs["load"].to_numpy(float) if "load" in runs else np.ones(len(runs))
+    gap = runs["wall"].to_numpy(float) - runs["makespan"].to_numpy(float)
+    gap = np.maximum(gap / load, 0.0)
+    design = np.column_stack([np.ones(len(runs)), runs["jobs"].to_numpy(float)])
+    (a, b), _ = nnls(design, gap)
+    return float(a), float(b)
+
+
+def estimate_run(
+    jobs: Sequence[DagJob],
+    config: dict[str, Any],
+    calibration: Calibration,
+    machine: Machine,
+    *,
+    machine_label: str = "",
+    speed: float = 1.0,
+) -> Estimate:
+    """Predict the run of `jobs` (a DAG from `dag_jobs`) on `machine` from `calibration`.
+
+    The calibration's lines give seconds on idle cores (`calibration.unshared_seconds`);
+    `speed` multiplies every second (jobs and workflow overhead) into this machine's wall: its
+    load factor (1 on idle cores; `calibration.load_factors`) times its CPU's slowness against
+    the calibration's (~2.5 for the 2-core class without AVX-512 against an AVX-512 one)."""
+    if not speed > 0:
+        raise ValueError(f"speed factor must be > 0, got {speed}")
+    lines = fit_costs(calibration.points)
+    per_job = job_seconds(jobs, config, lines)
+    per_job["seconds"] *= speed
+    seconds = dict(zip(per_job["jobid"], per_job["seconds"], strict=True))
+    tasks = [Task(j.jobid, seconds.get(j.jobid, 0.0), j.threads, j.deps, j.local) for j in jobs]
+    schedule = list_schedule(tasks, machine)
+    per_job["start"] = per_job["jobid"].map(schedule.start)
+    per_job["end"] = per_job["jobid"].map(schedule.end)
+    threads = {j.jobid: j.threads for j in jobs}
+    per_job["threads"] = per_job["jobid"].map(threads)
+    per_rule = (
+        per_job.groupby("rule", sort=False)
+        .agg(
+            jobs=("jobid", "size"),
+            threads=("threads", "max"),
+            units=("units", "sum"),
+            job_seconds=("seconds", "sum"),
+            start_s=("start", "min"),
+            end_s=("end", "max"),
+            per_unit_fitted=("identified", "all"),
+        )
+        .reset_index()
+        .sort_values(["start_s", "rule"])
+    )
+    per_rule["unit"] = per_rule["rule"].map(lambda r: UNITS[r].unit)
+    startup, per_job_s = workflow_overhead(calibration.runs)
+    overhead = (startup + per_job_s * len(per_job)) * speed
+    return Estimate(
+        per_rule=per_rule[RULE_COLUMNS].reset_index(drop=True),
+        makespan=schedule.makespan,
+        overhead=overhead,
+        machine=machine_label,
+        source=calibration.source,
+    )
+
+
+def choose_calibration(
+    *,
+    calibration: str | os.PathLike[str] | None,
+    benchmarks: str | os.PathLike[str],
+    benchmarks_config: str | os.PathLike[str] | None = None,
+    workdir: str | os.PathLike[str] = ".",
+) -> Calibration:
+    """The last run's benchmark files when `benchmarks` holds a complete run of
+    `benchmarks_config` (default: the config of the newest finished Snakemake run of
+    `workdir`, from its log; the embedded default if none is named there), its cost classes
+    with the shipped ones filling any class it lacks (the shipped runs' totals give the
+    workflow overhead); else the shipped calibration (or the folder `calibration`, which always
+    wins). The returned `source` says which, and why."""
+    shipped = load_calibration(calibration or SHIPPED)
+    if calibration is not None:
+        return shipped
+    bench = Path(workdir) / benchmarks
+    if not bench.is_dir():
+        return Calibration(shipped.points, shipped.runs, f"{shipped.source} (no {benchmarks} here)")
+    if benchmarks_config is None:
+        log = last_run(workdir)
+        benchmarks_config = (
+            log.configfiles[0] if log is not None and log.configfiles else "config/config.yaml"
+        )
+    try:
+        last, _ = run_calibration(benchmarks_config, bench, run="last run", workdir=workdir)
+    except ValueError as exc:
+        return Calibration(
+            shipped.points, shipped.runs, f"{shipped.source} ({benchmarks} not used: {exc})"
+        )
+    fill = shipped.points[~shipped.points["cost_class"].isin(set(last["cost_class"]))]
+    points = pd.concat([last, fill], ignore_index=True)
+    source = (
+        f"last run: {benchmarks} as a run of {benchmarks_config} ({len(last)} jobs; CPU {cpu_label()})"
+        + (
+            f", {fill['cost_class'].nunique()} classes from the shipped calibration"
+            if len(fill)
+            else ""
+        )
+        + f"; workflow overhead from {shipped.source}"
+    )
+    return Calibration(points, shipped.runs, source)
+
+
+def profile_threads(profile: str | os.PathLike[str]) -> dict[str, int]:
+    """`set-threads:` of a Snakemake profile folder (its config.yaml); {} without one."""
+    path = Path(profile) / "config.yaml"
+    if not str(profile) or not path.is_file():
+        return {}
+    import yaml
+
+    data = yaml.safe_load(path.read_text()) or {}
+    return {str(k): int(v) for k, v in (data.get("set-threads") or {}).items()}
+
+
+def format_estimate(est: Estimate) -> str:
+    """The per-rule table and the total, as printed by the command."""
+    table = est.per_rule.copy()
+    lines = [
+        f"Run-time estimate on {est.machine}",
+        f"calibration: {est.source}",
+        "",
+        f"{'rule':28s} {'jobs':>5s} {'thr':>3s} {'job-seconds':>12s} {'start':>8s} {'end':>8s}  unit",
+    ]
+    for r in table.itertuples():
+        flag = "" if r.per_unit_fitted else " *"
+        lines.append(
+            f"{r.rule + flag:28s} {r.jobs:5d} {r.threads:3d} {r.job_seconds:12.1f} "
+            f"{r.start_s:8.1f} {r.end_s:8.1f}  {r.unit}"
+        )
+    if not table["per_unit_fitted"].all():
+        lines += [
+            "* per-unit cost not identified (the calibration measured one size of these jobs, "
+            "or sizes too close): flat at the measured mean, a lower bound for larger jobs"
+        ]
+    lines += [
+        "",
+        f"jobs: {int(table['jobs'].sum())}, job-seconds: {table['job_seconds'].sum():.0f} s",
+        f"scheduled jobs (makespan): {est.makespan:.0f} s; workflow overhead: {est.overhead:.0f} s",
+        f"total predicted wall time: {est.total:.0f} s ({est.total / 60:.1f} min, "
+        f"{est.total / 3600:.2f} h)",
+    ]
+    return "\n".join(lines)
+
+
+def write_table(est: Estimate, out: str | os.PathLike[str]) -> None:
+    """The per-rule table with a `total` row (machine and source in columns) to `out`: .parquet,
+    .csv or .tsv by suffix; written atomically (temp file + rename)."""
+    out = Path(out)
+    table = est.per_rule.copy()
+    total = {
+        "rule": "total",
+        "jobs": int(table["jobs"].sum()),
+        "threads": int(table["threads"].max()),
+        "unit": "wall seconds incl. workflow overhead",
+        "units": float("nan"),
+        "job_seconds": float(table["job_seconds"].sum()),
+        "start_s": 0.0,
+        "end_s": est.total,
+        "per_unit_fitted": bool(table["per_unit_fitted"].all()),
+    }
+    table = pd.concat([table, pd.DataFrame([total])], ignore_index=True)
+    table["machine"] = est.machine
+    table["source"] = est.source
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(f".{out.name}.tmp")
+    if out.suffix == ".parquet":
+        table.to_parquet(tmp, index=False)
+    elif out.suffix in (".csv", ".tsv"):
+        table.to_csv(tmp, index=False, sep="," if out.suffix == ".csv" else "\t")
+    else:
+        raise ValueError(f"--out {out}: use a .parquet, .csv or .tsv file")
+    tmp.replace(out)
+
+
+def main(argv: Sequence[str] | None = None) -> Estimate:
+    parser = argparse.ArgumentParser(
+        prog="python -m tacgen_lib.cost.estimate",
+        description="Predict per-rule and total wall time of a config's DAG before running it.",
+    )
+    parser.add_argument(
+        "--configfile", action="append", default=[], help="config merged over the default"
+    )
+    parser.add_argument("--cores", type=int, default=2, help="local cores (default 2)")
+    parser.add_argument("--slurm-nodes", type=int, default=None, help="SLURM nodes K")
+    parser.add_argument("--cores-per-node", type=int, default=32, help="cores per SLURM node")
+    parser.add_argument(
+        "--queue-s", type=float, default=30.0, help="SLURM queue + start seconds per job"
+    )
+    parser.add_argument(
+        "--max-jobs", type=int, default=50, help="SLURM jobs at once (profile `jobs:`)"
+    )
+    parser.add_argument(
+        "--profile",
+        default="profiles/slurm",
+        help="SLURM profile whose `set-threads:` apply (default profiles/slurm; '' for none)",
+    )
+    parser.add_argument(
+        "--calibration", default=None, help="a calibration folder (default: last run, else shipped)"
+    )
+    parser.add_argument("--benchmarks", default="results/benchmarks", help="the last run's folder")
+    parser.add_argument(
+        "--benchmarks-config",
+        default=None,
+        help="the config the last run used (default: read from its Snakemake log)",
+    )
+    parser.add_argument(
+        "--load-factor",
+        type=float,
+        default=1.0,
+        help="wall here over wall on idle cores (default 1: idle; 6-10 with a dozen other "
+        "jobs sharing 2 cores)",
+    )
+    parser.add_argument(
+        "--speed-factor",
+        type=float,
+        default=1.0,
+        help="CPU seconds here per calibration CPU second (e.g. 2.5 on a CPU without AVX-512)",
+    )
+    parser.add_argument("--workdir", default=".", help="the workflow's directory")
+    parser.add_argument("--out", default=None, help="write the per-rule table (.parquet/.csv/.tsv)")
+    args = parser.parse_args(argv)
+
+    if args.slurm_nodes:
+        machine = slurm_machine(
+            args.slurm_nodes,
+            args.cores_per_node,
+            queue_s=args.queue_s,
+            max_jobs=args.max_jobs,
+            local_cores=args.cores,
+        )
+        label = (
+            f"SLURM, {args.slurm_nodes} nodes x {args.cores_per_node} cores, {args.queue_s:g} s "
+            f"queue per job, <= {args.max_jobs} jobs at once, localrules on {args.cores} cores, "
+            f"threads of {args.profile or 'the rules'}"
+        )
+        cap = args.cores_per_node
+    else:
+        machine, label, cap = local_machine(args.cores), f"{args.cores} local cores", args.cores
+    set_threads = profile_threads(Path(args.workdir) / args.profile) if args.slurm_nodes else {}
+    jobs, config = dag_jobs(
+        args.configfile, workdir=args.workdir, cores=cap, set_threads=set_threads
+    )
+    calibration = choose_calibration(
+        calibration=args.calibration,
+        benchmarks=args.benchmarks,
+        benchmarks_config=args.benchmarks_config,
+        workdir=args.workdir,
+    )
+    configs = " + ".join(["config/config.yaml", *args.configfile])
+    if args.load_factor != 1.0:
+        label += f", load factor {args.load_factor:g}"
+    if args.speed_factor != 1.0:
+        label += f", x{args.speed_factor:g} the calibration CPU's seconds"
+    est = estimate_run(
+        jobs,
+        config,
+        calibration,
+        machine,
+        machine_label=f"{label} ({configs})",
+        speed=args.speed_factor * args.load_factor,
+    )
+    print(format_estimate(est))
+    if args.out:
+        write_table(est, args.out)
+        print(f"per-rule table: {args.out}", file=sys.stderr)
+    return est
+
+
+if __name__ == "__main__":
+    main()

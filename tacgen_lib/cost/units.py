@@ -1,0 +1,378 @@
+"""The work units of each rule's jobs: the one table the run-time estimate is built on.
+
+A job's predicted wall time is `overhead + cost_per_unit × units + FLOPs / rate`
+(tacgen_lib.cost.calibration fits the first two per cost class on benchmark files; the FLOP term,
+for rules with a model, is charged at the CPU's effective GEMM rate so that a model 100x
+larger than any calibrated one costs 100x its arithmetic, not 100x its calibrated overheads). `UNITS` has one line per rule: what one unit is,
+and how many a job has, read from the merged config and the job's wildcards. A rule may split
+its jobs into cost classes (a probe family's solver kind and protocol variant cost differently
+per row); a class is `rule` or `rule:<what>`.
+
+The counts are proportional to the work the job's code does (rows × steps × model size), not
+exact: early stopping (align `patience`, generator `patience`) can end training before its
+budget, so those rules' predictions are upper-side. Changing a rule's code or its config keys
+may change its units: edit its line here, then regenerate the shipped calibration
+(`python -m tacgen_lib.cost.calibration`, README "Run-time estimate").
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+__all__ = [
+    "UnitRule",
+    "UNITS",
+    "GFLOPS_PER_THREAD",
+    "job_units",
+    "flop_seconds",
+    "MissingUnitsError",
+]
+
+Config = Mapping[str, Any]
+Wildcards = Mapping[str, str]
+
+#: ViT shapes by arch name (tacgen_lib.features.vit.ARCHS): (embed_dim, depth). Kept here as
+#: numbers so that estimating does not import torch.
+_VIT = {"vit_tiny": (192, 6), "vit_small": (384, 12), "vit_base": (768, 12)}
+_PATCH = 14
+
+
+class MissingUnitsError(KeyError):
+    """A rule of the DAG has no line in `UNITS` (or a config it cannot count)."""
+
+    def __str__(self) -> str:  # KeyError quotes its message; this one reads as a sentence
+        return str(self.args[0])
+
+
+@dataclass(frozen=True)
+class UnitRule:
+    """How one rule's jobs are counted: `unit` says what one unit is (for the printed table),
+    `count(config, wildcards) -> (class suffix, units)`; an empty suffix is the rule itself.
+    `flops(config, wildcards)`, for rules whose time grows with a model's size, is the job's
+    dense floating-point work (multiply-add = 2): it is charged at the CPU's effective GEMM
+    rate (`GFLOPS_PER_THREAD`), so a bigger model costs more without a fitted term for it."""
+
+    unit: str
+    count: Callable[[Config, Wildcards], tuple[str, float]]
+    flops: Callable[[Config, Wildcards], float] | None = None
+
+
+#: Effective dense float32 rate per thread of the calibration's CPU (2-core AMD EPYC, AVX-512):
+#: half its measured GEMM peak of 100 GFLOP/s per thread (README, Speed: training reaches
+#: 0.58-0.69 of the roofline at batch 256, less on small layers). Scale with --speed-factor on
+#: another CPU class.
+GFLOPS_PER_THREAD = 50.0
+
+
+# ---- helpers: sizes read from the merged config --------------------------------------------
+
+
+def _corpus(c: Config, name: str) -> Mapping[str, Any]:
+    return c["corpora"][name]
+
+
+def _n(c: Config, name: str) -> float:
+    """Samples of a corpus: `n` of a simulated one; a real one's size is not in config (1)."""
+    return float(_corpus(c, name).get("n", 1))
+
+
+def _train_rows(c: Config, name: str) -> float:
+    return _n(c, name) * float(c["splits"]["fractions"]["train"])
+
+
+def _backbone(c: Config, modality: str) -> float:
+    """FLOPs of one frame through a modality's ViT forward: 2 × depth × tokens × (12 width² +
+    2 tokens × width) (projections and MLP, attention)."""
+    arch = c["features"]["backbones"][modality]["arch"]
+    width, depth = _VIT[arch]
+    tokens = (int(c["features"]["image_size"]) // _PATCH) ** 2 + 1
+    return 2.0 * depth * tokens * (12 * width**2 + 2 * tokens * width)
+
+
+#: DINO self-distillation per frame and epoch, in ViT forwards: 2 global crops through the
+#: student (forward + backward = 3 forwards) and the teacher (1), local crops left out.
+_DINO_FORWARDS = 8
+
+
+def _align_cells(c: Config) -> float:
+    a = c["align"]
+    return float(
+        len(a["corpora"])
+        * len(a["variants"])
+        * len(a["seeds"])
+        * len(a["taus"])
+        * len(a["n_train"])
+    )
+
+
+def _align_steps(c: Config, w: Wildcards) -> float:
+    """Optimiser steps of one alignment cell at most (`budget` epochs or steps)."""
+    a = c["align"]
+    rows = _train_rows(c, w["corpus"])
+    if w["n_train"] != "all":
+        rows = min(rows, float(w["n_train"]))
+    if a["budget"] == "steps":
+        return float(a["steps"])
+    return float(a["epochs"]) * max(1.0, rows // int(a["batch_size"]))
+
+
+def _generator_mlp(c: Config) -> float:
+    """FLOPs of one row through the residual MLP forward (2 hidden² layers per block, plus the
+    input and output layers of ~3 × 768-d features)."""
+    g = c["generate"]
+    h = int(g["hidden"])
+    return 2.0 * (int(g["blocks"]) * 2 * h * h + 3 * 768 * h)
+
+
+def _generate_cells(c: Config) -> float:
+    g = c["generate"]
+    return float(len(g["guidance"]) * sum(len(s) for s in g["samplers"].values()))
+
+
+def _probe_work(c: Config, w: Wildcards) -> tuple[str, float]:
+    """One probe job: rows × fits. Fits = inputs × CV grid × folds (the regulariser search of
+    each compared input) + control refits (permutations, label permutations, random draws,
+    train resamples) when the protocol runs controls + bootstrap resamples / 100 (a resample
+    re-scores, it does not refit). Class: solver kind / protocol variant."""
+    p = c["probes"]
+    fam = p["families"][w["family"]]
+    rob = p.get("robustness", {})
+    protocol = w["protocol"]
+    raw = protocol == "raw"
+    aligned = len(c["align"]["seeds"]) if fam.get("vision", "vit") == "vit" else 0
+    if raw or rob.get("comparisons", "headline") == "all":
+        inputs = 1 + len(p["fusions"]) * (1 + aligned) + len(c["preprocess"]["variants"])
+    else:
+        inputs = 2
+    if protocol == "mlp2":
+        mlp = rob["mlp"]
+        grid = len(mlp["widths"]) * len(mlp["weight_decays"]) * int(mlp["folds"])
+    else:
+        grid = len(p["lambdas"] if fam["kind"] == "ridge" else p["C"]) * int(p["folds"])
+    controls = raw or bool(rob.get("controls", False))
+    refits = (
+        int(p["permutations"]) + int(p["label_permutations"]) + int(p["random_draws"])
+        if controls
+        else 0
+    ) + (int(p["train_resamples"]) if raw else 0)
+    work = inputs * grid + refits + int(p["bootstrap"]) / 100
+    return f"{fam['kind']}/{protocol}", _n(c, fam["corpus"]) * work
+
+
+def _probe_jobs(c: Config) -> float:
+    p = c["probes"]
+    rob = p.get("robustness", {})
+    other = len([x for x in rob.get("protocols", []) if x != "raw"])
+    return float(len(p["seeds"]) * (len(p["families"]) + other * len(rob.get("families", []))))
+
+
+def _policy(c: Config) -> Mapping[str, Any]:
+    return c.get("policy", {})
+
+
+def _episodes(c: Config, episode_set: str) -> float:
+    pol = _policy(c)
+    return float(pol.get("n_demos" if episode_set == "demos" else "n_heldout", 0))
+
+
+def _policy_cells(c: Config) -> float:
+    pol = _policy(c)
+    return float(
+        len(pol.get("seeds", [1])) * 4
+        + len(pol.get("sweep_hidden", [])) * len(pol.get("sweep_epochs", []))
+        + 2
+    )
+
+
+def _const(unit: str) -> UnitRule:
+    """A rule whose jobs are all alike: one unit each, so its cost is its overhead."""
+    return UnitRule(unit, lambda c, w: ("", 1.0))
+
+
+# ---- the table: one line per rule --------------------------------------------------------------
+
+UNITS: dict[str, UnitRule] = {
+    # corpus
+    "simulate_corpus": UnitRule(
+        "sample-press (samples in the shard × presses)",
+        lambda c, w: (
+            "",
+            _n(c, w["corpus"])
+            / int(_corpus(c, w["corpus"])["shards"])
+            * int(_corpus(c, w["corpus"])["presses"]),
+        ),
+    ),
+    "merge_corpus": UnitRule("sample", lambda c, w: ("", _n(c, w["corpus"]))),
+    "ingest_tvl": _const("job (real corpus; size not in config)"),
+    "fuse_manifest": UnitRule(
+        "sample (all corpora)", lambda c, w: ("", sum(map(lambda k: _n(c, k), c["corpora"])))
+    ),
+    "make_splits": UnitRule(
+        "sample (all corpora)", lambda c, w: ("", sum(map(lambda k: _n(c, k), c["corpora"])))
+    ),
+    # preprocess
+    "background_subtract": UnitRule("frame", lambda c, w: ("", _n(c, w["corpus"]))),
+    # features
+    "pretrain_backbone": UnitRule(
+        "epoch × train frame (+ ViT FLOPs)",
+        lambda c, w: (
+            "",
+            int(c["features"]["pretrain"]["epochs"])
+            * _train_rows(c, c["features"]["pretrain"]["corpus"]),
+        ),
+        lambda c, w: (
+            int(c["features"]["pretrain"]["epochs"])
+            * _train_rows(c, c["features"]["pretrain"]["corpus"])
+            * _DINO_FORWARDS
+            * _backbone(c, w["modality"])
+        ),
+    ),
+    "extract_vision_features": UnitRule(
+        "frame (+ ViT FLOPs)",
+        lambda c, w: ("", _n(c, w["corpus"])),
+        lambda c, w: _n(c, w["corpus"]) * _backbone(c, "vision"),
+    ),
+    "extract_tactile_features": UnitRule(
+        "frame (+ ViT FLOPs)",
+        lambda c, w: ("", _n(c, w["corpus"])),
+        lambda c, w: _n(c, w["corpus"]) * _backbone(c, "tactile"),
+    ),
+    "pretrained_vs_random": UnitRule(
+        "frame (+ FLOPs of both random-init ViTs)",
+        lambda c, w: ("", _n(c, c["features"]["pretrained_vs_random"]["corpus"])),
+        lambda c, w: (
+            _n(c, c["features"]["pretrained_vs_random"]["corpus"])
+            * (_backbone(c, "vision") + _backbone(c, "tactile"))
+        ),
+    ),
+    # align
+    "train_heads": UnitRule(
+        "optimiser step × batch row (at most; early stopping ends sooner)",
+        lambda c, w: ("", _align_steps(c, w) * int(c["align"]["batch_size"])),
+    ),
+    "project_aligned": UnitRule(
+        "sample of the target corpus", lambda c, w: ("", _n(c, w["target"]))
+    ),
+    "aggregate_align": UnitRule("grid cell", lambda c, w: ("", _align_cells(c))),
+    # generate
+    "train_generator": UnitRule(
+        "optimiser step (at most; + MLP FLOPs)",
+        lambda c, w: ("", float(c["generate"]["steps"])),
+        lambda c, w: (
+            3.0 * int(c["generate"]["steps"]) * int(c["generate"]["batch_size"]) * _generator_mlp(c)
+        ),
+    ),
+    "sample_generator": UnitRule(
+        "sample × sampling step (+ MLP FLOPs, 2 passes for guidance)",
+        lambda c, w: ("", _n(c, w["corpus"]) * int(w["steps"])),
+        lambda c, w: 2.0 * _n(c, w["corpus"]) * int(w["steps"]) * _generator_mlp(c),
+    ),
+    "evaluate_generator": UnitRule(
+        "sample × (sampling cells × targets + permutations / 100)",
+        lambda c, w: (
+            "",
+            _n(c, w["corpus"])
+            * (
+                _generate_cells(c) * len(c["generate"]["corpora"][w["corpus"]])
+                + int(c["generate"]["permutations"]) / 100
+            ),
+        ),
+    ),
+    "aggregate_generate": UnitRule(
+        "sampling cell (all generators)",
+        lambda c, w: (
+            "",
+            _generate_cells(c) * len(c["generate"]["corpora"]) * len(c["generate"]["seeds"]),
+        ),
+    ),
+    # probes
+    "probe": UnitRule("row × fit (inputs × CV grid + control refits)", _probe_work),
+    "probe_training_size": UnitRule(
+        "row × training size × subset seed",
+        lambda c, w: (
+            "",
+            _n(c, c["probes"]["families"][w["family"]]["corpus"])
+            * len(c["probes"]["robustness"]["training_size"]["n_train"])
+            * len(c["probes"]["robustness"]["training_size"]["seeds"]),
+        ),
+    ),
+    "probe_within_scale": UnitRule(
+        "row × protocol variant",
+        lambda c, w: (
+            "",
+            _n(c, c["probes"]["families"][w["family"]]["corpus"])
+            * len(c["probes"]["robustness"]["protocols"]),
+        ),
+    ),
+    "aggregate_probes": UnitRule("probe job", lambda c, w: ("", _probe_jobs(c))),
+    "aggregate_robustness": UnitRule("probe job", lambda c, w: ("", _probe_jobs(c))),
+    # policy
+    "collect_demos": UnitRule(
+        "episode in the shard",
+        lambda c, w: (
+            "",
+            _episodes(c, w["episode_set"]) / int(_policy(c).get("collect_shards", 1)),
+        ),
+    ),
+    "palpate": UnitRule(
+        "episode (+ V and T ViT FLOPs)",
+        lambda c, w: ("", _episodes(c, "demos") + _episodes(c, "heldout")),
+        lambda c, w: (
+            (_episodes(c, "demos") + _episodes(c, "heldout"))
+            * (_backbone(c, "vision") + _backbone(c, "tactile"))
+        ),
+    ),
+    "train_policy": UnitRule(
+        "epoch × demo (+ MLP FLOPs)",
+        lambda c, w: ("", int(w["epochs"]) * _episodes(c, "demos")),
+        lambda c, w: 6.0 * int(w["epochs"]) * _episodes(c, "demos") * 3 * int(w["hidden"]) ** 2,
+    ),
+    "rollout_policy": UnitRule(
+        "held-out episode in the shard",
+        lambda c, w: (
+            "",
+            _episodes(c, "heldout") / int(_policy(c).get("rollout_shards", 1)),
+        ),
+    ),
+    "policy_regression": UnitRule(
+        "episode", lambda c, w: ("", _episodes(c, "demos") + _episodes(c, "heldout"))
+    ),
+    "aggregate_policy": UnitRule(
+        "policy cell × bootstrap resample / 1000",
+        lambda c, w: ("", _policy_cells(c) * int(_policy(c).get("bootstrap", 1000)) / 1000),
+    ),
+    # report
+    "corpus_examples": UnitRule(
+        "example frame", lambda c, w: ("", float(c["report"]["examples_per_corpus"]))
+    ),
+    "edge_manifest": _const("job"),
+    "cost_of_accuracy": _const("job"),
+}
+
+
+def job_units(rule: str, config: Config, wildcards: Wildcards) -> tuple[str, float, float]:
+    """(cost class, units, FLOPs) of one job of `rule` (FLOPs 0 for a rule without a model). A rule without a line in `UNITS`, or whose
+    line cannot count this config, raises `MissingUnitsError` naming the rule."""
+    if rule not in UNITS:
+        raise MissingUnitsError(
+            f"rule {rule!r} has no unit definition: add a line for it to "
+            "tacgen_lib/cost/units.py UNITS, then regenerate the calibration "
+            "(python -m tacgen_lib.cost.calibration)"
+        )
+    try:
+        suffix, units = UNITS[rule].count(config, wildcards)
+        flops = UNITS[rule].flops(config, wildcards) if UNITS[rule].flops else 0.0
+    except (KeyError, TypeError, ValueError, ZeroDivisionError) as exc:
+        raise MissingUnitsError(
+            f"rule {rule!r}: cannot count its units ({UNITS[rule].unit}) for wildcards "
+            f"{dict(wildcards)} from this config ({type(exc).__name__}: {exc}); fix its line in "
+            "tacgen_lib/cost/units.py UNITS"
+        ) from exc
+    return (f"{rule}:{suffix}" if suffix else rule), float(units), float(flops)
+
+
+def flop_seconds(flops: float, threads: int) -> float:
+    """Seconds of `flops` at the effective GEMM rate of `threads` threads."""
+    return flops / (GFLOPS_PER_THREAD * 1e9 * max(1, threads))
