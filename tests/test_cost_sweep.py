@@ -160,7 +160,9 @@ def test_sentence_names_a_cheaper_setting_inside_the_default_interval():
 
 
 def test_sentence_says_when_the_default_is_dominated():
-    p = points("w", "success", [("a", 1, True, 0.5, 0.4, 0.6, 5.0), ("b", 2, False, 0.7, 0.6, 0.8, 2.0)])
+    p = points(
+        "w", "success", [("a", 1, True, 0.5, 0.4, 0.6, 5.0), ("b", 2, False, 0.7, 0.6, 0.8, 2.0)]
+    )
     assert knob_sentence(p).endswith("The default is dominated.")
     with pytest.raises(ValueError, match="one knob"):
         knob_sentence(pd.concat([p, p.assign(metric="other")]))

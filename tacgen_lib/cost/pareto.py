@@ -95,10 +95,15 @@ def knob_sentence(points: pd.DataFrame, unit: str = "") -> str:
     p = points.sort_values("wall_s", kind="stable").reset_index(drop=True)
     direction = str(p["direction"].iloc[0]) if "direction" in p.columns else "higher"
     knob, metric = str(p["knob"].iloc[0]), str(p["metric"].iloc[0])
-    lab = (lambda r: f"{r['label']} {unit}".strip())
+
+    def lab(r: pd.Series) -> str:
+        return f"{r['label']} {unit}".strip()
+
     if len(p) == 1:
         r = p.iloc[0]
-        return f"{knob}: one setting ({lab(r)}), {metric} {_num(r['value'])} in {_num(r['wall_s'])} s."
+        return (
+            f"{knob}: one setting ({lab(r)}), {metric} {_num(r['value'])} in {_num(r['wall_s'])} s."
+        )
     default = p[p["is_default"].astype(bool)]
     d = default.iloc[0] if len(default) else p.iloc[0]
     other = p.iloc[-1] if d.name != len(p) - 1 else p.iloc[0]
@@ -109,7 +114,9 @@ def knob_sentence(points: pd.DataFrame, unit: str = "") -> str:
     change = f"{metric} {verb} by {_num(abs(gain))}" if gain != 0 else f"{metric} does not change"
     change += f" ({_num(d['value'])} → {_num(other['value'])}"
     if has_ci:
-        change += ", inside the default's interval)" if inside else ", outside the default's interval)"
+        change += (
+            ", inside the default's interval)" if inside else ", outside the default's interval)"
+        )
     else:
         change += ")"
     start = "from the default " if len(default) else "from "
@@ -147,7 +154,9 @@ def marginal_table(points: pd.DataFrame) -> pd.DataFrame:
             extra = float(b.wall_s - a.wall_s)
             gain = improvement(float(a.value), float(b.value), direction)
             within = bool(
-                math.isfinite(a.ci_low) and math.isfinite(a.ci_high) and a.ci_low <= b.value <= a.ci_high
+                math.isfinite(a.ci_low)
+                and math.isfinite(a.ci_high)
+                and a.ci_low <= b.value <= a.ci_high
             )
             out.append(
                 (

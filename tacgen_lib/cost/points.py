@@ -25,7 +25,7 @@ from __future__ import annotations
 
 import pandas as pd
 
-__all__ = ["DIRECTIONS", "POINT_COLUMNS", "check_points"]
+__all__ = ["DIRECTIONS", "POINT_COLUMNS", "check_points", "read_points", "write_points"]
 
 POINT_COLUMNS = [
     "knob",
@@ -67,3 +67,22 @@ def check_points(table: pd.DataFrame, source: str) -> pd.DataFrame:
         if pd.notna(r.ci_low) and not (r.ci_low <= r.value <= r.ci_high):
             raise ValueError(f"{where}: value {r.value} outside [{r.ci_low}, {r.ci_high}]")
     return table
+
+
+def write_points(table: pd.DataFrame, path: str, source: str) -> pd.DataFrame:
+    """Check `table` (`check_points`) and write it to `path` as Parquet, atomically. Not an
+    edge (no sidecar): its seconds vary from run to run (DESIGN §3)."""
+    import io
+
+    from tacgen_lib.io.edges import atomic_write_bytes
+
+    table = check_points(table, source)
+    sink = io.BytesIO()
+    table.to_parquet(sink, index=False)
+    atomic_write_bytes(path, sink.getvalue())
+    return table
+
+
+def read_points(path: str) -> pd.DataFrame:
+    """A knob's points, checked (`check_points`, naming `path` on a bad table)."""
+    return check_points(pd.read_parquet(path), str(path))

@@ -89,7 +89,9 @@ def replicate_seconds(benchmarks: Sequence[Benchmark]) -> tuple[float, float, in
     if not benchmarks:
         raise ValueError("replicate_seconds: no benchmark files")
     wall = float(np.mean([b.wall for b in benchmarks]))
-    cpu = float(np.nanmean([b.cpu for b in benchmarks])) if any(
-        math.isfinite(b.cpu) for b in benchmarks
-    ) else math.nan
+    cpu = (
+        float(np.nanmean([b.cpu for b in benchmarks]))
+        if any(math.isfinite(b.cpu) for b in benchmarks)
+        else math.nan
+    )
     return wall, cpu, len(benchmarks)

@@ -1,0 +1,425 @@
+"""Cost of accuracy: sweeps of the align, probes, generator and policy knobs, and the page.
+
+`snakemake --cores 2 cost_of_accuracy --configfile config/cost.yaml` runs every knob listed in
+config cost.knobs around the default and draws the page; the default run draws it from the
+knobs its own grids already vary (generator steps and samplers, the policy sweep).
+"""
+
+from tacgen_lib.generate.cells import guidance_text as _guidance_text
+from tacgen_lib.policy.cells import all_cells as _policy_all_cells
+
+ALIGN_KNOBS = ["align_steps", "align_n"]
+PROBE_KNOBS = ["probe_bootstrap", "probe_permutations"]
+GENERATE_KNOBS = ["generate_steps", "generate_sampler"]
+POLICY_KNOBS = ["policy_width", "policy_epochs"]
+register_cost_knobs("align", ALIGN_KNOBS)
+register_cost_knobs("probes", PROBE_KNOBS)
+register_cost_knobs("generate", GENERATE_KNOBS, free=bool(GENERATE_CORPORA))
+register_cost_knobs("policy", POLICY_KNOBS, free=POLICY_ON)
+for _k in GENERATE_KNOBS + POLICY_KNOBS:
+    if "values" in cost_knob(_k):
+        raise ValueError(
+            f"config cost.knobs.{_k}: its settings are the stage's own grid "
+            "(generate.samplers, policy.sweep_hidden / sweep_epochs); widen that instead"
+        )
+TARGETS += ["results/report/cost_of_accuracy.html"]
+
+
+def _text(values):
+    return [str(v) for v in values]
+
+
+# ------------------------------------------------------------------ alignment knobs
+
+
+def cost_align(knob):
+    """(corpus, variant, seeds, value labels) of an alignment knob."""
+    entry = cost_knob(knob)
+    heads = config["probes"]["heads"]
+    return (
+        entry.get("corpus") or ALIGN_CORPORA[0],
+        heads["variant"],
+        entry.get("seeds") or ALIGN["seeds"],
+        _text(entry.get("values") or []),
+    )
+
+
+def cost_align_cells(knob):
+    _, _, seeds, values = cost_align(knob)
+    return [(v, str(s)) for v in values for s in seeds]
+
+
+def cost_align_files(pattern):
+    def files(wildcards):
+        return [
+            pattern.format(knob=wildcards.knob, value=v, seed=s)
+            for v, s in cost_align_cells(wildcards.knob)
+        ]
+
+    return files
+
+
+rule cost_train_heads:
+    """InfoNCE heads at one setting of an alignment knob and one seed; test retrieval ranks."""
+    input:
+        v=lambda w: feature_edge(cost_align(w.knob)[0], "vision"),
+        t=lambda w: feature_edge(
+            cost_align(w.knob)[0], "tactile", cost_align(w.knob)[1]
+        ),
+        splits="results/corpus/splits.parquet",
+        code=imports_of("cost_train_heads"),
+    output:
+        ranks="results/cost/align/{knob}/{value}/seed~{seed}/ranks.parquet",
+    log:
+        "results/logs/cost_train_heads/{knob}/{value}/{seed}.log",
+    benchmark:
+        "results/benchmarks/cost_train_heads/{knob}/{value}/{seed}.tsv"
+    wildcard_constraints:
+        knob=one_of(ALIGN_KNOBS),
+        value=r"all|[1-9]\d*",
+        seed=r"0|[1-9]\d*",
+    conda:
+        "../envs/align.yaml"
+    threads: 2
+    resources:
+        mem_mb=4000,
+        runtime=60,
+    params:
+        settings=ALIGN,
+        corpus=lambda w: cost_align(w.knob)[0],
+        tau=config["probes"]["heads"]["tau"],
+        n_train=str(config["probes"]["heads"]["n_train"]),
+    script:
+        "../workflow/scripts/cost_train_heads.py"
+
+
+rule cost_align_points:
+    """Points of an alignment knob: top-1 and median rank with a bootstrap CI, and seconds."""
+    input:
+        ranks=cost_align_files(
+            "results/cost/align/{knob}/{value}/seed~{seed}/ranks.parquet"
+        ),
+        benchmarks=cost_align_files(
+            "results/benchmarks/cost_train_heads/{knob}/{value}/{seed}.tsv"
+        ),
+        code=imports_of("cost_align_points"),
+    output:
+        points=COST_POINTS,
+    log:
+        "results/logs/cost_align_points/{knob}.log",
+    benchmark:
+        "results/benchmarks/cost_align_points/{knob}.tsv"
+    wildcard_constraints:
+        knob=one_of(ALIGN_KNOBS),
+    conda:
+        "../envs/report.yaml"
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=5,
+    params:
+        cells=lambda w: cost_align_cells(w.knob),
+        default=lambda w: (
+            None
+            if w.knob == "align_steps"
+            else str(DEFAULT_CONFIG["probes"]["heads"]["n_train"])
+        ),
+        bootstrap=lambda w: cost_knob(w.knob).get("bootstrap", 2000),
+    script:
+        "../workflow/scripts/cost_align_points.py"
+
+
+# ------------------------------------------------------------------ probe knobs
+
+
+def cost_probe_family(knob):
+    return probe_family(cost_knob(knob).get("family", "force"))
+
+
+def cost_probe_cells(knob):
+    entry = cost_knob(knob)
+    return [
+        (v, str(r))
+        for v in _text(entry.get("values") or [])
+        for r in range(int(entry.get("replicates", 5)))
+    ]
+
+
+def cost_probe_files(pattern):
+    def files(wildcards):
+        return [
+            pattern.format(knob=wildcards.knob, value=v, rep=r)
+            for v, r in cost_probe_cells(wildcards.knob)
+        ]
+
+    return files
+
+
+def cost_probe_inputs(wildcards):
+    fam = cost_probe_family(wildcards.knob)
+    return {
+        "manifest": "results/corpus/manifest.parquet",
+        "splits": "results/corpus/splits.parquet",
+        "vision": feature_edge(fam["corpus"], "vision"),
+        "tactile": feature_edge(fam["corpus"], "tactile", PROBES["heads"]["variant"]),
+    }
+
+
+rule cost_probe:
+    """One replicate seed of a probe knob's setting: B bootstrap resamples or permutations."""
+    input:
+        unpack(cost_probe_inputs),
+        code=imports_of("cost_probe"),
+    output:
+        rows="results/cost/probes/{knob}/{value}/rep~{rep}.parquet",
+    log:
+        "results/logs/cost_probe/{knob}/{value}/{rep}.log",
+    benchmark:
+        "results/benchmarks/cost_probe/{knob}/{value}/{rep}.tsv"
+    wildcard_constraints:
+        knob=one_of(PROBE_KNOBS),
+        value=r"[1-9]\d*",
+        rep=r"0|[1-9]\d*",
+    conda:
+        "../envs/probes.yaml"
+    threads: 1
+    resources:
+        mem_mb=3000,
+        runtime=30,
+    params:
+        family=lambda w: cost_probe_family(w.knob),
+        corpus=lambda w: CORPORA[cost_probe_family(w.knob)["corpus"]],
+        settings={k: v for k, v in PROBES.items() if k not in ("families", "seeds")},
+        probe_seed=PROBES["seeds"][0],
+    script:
+        "../workflow/scripts/cost_probe.py"
+
+
+rule cost_probe_points:
+    """Points of a probe knob: Monte Carlo spread across replicate seeds, and seconds."""
+    input:
+        rows=cost_probe_files("results/cost/probes/{knob}/{value}/rep~{rep}.parquet"),
+        benchmarks=cost_probe_files(
+            "results/benchmarks/cost_probe/{knob}/{value}/{rep}.tsv"
+        ),
+        code=imports_of("cost_probe_points"),
+    output:
+        points=COST_POINTS,
+    log:
+        "results/logs/cost_probe_points/{knob}.log",
+    benchmark:
+        "results/benchmarks/cost_probe_points/{knob}.tsv"
+    wildcard_constraints:
+        knob=one_of(PROBE_KNOBS),
+    conda:
+        "../envs/report.yaml"
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=5,
+    params:
+        cells=lambda w: cost_probe_cells(w.knob),
+        default=lambda w: str(
+            DEFAULT_CONFIG["probes"][
+                "bootstrap" if w.knob == "probe_bootstrap" else "permutations"
+            ]
+        ),
+    script:
+        "../workflow/scripts/cost_probe_points.py"
+
+
+# ------------------------------------------------------------------ generator knobs
+
+
+def _generate_ref(gen):
+    """(sampler, steps, guidance text) of a generate config's reference cell."""
+    sampler = next(iter(gen["samplers"]))
+    ws = [_guidance_text(w) for w in gen["guidance"]]
+    return (
+        sampler,
+        max(int(s) for s in gen["samplers"][sampler]),
+        ("1" if "1" in ws else ws[0]),
+    )
+
+
+def cost_generate(knob):
+    """corpus, target, guidance, default label and cells (label, setting, sampler, steps)."""
+    entry = cost_knob(knob)
+    corpus = entry.get("corpus") or GENERATE_CORPORA[0]
+    target = entry.get("target") or next(iter(GENERATE["corpora"][corpus]))
+    sampler, steps, guidance = _generate_ref(GENERATE)
+    d_sampler, d_steps, _ = _generate_ref(DEFAULT_CONFIG["generate"])
+    if knob == "generate_steps":
+        cells = [
+            (str(s), int(s), sampler, int(s))
+            for s in sorted(int(x) for x in GENERATE["samplers"][sampler])
+        ]
+        default = str(d_steps) if sampler == d_sampler else None
+    else:
+        cells = []
+        for i, (name, steps_list) in enumerate(GENERATE["samplers"].items()):
+            st = d_steps if d_steps in [int(x) for x in steps_list] else max(steps_list)
+            cells.append((f"{name} {int(st)}", i, name, int(st)))
+        default = f"{d_sampler} {d_steps}"
+    return corpus, target, guidance, default, cells
+
+
+def cost_generate_bench(knob):
+    corpus, _, guidance, _, cells = cost_generate(knob)
+    out = [
+        (
+            (label, str(seed)),
+            sample_benchmark(corpus, seed, sampler, guidance, steps),
+        )
+        for label, _, sampler, steps in cells
+        for seed in GENERATE["seeds"]
+    ]
+    return out
+
+
+rule cost_generate_points:
+    """Points of a generator knob from the generation summary and the sampling benchmarks."""
+    input:
+        summary="results/generate/summary.parquet",
+        benchmarks=lambda w: [path for _, path in cost_generate_bench(w.knob)],
+        code=imports_of("cost_generate_points"),
+    output:
+        points=COST_POINTS,
+    log:
+        "results/logs/cost_generate_points/{knob}.log",
+    benchmark:
+        "results/benchmarks/cost_generate_points/{knob}.tsv"
+    wildcard_constraints:
+        knob=one_of(GENERATE_KNOBS),
+    conda:
+        "../envs/report.yaml"
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=5,
+    params:
+        corpus=lambda w: cost_generate(w.knob)[0],
+        target=lambda w: cost_generate(w.knob)[1],
+        guidance=lambda w: cost_generate(w.knob)[2],
+        default=lambda w: cost_generate(w.knob)[3],
+        cells=lambda w: cost_generate(w.knob)[4],
+        bench_cells=lambda w: [cell for cell, _ in cost_generate_bench(w.knob)],
+    script:
+        "../workflow/scripts/cost_generate_points.py"
+
+
+# ------------------------------------------------------------------ policy knobs
+
+
+def cost_policy(knob):
+    """Default label and cells (label, setting, hidden, epochs) of a policy knob: the V-only
+    cells at the default epochs (width) or the default width (epochs)."""
+    s = POLICY_SETTINGS
+    v_cells = [c for c in _policy_all_cells(s) if c[0] == "v"]
+    if knob == "policy_width":
+        values = sorted({h for _, h, e, _ in v_cells if e == s.epochs})
+        cells = [(str(h), h, h, s.epochs) for h in values]
+        default = str(DEFAULT_CONFIG["policy"]["hidden"])
+    else:
+        values = sorted({e for _, h, e, _ in v_cells if h == s.hidden})
+        cells = [(str(e), e, s.hidden, e) for e in values]
+        default = str(DEFAULT_CONFIG["policy"]["epochs"])
+    return default, cells, v_cells
+
+
+def cost_policy_bench(knob):
+    _, cells, v_cells = cost_policy(knob)
+    out = []
+    for label, _, h, e in cells:
+        for c in v_cells:
+            if (c[1], c[2]) != (h, e):
+                continue
+            name = policy_cell_name(c)
+            out.append(
+                ((label, str(c[3])), f"results/benchmarks/train_policy/{name}.tsv")
+            )
+            out += [
+                (
+                    (label, str(c[3])),
+                    f"results/benchmarks/rollout_policy/{name}/{k}.tsv",
+                )
+                for k in range(POLICY_SETTINGS.rollout_shards)
+            ]
+    return out
+
+
+rule cost_policy_points:
+    """Points of a policy knob from the policy summary and the training and rollout benchmarks."""
+    input:
+        summary=f"{POLICY_DIR}/summary.parquet",
+        benchmarks=lambda w: [path for _, path in cost_policy_bench(w.knob)],
+        code=imports_of("cost_policy_points"),
+    output:
+        points=COST_POINTS,
+    log:
+        "results/logs/cost_policy_points/{knob}.log",
+    benchmark:
+        "results/benchmarks/cost_policy_points/{knob}.tsv"
+    wildcard_constraints:
+        knob=one_of(POLICY_KNOBS),
+    conda:
+        "../envs/report.yaml"
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=5,
+    params:
+        default=lambda w: cost_policy(w.knob)[0],
+        cells=lambda w: cost_policy(w.knob)[1],
+        bench_cells=lambda w: [cell for cell, _ in cost_policy_bench(w.knob)],
+    script:
+        "../workflow/scripts/cost_policy_points.py"
+
+
+# ------------------------------------------------------------------ the page
+
+
+localrules:
+    cost_of_accuracy,
+
+
+rule cost_of_accuracy:
+    """The cost page: per knob, metric ± uncertainty against seconds, default, Pareto front."""
+    input:
+        points=cost_points,
+        code=imports_of("cost_of_accuracy"),
+    output:
+        html=report(
+            "results/report/cost_of_accuracy.html",
+            caption="../workflow/report/cost_of_accuracy.rst",
+            category="Cost of accuracy",
+            labels={"table": "knobs: what each setting buys"},
+        ),
+        marginal=report(
+            "results/report/cost_marginal.html",
+            caption="../workflow/report/cost_marginal.rst",
+            category="Cost of accuracy",
+            labels={"table": "marginal accuracy per extra minute"},
+        ),
+        figure=report(
+            "results/report/cost_of_accuracy.png",
+            caption="../workflow/report/cost_of_accuracy_figure.rst",
+            category="Cost of accuracy",
+            labels={"figure": "accuracy against seconds"},
+        ),
+        tsv="results/report/cost_of_accuracy.tsv",
+    log:
+        "results/logs/cost_of_accuracy.log",
+    benchmark:
+        "results/benchmarks/cost_of_accuracy.tsv"
+    conda:
+        "../envs/report.yaml"
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=5,
+    params:
+        stages=COST_KNOBS,
+        swept=sorted(COST_KNOB_CONFIG),
+    script:
+        "../workflow/scripts/cost_of_accuracy.py"
