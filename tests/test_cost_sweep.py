@@ -14,6 +14,14 @@ from tacgen_lib.cost.benchmarks import Benchmark
 from tacgen_lib.cost.pareto import improvement, knob_sentence, marginal_table, pareto_front
 from tacgen_lib.cost.points import POINT_COLUMNS, check_points
 from tacgen_lib.cost.spread import replicate_seconds, retrieval_bootstrap, sd_interval
+from tacgen_lib.cost.sweeps import (
+    Seconds,
+    align_points,
+    bootstrap_spread_points,
+    generate_points,
+    permutation_points,
+    policy_points,
+)
 
 
 def points(knob, metric, rows, direction="higher"):
@@ -185,3 +193,48 @@ def test_marginal_table_gain_per_minute_on_the_front():
     assert t["within_uncertainty"].tolist() == [False, True]
     lower = marginal_table(p.assign(direction="lower"))
     assert lower.empty  # lower is better: the cheapest point dominates all
+
+
+# ------------------------------------------------------------------------------ sweeps
+
+
+SEC = {"a": Seconds(1.0, 0.5, 2), "b": Seconds(3.0, 2.0, 2)}
+
+
+def test_align_points_carry_both_metrics_and_directions():
+    ranks = {"a": [np.array([1, 2, 3, 1])], "all": [np.array([1, 1, 2, 1])]}
+    p = check_points(
+        align_points("align_n", ranks, {"a": SEC["a"], "all": SEC["b"]}, "all",
+                     n_resamples=200, seed=0, n_all=840),
+        "align",
+    )  # fmt: skip
+    top1 = p[p["metric"].str.startswith("top-1")].set_index("label")
+    assert top1.loc["all", "value"] == pytest.approx(0.75)
+    assert top1.loc["all", "setting"] == 840 and bool(top1.loc["all", "is_default"])
+    assert set(p.loc[p["metric"].str.startswith("median"), "direction"]) == {"lower"}
+
+
+def test_spread_and_permutation_points():
+    reps = pd.DataFrame({"label": ["a"] * 3 + ["b"] * 3,
+                         "ci_low": [0.10, 0.12, 0.11, 0.110, 0.111, 0.112],
+                         "ci_high": [0.5, 0.52, 0.51, 0.51, 0.51, 0.51]})  # fmt: skip
+    p = check_points(bootstrap_spread_points("probe_bootstrap", reps, SEC, "b"), "boot")
+    low = p[p["metric"].str.contains("lower")].set_index("label")["value"]
+    assert low["a"] == pytest.approx(0.01) and low["b"] == pytest.approx(0.001)
+    perm = pd.DataFrame({"label": ["a", "a"], "n_permutations": [9, 9], "delta_ctrl": [0.1, 0.3]})
+    q = check_points(permutation_points("probe_permutations", perm, SEC, "a"), "perm")
+    assert q.iloc[0]["value"] == pytest.approx(0.1) and math.isnan(q.iloc[0]["ci_low"])
+    assert q.iloc[1]["value"] == pytest.approx(np.std([0.1, 0.3], ddof=1))
+
+
+def test_generate_and_policy_points_average_seeds():
+    cells = pd.DataFrame({"label": ["a", "a"], "setting": [5, 5], "delta": [0.1, 0.2],
+                          "ci_low": [0.0, 0.1], "ci_high": [0.2, 0.3], "frechet": [4.0, 6.0]})  # fmt: skip
+    p = check_points(generate_points("generate_steps", cells, SEC, "a", target="force"), "gen")
+    assert p.iloc[0][["value", "ci_low", "ci_high"]].tolist() == pytest.approx([0.15, 0.05, 0.25])
+    assert p.iloc[1][["value", "ci_low", "ci_high"]].tolist() == pytest.approx([5.0, 4.0, 6.0])
+    assert p.iloc[1]["direction"] == "lower"
+    pol = pd.DataFrame({"label": ["b"], "setting": [512], "success": [0.6], "ci_low": [0.5],
+                        "ci_high": [0.7], "n_episodes": [128]})  # fmt: skip
+    q = check_points(policy_points("policy_width", pol, SEC, "b"), "pol")
+    assert bool(q.iloc[0]["is_default"]) and q.iloc[0]["wall_s"] == 3.0
