@@ -142,12 +142,18 @@ def test_sentence_from_numbers_resamples():
         direction="lower",
     )
     text = knob_sentence(p, unit="resamples")
-    assert text.startswith("probe_bootstrap: from the default 5,000 resamples to 200 resamples")
-    assert "worsens by 0.016 (0.004 → 0.02, outside the default's interval)" in text
-    assert "0.2× as long (4.5 s → 1 s)" in text
+    # the default is the largest setting: compared with the next smaller one
+    assert text.startswith("probe_bootstrap: from the default 5,000 resamples to 1,000 resamples")
+    assert "worsens by 0.004 (0.004 → 0.008, inside the interval of 5,000 resamples)" in text
+    assert "0.3× as long (4.5 s → 1.5 s)" in text
     assert "The default is on the Pareto front." in text
     # 0.008 lies inside the default's [0.002, 0.011]: 1,000 resamples is as good, measurably
     assert "1,000 resamples is within the default's uncertainty at 0.3× its time" in text
+    no_default = knob_sentence(p.assign(is_default=False), unit="resamples")
+    assert no_default.startswith("probe_bootstrap: from 200 resamples to 5,000 resamples, ")
+    assert "improves by 0.016 (0.02 → 0.004, outside the interval of 200 resamples)" in no_default
+    assert "22.5× as long" not in no_default and "4.5× as long (1 s → 4.5 s)" in no_default
+    assert "Pareto" not in no_default
 
 
 def test_sentence_names_a_cheaper_setting_inside_the_default_interval():
@@ -162,7 +168,7 @@ def test_sentence_names_a_cheaper_setting_inside_the_default_interval():
     )
     text = knob_sentence(p, unit="steps")
     assert "from the default 900 steps to 2700 steps, top-1 improves by 0.02" in text
-    assert "inside the default's interval" in text
+    assert "inside the interval of 900 steps" in text
     assert "2.0× as long (30 s → 60 s)" in text
     assert "300 steps is within the default's uncertainty at 0.3× its time" in text
 

@@ -82,17 +82,19 @@ def _ratio(a: float, b: float) -> str:
 def knob_sentence(points: pd.DataFrame, unit: str = "") -> str:
     """One sentence on a knob's metric from its points (one knob, one metric, >= 1 setting).
 
-    Compares the default setting with the most expensive setting (or, if the default is the
-    most expensive, with the cheapest): the metric's change against its uncertainty and the
-    ratio of wall times; then names the cheapest setting whose value lies inside the default's
-    interval (what could be saved without a measurable loss), and whether the default is on
-    the Pareto front. `unit` follows setting labels ("resamples").
+    "What does more X buy, and for how long": compares the default setting with the next
+    larger setting of the knob (the next smaller if the default is the largest; the smallest
+    with the largest if no setting is the default): the metric's change, whether it lies
+    inside the first setting's interval (not measurable) and the ratio of wall times. Then
+    names the cheapest setting whose value lies inside the default's interval (what could be
+    saved without a measurable loss), and whether the default is on the Pareto front.
+    Settings are ordered by `setting` (then by seconds); `unit` follows their labels.
     """
     if points.empty:
         raise ValueError("knob_sentence: no points")
     if points["knob"].nunique() != 1 or points["metric"].nunique() != 1:
         raise ValueError("knob_sentence: pass the points of one knob and one metric")
-    p = points.sort_values("wall_s", kind="stable").reset_index(drop=True)
+    p = points.sort_values(["setting", "wall_s"], kind="stable").reset_index(drop=True)
     direction = str(p["direction"].iloc[0]) if "direction" in p.columns else "higher"
     knob, metric = str(p["knob"].iloc[0]), str(p["metric"].iloc[0])
 
@@ -104,38 +106,40 @@ def knob_sentence(points: pd.DataFrame, unit: str = "") -> str:
         return (
             f"{knob}: one setting ({lab(r)}), {metric} {_num(r['value'])} in {_num(r['wall_s'])} s."
         )
-    default = p[p["is_default"].astype(bool)]
-    d = default.iloc[0] if len(default) else p.iloc[0]
-    other = p.iloc[-1] if d.name != len(p) - 1 else p.iloc[0]
+    defaults = np.flatnonzero(p["is_default"].astype(bool).to_numpy())
+    if defaults.size:
+        i = int(defaults[0])
+        j = i + 1 if i + 1 < len(p) else i - 1
+    else:
+        i, j = 0, len(p) - 1
+    d, other = p.iloc[i], p.iloc[j]
     gain = improvement(d["value"], other["value"], direction)
     has_ci = math.isfinite(d["ci_low"]) and math.isfinite(d["ci_high"])
-    inside = has_ci and d["ci_low"] <= other["value"] <= d["ci_high"]
     verb = "improves" if gain > 0 else "worsens" if gain < 0 else "does not change"
-    change = f"{metric} {verb} by {_num(abs(gain))}" if gain != 0 else f"{metric} does not change"
+    change = f"{metric} {verb}" + (f" by {_num(abs(gain))}" if gain != 0 else "")
     change += f" ({_num(d['value'])} → {_num(other['value'])}"
     if has_ci:
-        change += (
-            ", inside the default's interval)" if inside else ", outside the default's interval)"
-        )
+        inside = d["ci_low"] <= other["value"] <= d["ci_high"]
+        change += f", {'inside' if inside else 'outside'} the interval of {lab(d)})"
     else:
         change += ")"
-    start = "from the default " if len(default) else "from "
+    start = "from the default " if defaults.size else "from "
     text = (
         f"{knob}: {start}{lab(d)} to {lab(other)}, {change} and the job takes "
         f"{_ratio(d['wall_s'], other['wall_s'])} as long ({_num(d['wall_s'])} s → "
         f"{_num(other['wall_s'])} s)."
     )
-    if has_ci:
+    if defaults.size and has_ci:
         cheap = p[(p["value"] >= d["ci_low"]) & (p["value"] <= d["ci_high"])]
-        cheap = cheap[cheap["wall_s"] < d["wall_s"]]
+        cheap = cheap[cheap["wall_s"] < d["wall_s"]].sort_values("wall_s", kind="stable")
         if len(cheap):
             c = cheap.iloc[0]
             text += (
                 f" {lab(c)} is within the default's uncertainty at "
                 f"{_ratio(d['wall_s'], c['wall_s'])} its time."
             )
-    if len(default):
-        on = pareto_front(p["wall_s"], p["value"], direction)[d.name]
+    if defaults.size:
+        on = pareto_front(p["wall_s"], p["value"], direction)[i]
         text += " The default is on the Pareto front." if on else " The default is dominated."
     return text
 

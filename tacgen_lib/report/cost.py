@@ -15,6 +15,7 @@ from collections.abc import Mapping, Sequence
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
+from matplotlib.ticker import FuncFormatter, NullFormatter
 
 from tacgen_lib.cost.pareto import knob_sentence, marginal_table, pareto_front
 from tacgen_lib.report.tables import to_html
@@ -158,6 +159,10 @@ def cost_figure(points: pd.DataFrame, stages: Mapping[str, str] | None = None) -
                 ax.annotate(_label(str(lab)), (xi, yi), xytext=(dx, dy), textcoords="offset points",
                             fontsize=7, zorder=5)  # fmt: skip
             ax.set_xscale("log")
+            plain = FuncFormatter(lambda v, _: f"{v:g}")
+            ax.xaxis.set_major_formatter(plain)
+            span = np.nanmax(x) / max(np.nanmin(x), 1e-9) if len(x) else 1.0
+            ax.xaxis.set_minor_formatter(plain if span < 10 else NullFormatter())
             if len(x) and np.nanmax(x) / max(np.nanmin(x), 1e-9) < 3:
                 mid = float(np.sqrt(np.nanmax(x) * np.nanmin(x)))
                 ax.set_xlim(mid / 2.0, mid * 2.0)  # a narrow range still shows as a factor
@@ -167,7 +172,7 @@ def cost_figure(points: pd.DataFrame, stages: Mapping[str, str] | None = None) -
             ax.set_ylabel(f"{metric} {arrow}", fontsize=7)
             stage = f" ({stages[knob]})" if stages and knob in stages else ""
             ax.set_title(f"{knob}{stage}", fontsize=9)
-            ax.tick_params(labelsize=7)
+            ax.tick_params(which="both", labelsize=7)
             ax.legend(fontsize=6, loc="best")
     fig.suptitle(
         "Cost of accuracy: each point one setting of a knob (± its uncertainty)", fontsize=10
