@@ -4,7 +4,8 @@ A knob is swept when config `cost.knobs` lists it (config/cost.yaml); its points
 `results/cost/points/{knob}.parquet` (tacgen_lib.cost.points). Each cost*.smk registers the
 knobs its rules write with `register_cost_knobs`; `free=True` marks knobs whose points come
 from a stage's own grid at no extra job (the generator's steps and samplers, the policy's
-width and epochs sweep), so the default run's page shows them too. `cost_points()` is the
+width and epochs sweep), so the default run's page shows them too (`cost.grid_knobs: false`
+leaves them out). `cost_points()` is the
 page's input: an unknown name in `cost.knobs` stops the run with the registered names.
 """
 
@@ -39,7 +40,8 @@ def cost_knobs():
             f"config cost.knobs: {unknown} are not knobs of this workflow "
             f"(known: {sorted(COST_KNOBS)})"
         )
-    return [k for k in COST_KNOBS if k in COST_KNOB_CONFIG or k in COST_FREE_KNOBS]
+    free = COST_FREE_KNOBS if COST.get("grid_knobs", True) else set()
+    return [k for k in COST_KNOBS if k in COST_KNOB_CONFIG or k in free]
 
 
 def cost_points(wildcards=None):
