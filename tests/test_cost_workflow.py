@@ -34,7 +34,7 @@ def test_unknown_knob_stops_with_the_known_names(tmp_path):
         yaml.safe_dump({"cost": {"knobs": {"align_stepz": {"values": [1, 2]}}}})
     )
     proc = smk(work, "--dry-run", "--configfile", "config/test.yaml", "config/bad_cost.yaml",
-               "cost_of_accuracy", check=False)  # fmt: skip
+               "--", "cost_of_accuracy", check=False)  # fmt: skip
     assert proc.returncode != 0
     assert "['align_stepz'] are not knobs" in proc.stdout + proc.stderr
     assert "align_steps" in proc.stdout + proc.stderr
@@ -42,11 +42,11 @@ def test_unknown_knob_stops_with_the_known_names(tmp_path):
 
 def test_tiny_sweep_writes_points_and_the_page(reference_run: Path, tmp_path):
     work = copy_run(reference_run, tmp_path / "sweep")
-    planned = planned_rules(work, *SWEEP, "cost_of_accuracy")
+    planned = planned_rules(work, *SWEEP, "--", "cost_of_accuracy")
     assert planned["cost_train_heads"] == 4  # 2 knobs x 2 settings x 1 seed
     assert planned["cost_probe"] == 8  # 2 knobs x 2 settings x 2 replicates
     assert "train_heads" not in planned and "probe" not in planned  # the default's jobs stay
-    smk(work, *SWEEP, "cost_of_accuracy")
+    smk(work, *SWEEP, "--", "cost_of_accuracy")
     points = {
         k: read_points(work / f"results/cost/points/{k}.parquet")
         for k in ("align_steps", "align_n", "probe_bootstrap", "probe_permutations",
@@ -70,5 +70,5 @@ def test_tiny_sweep_writes_points_and_the_page(reference_run: Path, tmp_path):
     assert (work / "results/report/cost_of_accuracy.png").stat().st_size > 10_000
     table = pd.read_csv(work / "results/report/cost_of_accuracy.tsv", sep="\t")
     assert set(table["knob"]) == set(points)
-    again = planned_rules(work, *SWEEP, "cost_of_accuracy")
+    again = planned_rules(work, *SWEEP, "--", "cost_of_accuracy")
     assert again == {}, again  # a second run has nothing to do
