@@ -119,9 +119,22 @@ def cost_page_html(
     return page.replace("</h3>", "</h3>" + intro, 1)
 
 
-def _offsets(n: int) -> list[tuple[int, int]]:
-    """Label offsets (points) that alternate above and below, so neighbours do not collide."""
-    return [(4, 7) if i % 2 == 0 else (4, -11) for i in range(n)]
+def _offsets(x: np.ndarray) -> list[tuple[int, int, str]]:
+    """Label offsets (points) and alignment for points at seconds `x` (in drawing order):
+    above and below in turn; where neighbours crowd the x-axis (within 15 % of each other),
+    to the right and left in turn, so no two labels of a cluster share a side."""
+    order = np.argsort(x, kind="stable")
+    out: list[tuple[int, int, str]] = [(4, 7, "left")] * len(x)
+    for rank, i in enumerate(order):
+        crowded = any(
+            j != i and np.isfinite(x[j]) and abs(np.log(x[j] / x[i])) < np.log(1.15)
+            for j in range(len(x))
+        ) if np.isfinite(x[i]) and x[i] > 0 else False  # fmt: skip
+        if crowded:
+            out[i] = (7, -3, "left") if rank % 2 == 0 else (-7, -3, "right")
+        else:
+            out[i] = (4, 7, "left") if rank % 2 == 0 else (4, -11, "left")
+    return out
 
 
 def cost_figure(points: pd.DataFrame, stages: Mapping[str, str] | None = None) -> plt.Figure:
@@ -155,9 +168,9 @@ def cost_figure(points: pd.DataFrame, stages: Mapping[str, str] | None = None) -
             if d.any():
                 ax.scatter(x[d], y[d], s=110, facecolors="none", edgecolors="tab:red", lw=1.6,
                            label="default", zorder=4)  # fmt: skip
-            for (dx, dy), lab, xi, yi in zip(_offsets(len(g)), g["label"], x, y, strict=True):
+            for (dx, dy, ha), lab, xi, yi in zip(_offsets(x), g["label"], x, y, strict=True):
                 ax.annotate(_label(str(lab)), (xi, yi), xytext=(dx, dy), textcoords="offset points",
-                            fontsize=7, zorder=5)  # fmt: skip
+                            ha=ha, fontsize=7, zorder=5)  # fmt: skip
             ax.set_xscale("log")
             plain = FuncFormatter(lambda v, _: f"{v:g}")
             ax.xaxis.set_major_formatter(plain)
