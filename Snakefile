@@ -32,6 +32,8 @@ include: "rules/probes.smk"
 # --- policy stage (issue 13) ---
 include: "rules/policy.smk"
 # --- end policy stage ---
+include: "rules/cost_common.smk"  # issue 14: cost of accuracy (knob registry)
+include: "rules/cost.smk"
 include: "rules/report.smk"
 
 

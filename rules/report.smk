@@ -4,7 +4,6 @@
 localrules:
     corpus_examples,
     edge_manifest,
-    cost_of_accuracy,
 
 
 TARGETS += ["results/report/edge_manifest.html"]
@@ -74,45 +73,3 @@ rule edge_manifest:
         runtime=5,
     script:
         "../workflow/scripts/edge_manifest.py"
-
-
-TARGETS += ["results/report/cost_of_accuracy.html"]
-
-
-rule cost_of_accuracy:
-    """Each knob's accuracy against its run time: benchmark files joined with the metrics."""
-    input:
-        align="results/align/summary.parquet",
-        pretrain="results/features/pretrained_vs_random.parquet",
-        pretrain_bench=expand(
-            "results/benchmarks/pretrain_backbone/{m}.tsv", m=["vision", "tactile"]
-        ),
-        simulate_bench=simulate_benchmarks,
-        manifest="results/corpus/manifest.parquet",
-        code=imports_of("cost_of_accuracy"),
-    output:
-        html=report(
-            "results/report/cost_of_accuracy.html",
-            caption="../workflow/report/cost_of_accuracy.rst",
-            category="Cost of accuracy",
-            labels={"table": "cost of accuracy"},
-        ),
-        figure=report(
-            "results/report/cost_of_accuracy.png",
-            caption="../workflow/report/cost_of_accuracy.rst",
-            category="Cost of accuracy",
-            labels={"figure": "cost of accuracy"},
-        ),
-        tsv="results/report/cost_of_accuracy.tsv",
-    log:
-        "results/logs/cost_of_accuracy.log",
-    benchmark:
-        "results/benchmarks/cost_of_accuracy.tsv"
-    conda:
-        "../envs/report.yaml"
-    threads: 1
-    resources:
-        mem_mb=1000,
-        runtime=5,
-    script:
-        "../workflow/scripts/cost_of_accuracy.py"

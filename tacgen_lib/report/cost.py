@@ -1,103 +1,194 @@
-"""Cost of accuracy (DESIGN §7): every knob's accuracy against its run time.
+"""The cost-of-accuracy page (DESIGN §7): what each knob's settings buy, against their seconds.
 
-Run times come from the Snakemake `benchmark:` file of the job that produced a metric (wall
-seconds, column `s`), never from inside an edge (edges must be reproducible bit for bit).
-Each row is one job: which knob it varies, its setting, the seconds it took and the metric it
-produced, so a reader sees what an extra epoch, sample or resample buys.
+Input is the points of every knob (`tacgen_lib.cost.points`, one table per knob). The page
+has a figure (one row of panels per knob, one panel per metric: metric ± uncertainty against
+wall seconds on a log axis, the default ringed, the Pareto front drawn), one sentence per knob
+and metric written from the numbers (`cost.pareto.knob_sentence`), the points as a table and
+the marginal accuracy per extra minute between consecutive Pareto points.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import html
+from collections.abc import Mapping, Sequence
 
 import matplotlib.pyplot as plt
+import numpy as np
 import pandas as pd
+from matplotlib.ticker import FuncFormatter, NullFormatter
 
-__all__ = ["COST_COLUMNS", "cost_rows", "cost_figure"]
+from tacgen_lib.cost.pareto import knob_sentence, marginal_table, pareto_front
+from tacgen_lib.report.tables import to_html
 
-COST_COLUMNS = ["stage", "knob", "setting", "seconds", "metric", "value"]
+__all__ = [
+    "KNOB_UNITS",
+    "cost_figure",
+    "cost_page_html",
+    "knob_sentences",
+    "marginal_view",
+    "points_view",
+]
+
+#: What a knob's setting labels count, for the sentences ("5,000 resamples").
+KNOB_UNITS = {
+    "align_steps": "steps",
+    "align_n": "training pairs",
+    "probe_bootstrap": "resamples",
+    "probe_permutations": "permutations",
+    "generate_steps": "sampling steps",
+    "generate_sampler": "",
+    "policy_width": "hidden units",
+    "policy_epochs": "epochs",
+}
 
 
-def cost_rows(
-    *,
-    align_summary: pd.DataFrame,
-    pretrain: pd.DataFrame,
-    pretrain_seconds: Mapping[str, float],
-    simulate_seconds: Mapping[str, float],
-    corpus_sizes: Mapping[str, int],
-    probe_seconds: Mapping[str, float] | None = None,
-    probe_summary: pd.DataFrame | None = None,
-) -> pd.DataFrame:
-    """Tidy cost-of-accuracy table.
+def _label(x: str) -> str:
+    try:
+        v = float(x)
+    except ValueError:
+        return x
+    return f"{v:,.0f}" if v.is_integer() and abs(v) >= 1000 else x
 
-    align_summary: results/align/summary.parquet (train_seconds, top1_v2t per cell);
-    pretrain: results/features/pretrained_vs_random.parquet; pretrain_seconds: modality -> s;
-    simulate_seconds: corpus -> total simulation seconds over its shards; corpus_sizes: corpus
-    -> samples; probe_seconds: family -> s of its probe jobs, with probe_summary giving the
-    family's main Δ and CI width.
-    """
+
+def knob_sentences(points: pd.DataFrame, units: Mapping[str, str] = KNOB_UNITS) -> list[str]:
+    """One sentence per knob and metric, in the order of the points."""
+    out = []
+    for (knob, _metric), g in points.groupby(["knob", "metric"], sort=False):
+        g = g.assign(label=g["label"].map(_label))
+        out.append(knob_sentence(g, unit=units.get(knob, "")))
+    return out
+
+
+def points_view(points: pd.DataFrame) -> pd.DataFrame:
+    """The points as the page's table: setting, metric [CI], seconds, front membership."""
     rows = []
-    for r in align_summary.itertuples(index=False):
-        setting = f"{r.corpus} {r.variant} seed {r.seed} τ {r.tau} N {r.n_train} ({r.budget})"
-        rows.append(
-            ("align", "alignment cell", setting, r.train_seconds, "top-1 V→T (test)", r.top1_v2t)
-        )
-    for r in pretrain.itertuples(index=False):
-        secs = pretrain_seconds.get(r.modality)
-        rows.append(
-            (
-                "features",
-                f"{r.modality} backbone pretraining",
-                f"{r.arch}",
-                secs,
-                f"Δ accuracy vs random ({r.target})",
-                r.delta,
+    for (_knob, _metric), g in points.groupby(["knob", "metric"], sort=False):
+        front = pareto_front(g["wall_s"], g["value"], str(g["direction"].iloc[0]))
+        for on, r in zip(front, g.itertuples(index=False), strict=True):
+            ci = f" [{r.ci_low:.4g}, {r.ci_high:.4g}]" if np.isfinite(r.ci_low) else ""
+            rows.append(
+                {
+                    "knob": r.knob,
+                    "stage": r.stage,
+                    "setting": _label(r.label) + (" (default)" if r.is_default else ""),
+                    "metric": f"{r.metric} ({r.direction} is better)",
+                    "value [CI]": f"{r.value:.4g}{ci}",
+                    "uncertainty": r.uncertainty,
+                    "wall s": f"{r.wall_s:.1f}",
+                    "CPU s": f"{r.cpu_s:.1f}",
+                    "jobs": int(r.n_jobs),
+                    "Pareto": "yes" if on else "",
+                }
             )
-        )
-    for corpus, secs in simulate_seconds.items():
-        n = corpus_sizes.get(corpus, 0)
-        rows.append(
-            (
-                "corpus",
-                "corpus size",
-                f"{corpus}: {n} samples",
-                secs,
-                "ms per sample",
-                1000 * secs / max(n, 1),
-            )
-        )
-    if probe_seconds and probe_summary is not None and len(probe_summary):
-        main = probe_summary[probe_summary["control"].astype(str).isin(["none", ""])]
-        for family, secs in probe_seconds.items():
-            fam = main[main["family"] == family] if "family" in main.columns else main.iloc[0:0]
-            if len(fam):
-                width = float((fam["ci_high"] - fam["ci_low"]).median())
-                rows.append(
-                    ("probes", "probe family", family, secs, "median 95% CI width of Δ", width)
-                )
-    return pd.DataFrame(rows, columns=COST_COLUMNS)
+    return pd.DataFrame(rows)
 
 
-def cost_figure(table: pd.DataFrame) -> plt.Figure:
-    """One panel per stage: metric against seconds, each point a job, labelled by setting."""
-    stages = list(dict.fromkeys(table["stage"]))
-    fig, axes = plt.subplots(
-        1, max(len(stages), 1), figsize=(4.2 * max(len(stages), 1), 3.6), squeeze=False
+def marginal_view(points: pd.DataFrame) -> pd.DataFrame:
+    """`marginal_table` rounded for the page."""
+    t = marginal_table(points)
+    if t.empty:
+        return pd.DataFrame({"note": ["no knob has two settings on its Pareto front"]})
+    return pd.DataFrame(
+        {
+            "knob": t["knob"],
+            "metric": t["metric"],
+            "from → to": [
+                f"{_label(a)} → {_label(b)}" for a, b in zip(t["from"], t["to"], strict=True)
+            ],
+            "extra wall s": t["extra_s"].map("{:.1f}".format),
+            "gain": t["gain"].map("{:+.4g}".format),
+            "gain per extra minute": t["gain_per_min"].map("{:+.4g}".format),
+            "gain inside the cheaper point's interval": t["within_uncertainty"].map(
+                {True: "yes (not measurable)", False: "no"}
+            ),
+        }
     )
-    for ax, stage in zip(axes[0], stages, strict=False):
-        part = table[table["stage"] == stage].dropna(subset=["seconds"])
-        ax.scatter(part["seconds"], part["value"], s=18)
-        for r in part.itertuples(index=False):
-            ax.annotate(
-                str(r.setting)[:28],
-                (r.seconds, r.value),
-                fontsize=6,
-                xytext=(3, 3),
-                textcoords="offset points",
+
+
+def cost_page_html(
+    points: pd.DataFrame, sentences: Sequence[str], *, title: str, note: str = ""
+) -> str:
+    """The page: a note, the sentences, then the points table (standalone HTML)."""
+    page = to_html(points_view(points), title=title, mono=())
+    intro = (
+        (f"<p>{html.escape(note)}</p>" if note else "")
+        + "<ul>"
+        + "".join(f"<li>{html.escape(s)}</li>" for s in sentences)
+        + "</ul>"
+    )
+    return page.replace("</h3>", "</h3>" + intro, 1)
+
+
+def _offsets(x: np.ndarray) -> list[tuple[int, int, str]]:
+    """Label offsets (points) and alignment for points at seconds `x` (in drawing order):
+    above and below in turn; where neighbours crowd the x-axis (within 15 % of each other),
+    to the right and left in turn, so no two labels of a cluster share a side."""
+    order = np.argsort(x, kind="stable")
+    out: list[tuple[int, int, str]] = [(4, 7, "left")] * len(x)
+    for rank, i in enumerate(order):
+        crowded = any(
+            j != i and np.isfinite(x[j]) and abs(np.log(x[j] / x[i])) < np.log(1.15)
+            for j in range(len(x))
+        ) if np.isfinite(x[i]) and x[i] > 0 else False  # fmt: skip
+        if crowded:
+            out[i] = (7, -3, "left") if rank % 2 == 0 else (-7, -3, "right")
+        else:
+            out[i] = (4, 7, "left") if rank % 2 == 0 else (4, -11, "left")
+    return out
+
+
+def cost_figure(points: pd.DataFrame, stages: Mapping[str, str] | None = None) -> plt.Figure:
+    """One row per knob, one panel per metric: value ± CI against wall seconds (log axis),
+    each point labelled with its setting, the default ringed in red, the Pareto front a line."""
+    knobs = list(dict.fromkeys(points["knob"]))
+    ncols = max(int(points.groupby("knob")["metric"].nunique().max()), 1) if len(points) else 1
+    fig, axes = plt.subplots(
+        max(len(knobs), 1), ncols, figsize=(5.6 * ncols, 3.1 * max(len(knobs), 1)), squeeze=False
+    )
+    for ax in axes.ravel():
+        ax.set_visible(False)
+    for i, knob in enumerate(knobs):
+        part = points[points["knob"] == knob]
+        for j, metric in enumerate(dict.fromkeys(part["metric"])):
+            ax = axes[i, j]
+            ax.set_visible(True)
+            g = part[part["metric"] == metric].sort_values("wall_s", kind="stable")
+            direction = str(g["direction"].iloc[0])
+            x, y = g["wall_s"].to_numpy(float), g["value"].to_numpy(float)
+            lo, hi = g["ci_low"].to_numpy(float), g["ci_high"].to_numpy(float)
+            err = np.vstack(
+                [np.where(np.isfinite(lo), y - lo, 0), np.where(np.isfinite(hi), hi - y, 0)]
             )
-        ax.set_xlabel("wall seconds (benchmark file)")
-        ax.set_ylabel("; ".join(dict.fromkeys(part["metric"]))[:60], fontsize=7)
-        ax.set_title(stage, fontsize=9)
-    fig.suptitle("Cost of accuracy: each point is one job", fontsize=10)
+            ax.errorbar(x, y, yerr=err, fmt="o", ms=4, color="tab:blue", ecolor="tab:blue",
+                        elinewidth=1, capsize=2, zorder=3)  # fmt: skip
+            front = pareto_front(x, y, direction)
+            ax.plot(x[front], y[front], "-", color="tab:green", lw=1.2, alpha=0.8,
+                    label="Pareto front", zorder=2)  # fmt: skip
+            d = g["is_default"].to_numpy(bool)
+            if d.any():
+                ax.scatter(x[d], y[d], s=110, facecolors="none", edgecolors="tab:red", lw=1.6,
+                           label="default", zorder=4)  # fmt: skip
+            for (dx, dy, ha), lab, xi, yi in zip(_offsets(x), g["label"], x, y, strict=True):
+                ax.annotate(_label(str(lab)), (xi, yi), xytext=(dx, dy), textcoords="offset points",
+                            ha=ha, fontsize=7, zorder=5)  # fmt: skip
+            ax.set_xscale("log")
+            plain = FuncFormatter(lambda v, _: f"{v:g}")
+            ax.xaxis.set_major_formatter(plain)
+            span = np.nanmax(x) / max(np.nanmin(x), 1e-9) if len(x) else 1.0
+            ax.xaxis.set_minor_formatter(plain if span < 10 else NullFormatter())
+            if len(x) and np.nanmax(x) / max(np.nanmin(x), 1e-9) < 3:
+                mid = float(np.sqrt(np.nanmax(x) * np.nanmin(x)))
+                ax.set_xlim(mid / 2.0, mid * 2.0)  # a narrow range still shows as a factor
+            ax.margins(x=0.15, y=0.2)
+            ax.set_xlabel("wall seconds per run (benchmark files)", fontsize=7)
+            arrow = "↑" if direction == "higher" else "↓"
+            ax.set_ylabel(f"{metric} {arrow}", fontsize=7)
+            stage = f" ({stages[knob]})" if stages and knob in stages else ""
+            ax.set_title(f"{knob}{stage}", fontsize=9)
+            ax.tick_params(which="both", labelsize=7)
+            ax.legend(fontsize=6, loc="best")
+    fig.suptitle(
+        "Cost of accuracy: each point one setting of a knob (± its uncertainty)", fontsize=10
+    )
     fig.tight_layout()
     return fig

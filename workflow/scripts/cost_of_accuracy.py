@@ -1,33 +1,48 @@
-"""Join benchmark files with the metrics each job produced (rule cost_of_accuracy)."""
-
-from pathlib import Path
+"""The cost-of-accuracy page: every knob's points, sentences, Pareto fronts and the marginal
+accuracy per extra minute (rule cost_of_accuracy)."""
 
 import pandas as pd
 
-from tacgen_lib.cost.benchmarks import benchmark_seconds
-from tacgen_lib.io import edges, log
-from tacgen_lib.report.cost import cost_figure, cost_rows
+from tacgen_lib.cost.benchmarks import cpu_label
+from tacgen_lib.cost.points import POINT_COLUMNS, read_points
+from tacgen_lib.io import log
+from tacgen_lib.io.edges import atomic_write_bytes
+from tacgen_lib.report.cost import cost_figure, cost_page_html, knob_sentences, marginal_view
 from tacgen_lib.report.write import write_figure, write_table
 
 logger = log.for_rule(snakemake)
-simulate = {}
-for path in snakemake.input.simulate_bench:
-    corpus = Path(path).parent.name
-    simulate[corpus] = simulate.get(corpus, 0.0) + benchmark_seconds(path)
-manifest = edges.read(snakemake.input.manifest, columns=["corpus"]).frame
-table = cost_rows(
-    align_summary=pd.read_parquet(snakemake.input.align),
-    pretrain=edges.read(snakemake.input.pretrain).frame,
-    pretrain_seconds={Path(p).stem: benchmark_seconds(p) for p in snakemake.input.pretrain_bench},
-    simulate_seconds=simulate,
-    corpus_sizes=manifest["corpus"].value_counts().to_dict(),
+params = snakemake.params
+tables = [read_points(p) for p in snakemake.input.points]
+points = (
+    pd.concat(tables, ignore_index=True)
+    if tables
+    else pd.DataFrame(columns=[*POINT_COLUMNS, "direction"])
 )
-table.to_csv(snakemake.output.tsv, sep="\t", index=False)
-write_table(
-    table.round(4),
+swept = list(params.swept)
+note = (
+    f"Measured on {cpu_label()}; seconds are wall times of one run of a setting from its jobs' "
+    "benchmark files, and vary with machine load. "
+    + (
+        f"Swept knobs (config cost.knobs): {', '.join(swept)}. "
+        if swept
+        else "This run sweeps no knob: the points below are what the run's own grids vary. "
+        "For every knob, run `snakemake --cores 2 cost_of_accuracy --configfile config/cost.yaml`. "
+    )
+)
+sentences = knob_sentences(points) if len(points) else ["No knob has points in this run."]
+atomic_write_bytes(
     snakemake.output.html,
-    title="Cost of accuracy: seconds per job against the metric it produced",
+    cost_page_html(
+        points, sentences, title="Cost of accuracy: what each knob's settings buy", note=note
+    ).encode(),
+)
+write_table(
+    marginal_view(points),
+    snakemake.output.marginal,
+    title="Marginal accuracy per extra minute between consecutive Pareto points",
     mono=(),
 )
-write_figure(cost_figure(table), snakemake.output.figure)
-logger.info("%d jobs joined with their metrics", len(table))
+write_figure(cost_figure(points, params.stages), snakemake.output.figure)
+points.to_csv(snakemake.output.tsv, sep="\t", index=False)
+for s in sentences:
+    logger.info("%s", s)

@@ -1,0 +1,180 @@
+"""Points of the align, probes, generate and policy knobs (the `points` contract), from each
+stage's own outputs and the seconds of the jobs they came from.
+
+Each function takes what a knob's setting produced (ranks, replicate rows, a stage summary)
+and the seconds of its jobs (`Seconds`: wall and CPU from the `benchmark:` files, with the
+number of files), and returns rows in `points.POINT_COLUMNS` + `direction`:
+
+- `align_points`: top-1 and median rank V→T on the test rows, mean over alignment seeds, with
+  a bootstrap CI over the test rows (`spread.retrieval_bootstrap`);
+- `bootstrap_spread_points`: the Monte Carlo sd of the probe CI's endpoints across bootstrap
+  seeds (chi-square CI: `spread.sd_interval`);
+- `permutation_points`: the permutation p-value's resolution 1/(B+1) (exact) and the sd of
+  Δ_ctrl across permutation seeds;
+- `generate_points`: Δ_gen of one probe target (its fixed-test bootstrap CI, endpoints averaged
+  over generator seeds) and the Fréchet distance generated–real (range over seeds);
+- `policy_points`: V-only policy success with its bootstrap CI.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from tacgen_lib.cost.points import POINT_COLUMNS
+from tacgen_lib.cost.spread import retrieval_bootstrap, sd_interval
+
+__all__ = [
+    "Seconds",
+    "align_points",
+    "bootstrap_spread_points",
+    "generate_points",
+    "permutation_points",
+    "point",
+    "policy_points",
+]
+
+
+@dataclass(frozen=True)
+class Seconds:
+    """What one run of a setting costs: wall and CPU seconds, from `n_jobs` benchmark files."""
+
+    wall: float
+    cpu: float
+    n_jobs: int
+
+
+def point(
+    knob: str, stage: str, setting: float, label: str, is_default: bool, metric: str,
+    value: float, ci: tuple[float, float], uncertainty: str, seconds: Seconds,
+    direction: str = "higher",
+) -> dict:  # fmt: skip
+    """One row of the points contract."""
+    return dict(zip(POINT_COLUMNS, (
+        knob, stage, float(setting), str(label), bool(is_default), metric, float(value),
+        float(ci[0]), float(ci[1]), uncertainty, float(seconds.wall), float(seconds.cpu),
+        int(seconds.n_jobs),
+    ), strict=True)) | {"direction": direction}  # fmt: skip
+
+
+def _setting(label: str) -> float:
+    """A knob value as a number for the page ("all" and words keep their order elsewhere)."""
+    try:
+        return float(label)
+    except ValueError:
+        return math.nan
+
+
+def _frame(rows: list[dict]) -> pd.DataFrame:
+    return pd.DataFrame(rows, columns=[*POINT_COLUMNS, "direction"])
+
+
+def align_points(
+    knob: str,
+    ranks: Mapping[str, Sequence[np.ndarray]],
+    seconds: Mapping[str, Seconds],
+    default: str,
+    *,
+    n_resamples: int,
+    seed: int,
+    n_all: int | None = None,
+) -> pd.DataFrame:
+    """Points of an alignment knob: per setting label, `ranks` holds one array of V→T ranks
+    per alignment seed (the same test rows, same order). `n_all`: the train size that the
+    label "all" stands for (the x position of that setting)."""
+    rows = []
+    for label, per_seed in ranks.items():
+        r = np.vstack([np.asarray(x) for x in per_seed])
+        b = retrieval_bootstrap(r, n_resamples, seed)
+        what = f"95 % bootstrap CI over {r.shape[1]} test rows, mean of {r.shape[0]} seed(s)"
+        setting = n_all if label == "all" and n_all is not None else _setting(label)
+        common = (knob, "align", setting, label, label == default)
+        rows.append(point(*common, "top-1 V→T retrieval (test)", b["top1"],
+                          (b["top1_low"], b["top1_high"]), what, seconds[label]))  # fmt: skip
+        rows.append(point(*common, "median rank V→T (test)", b["median_rank"],
+                          (b["median_rank_low"], b["median_rank_high"]), what, seconds[label],
+                          "lower"))  # fmt: skip
+    return _frame(rows)
+
+
+def bootstrap_spread_points(
+    knob: str, reps: pd.DataFrame, seconds: Mapping[str, Seconds], default: str
+) -> pd.DataFrame:
+    """Points of the bootstrap-resamples knob from replicate rows (columns `label`, `ci_low`,
+    `ci_high`: the probe Δ's CI at that B for one bootstrap seed each)."""
+    rows = []
+    for label, g in reps.groupby("label", sort=False):
+        what = f"sd over {len(g)} bootstrap seeds, 95 % chi-square CI"
+        for end, col in (("lower", "ci_low"), ("upper", "ci_high")):
+            sd, lo, hi = sd_interval(g[col].to_numpy())
+            rows.append(point(knob, "probes", _setting(label), label, label == default,
+                              f"Monte Carlo sd of the CI's {end} end", sd, (lo, hi), what,
+                              seconds[label], "lower"))  # fmt: skip
+    return _frame(rows)
+
+
+def permutation_points(
+    knob: str, reps: pd.DataFrame, seconds: Mapping[str, Seconds], default: str
+) -> pd.DataFrame:
+    """Points of the permutations knob from replicate rows (columns `label`, `n_permutations`,
+    `delta_ctrl`: one permutation seed each)."""
+    rows = []
+    for label, g in reps.groupby("label", sort=False):
+        b = int(g["n_permutations"].iloc[0])
+        common = (knob, "probes", float(b), label, label == default)
+        rows.append(point(*common, "permutation p-value resolution 1/(B+1)", 1.0 / (b + 1),
+                          (math.nan, math.nan), "exact", seconds[label], "lower"))  # fmt: skip
+        sd, lo, hi = sd_interval(g["delta_ctrl"].to_numpy())
+        rows.append(point(*common, "Monte Carlo sd of Δ_ctrl", sd, (lo, hi),
+                          f"sd over {len(g)} permutation seeds, 95 % chi-square CI",
+                          seconds[label], "lower"))  # fmt: skip
+    return _frame(rows)
+
+
+def generate_points(
+    knob: str,
+    cells: pd.DataFrame,
+    seconds: Mapping[str, Seconds],
+    default: str,
+    *,
+    target: str,
+) -> pd.DataFrame:
+    """Points of a generator knob. cells: the t_gen rows of the generation summary for one
+    corpus and target, with a `label` column naming the knob setting (and `setting`), one row
+    per generator seed."""
+    rows = []
+    for label, g in cells.groupby("label", sort=False):
+        n = len(g)
+        common = (knob, "generate", float(g["setting"].iloc[0]), label, label == default)
+        d = float(g["delta"].mean())
+        lo, hi = float(g["ci_low"].mean()), float(g["ci_high"].mean())
+        rows.append(point(*common, f"Δ_gen ({target}, test)", d, (min(lo, d), max(hi, d)),
+                          f"95 % fixed-test bootstrap CI, endpoints averaged over {n} "
+                          "generator seed(s)", seconds[label]))  # fmt: skip
+        fd = g["frechet"].to_numpy(dtype=np.float64)
+        rows.append(point(*common, "Fréchet distance generated–real (test)", float(fd.mean()),
+                          (float(fd.min()), float(fd.max())),
+                          f"range over {n} generator seed(s)", seconds[label],
+                          "lower"))  # fmt: skip
+    return _frame(rows)
+
+
+def policy_points(
+    knob: str, cells: pd.DataFrame, seconds: Mapping[str, Seconds], default: str
+) -> pd.DataFrame:
+    """Points of a policy knob. cells: V-only rows of the policy summary with `label`,
+    `setting`, success and its CI, one row per policy seed."""
+    rows = []
+    for label, g in cells.groupby("label", sort=False):
+        s = float(g["success"].mean())
+        lo, hi = float(g["ci_low"].mean()), float(g["ci_high"].mean())
+        rows.append(point(knob, "policy", float(g["setting"].iloc[0]), label, label == default,
+                          "V-only success rate (held-out episodes)", s,
+                          (min(lo, s), max(hi, s)),
+                          f"95 % bootstrap CI over {int(g['n_episodes'].iloc[0])} episodes, "
+                          f"mean of {len(g)} seed(s)", seconds[label]))  # fmt: skip
+    return _frame(rows)

@@ -1,0 +1,74 @@
+"""The knob sweep runs end to end on the tiny config (config/cost_tiny.yaml over test.yaml), on
+a copy of the session's reference run, so only the sweep's own jobs run (~30-60 s)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+import pytest
+import yaml
+from snakemake_run import copy_run, copy_tree, planned_rules, smk
+
+from tacgen_lib.cost.points import read_points
+
+pytestmark = pytest.mark.workflow
+
+SWEEP = ("--configfile", "config/test.yaml", "config/cost_tiny.yaml")
+
+
+def test_default_config_runs_no_sweep_job(tmp_path):
+    work = copy_tree(tmp_path / "dry")
+    rules = planned_rules(work)
+    assert "cost_of_accuracy" in rules
+    assert not {"cost_train_heads", "cost_probe", "cost_align_points", "cost_probe_points"} & set(
+        rules
+    )
+    # the free knobs (the stages' own grids) still give the page its points
+    assert rules.get("cost_generate_points") == 2 and rules.get("cost_policy_points") == 2
+
+
+def test_unknown_knob_stops_with_the_known_names(tmp_path):
+    work = copy_tree(tmp_path / "bad")
+    (work / "config" / "bad_cost.yaml").write_text(
+        yaml.safe_dump({"cost": {"knobs": {"align_stepz": {"values": [1, 2]}}}})
+    )
+    proc = smk(work, "--dry-run", "--configfile", "config/test.yaml", "config/bad_cost.yaml",
+               "--", "cost_of_accuracy", check=False)  # fmt: skip
+    assert proc.returncode != 0
+    assert "['align_stepz'] are not knobs" in proc.stdout + proc.stderr
+    assert "align_steps" in proc.stdout + proc.stderr
+
+
+def test_tiny_sweep_writes_points_and_the_page(reference_run: Path, tmp_path):
+    work = copy_run(reference_run, tmp_path / "sweep")
+    planned = planned_rules(work, *SWEEP, "--", "cost_of_accuracy")
+    assert planned["cost_train_heads"] == 4  # 2 knobs x 2 settings x 1 seed
+    assert planned["cost_probe"] == 8  # 2 knobs x 2 settings x 2 replicates
+    assert "train_heads" not in planned and "probe" not in planned  # the default's jobs stay
+    smk(work, *SWEEP, "--", "cost_of_accuracy")
+    points = {
+        k: read_points(work / f"results/cost/points/{k}.parquet")
+        for k in ("align_steps", "align_n", "probe_bootstrap", "probe_permutations",
+                  "generate_steps", "generate_sampler", "policy_width", "policy_epochs")
+    }  # fmt: skip
+    for knob, p in points.items():
+        assert (p["knob"] == knob).all()
+        assert (p["wall_s"] > 0).all(), knob
+        assert p["n_jobs"].min() >= 1
+    n = points["align_n"]
+    assert sorted(set(n["label"])) == ["10", "all"]
+    assert n.loc[n["label"] == "all", "is_default"].all()  # the default's heads use all rows
+    assert set(n["direction"]) == {"higher", "lower"}  # top-1 up, median rank down
+    b = points["probe_bootstrap"]
+    assert set(b["label"]) == {"50", "200"} and b["value"].notna().all()
+    perm = points["probe_permutations"]
+    res = perm[perm["metric"].str.contains("resolution")].set_index("label")["value"]
+    assert res.to_dict() == pytest.approx({"5": 1 / 6, "10": 1 / 11})
+    page = (work / "results/report/cost_of_accuracy.html").read_text()
+    assert "align_steps: " in page and "probe_permutations: " in page
+    assert (work / "results/report/cost_of_accuracy.png").stat().st_size > 10_000
+    table = pd.read_csv(work / "results/report/cost_of_accuracy.tsv", sep="\t")
+    assert set(table["knob"]) == set(points)
+    again = planned_rules(work, *SWEEP, "--", "cost_of_accuracy")
+    assert again == {}, again  # a second run has nothing to do

@@ -1,0 +1,37 @@
+"""Points of a policy knob (width, epochs of the V-only policy) from the policy summary and the
+train_policy + rollout_policy benchmark files (rule cost_policy_points)."""
+
+import pandas as pd
+
+from tacgen_lib.cost.benchmarks import Benchmark, read_benchmark
+from tacgen_lib.cost.points import write_points
+from tacgen_lib.cost.spread import replicate_seconds
+from tacgen_lib.cost.sweeps import Seconds, policy_points
+from tacgen_lib.io import log
+
+logger = log.for_rule(snakemake)
+params = snakemake.params
+summary = pd.read_parquet(snakemake.input.summary)
+cells = {(int(h), int(e)): (label, setting) for label, setting, h, e in params.cells}
+rows = summary[summary["condition"] == "v"]
+keys = [(int(h), int(e)) for h, e in zip(rows["hidden"], rows["epochs"], strict=True)]
+rows = rows[[k in cells for k in keys]]
+keys = [k for k in keys if k in cells]
+rows = rows.assign(label=[cells[k][0] for k in keys], setting=[cells[k][1] for k in keys])
+# One run of a setting = its training job + its rollout shards (summed), mean over seeds.
+jobs = {}
+for (label, seed), bench in zip(params.bench_cells, snakemake.input.benchmarks, strict=True):
+    jobs.setdefault((label, seed), []).append(read_benchmark(bench))
+per_seed = {}
+for (label, _seed), bs in jobs.items():
+    b = Benchmark(sum(x.wall for x in bs), sum(x.cpu for x in bs), max(x.max_rss_mb for x in bs))
+    per_seed.setdefault(label, []).append((b, len(bs)))
+seconds = {
+    k: Seconds(*replicate_seconds([b for b, _ in v])[:2], sum(n for _, n in v))
+    for k, v in per_seed.items()
+}
+table = policy_points(snakemake.wildcards.knob, rows, seconds, params.default)
+table = write_points(table, snakemake.output.points, snakemake.output.points)
+for r in table.itertuples(index=False):
+    logger.info("%s = %s: %s %.3f [%.3f, %.3f] in %.1f s (%d jobs)", r.knob, r.label, r.metric,
+                r.value, r.ci_low, r.ci_high, r.wall_s, r.n_jobs)  # fmt: skip
