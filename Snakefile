@@ -29,6 +29,9 @@ include: "rules/features.smk"
 include: "rules/align.smk"
 include: "rules/generate.smk"  # issue 12: latent V->T generator
 include: "rules/probes.smk"
+# --- cost of accuracy, simulation and features knobs (issue 14) ---
+include: "rules/cost_features.smk"
+# --- end cost of accuracy, simulation and features knobs ---
 # --- policy stage (issue 13) ---
 include: "rules/policy.smk"
 # --- end policy stage ---
