@@ -12,140 +12,8 @@ Rules reuse the stage scripts (simulate_corpus, merge_corpus, background_subtrac
 extract_features, pretrain_backbone, pretrained_vs_random) with the setting in the path.
 """
 
-from tacgen_lib.cost.knob_metrics import knob_metric_ids
-from tacgen_lib.features.vit import ARCHS
 
-COST = config.get("cost") or {}
-COST_KNOBS = COST.get("knobs") or {}
-SIM_KNOBS = [k for k in ("presses", "tactile_resolution") if k in COST_KNOBS]
-FEATURE_KNOBS = [
-    k for k in ("image_size", "backbone_arch", "pretrain_epochs") if k in COST_KNOBS
-]
-SIM_SWEEP = COST.get("sim_sweep") or {"corpus": "sim_paired", "n": 400}
-SIM_BASE = SIM_SWEEP["corpus"]
-SIM_DIR = "results/cost/sim/presses~{presses}/tactile~{tactile}"
-FEAT_DIR = "results/cost/features/size~{size}/arch~{arch}/epochs~{epochs}"
-PVR = config["features"]["pretrained_vs_random"]
-PROBE_VARIANT = config["probes"]["heads"]["variant"]
-if SIM_KNOBS and (
-    SIM_BASE not in SIM_CORPORA or int(SIM_SWEEP["n"]) > int(CORPORA[SIM_BASE]["n"])
-):
-    raise ValueError(
-        f"config cost.sim_sweep: corpus {SIM_BASE!r} must be a simulated corpus of the config "
-        f"with n >= {SIM_SWEEP['n']} (its sample_ids and splits are reused)"
-    )
-
-
-def _hw(value):
-    """A tactile resolution as the path writes it: [120, 160] -> '120x160'."""
-    h, w = (int(v) for v in value)
-    return f"{h}x{w}"
-
-
-def sim_default():
-    c = CORPORA.get(SIM_BASE, {})
-    return {
-        "presses": int(c.get("presses", 8)),
-        "tactile": _hw(c.get("tactile_size", [120, 160])),
-    }
-
-
-def features_default():
-    b = FEAT["backbones"]
-    return {
-        "size": int(FEAT["image_size"]),
-        "arch": b["vision"]["arch"],
-        "epochs": int(PRETRAIN["epochs"]),
-    }
-
-
-def knob_settings(knob):
-    """(label, number for the log axis, is_default, path wildcards) of each setting."""
-    out = []
-    for value in COST_KNOBS[knob]["values"]:
-        if knob in ("presses", "tactile_resolution"):
-            w = sim_default()
-            if knob == "presses":
-                w["presses"], label, num = int(value), str(int(value)), int(value)
-            else:
-                w["tactile"] = label = _hw(value)
-                num = int(value[0])
-            is_default = w == sim_default()
-        else:
-            w = features_default()
-            if knob == "image_size":
-                w["size"], label, num = int(value), str(int(value)), int(value)
-            elif knob == "backbone_arch":
-                w["arch"], label = str(value), str(value)
-                num = ARCHS[str(value)].embed_dim
-            else:
-                w["epochs"], label, num = int(value), str(int(value)), int(value)
-            is_default = w == features_default() and (
-                FEAT["backbones"]["tactile"]["arch"] == w["arch"]
-            )
-        out.append((label, num, is_default, w))
-    return out
-
-
-def sim_setting_jobs(w):
-    """The benchmark files of one simulation setting's jobs (what its seconds sum)."""
-    d = f"presses~{w['presses']}/tactile~{w['tactile']}"
-    return [
-        f"results/benchmarks/cost_simulate_corpus/{d}/0.tsv",
-        f"results/benchmarks/cost_merge_corpus/{d}.tsv",
-        f"results/benchmarks/cost_background_subtract/{d}/{PROBE_VARIANT}.tsv",
-        f"results/benchmarks/cost_sim_features/{d}/vision.tsv",
-        f"results/benchmarks/cost_sim_features/{d}/tactile.tsv",
-        f"results/benchmarks/cost_sim_probe/{d}.tsv",
-    ]
-
-
-def features_setting_jobs(w):
-    d = f"size~{w['size']}/arch~{w['arch']}/epochs~{w['epochs']}"
-    return [
-        *(f"results/benchmarks/cost_pretrain_backbone/{d}/{m}.tsv" for m in MODALITIES),
-        *(f"results/benchmarks/cost_features_extract/{d}/{m}.tsv" for m in MODALITIES),
-        f"results/benchmarks/cost_pretrained_vs_random/{d}.tsv",
-    ]
-
-
-def knob_plan(knob):
-    """What the points script needs per setting: label, number, default flag, the metrics
-    edge (or pretrained-vs-random table) and the benchmark files."""
-    plan = []
-    for label, num, is_default, w in knob_settings(knob):
-        if knob in ("presses", "tactile_resolution"):
-            metrics = SIM_DIR.format(**w) + "/metrics.parquet"
-            jobs = sim_setting_jobs(w)
-        else:
-            metrics = FEAT_DIR.format(**w) + "/pretrained_vs_random.parquet"
-            jobs = features_setting_jobs(w)
-        plan.append(
-            {
-                "label": label,
-                "setting": num,
-                "is_default": is_default,
-                "metrics": metrics,
-                "benchmarks": jobs,
-                "pretraining": int(w.get("epochs", 0)) > 0,
-            }
-        )
-    return plan
-
-
-
-def sim_corpus(w):
-    """The reduced corpus of a simulation setting: the base corpus's first n samples (same
-    name, seed and sample_ids), one shard, the setting's presses and tactile frame size."""
-    h, wd = (int(v) for v in w.tactile.split("x"))
-    return {
-        "name": SIM_BASE,
-        **CORPORA[SIM_BASE],
-        "n": int(SIM_SWEEP["n"]),
-        "shards": 1,
-        "presses": int(w.presses),
-        "tactile_size": [h, wd],
-    }
+include: "cost_features_common.smk"
 
 
 wildcard_constraints:
@@ -162,11 +30,15 @@ rule cost_simulate_corpus:
         scenes=config["scenes_file"],
         code=imports_of("simulate_corpus"),
     output:
-        temp(SIM_DIR + "/shards/{shard}.parquet"),
+        temp(
+            "results/cost/sim/presses~{presses}/tactile~{tactile}/shards/{shard}.parquet"
+        ),
     log:
         "results/logs/cost_simulate_corpus/presses~{presses}/tactile~{tactile}/{shard}.log",
     benchmark:
         "results/benchmarks/cost_simulate_corpus/presses~{presses}/tactile~{tactile}/{shard}.tsv"
+    conda:
+        "../envs/corpus.yaml"
     threads: 1
     resources:
         mem_mb=2000,
@@ -182,16 +54,18 @@ rule cost_merge_corpus:
     """The setting's corpus edge and sensor backgrounds (as merge_corpus)."""
     input:
         # a list, as merge_corpus's script expects (one shard per setting)
-        shards=lambda w: [SIM_DIR.format(**w) + "/shards/0.parquet"],
+        shards=lambda w: [sim_path(w, "shards/0.parquet")],
         scenes=config["scenes_file"],
         code=imports_of("merge_corpus"),
     output:
-        samples=SIM_DIR + "/samples.parquet",
-        sensors=SIM_DIR + "/sensors.parquet",
+        samples="results/cost/sim/presses~{presses}/tactile~{tactile}/samples.parquet",
+        sensors="results/cost/sim/presses~{presses}/tactile~{tactile}/sensors.parquet",
     log:
         "results/logs/cost_merge_corpus/presses~{presses}/tactile~{tactile}.log",
     benchmark:
         "results/benchmarks/cost_merge_corpus/presses~{presses}/tactile~{tactile}.tsv"
+    conda:
+        "../envs/corpus.yaml"
     threads: 1
     resources:
         mem_mb=2000,
@@ -205,17 +79,19 @@ rule cost_merge_corpus:
 rule cost_background_subtract:
     """tactile_proc of the setting's corpus, the probes' variant (as background_subtract)."""
     input:
-        samples=SIM_DIR + "/samples.parquet",
-        sensors=SIM_DIR + "/sensors.parquet",
+        samples="results/cost/sim/presses~{presses}/tactile~{tactile}/samples.parquet",
+        sensors="results/cost/sim/presses~{presses}/tactile~{tactile}/sensors.parquet",
         code=imports_of("background_subtract"),
     output:
-        SIM_DIR + "/preprocess/{variant}.parquet",
+        "results/cost/sim/presses~{presses}/tactile~{tactile}/preprocess/{variant}.parquet",
     log:
         "results/logs/cost_background_subtract/presses~{presses}/tactile~{tactile}/{variant}.log",
     benchmark:
         "results/benchmarks/cost_background_subtract/presses~{presses}/tactile~{tactile}/{variant}.tsv"
     wildcard_constraints:
         variant=one_of(VARIANTS),
+    conda:
+        "../envs/features.yaml"
     threads: 1
     resources:
         mem_mb=2000,
@@ -227,21 +103,26 @@ rule cost_background_subtract:
 rule cost_sim_features:
     """Frozen features of the setting's frames with the config's own backbones."""
     input:
-        frames=lambda w: (
-            SIM_DIR + "/samples.parquet"
-            if w.modality == "vision"
-            else SIM_DIR + f"/preprocess/{PROBE_VARIANT}.parquet"
+        frames=lambda w: sim_path(
+            w,
+            (
+                "samples.parquet"
+                if w.modality == "vision"
+                else f"preprocess/{PROBE_VARIANT}.parquet"
+            ),
         ),
         weights="results/features/backbones/{modality}.pt",
         code=imports_of("extract_features"),
     output:
-        SIM_DIR + "/features/{modality}.parquet",
+        "results/cost/sim/presses~{presses}/tactile~{tactile}/features/{modality}.parquet",
     log:
         "results/logs/cost_sim_features/presses~{presses}/tactile~{tactile}/{modality}.log",
     benchmark:
         "results/benchmarks/cost_sim_features/presses~{presses}/tactile~{tactile}/{modality}.tsv"
     wildcard_constraints:
         modality="vision|tactile",
+    conda:
+        "../envs/features.yaml"
     threads: 1
     resources:
         mem_mb=3000,
@@ -256,17 +137,19 @@ rule cost_sim_features:
 rule cost_sim_probe:
     """Force band width, force R² (V+T) and Δ of the force and hardness probes on one setting."""
     input:
-        samples=SIM_DIR + "/samples.parquet",
-        vision=SIM_DIR + "/features/vision.parquet",
-        tactile=SIM_DIR + "/features/tactile.parquet",
+        samples="results/cost/sim/presses~{presses}/tactile~{tactile}/samples.parquet",
+        vision="results/cost/sim/presses~{presses}/tactile~{tactile}/features/vision.parquet",
+        tactile="results/cost/sim/presses~{presses}/tactile~{tactile}/features/tactile.parquet",
         splits="results/corpus/splits.parquet",
         code=imports_of("cost_sim_probe"),
     output:
-        SIM_DIR + "/metrics.parquet",
+        "results/cost/sim/presses~{presses}/tactile~{tactile}/metrics.parquet",
     log:
         "results/logs/cost_sim_probe/presses~{presses}/tactile~{tactile}.log",
     benchmark:
         "results/benchmarks/cost_sim_probe/presses~{presses}/tactile~{tactile}.tsv"
+    conda:
+        "../envs/probes.yaml"
     threads: 1
     resources:
         mem_mb=2000,
@@ -285,15 +168,17 @@ rule cost_pretrain_backbone:
         splits="results/corpus/splits.parquet",
         code=imports_of("pretrain_backbone"),
     output:
-        weights=FEAT_DIR + "/backbones/{modality}.pt",
-        curve=FEAT_DIR + "/backbones/{modality}_curve.parquet",
-        figure=FEAT_DIR + "/backbones/{modality}_curve.png",
+        weights="results/cost/features/size~{size}/arch~{arch}/epochs~{epochs}/backbones/{modality}.pt",
+        curve="results/cost/features/size~{size}/arch~{arch}/epochs~{epochs}/backbones/{modality}_curve.parquet",
+        figure="results/cost/features/size~{size}/arch~{arch}/epochs~{epochs}/backbones/{modality}_curve.png",
     log:
         "results/logs/cost_pretrain_backbone/size~{size}/arch~{arch}/epochs~{epochs}/{modality}.log",
     benchmark:
         "results/benchmarks/cost_pretrain_backbone/size~{size}/arch~{arch}/epochs~{epochs}/{modality}.tsv"
     wildcard_constraints:
         modality="vision|tactile",
+    conda:
+        "../envs/features.yaml"
     threads: 1
     resources:
         mem_mb=6000,
@@ -310,16 +195,18 @@ rule cost_features_extract:
     """A features setting's frozen features of the pretrained-vs-random corpus."""
     input:
         frames=lambda w: backbone_frames(w.modality, PVR["corpus"]),
-        weights=FEAT_DIR + "/backbones/{modality}.pt",
+        weights="results/cost/features/size~{size}/arch~{arch}/epochs~{epochs}/backbones/{modality}.pt",
         code=imports_of("extract_features"),
     output:
-        FEAT_DIR + "/features/{modality}.parquet",
+        "results/cost/features/size~{size}/arch~{arch}/epochs~{epochs}/features/{modality}.parquet",
     log:
         "results/logs/cost_features_extract/size~{size}/arch~{arch}/epochs~{epochs}/{modality}.log",
     benchmark:
         "results/benchmarks/cost_features_extract/size~{size}/arch~{arch}/epochs~{epochs}/{modality}.tsv"
     wildcard_constraints:
         modality="vision|tactile",
+    conda:
+        "../envs/features.yaml"
     threads: 1
     resources:
         mem_mb=4000,
@@ -336,18 +223,20 @@ rule cost_pretrained_vs_random:
     input:
         vision=corpus_edge(PVR["corpus"]),
         tactile=backbone_frames("tactile", PVR["corpus"]),
-        pretrained_vision=FEAT_DIR + "/features/vision.parquet",
-        pretrained_tactile=FEAT_DIR + "/features/tactile.parquet",
+        pretrained_vision="results/cost/features/size~{size}/arch~{arch}/epochs~{epochs}/features/vision.parquet",
+        pretrained_tactile="results/cost/features/size~{size}/arch~{arch}/epochs~{epochs}/features/tactile.parquet",
         manifest="results/corpus/manifest.parquet",
         splits="results/corpus/splits.parquet",
         code=imports_of("pretrained_vs_random"),
     output:
-        table=FEAT_DIR + "/pretrained_vs_random.parquet",
-        html=FEAT_DIR + "/pretrained_vs_random.html",
+        table="results/cost/features/size~{size}/arch~{arch}/epochs~{epochs}/pretrained_vs_random.parquet",
+        html="results/cost/features/size~{size}/arch~{arch}/epochs~{epochs}/pretrained_vs_random.html",
     log:
         "results/logs/cost_pretrained_vs_random/size~{size}/arch~{arch}/epochs~{epochs}.log",
     benchmark:
         "results/benchmarks/cost_pretrained_vs_random/size~{size}/arch~{arch}/epochs~{epochs}.tsv"
+    conda:
+        "../envs/features.yaml"
     threads: 1
     resources:
         mem_mb=4000,
@@ -378,6 +267,8 @@ rule cost_knob_points:
         "results/benchmarks/cost_knob_points/{knob}.tsv"
     wildcard_constraints:
         knob=one_of(SIM_KNOBS + FEATURE_KNOBS),
+    conda:
+        "../envs/report.yaml"
     threads: 1
     resources:
         mem_mb=1000,
@@ -388,7 +279,9 @@ rule cost_knob_points:
         metrics=lambda w: knob_metric_ids(w.knob, config),
         n_sim=int(SIM_SWEEP["n"]),
         bootstrap=lambda w: (
-            int(config["probes"]["bootstrap"]) if w.knob in SIM_KNOBS else int(PVR["bootstrap"])
+            int(config["probes"]["bootstrap"])
+            if w.knob in SIM_KNOBS
+            else int(PVR["bootstrap"])
         ),
     script:
         "../workflow/scripts/cost_knob_points.py"
