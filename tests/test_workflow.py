@@ -140,14 +140,23 @@ def test_edit_to_an_indirectly_imported_module_reruns_exactly_its_users(run_dir,
     }
     # evaluate_generator reaches it through probes.protocol too (generate, issue 12)
     robustness = {"probe_training_size", "probe_within_scale", "aggregate_robustness"}
-    assert not direct and users == {"probe", "aggregate_probes", "evaluate_generator"} | robustness
+    # cost_sim_probe (issue 14) fits the probes stage's probes on each simulation setting
+    cost = {"cost_sim_probe"}
+    assert not direct and users == {"probe", "aggregate_probes", "evaluate_generator"} | (
+        robustness | cost
+    )
     work = copy_tree(tmp_path / "f")
     shutil.copytree(run_dir / "results", work / "results")
     shutil.copytree(run_dir / ".snakemake", work / ".snakemake")
     (work / module).write_text((work / module).read_text() + "\n# an edit\n")
     # its users rerun, then only what reads their outputs: the generation summary (issue 12),
     # the edge manifest and `all`
-    assert set(planned_rules(work)) == users | {"aggregate_generate", "edge_manifest", "all"}
+    # (the cost sweeps run only under config/cost.yaml: not planned here)
+    assert set(planned_rules(work)) == (users - cost) | {
+        "aggregate_generate",
+        "edge_manifest",
+        "all",
+    }
 
 
 def test_two_clean_runs_give_identical_edges(run_dir, tmp_path):

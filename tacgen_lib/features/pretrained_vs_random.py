@@ -2,7 +2,12 @@
 
 A linear (logistic) probe on frozen features of each backbone, fitted on the train rows and
 scored on the fixed test rows; the difference in accuracy gets a fixed-test bootstrap CI
-(tacgen_lib.probes.bootstrap.fixed_test_bootstrap), so "pretraining helps" is a statement with an interval.
+(tacgen_lib.probes.bootstrap.fixed_test_bootstrap), so "pretraining helps" is a statement with an interval;
+each accuracy gets its own CI on the same resamples (tacgen_lib.cost.scores.score_ci).
+
+With `features.pretrain.epochs: 0` (the embedded default since issue 14) no pretraining runs:
+the "pretrained" backbone is the random-init one (`random_backbone`, same seed), Delta is 0 by
+construction and the table reports what the frozen random-init features attain.
 """
 
 from __future__ import annotations
@@ -11,10 +16,12 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from tacgen_lib.cost.scores import score_ci
+from tacgen_lib.features.vit import random_backbone
 from tacgen_lib.probes.bootstrap import fixed_test_bootstrap
 from tacgen_lib.probes.logistic import fit_logistic
 
-__all__ = ["pretrained_vs_random"]
+__all__ = ["pretrained_vs_random", "random_backbone"]
 
 
 def pretrained_vs_random(
@@ -34,8 +41,9 @@ def pretrained_vs_random(
 
     pretrained, random_init: (N, d) features of the same N frames; labels: (N,) classes;
     train, test: row positions; C by `n_folds`-fold CV on the train rows.
-    Returns random_accuracy, pretrained_accuracy, delta, ci_low, ci_high, p_gt0, the test
-    chance level (majority class) and the chosen C of each probe.
+    Returns random_accuracy, pretrained_accuracy (each with its bootstrap CI `*_ci_low`,
+    `*_ci_high` on the resamples of Delta's), delta, ci_low, ci_high, p_gt0, the test chance
+    level (majority class) and the chosen C of each probe.
     """
     ids_tr = None if sample_ids is None else sample_ids[train]
     ids_te = None if sample_ids is None else sample_ids[test]
@@ -55,9 +63,19 @@ def pretrained_vs_random(
         n_resamples=n_resamples,
         seed=seed,
     )
+    cis = {
+        name: score_ci("accuracy", labels[test], preds[name], n_resamples=n_resamples, seed=seed)[
+            1:
+        ]
+        for name in ("random", "pretrained")
+    }
     return {
         "random_accuracy": boot["v_score"],
+        "random_ci_low": cis["random"][0],
+        "random_ci_high": cis["random"][1],
         "pretrained_accuracy": boot["vt_score"],
+        "pretrained_ci_low": cis["pretrained"][0],
+        "pretrained_ci_high": cis["pretrained"][1],
         "delta": boot["delta"],
         "ci_low": boot["ci_low"],
         "ci_high": boot["ci_high"],
@@ -69,14 +87,3 @@ def pretrained_vs_random(
         "C_random": fits["random"].C,
         "C_pretrained": fits["pretrained"].C,
     }
-
-
-def random_backbone(arch: str, image_size: int, seed: int):
-    """A randomly initialised ViT of `arch` (the baseline a pretrained backbone must beat)."""
-    import torch
-
-    from tacgen_lib.features.vit import build_vit
-
-    with torch.random.fork_rng(devices=[]):
-        torch.manual_seed(seed)
-        return build_vit(arch, img_size=image_size).eval()

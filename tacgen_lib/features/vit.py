@@ -40,6 +40,7 @@ __all__ = [
     "ViTConfig",
     "DinoVisionTransformer",
     "build_vit",
+    "random_backbone",
     "interpolate_pos_embed",
     "load_pretrained",
     "load_tensors",
@@ -321,6 +322,16 @@ def build_vit(
 
 _WRAPPER_KEYS = ("teacher", "model", "state_dict", "student")
 _PREFIXES = ("module.", "backbone.")
+
+
+def random_backbone(arch: str, image_size: int, seed: int) -> DinoVisionTransformer:
+    """The seeded random-init ViT of `arch` in eval mode: the baseline a pretrained backbone
+    must beat, and the frozen backbone itself when `features.pretrain.epochs` is 0. Drawn under
+    a forked RNG, so the caller's torch RNG is untouched; DINO pretraining starts from the same
+    weights (`dino.pretrain_dino` builds the backbone first after seeding with `seed`)."""
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(seed)
+        return build_vit(arch, img_size=image_size).eval()
 
 
 def unwrap_state_dict(obj: object, *, where: str = "checkpoint") -> dict[str, Tensor]:

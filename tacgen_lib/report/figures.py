@@ -69,13 +69,17 @@ def corpus_example_grid(
     return fig
 
 
-def pretrain_curve_figure(curve: pd.DataFrame, *, title: str) -> plt.Figure:
-    """DINO loss (and teacher entropy, where recorded) per epoch."""
+def pretrain_curve_figure(
+    curve: pd.DataFrame,
+    *,
+    title: str,
+    empty_note: str = "loaded from a checkpoint: no pretraining curve",
+) -> plt.Figure:
+    """DINO loss (and teacher entropy, where recorded) per epoch; `empty_note` says why an
+    empty curve is empty (a checkpoint, or pretraining turned off)."""
     fig, ax = plt.subplots(figsize=(5, 3.2))
     if len(curve) == 0:
-        ax.text(
-            0.5, 0.5, "loaded from a checkpoint: no pretraining curve", ha="center", va="center"
-        )
+        ax.text(0.5, 0.5, empty_note, ha="center", va="center")
         ax.set_axis_off()
     else:
         ax.plot(curve["epoch"], curve["loss"], marker="o", label="DINO loss")

@@ -6,7 +6,7 @@ import torch
 from tacgen_lib.corpus.splits import assert_trainable, ids_in_split
 from tacgen_lib.features.dino import pretrain_dino
 from tacgen_lib.features.settings import DinoSettings
-from tacgen_lib.features.vit import build_vit, load_pretrained, save_backbone
+from tacgen_lib.features.vit import build_vit, load_pretrained, random_backbone, save_backbone
 from tacgen_lib.io import edges, log
 from tacgen_lib.preprocess.frames import decode_frames
 from tacgen_lib.report.figures import pretrain_curve_figure
@@ -26,6 +26,18 @@ if backbone.get("checkpoint"):
     load_pretrained(model, backbone["checkpoint"])
     curve = pd.DataFrame({"epoch": pd.Series([], dtype="int64")})
     logger.info("loaded official checkpoint %s (no pretraining)", backbone["checkpoint"])
+    empty_note = "loaded from a checkpoint: no pretraining curve"
+elif int(pretrain["epochs"]) == 0:
+    # features.pretrain.epochs: 0 -> the frozen backbone is the seeded random init (README,
+    # Backbones: DINO at the default budget did not beat it); no frame is read
+    model = random_backbone(backbone["arch"], image_size, seed=int(pretrain["seed"]))
+    curve = pd.DataFrame({"epoch": pd.Series([], dtype="int64")})
+    logger.info(
+        "features.pretrain.epochs is 0: random-init %s backbone (seed %d), no pretraining",
+        backbone["arch"],
+        pretrain["seed"],
+    )
+    empty_note = f"epochs: 0, random init (seed {pretrain['seed']}): no pretraining curve"
 else:
     splits = edges.read(snakemake.input.splits).frame
     train_ids = ids_in_split(splits, "train", corpus=pretrain["corpus"])
@@ -46,12 +58,15 @@ else:
     model = result.backbone()
     # wall-clock seconds stay in the log and the benchmark file: the edge must be reproducible
     curve = pd.DataFrame(result.curve).drop(columns=["seconds"], errors="ignore")
+    empty_note = ""
 curve.insert(
     0, "epoch_id", pd.Series([f"{modality}-{int(e):04d}" for e in curve["epoch"]], dtype=object)
 )
 save_backbone(model, snakemake.output.weights)
 digest = edges.record_file(snakemake.output.weights, producer=snakemake.rule)
 edges.write(snakemake.output.curve, curve, key="epoch_id", producer=snakemake.rule)
-fig = pretrain_curve_figure(curve, title=f"{modality} backbone ({backbone['arch']})")
+fig = pretrain_curve_figure(
+    curve, title=f"{modality} backbone ({backbone['arch']})", empty_note=empty_note
+)
 write_figure(fig, snakemake.output.figure)
 logger.info("saved %s backbone, sha256 %s", modality, digest)
