@@ -9,7 +9,9 @@ register_cost_knobs("features", ["image_size", "backbone_arch", "pretrain_epochs
 # COST and COST_KNOB_CONFIG (the configured knobs) come from cost_common.smk
 SIM_KNOBS = [k for k in ("presses", "tactile_resolution") if k in COST_KNOB_CONFIG]
 FEATURE_KNOBS = [
-    k for k in ("image_size", "backbone_arch", "pretrain_epochs") if k in COST_KNOB_CONFIG
+    k
+    for k in ("image_size", "backbone_arch", "pretrain_epochs")
+    if k in COST_KNOB_CONFIG
 ]
 SIM_SWEEP = COST.get("sim_sweep") or {"corpus": "sim_paired", "n": 400}
 SIM_BASE = SIM_SWEEP["corpus"]

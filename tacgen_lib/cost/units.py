@@ -186,6 +186,39 @@ def _policy_cells(c: Config) -> float:
     )
 
 
+# ---- the cost sweeps (config/cost.yaml): their settings come from the job's wildcards --------
+
+
+def _sweep_n(c: Config) -> float:
+    return float((c.get("cost") or {}).get("sim_sweep", {}).get("n", 400))
+
+
+def _pixels(w: Wildcards) -> float:
+    """Tactile pixels of a sweep setting ('120x160'), relative to the default 120 × 160."""
+    h, wd = (int(v) for v in w["tactile"].split("x"))
+    return h * wd / (120.0 * 160.0)
+
+
+def _sweep_backbone(w: Wildcards) -> float:
+    """`_backbone` at a features-knob setting (size, arch from the wildcards)."""
+    width, depth = _VIT[w["arch"]]
+    tokens = (int(w["size"]) // _PATCH) ** 2 + 1
+    return 2.0 * depth * tokens * (12 * width**2 + 2 * tokens * width)
+
+
+def _sweep_align_steps(c: Config, w: Wildcards) -> float:
+    if w["knob"] == "align_steps":
+        return float(w["value"])
+    return _align_steps(c, {"corpus": c["align"]["corpora"][0], "n_train": w["value"]})
+
+
+def _probe_knob(c: Config, w: Wildcards) -> tuple[str, float]:
+    """One replicate of a probe knob: the force family's raw probe with B = the setting."""
+    family = ((c.get("cost") or {}).get("knobs", {}).get(w["knob"]) or {}).get("family", "force")
+    cls, units = _probe_work(c, {"family": family, "protocol": "raw"})
+    return cls, units * (1 + float(w["value"]) / 1000)
+
+
 def _const(unit: str) -> UnitRule:
     """A rule whose jobs are all alike: one unit each, so its cost is its overhead."""
     return UnitRule(unit, lambda c, w: ("", 1.0))
@@ -349,6 +382,60 @@ UNITS: dict[str, UnitRule] = {
     ),
     "edge_manifest": _const("job"),
     "cost_of_accuracy": _const("job"),
+    # cost sweeps (config/cost.yaml)
+    "cost_simulate_corpus": UnitRule(
+        "sample-press × tactile pixels / 120×160",
+        lambda c, w: ("", _sweep_n(c) * int(w["presses"]) * _pixels(w)),
+    ),
+    "cost_merge_corpus": UnitRule("sample", lambda c, w: ("", _sweep_n(c))),
+    "cost_background_subtract": UnitRule(
+        "frame × tactile pixels / 120×160", lambda c, w: ("", _sweep_n(c) * _pixels(w))
+    ),
+    "cost_sim_features": UnitRule(
+        "frame (+ ViT FLOPs)",
+        lambda c, w: ("", _sweep_n(c)),
+        lambda c, w: _sweep_n(c) * _backbone(c, w["modality"]),
+    ),
+    "cost_sim_probe": UnitRule(
+        "row × fit (the force probe of the sweep corpus)",
+        lambda c, w: _probe_work(c, {"family": "force", "protocol": "raw"}),
+    ),
+    "cost_pretrain_backbone": UnitRule(
+        "epoch × train frame (+ ViT FLOPs)",
+        lambda c, w: (
+            "",
+            int(w["epochs"]) * _train_rows(c, c["features"]["pretrain"]["corpus"]),
+        ),
+        lambda c, w: (
+            int(w["epochs"])
+            * _train_rows(c, c["features"]["pretrain"]["corpus"])
+            * _DINO_FORWARDS
+            * _sweep_backbone(w)
+        ),
+    ),
+    "cost_features_extract": UnitRule(
+        "frame (+ ViT FLOPs)",
+        lambda c, w: ("", _n(c, c["features"]["pretrained_vs_random"]["corpus"])),
+        lambda c, w: _n(c, c["features"]["pretrained_vs_random"]["corpus"]) * _sweep_backbone(w),
+    ),
+    "cost_pretrained_vs_random": UnitRule(
+        "frame (+ FLOPs of both random-init ViTs)",
+        lambda c, w: ("", _n(c, c["features"]["pretrained_vs_random"]["corpus"])),
+        lambda c, w: (
+            _n(c, c["features"]["pretrained_vs_random"]["corpus"]) * 2 * _sweep_backbone(w)
+        ),
+    ),
+    "cost_train_heads": UnitRule(
+        "optimiser step × batch row",
+        lambda c, w: ("", _sweep_align_steps(c, w) * int(c["align"]["batch_size"])),
+    ),
+    "cost_probe": UnitRule("row × fit, × (1 + B / 1000)", _probe_knob),
+    "cost_knob_points": _const("job"),
+    "cost_align_points": _const("job"),
+    "cost_probe_points": _const("job"),
+    "cost_generate_points": _const("job"),
+    "cost_policy_points": _const("job"),
+    "cost_features_knobs": _const("job"),
 }
 
 
