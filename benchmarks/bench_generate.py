@@ -1,10 +1,11 @@
 """Generator training and sampling throughput against the float32 GEMM roofline (same run).
 
-Training: one optimiser step of `tacgen_lib.generate.train` at the default size (config
-``generate``: 3 x 256 residual MLP on 192-d ViT-tiny features, batch 128) -- forward, the
-denoising loss, backward, clipping, AdamW and the EMA update -- against the time its matrix
-products would take at the float32 GEMM rate of one 1024^3 torch.matmul measured in the same
-process between the rounds:
+Training: one optimiser step of `tacgen_lib.generate.train` (`training_step`, the function
+`fit_generator` runs) at the default size (`GenerateSettings`' defaults = config ``generate``:
+blocks x hidden residual MLP on 192-d ViT-tiny features, batch_size rows) -- forward, the
+denoising loss, backward, clipping, fused AdamW and the EMA update -- against the time its
+matrix products would take at the float32 GEMM rate of one 1024^3 torch.matmul measured in the
+same process between the rounds:
 
     FLOPs of a step = sum over Linear layers of 2 B in out (forward) + 2 B in out (weight grad)
                       + 2 B in out (input grad, except layers fed by data: inp, cond[0], time[0])
@@ -12,7 +13,9 @@ process between the rounds:
 
 Sampling: DDIM-50 with classifier-free guidance (conditional and unconditional rows in one
 batch of 2n) over n = 1,200 rows: generated vectors per second and the same roofline fraction
-(forward FLOPs only). The machine is shared: each figure is the best of several rounds, and the
+over the FLOPs `sample` performs (`sample_flops`: the condition's share of the embeddings once
+per batch, the time MLP on one row per step; the FLOPs a plain forward per step would need are
+printed too, as "forward-equivalent"). The machine is shared: each figure is the best of several rounds, and the
 ratio is also given with process CPU seconds (`cpu-frac`), less sensitive to competing load.
 
     .venv/bin/python benchmarks/bench_generate.py [--rounds 5] [--steps 30] [--threads N]
@@ -33,7 +36,7 @@ from tacgen_lib.generate.model import Denoiser
 from tacgen_lib.generate.sampling import sample
 from tacgen_lib.generate.schedules import make_schedule
 from tacgen_lib.generate.settings import GenerateSettings
-from tacgen_lib.generate.train import diffusion_loss
+from tacgen_lib.generate.train import make_optimiser, training_step
 
 
 def linear_shapes(model: Denoiser) -> list[tuple[str, int, int]]:
@@ -53,6 +56,21 @@ def step_flops(model: Denoiser, batch: int) -> float:
 
 def forward_flops(model: Denoiser, batch: int) -> float:
     return sum(2 * batch * i * o for _, i, o in linear_shapes(model))
+
+
+def sample_flops(model: Denoiser, rows: int, steps: int) -> float:
+    """Matrix-product FLOPs of `sampling.sample` with CFG over `rows` (batch 2 rows): once per
+    batch the condition MLP and each block's embedding projection on 2 rows rows; per step the
+    time MLP and the blocks' time projections on one row, everything else on 2 rows rows."""
+    total = 0.0
+    for name, i, o in linear_shapes(model):
+        if name.startswith("cond."):
+            total += 2 * (2 * rows) * i * o
+        elif name.startswith("time.") or name.endswith(".emb"):
+            total += steps * 2 * i * o + (2 * 2 * rows * i * o if name.endswith(".emb") else 0)
+        else:
+            total += steps * 2 * (2 * rows) * i * o
+    return total
 
 
 def gemm_rate(n: int = 1024) -> tuple[float, float]:
@@ -78,13 +96,14 @@ def main() -> None:
           f"batch {args.batch}")  # fmt: skip
 
     torch.manual_seed(0)
-    s = GenerateSettings()
+    s = GenerateSettings(hidden=args.hidden, blocks=args.blocks, batch_size=args.batch,
+                         prediction="v")  # fmt: skip
     model = Denoiser(args.dim, args.dim, args.hidden, args.blocks, s.time_dim)
     ema = Denoiser(args.dim, args.dim, args.hidden, args.blocks, s.time_dim)
     ema.load_state_dict(model.state_dict())
     ema.requires_grad_(False)
     params, ema_params = list(model.parameters()), list(ema.parameters())
-    opt = torch.optim.AdamW(params, lr=1e-3, weight_decay=0.01)
+    opt = make_optimiser(params, s)
     sch = make_schedule("cosine", 1000)
     sa = torch.from_numpy(np.sqrt(sch.alphas_cumprod)).float()
     s1 = torch.from_numpy(np.sqrt(1 - sch.alphas_cumprod)).float()
@@ -97,14 +116,8 @@ def main() -> None:
             idx = torch.randint(0, n, (args.batch,), generator=gen)
             t = torch.randint(0, 1000, (args.batch,), generator=gen)
             noise = torch.randn(args.batch, args.dim, generator=gen)
-            drop = torch.rand(args.batch, generator=gen) < 0.1
-            loss = diffusion_loss(model, x0[idx], cond[idx], t, noise, drop, sa, s1, "v")
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            torch.nn.utils.clip_grad_norm_(params, 1.0)
-            opt.step()
-            with torch.no_grad():
-                torch._foreach_lerp_(ema_params, params, 0.005)
+            drop = torch.rand(args.batch, generator=gen) < s.p_uncond
+            training_step(model, opt, ema_params, (x0[idx], cond[idx], t, noise, drop), sa, s1, s)
 
     flops = step_flops(model, args.batch)
     step_w, step_c, rate_w, rate_c = float("inf"), float("inf"), 0.0, 0.0
@@ -124,10 +137,12 @@ def main() -> None:
     rows = np.random.default_rng(0).standard_normal((args.rows, args.dim)).astype(np.float32)
     kw = {"sampler": "ddim", "steps": 50, "guidance": 2.0, "seed": 0, "prediction": "v"}
     sw, sc = best_of(lambda: sample(model, sch, rows, **kw), max(1, args.rounds // 2))
-    f_sample = 50 * forward_flops(model, 2 * args.rows)
+    f_sample = sample_flops(model, args.rows, 50)
+    f_plain = 50 * forward_flops(model, 2 * args.rows)
     print(f"sampling DDIM-50 + CFG, {args.rows} rows: {sw:.2f} s, {args.rows / sw:.0f} vectors/s;"
           f" roofline fraction {f_sample / rate_w / sw:.2f} (cpu-frac "
-          f"{f_sample / rate_c / sc:.2f})")  # fmt: skip
+          f"{f_sample / rate_c / sc:.2f}) on {f_sample / 1e9:.1f} GFLOP performed; "
+          f"forward-equivalent {f_plain / rate_w / sw:.2f} ({f_plain / 1e9:.1f} GFLOP)")  # fmt: skip
 
 
 if __name__ == "__main__":

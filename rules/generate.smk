@@ -42,7 +42,10 @@ rule train_generator:
         seed=SAMPLE_CONSTRAINTS["seed"],
     conda:
         "../envs/generate.yaml"
-    threads: 2
+    # one thread: the default model's GEMMs (128 x 256 x 256) gain little from a second
+    # thread, so two generators training side by side finish sooner than one after the other
+    # (profiles/slurm gives it 2 on a cluster; results are bit-reproducible per thread count)
+    threads: 1
     resources:
         mem_mb=3000,
         runtime=30,
@@ -115,6 +118,7 @@ rule evaluate_generator:
         },
         probe_seed=config["probes"]["seeds"][0],
         cells=GENERATE_CELLS,  # the order of the t_gen inputs
+        reference=generate_ref_cell(),  # its CV chooses the logistic C of every cell
     script:
         "../workflow/scripts/evaluate_generator.py"
 

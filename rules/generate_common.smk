@@ -43,6 +43,12 @@ def generate_ref():
     }
 
 
+def generate_ref_cell():
+    """The reference cell as (sampler, guidance text, steps text), a member of GENERATE_CELLS."""
+    ref = generate_ref()
+    return (ref["sampler"], ref["guidance"], str(ref["steps"]))
+
+
 def generators():
     return [(c, str(s)) for c in GENERATE_CORPORA for s in GENERATE["seeds"]]
 

@@ -34,6 +34,7 @@ from tacgen_lib.generate.model import Denoiser, fit_standardiser, sinusoidal_emb
 from tacgen_lib.generate.sampling import (
     ddim_timesteps,
     guided_output,
+    guided_output_projected,
     predicted_x0_eps,
     sample,
 )
@@ -43,10 +44,13 @@ from tacgen_lib.generate.train import (
     fit_generator,
     generate,
     load_generator,
+    make_optimiser,
     save_generator,
+    training_step,
 )
 from tacgen_lib.io.config import validate_config
-from tacgen_lib.probes.protocol import ProbeSettings, family_rows
+from tacgen_lib.probes.logistic import FixedLogistic
+from tacgen_lib.probes.protocol import ProbeSettings, family_rows, fit_probe
 
 SCHEMA = ROOT / "config" / "config.schema.yaml"
 
@@ -220,6 +224,52 @@ def test_batch_of_one_and_identical_conditions():
     rows = torch.cat([guided_output(model, x[i : i + 1], t[i : i + 1], c[i : i + 1], 3.0)
                       for i in range(3)])  # fmt: skip
     torch.testing.assert_close(batched, rows, rtol=1e-5, atol=1e-6)
+
+
+@pytest.mark.parametrize("guidance", [0.0, 1.0, 3.0])
+def test_projected_condition_matches_the_plain_forward(guidance):
+    """`sample`'s shortcut (condition share of the embeddings once per batch, time MLP on one
+    row) equals the plain CFG forward up to float32 rounding, and against float64."""
+    model = random_denoiser()
+    x, c = torch.randn(9, 6), torch.randn(9, 5)
+    keep_drop = torch.cat([torch.zeros(9, dtype=torch.bool), torch.ones(9, dtype=torch.bool)])
+    with torch.no_grad():
+        for t in (999, 500, 1, 0):
+            plain = guided_output(model, x, torch.full((9,), t), c, guidance)
+            got = guided_output_projected(
+                model, x, t, model.project_condition(torch.cat([c, c]), keep_drop), guidance
+            )
+            torch.testing.assert_close(got, plain, rtol=1e-5, atol=1e-5)
+            m64 = Denoiser(**model.dims).double()
+            m64.load_state_dict({k: v.double() for k, v in model.state_dict().items()})
+            ref = guided_output(m64, x.double(), torch.full((9,), t), c.double(), guidance)
+            np.testing.assert_allclose(got.double().numpy(), ref.numpy(), rtol=1e-4, atol=1e-5)
+
+
+def test_training_step_is_bit_reproducible_with_the_fused_optimiser():
+    s = GenerateSettings.tiny(prediction="v")
+    sch = make_schedule("cosine", 100)
+    sa = torch.from_numpy(np.sqrt(sch.alphas_cumprod)).float()
+    s1 = torch.from_numpy(np.sqrt(1 - sch.alphas_cumprod)).float()
+
+    def run():
+        torch.manual_seed(0)
+        model = Denoiser(6, 5, s.hidden, s.blocks, s.time_dim)
+        ema = Denoiser(6, 5, s.hidden, s.blocks, s.time_dim)
+        ema.load_state_dict(model.state_dict())
+        opt = make_optimiser(list(model.parameters()), s)
+        gen = torch.Generator().manual_seed(1)
+        for _ in range(5):
+            batch = (torch.randn(8, 6, generator=gen), torch.randn(8, 5, generator=gen),
+                     torch.randint(0, 100, (8,), generator=gen),
+                     torch.randn(8, 6, generator=gen), torch.rand(8, generator=gen) < 0.1)  # fmt: skip
+            loss = training_step(model, opt, list(ema.parameters()), batch, sa, s1, s)
+        return loss.item(), [p.detach().clone() for p in ema.parameters()]
+
+    (l1, p1), (l2, p2) = run(), run()
+    assert l1 == l2 and np.isfinite(l1)
+    for a, b in zip(p1, p2, strict=True):
+        assert torch.equal(a, b)
 
 
 def test_ddpm_final_step_is_the_posterior_mean_and_x0_inverts():
@@ -418,6 +468,53 @@ def test_evaluation_real_touch_helps_where_generated_touch_cannot():
         assert np.isfinite(by[col]).all()
 
 
+def test_logistic_c_is_chosen_on_the_reference_cell_and_reused():
+    """The logistic C of V+T_gen and of the shuffled control comes from the reference cell's
+    CV; every other cell refits at that C. The reference cell's rows equal per-cell CV, and a
+    reused-C fit equals the probe's own final fit at that C."""
+    ids, v, t, manifest, splits = toy_world()
+    rng = np.random.default_rng(3)
+    manifest["hardness"] = np.where(manifest["force_p50"] > 0, "hard", "soft")
+    rows = family_rows(manifest, splits, corpus="toy", target="hardness", kind="logistic")
+    ps = ProbeSettings.from_config(
+        {"lambdas": [1], "C": [0.01, 1, 100], "folds": 3, "bootstrap": 200,
+         "train_resamples": 0, "permutations": 0, "label_permutations": 0,
+         "random_draws": 0}, "logistic", 0)  # fmt: skip
+    cells = {
+        ("ddim", str(w), "5"): dict(zip(ids, v @ rng.normal(size=(4, 4)) + w * t, strict=True))
+        for w in (0, 1, 3)
+    }
+    summary, _ = evaluate_generator(
+        [TargetSpec("hardness", rows, ps)], corpus="toy", seed=0,
+        vision=dict(zip(ids, v, strict=True)), t_real=dict(zip(ids, t, strict=True)),
+        t_gen=cells, permutations=10, gammas=(1.0,), reference=("ddim", "1", "5"),
+    )  # fmt: skip
+    gen = summary[summary["input"].isin(["t_gen", "t_gen_shuffled"])].set_index(
+        ["input", "guidance"]
+    )
+    assert (gen.xs(1.0, level="guidance")["reg_source"] == "cv").all()
+    assert (gen.drop(index=1.0, level="guidance")["reg_source"] == "reference cell").all()
+    for inp in ("t_gen", "t_gen_shuffled"):
+        assert gen.loc[inp, "reg"].nunique() == 1  # one C per input kind
+    assert (summary.loc[summary["input"] == "t_real", "reg_source"] == "cv").all()
+
+    def block(src, sel):
+        return np.stack([src[i] for i in sel]).astype(np.float64)
+
+    vis = dict(zip(ids, v, strict=True))
+    for w in ("1", "3"):  # the CV cell, and a reused-C cell
+        g = cells[("ddim", w, "5")]
+        x_tr = np.hstack([block(vis, rows.train_ids), block(g, rows.train_ids)])
+        x_te = np.hstack([block(vis, rows.test_ids), block(g, rows.test_ids)])
+        own = fit_probe(x_tr, rows.y_train, x_te, ps)
+        c_ref = float(gen.loc[("t_gen", 1.0), "reg"])
+        refit = FixedLogistic(c_ref).fit_predict(x_tr, rows.y_train, x_te)
+        score = float(gen.loc[("t_gen", float(w)), "score"])
+        assert score == pytest.approx(float(np.mean(refit == rows.y_test)), abs=1e-12)
+        if w == "1" or float(own.reg) == c_ref:  # same C: the refit is the probe's final fit
+            np.testing.assert_array_equal(refit, own.pred_test)
+
+
 # ------------------------------------------------------------------ settings + cells
 
 
@@ -485,6 +582,15 @@ def synthetic_summary() -> pd.DataFrame:
                         "frechet": 2.0, "frechet_real_ref": 1.0,
                     })  # fmt: skip
     return pd.DataFrame(rows)
+
+
+def test_heatmap_text_colour_follows_cell_luminance():
+    from tacgen_lib.report.generate import text_colour
+
+    assert text_colour((0.0, 0.0, 0.3, 1.0)) == "white"  # dark blue
+    assert text_colour((0.4, 0.0, 0.05, 1.0)) == "white"  # dark red
+    assert text_colour((0.97, 0.97, 0.97, 1.0)) == "black"  # the colour map's middle
+    assert text_colour((1.0, 0.8, 0.7)) == "black"
 
 
 def test_report_tables_and_figures_from_a_summary():

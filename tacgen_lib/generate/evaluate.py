@@ -14,7 +14,19 @@ The probes are the probes stage's own (`tacgen_lib.probes.protocol.fit_probe` on
   the train rows only. T_gen is a function of V, so a gain of V + T_gen over linear V may be
   nonlinearity, not touch; ``delta_vs_nonlinear`` = score(V + x) - score(V + phi(V)) says.
 
-Every Delta is paired on the same test rows with the same 5,000 fixed-test resamples.
+Every Delta is paired on the same test rows with the same 5,000 fixed-test resamples (drawn
+once per target and shared by every bootstrap of that target: identical to drawing them per
+call with the same seed).
+
+Regularisation of the per-cell probes (``t_gen``, ``t_gen_shuffled``). Ridge chooses lambda by
+CV in every cell (closed form over the grid: costs next to nothing). The logistic probe's CV
+(folds x C lbfgs fits) dominated the stage when repeated per cell, so its C is chosen ONCE per
+target and input kind: by CV on the train rows of the *reference cell* (the report's headline
+cell), then reused for that input kind in every other cell, refitted on the same train rows
+(`probes.logistic.FixedLogistic`, the same lbfgs settings as the CV's final fit). The reference
+cell's rows are therefore exactly what per-cell CV gives; the other cells differ only where
+their own CV would have picked another C. Columns ``reg`` and ``reg_source`` (``cv`` or
+``reference cell``) record it per row. No test row is used to choose anything.
 Fidelity of each cell on the test rows (`fidelity`): matched-pair cosine (gen_i vs real_i)
 against the off-diagonal mean, a pairing-permutation check (one-sided p of the matched mean
 cosine against `permutations` re-pairings) and the Frechet distance between generated and real
@@ -32,9 +44,11 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 from scipy import linalg
+from scipy.spatial.distance import pdist
 from sklearn.kernel_approximation import Nystroem
 
-from tacgen_lib.probes.bootstrap import fixed_test_bootstrap
+from tacgen_lib.probes.bootstrap import fixed_test_bootstrap, resample_indices
+from tacgen_lib.probes.logistic import FixedLogistic
 from tacgen_lib.probes.protocol import FamilyRows, FittedProbe, ProbeSettings, fit_probe
 
 __all__ = [
@@ -179,8 +193,8 @@ def nonlinear_baseline(
     """
     z_tr, z_te = _standardise(np.asarray(v_train, np.float64), np.asarray(v_test, np.float64))
     sub = z_tr[: min(len(z_tr), 500)]
-    d2 = ((sub[:, None, :] - sub[None, :, :]) ** 2).sum(-1)
-    med = float(np.median(d2[np.triu_indices(len(sub), 1)])) if len(sub) > 1 else 1.0
+    # pairwise squared distances i < j (pdist: no (n, n, d) temporary)
+    med = float(np.median(pdist(sub, "sqeuclidean"))) if len(sub) > 1 else 1.0
     med = med if med > 0 else 1.0
     best: tuple[float, FittedProbe, float] | None = None
     for mult in gammas:
@@ -223,6 +237,24 @@ def _row(base: dict, inp: str, boot: dict, vs_nl: dict | None) -> dict:
     }
 
 
+#: ``reg_source`` of a probe whose regulariser was chosen by its own CV / taken from the
+#: reference cell's CV of the same input kind (logistic t_gen and t_gen_shuffled only).
+REG_CV, REG_REFERENCE = "cv", "reference cell"
+
+
+def _cell_order(
+    cells: Sequence[tuple[str, str, str]], reference: tuple[str, str, str] | None
+) -> list[tuple[str, str, str]]:
+    """The cells with the reference cell first (its CV fixes the logistic C of the others)."""
+    cells = list(cells)
+    if reference is None or not cells:
+        return cells
+    ref = tuple(str(x) for x in reference)
+    if ref not in cells:
+        raise ValueError(f"evaluate_generator: reference cell {ref} is not among the cells {cells}")
+    return [ref] + [c for c in cells if c != ref]
+
+
 def evaluate_generator(
     targets: Sequence[TargetSpec],
     *,
@@ -233,6 +265,7 @@ def evaluate_generator(
     t_gen: Mapping[tuple[str, str, str], Mapping[str, np.ndarray]],
     permutations: int,
     gammas: Sequence[float],
+    reference: tuple[str, str, str] | None = None,
     labels: Mapping[str, object] | None = None,
     progress: Callable[[str], None] | None = None,
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
@@ -240,6 +273,8 @@ def evaluate_generator(
 
     vision, t_real: sample_id -> vector, for every row of the corpus (dicts keep this
     function free of edge I/O); t_gen: (sampler, guidance, steps) -> sample_id -> vector.
+    `reference`: the cell whose CV chooses the logistic C of every cell (module docstring;
+    default: the first cell).
     """
     say = progress or (lambda _m: None)
 
@@ -249,6 +284,7 @@ def evaluate_generator(
     all_ids = np.array(sorted(vision), dtype=object)
     perm = shuffled_rows(len(all_ids), seed)
     shuffled_of = dict(zip(all_ids, all_ids[perm], strict=True))
+    cells = _cell_order(list(t_gen), reference)
     out_rows: list[dict] = []
     perm_rows: list[dict] = []
     fid_cache: dict[tuple, dict] = {}
@@ -256,6 +292,9 @@ def evaluate_generator(
         rows, ps = spec.rows, spec.settings
         v_tr, v_te = block(vision, rows.train_ids), block(vision, rows.test_ids)
         t_tr, t_te = block(t_real, rows.train_ids), block(t_real, rows.test_ids)
+        # one draw of the 5,000 test resamples, shared by every bootstrap of this target
+        resamples = resample_indices(len(rows.y_test), ps.bootstrap, ps.seed,
+                                     strata=rows.strata_test)  # fmt: skip
 
         def fit(
             x_tr: np.ndarray, x_te: np.ndarray, ps: ProbeSettings = ps, rows: FamilyRows = rows
@@ -264,14 +303,38 @@ def evaluate_generator(
                              train_ids=rows.train_ids, test_ids=rows.test_ids)  # fmt: skip
 
         def boot(
-            pred_a: np.ndarray, pred_b: np.ndarray, ps: ProbeSettings = ps, rows: FamilyRows = rows
+            pred_a: np.ndarray,
+            pred_b: np.ndarray,
+            ps: ProbeSettings = ps,
+            rows: FamilyRows = rows,
+            resamples: np.ndarray = resamples,
         ) -> dict:
             return fixed_test_bootstrap(rows.y_test, pred_a, pred_b, ps.metric,
                                         n_resamples=ps.bootstrap, seed=ps.seed,
-                                        strata=rows.strata_test, sample_ids=rows.test_ids)  # fmt: skip
+                                        indices=resamples, sample_ids=rows.test_ids)  # fmt: skip
 
-        p_v = fit(v_tr, v_te).pred_test
-        p_real = fit(np.hstack([v_tr, t_tr]), np.hstack([v_te, t_te])).pred_test
+        chosen: dict[str, float] = {}  # input kind -> C chosen on the reference cell
+
+        def fit_cell(
+            inp: str, x_tr: np.ndarray, x_te: np.ndarray, ps: ProbeSettings = ps,
+            rows: FamilyRows = rows, chosen: dict[str, float] = chosen,
+        ) -> tuple[np.ndarray, float, str]:  # fmt: skip
+            """(test predictions, regulariser, its source) of one cell's V + x probe."""
+            if ps.kind == "logistic" and inp in chosen:
+                # lbfgs from max_iter = the cap at once: the iterates do not depend on max_iter,
+                # so a fit that converges gives the probe's own fit without its restarts
+                # (fit_logistic_once doubles max_iter from 200 and starts again from zero)
+                cap = FixedLogistic.max_iter_cap
+                fixed = FixedLogistic(chosen[inp], max_iter=cap, max_iter_cap=cap)
+                pred = np.asarray(fixed.fit_predict(x_tr, rows.y_train, x_te), dtype=object)
+                return pred, chosen[inp], REG_REFERENCE
+            probe = fit(x_tr, x_te)
+            if ps.kind == "logistic":
+                chosen[inp] = float(probe.reg)
+            return probe.pred_test, float(probe.reg), REG_CV
+
+        v_fit, real_fit = fit(v_tr, v_te), fit(np.hstack([v_tr, t_tr]), np.hstack([v_te, t_te]))
+        p_v, p_real = v_fit.pred_test, real_fit.pred_test
         nl, gamma = nonlinear_baseline(v_tr, v_te, rows, ps, gammas=gammas,
                                        n_components=t_tr.shape[1], seed=seed)  # fmt: skip
         p_nl = nl.pred_test
@@ -280,20 +343,26 @@ def evaluate_generator(
             "seed": int(seed), "probe_seed": ps.seed, "n_train": rows.n_train,
             "n_test": rows.n_test, "nonlinear_gamma": gamma, **(labels or {}),
         }  # fmt: skip
+        # the rows every cell repeats (they do not depend on the cell): bootstrapped once
         real_row = _row({}, "t_real", boot(p_v, p_real), boot(p_nl, p_real))
         nl_row = _row({}, "v_nonlinear", boot(p_v, p_nl), None)
+        real_row.update(reg=float(real_fit.reg), reg_source=REG_CV)
+        nl_row.update(reg=float(nl.reg), reg_source=REG_CV)
         say(f"{spec.name}: V {real_row['v_score']:.3f}, V+T_real delta {real_row['delta']:+.3f} "
             f"[{real_row['ci_low']:+.3f}, {real_row['ci_high']:+.3f}], nonlinear V delta "
             f"{nl_row['delta']:+.3f}")  # fmt: skip
-        for cell, gen in t_gen.items():
+        for cell in cells:
+            gen = t_gen[cell]
             sampler, guidance, steps = cell
             cell_base = {**base, "sampler": sampler, "guidance": float(guidance),
                          "steps": int(steps)}  # fmt: skip
             g_tr, g_te = block(gen, rows.train_ids), block(gen, rows.test_ids)
             shuf = {i: gen[shuffled_of[i]] for i in vision}
             s_tr, s_te = block(shuf, rows.train_ids), block(shuf, rows.test_ids)
-            p_gen = fit(np.hstack([v_tr, g_tr]), np.hstack([v_te, g_te])).pred_test
-            p_shuf = fit(np.hstack([v_tr, s_tr]), np.hstack([v_te, s_te])).pred_test
+            p_gen, reg_gen, src_gen = fit_cell("t_gen", np.hstack([v_tr, g_tr]),
+                                               np.hstack([v_te, g_te]))  # fmt: skip
+            p_shuf, reg_shuf, src_shuf = fit_cell("t_gen_shuffled", np.hstack([v_tr, s_tr]),
+                                                  np.hstack([v_te, s_te]))  # fmt: skip
             key = (cell, tuple(rows.test_ids))
             if key not in fid_cache:
                 fid, null = fidelity(g_te, t_te, t_tr, n_permutations=permutations, seed=seed)
@@ -307,21 +376,20 @@ def evaluate_generator(
                     for k, s in enumerate(null)
                 ]  # fmt: skip
             fid = fid_cache[key]
-            rows_cell = [
-                _row(cell_base, "t_real", boot(p_v, p_real), boot(p_nl, p_real)),
-                _row(cell_base, "t_gen", boot(p_v, p_gen), boot(p_nl, p_gen)),
-                _row(cell_base, "t_gen_shuffled", boot(p_v, p_shuf), boot(p_nl, p_shuf)),
-                _row(cell_base, "v_nonlinear", boot(p_v, p_nl), None),
-            ]
+            gen_row = _row(cell_base, "t_gen", boot(p_v, p_gen), boot(p_nl, p_gen))
+            shuf_row = _row(cell_base, "t_gen_shuffled", boot(p_v, p_shuf), boot(p_nl, p_shuf))
+            gen_row.update(reg=reg_gen, reg_source=src_gen)
+            shuf_row.update(reg=reg_shuf, reg_source=src_shuf)
+            rows_cell = [{**cell_base, **real_row}, gen_row, shuf_row, {**cell_base, **nl_row}]
             for r in rows_cell:
                 r.update(fid)
                 r["row_id"] = (f"{corpus}|{spec.name}|seed~{seed}|{sampler}|w={guidance}|"
                                f"steps={steps}|{r['input']}")  # fmt: skip
             out_rows += rows_cell
-            g = rows_cell[1]
             say(f"{spec.name} {sampler} w={guidance} steps={steps}: V+T_gen delta "
-                f"{g['delta']:+.3f} [{g['ci_low']:+.3f}, {g['ci_high']:+.3f}], vs nonlinear V "
-                f"{g['delta_vs_nonlinear']:+.3f}; shuffled {rows_cell[2]['delta']:+.3f}; "
+                f"{gen_row['delta']:+.3f} [{gen_row['ci_low']:+.3f}, {gen_row['ci_high']:+.3f}]"
+                f" (C/lambda {reg_gen:g}, {src_gen}), vs nonlinear V "
+                f"{gen_row['delta_vs_nonlinear']:+.3f}; shuffled {shuf_row['delta']:+.3f}; "
                 f"cos {fid['cos_matched']:.3f} vs {fid['cos_offdiag']:.3f} "
                 f"(p {fid['pairing_p']:.3f}), FD {fid['frechet']:.2f}")  # fmt: skip
     perm_frame = pd.DataFrame(perm_rows, columns=list(PERMUTATION_COLUMNS))

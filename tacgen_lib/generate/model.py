@@ -60,7 +60,11 @@ class ResidualBlock(nn.Module):
         self.act = nn.SiLU()
 
     def forward(self, x: Tensor, emb: Tensor) -> Tensor:
-        h = self.norm(x) + self.emb(emb)
+        return self.forward_projected(x, self.emb(emb))
+
+    def forward_projected(self, x: Tensor, projected: Tensor) -> Tensor:
+        """The block given its embedding already projected (``self.emb(emb)``, (B or 1, width))."""
+        h = self.norm(x) + projected
         h = self.fc2(self.act(self.fc1(self.act(h))))
         return x + h
 
@@ -83,15 +87,42 @@ class Denoiser(nn.Module):
         nn.init.zeros_(self.out.weight)  # zero-initialised last layer (RCG): starts at eps = 0
         nn.init.zeros_(self.out.bias)
 
+    def condition(self, cond: Tensor, drop: Tensor | None = None) -> Tensor:
+        """cond (B, d_v) with the rows where ``drop`` is True replaced by the null condition."""
+        if drop is None:
+            return cond
+        return torch.where(drop[:, None], self.null_condition[None, :].expand_as(cond), cond)
+
     def forward(self, x_t: Tensor, t: Tensor, cond: Tensor, drop: Tensor | None = None) -> Tensor:
         """x_t (B, d_t), t (B,) integer steps, cond (B, d_v); drop (B,) bool -> null condition."""
-        if drop is not None:
-            cond = torch.where(drop[:, None], self.null_condition[None, :].expand_as(cond), cond)
+        cond = self.condition(cond, drop)
         emb = self.time(sinusoidal_embedding(t, self.time_dim).to(x_t.dtype)) + self.cond(cond)
         h = self.inp(x_t)
         for block in self.blocks:
             h = block(h, emb)
+        return self._head(h)
+
+    def _head(self, h: Tensor) -> Tensor:
         return self.out(torch.nn.functional.silu(self.out_norm(h)))
+
+    def project_condition(self, cond: Tensor, drop: Tensor | None = None) -> list[Tensor]:
+        """What fixed condition rows contribute to each block's embedding: W_k cond_emb per
+        block k, (B, hidden) each, without the bias. Sampling computes it once per batch
+        (`forward_projected` adds the time part per step) instead of once per step."""
+        c = self.cond(self.condition(cond, drop))
+        return [torch.nn.functional.linear(c, block.emb.weight) for block in self.blocks]
+
+    def forward_projected(self, x_t: Tensor, t: int, projected: list[Tensor]) -> Tensor:
+        """`forward` for rows that share one timestep t, the condition part precomputed by
+        `project_condition`: equal to it up to float rounding, since each block's embedding
+        layer is linear, W (time + cond) + b = (W time + b) + W cond. The time MLP then runs
+        on one row per step and the condition MLP never (sampling: about half the FLOPs)."""
+        tt = torch.full((1,), int(t), dtype=torch.int64)
+        time = self.time(sinusoidal_embedding(tt, self.time_dim).to(x_t.dtype))  # (1, hidden)
+        h = self.inp(x_t)
+        for block, pc in zip(self.blocks, projected, strict=True):
+            h = block.forward_projected(h, pc + block.emb(time))
+        return self._head(h)
 
 
 @dataclass(frozen=True)

@@ -11,7 +11,7 @@ histogram and the training curves. Pure functions of their arguments.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -30,6 +30,7 @@ __all__ = [
     "pca_figure",
     "permutation_figure",
     "steps_seconds_figure",
+    "text_colour",
 ]
 
 
@@ -160,6 +161,18 @@ def _panels(n: int, ncols: int = 3, size: tuple[float, float] = (4.2, 3.4)):
     return fig, axes.ravel()
 
 
+def text_colour(rgba: Sequence[float]) -> str:
+    """Black or white, whichever reads better on a cell of colour `rgba`: white when the
+    cell's relative luminance (WCAG 2.x: 0.2126 R + 0.7152 G + 0.0722 B of the linearised
+    sRGB channels) is below 0.179, the point where both give the same contrast ratio."""
+
+    def linear(c: float) -> float:
+        return c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4
+
+    r, g, b = (linear(float(c)) for c in rgba[:3])
+    return "white" if 0.2126 * r + 0.7152 * g + 0.0722 * b < 0.179 else "black"
+
+
 def guidance_seed_figure(summary: pd.DataFrame, sampler: str, steps: int) -> plt.Figure:
     """Heatmap of Delta_gen per guidance w (rows) x seed (columns), one panel per target,
     each cell annotated with Delta and its bootstrap CI."""
@@ -173,11 +186,12 @@ def guidance_seed_figure(summary: pd.DataFrame, sampler: str, steps: int) -> plt
         for r in g.itertuples():
             grid[ws.index(r.guidance), seeds.index(r.seed)] = r.delta
         lim = max(float(np.nanmax(np.abs(grid))) if np.isfinite(grid).any() else 0.0, 1e-3)
-        ax.imshow(grid, cmap="RdBu_r", vmin=-lim, vmax=lim, aspect="auto")
+        image = ax.imshow(grid, cmap="RdBu_r", vmin=-lim, vmax=lim, aspect="auto")
         for r in g.itertuples():
             i, j = ws.index(r.guidance), seeds.index(r.seed)
             ax.text(j, i, f"{r.delta:+.3f}\n[{r.ci_low:+.2f}, {r.ci_high:+.2f}]", ha="center",
-                    va="center", fontsize=7)  # fmt: skip
+                    va="center", fontsize=7,
+                    color=text_colour(image.cmap(image.norm(r.delta))))  # fmt: skip
         ax.set_xticks(range(len(seeds)), [str(x) for x in seeds])
         ax.set_yticks(range(len(ws)), [f"{w:g}" for w in ws])
         ax.set_xlabel("generator seed")

@@ -48,6 +48,7 @@ with threadpool_limits(snakemake.threads):
         t_gen=t_gen,
         permutations=settings.permutations,
         gammas=settings.nonlinear_gammas,
+        reference=tuple(params.reference),
         labels={
             "design": corpus_cfg.get("design", corpus_cfg["kind"]),
             "null_corpus": bool(corpus_cfg.get("null", False)),
