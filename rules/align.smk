@@ -46,10 +46,11 @@ rule train_heads:
         variant=one_of(ALIGN["variants"]),
     conda:
         "../envs/align.yaml"
-    threads: 2
-    resources:
-        mem_mb=4000,
-        runtime=60,
+    # one thread, so two cells train side by side: at the default's sizes a second thread
+    # bought nothing (sim_paired, seed 42, tau 0.07, all rows: 9.6 s wall and 15.1 CPU-s on
+    # 2 threads, 8.3 s and 8.1 CPU-s on 1, 2-core AVX-512 EPYC); profiles/slurm gives 2.
+    # Reruns are bit-identical per thread count.
+    threads: 1
     params:
         settings=ALIGN,  # the whole subtree; tacgen_lib.align.settings reads it
     script:
