@@ -166,7 +166,7 @@ def test_knob_points_sum_benchmarks_keep_metric_order_and_append_extras():
     settings = [_setting("2", 0.5, [1.0, 2.0]), _setting("8", 0.7, [3.0, 4.0, 5.0], True)]
     extra = {"8": [metric_row(FRAMES_PER_S, 30.0, np.nan, np.nan, "none")]}
     points = knob_points("presses", "corpus", settings, ["m2", "m1"], extra=extra)
-    assert list(points.columns) == POINT_COLUMNS
+    assert list(points.columns) == [*POINT_COLUMNS, "direction"]  # check_points adds direction
     assert list(points["metric"]) == ["m2", "m1", "m2", "m1", FRAMES_PER_S]
     assert list(points["wall_s"]) == [3.0, 3.0, 12.0, 12.0, 12.0]
     assert list(points["cpu_s"]) == [1.5, 1.5, 6.0, 6.0, 6.0]
