@@ -326,10 +326,16 @@ def test_align_grid_through_slurm_profile(tmp_path):
         edges.verify(work / "results/align" / cell / "heads.pt")
     assert (work / "results/report/align/seeds.html").stat().st_size > 500
     # ---- issue 15: the same grid run locally gives the same edges ---- begin
+    # at the profile's thread counts: edges are bit-identical per thread count, and the
+    # profile gives train_heads and train_generator 2 threads where a local run gives 1
     smk(
         local,
         "results/align/summary.parquet",
         "results/report/align/seeds.html",
+        GENERATOR_WEIGHTS,
+        "--set-threads",
+        "train_heads=2",
+        "train_generator=2",
         "--configfile",
         "config/test.yaml",
         "config/slurm_test.yaml",

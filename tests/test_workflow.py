@@ -107,8 +107,10 @@ def test_changed_probe_param_reruns_only_the_probes(run_dir, tmp_path):
     # evaluation uses the probes' settings (same probe code): both are downstream too
     robustness = {"probe_training_size", "probe_within_scale", "aggregate_robustness"}
     generate = {"evaluate_generator", "aggregate_generate"}
+    # the cost page's free generator knobs read the generation summary (issue 14)
+    cost = {"cost_generate_points", "cost_of_accuracy"}
     assert set(planned_rules(work)) == {"probe", "aggregate_probes", "edge_manifest", "all"} | (
-        robustness | generate
+        robustness | generate | cost
     )
 
 
@@ -140,11 +142,11 @@ def test_edit_to_an_indirectly_imported_module_reruns_exactly_its_users(run_dir,
     }
     # evaluate_generator reaches it through probes.protocol too (generate, issue 12)
     robustness = {"probe_training_size", "probe_within_scale", "aggregate_robustness"}
-    # cost_sim_probe (issue 14) fits the probes stage's probes on each simulation setting
-    cost = {"cost_sim_probe"}
-    assert not direct and users == {"probe", "aggregate_probes", "evaluate_generator"} | (
-        robustness | cost
-    )
+    # cost_sim_probe (issue 14) fits the probes stage's probes on each simulation setting;
+    # cost_probe (the permutations knob) calls the tactile-permutation control itself
+    cost = {"cost_sim_probe", "cost_probe"}
+    assert direct == ["cost_probe.py"]
+    assert users == {"probe", "aggregate_probes", "evaluate_generator"} | (robustness | cost)
     work = copy_tree(tmp_path / "f")
     shutil.copytree(run_dir / "results", work / "results")
     shutil.copytree(run_dir / ".snakemake", work / ".snakemake")
@@ -154,6 +156,8 @@ def test_edit_to_an_indirectly_imported_module_reruns_exactly_its_users(run_dir,
     # (the cost sweeps run only under config/cost.yaml: not planned here)
     assert set(planned_rules(work)) == (users - cost) | {
         "aggregate_generate",
+        "cost_generate_points",
+        "cost_of_accuracy",
         "edge_manifest",
         "all",
     }
