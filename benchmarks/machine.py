@@ -8,8 +8,9 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Callable
-from pathlib import Path
 from typing import NamedTuple
+
+from tacgen_lib.cost.benchmarks import cpu_label
 
 
 class Timing(NamedTuple):
@@ -44,15 +45,5 @@ def gemm_peak(n: int = 1024, reps: int = 5) -> Timing:
 
 def describe() -> str:
     """CPU model, cores, widest x86 vector extension and the 1-minute load average."""
-    model, flags = "unknown CPU", set()
-    cpuinfo = Path("/proc/cpuinfo")
-    if cpuinfo.exists():
-        for line in cpuinfo.read_text().splitlines():
-            key, _, value = line.partition(":")
-            if key.strip() == "model name" and model == "unknown CPU":
-                model = value.strip()
-            elif key.strip() == "flags" and not flags:
-                flags = set(value.split())
-    vector = next((f for f in ("avx512f", "avx2", "avx", "sse4_2") if f in flags), "-")
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
-    return f"{model}, {os.cpu_count()} cores, vector {vector}, load average {load:.2f}"
+    return f"{cpu_label()}, load average {load:.2f}"

@@ -20,6 +20,8 @@ from collections.abc import Sequence
 import numpy as np
 import pandas as pd
 
+from tacgen_lib.cost.points import DIRECTIONS
+
 __all__ = ["MARGINAL_COLUMNS", "improvement", "knob_sentence", "marginal_table", "pareto_front"]
 
 MARGINAL_COLUMNS = [
@@ -35,8 +37,8 @@ MARGINAL_COLUMNS = [
 
 
 def _sign(direction: str) -> float:
-    if direction not in ("higher", "lower"):
-        raise ValueError(f"direction must be 'higher' or 'lower', got {direction!r}")
+    if direction not in DIRECTIONS:
+        raise ValueError(f"direction must be one of {DIRECTIONS}, got {direction!r}")
     return 1.0 if direction == "higher" else -1.0
 
 

@@ -82,13 +82,17 @@ def _train_rows(c: Config, name: str) -> float:
     return _n(c, name) * float(c["splits"]["fractions"]["train"])
 
 
-def _backbone(c: Config, modality: str) -> float:
-    """FLOPs of one frame through a modality's ViT forward: 2 × depth × tokens × (12 width² +
-    2 tokens × width) (projections and MLP, attention)."""
-    arch = c["features"]["backbones"][modality]["arch"]
+def _vit_flops(arch: str, image_size: int) -> float:
+    """FLOPs of one frame through a ViT forward: 2 × depth × tokens × (12 width² + 2 tokens ×
+    width) (projections and MLP, attention)."""
     width, depth = _VIT[arch]
-    tokens = (int(c["features"]["image_size"]) // _PATCH) ** 2 + 1
+    tokens = (int(image_size) // _PATCH) ** 2 + 1
     return 2.0 * depth * tokens * (12 * width**2 + 2 * tokens * width)
+
+
+def _backbone(c: Config, modality: str) -> float:
+    """`_vit_flops` of a modality's backbone at the config's input size."""
+    return _vit_flops(c["features"]["backbones"][modality]["arch"], c["features"]["image_size"])
 
 
 #: DINO self-distillation per frame and epoch, in ViT forwards: 2 global crops through the
@@ -200,10 +204,8 @@ def _pixels(w: Wildcards) -> float:
 
 
 def _sweep_backbone(w: Wildcards) -> float:
-    """`_backbone` at a features-knob setting (size, arch from the wildcards)."""
-    width, depth = _VIT[w["arch"]]
-    tokens = (int(w["size"]) // _PATCH) ** 2 + 1
-    return 2.0 * depth * tokens * (12 * width**2 + 2 * tokens * width)
+    """`_vit_flops` at a features-knob setting (size, arch from the wildcards)."""
+    return _vit_flops(w["arch"], w["size"])
 
 
 def _sweep_align_steps(c: Config, w: Wildcards) -> float:
