@@ -12,10 +12,13 @@ same process between the rounds:
     fraction        = (FLOPs / GEMM FLOP/s) / measured step seconds      (issue target >= 0.5)
 
 Sampling: DDIM-50 with classifier-free guidance (conditional and unconditional rows in one
-batch of 2n) over n = 1,200 rows: generated vectors per second and the same roofline fraction
-over the FLOPs `sample` performs (`sample_flops`: the condition's share of the embeddings once
-per batch, the time MLP on one row per step; the FLOPs a plain forward per step would need are
-printed too, as "forward-equivalent"). The machine is shared: each figure is the best of several rounds, and the
+batch of 2n) over n = 1,200 rows, in numpy (`inference.DenoiserArrays`, what a sample_generator
+job runs): generated vectors per second and the roofline fraction over the FLOPs `sample`
+performs (`sample_flops`: the condition's share of the embeddings once per batch, the time MLP
+on one row per step; the FLOPs a plain forward per step would need are printed too, as
+"forward-equivalent"), against one 1024^3 float32 numpy matmul (numpy's BLAS, which sampling
+uses). Then what one sampling job pays before it samples: the seconds a fresh interpreter takes
+to import the sampling job's modules, against importing torch (which those modules avoid). The machine is shared: each figure is the best of several rounds, and the
 ratio is also given with process CPU seconds (`cpu-frac`), less sensitive to competing load.
 
     .venv/bin/python benchmarks/bench_generate.py [--rounds 5] [--steps 30] [--threads N]
@@ -25,11 +28,15 @@ ratio is also given with process CPU seconds (`cpu-frac`), less sensitive to com
 from __future__ import annotations
 
 import argparse
+import subprocess
+import sys
+import time
 
 import machine
 import numpy as np
 import torch
 from machine import best_of, gemm_peak
+from threadpoolctl import threadpool_limits
 from torch import nn
 
 from tacgen_lib.generate.model import Denoiser
@@ -77,6 +84,29 @@ def gemm_rate(n: int = 1024) -> tuple[float, float]:
     """FLOP/s of one n^3 float32 matmul by wall and by process CPU seconds (best of 5)."""
     wall, cpu = gemm_peak(n)
     return 2 * n**3 / wall, 2 * n**3 / cpu
+
+
+def numpy_gemm_rate(n: int = 1024) -> tuple[float, float]:
+    """FLOP/s of one n^3 float32 numpy matmul by wall and by process CPU seconds (best of 5)."""
+    rng = np.random.default_rng(0)
+    a = rng.standard_normal((n, n), dtype=np.float32)
+    b = rng.standard_normal((n, n), dtype=np.float32)
+    wall, cpu = best_of(lambda: a @ b, 5)
+    return 2 * n**3 / wall, 2 * n**3 / cpu
+
+
+def import_seconds(modules: str, reps: int = 3) -> float:
+    """Best wall seconds of a fresh interpreter importing `modules` (minus a bare start)."""
+
+    def run(code: str) -> float:
+        best = float("inf")
+        for _ in range(reps):
+            t0 = time.perf_counter()
+            subprocess.run([sys.executable, "-c", code], check=True)
+            best = min(best, time.perf_counter() - t0)
+        return best
+
+    return run(f"import {modules}") - run("pass")
 
 
 def main() -> None:
@@ -133,16 +163,26 @@ def main() -> None:
           f"{flops / rate_w / step_w:.2f} (cpu-frac {flops / rate_c / step_c:.2f}); "
           f"{1 / step_w:.0f} steps/s")  # fmt: skip
 
-    model.eval()
+    arrays = ema.arrays()
     rows = np.random.default_rng(0).standard_normal((args.rows, args.dim)).astype(np.float32)
     kw = {"sampler": "ddim", "steps": 50, "guidance": 2.0, "seed": 0, "prediction": "v"}
-    sw, sc = best_of(lambda: sample(model, sch, rows, **kw), max(1, args.rounds // 2))
+    with threadpool_limits(args.threads):
+        np_w, np_c = numpy_gemm_rate()
+        sw, sc = best_of(lambda: sample(arrays, sch, rows, **kw), max(1, args.rounds // 2))
+        rw, rc = numpy_gemm_rate()
+    np_w, np_c = max(np_w, rw), max(np_c, rc)
     f_sample = sample_flops(model, args.rows, 50)
     f_plain = 50 * forward_flops(model, 2 * args.rows)
-    print(f"sampling DDIM-50 + CFG, {args.rows} rows: {sw:.2f} s, {args.rows / sw:.0f} vectors/s;"
-          f" roofline fraction {f_sample / rate_w / sw:.2f} (cpu-frac "
-          f"{f_sample / rate_c / sc:.2f}) on {f_sample / 1e9:.1f} GFLOP performed; "
-          f"forward-equivalent {f_plain / rate_w / sw:.2f} ({f_plain / 1e9:.1f} GFLOP)")  # fmt: skip
+    print(f"numpy GEMM 1024^3: {np_w / 1e9:.1f} GF/s wall, {np_c / 1e9:.1f} GF/s per CPU second")
+    print(f"sampling DDIM-50 + CFG (numpy), {args.rows} rows: {sw:.2f} s, "
+          f"{args.rows / sw:.0f} vectors/s; roofline fraction {f_sample / np_w / sw:.2f} "
+          f"(cpu-frac {f_sample / np_c / sc:.2f}) on {f_sample / 1e9:.1f} GFLOP performed; "
+          f"forward-equivalent {f_plain / np_w / sw:.2f} ({f_plain / 1e9:.1f} GFLOP)")  # fmt: skip
+    job = import_seconds("tacgen_lib.generate.inference, tacgen_lib.generate.sampling, "
+                         "tacgen_lib.io.edges, tacgen_lib.io.log, pandas")  # fmt: skip
+    with_torch = import_seconds("torch")
+    print(f"per sampling job, before sampling: its imports {job:.2f} s; importing torch "
+          f"{with_torch:.2f} s more would be {with_torch / max(job, 1e-9):.1f}x that")  # fmt: skip
 
 
 if __name__ == "__main__":

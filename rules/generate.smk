@@ -12,7 +12,7 @@ include: "generate_common.smk"
 TARGETS += ["results/generate/summary.parquet"]
 TARGETS += [f"{GENERATE_REPORT}/{n}.{e}" for n, e in GENERATE_ITEMS.items()]
 EDGES += ["results/generate/evaluation.parquet"]
-EDGES += generator_files(f"{GENERATOR}/generator.pt")
+EDGES += generator_files(f"{GENERATOR}/generator.arrow")
 EDGES += generator_files(f"{GENERATOR}/curve.parquet")
 EDGES += generator_files(f"{GENERATOR}/evaluation.parquet")
 EDGES += generator_files(f"{GENERATOR}/permutations.parquet")
@@ -31,7 +31,7 @@ rule train_generator:
         splits="results/corpus/splits.parquet",
         code=imports_of("train_generator"),
     output:
-        weights=f"{GENERATOR}/generator.pt",
+        weights=f"{GENERATOR}/generator.arrow",
         curve=f"{GENERATOR}/curve.parquet",
     log:
         "results/logs/train_generator/{corpus}/seed~{seed}.log",
@@ -58,7 +58,7 @@ rule train_generator:
 rule sample_generator:
     """Generated tactile features for every row of the corpus: one sampler, guidance and steps."""
     input:
-        weights=f"{GENERATOR}/generator.pt",
+        weights=f"{GENERATOR}/generator.arrow",
         v=lambda w: feature_edge(w.corpus, "vision"),
         code=imports_of("sample_generator"),
     output:

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pandas as pd
@@ -30,9 +32,11 @@ from tacgen_lib.generate.evaluate import (
     pairing_permutation,
     shuffled_rows,
 )
+from tacgen_lib.generate.inference import DenoiserArrays, read_generator
 from tacgen_lib.generate.model import Denoiser, fit_standardiser, sinusoidal_embedding
 from tacgen_lib.generate.sampling import (
     ddim_timesteps,
+    generate,
     guided_output,
     guided_output_projected,
     predicted_x0_eps,
@@ -42,7 +46,6 @@ from tacgen_lib.generate.schedules import cosine_betas, linear_betas, make_sched
 from tacgen_lib.generate.settings import GenerateSettings, check_grid
 from tacgen_lib.generate.train import (
     fit_generator,
-    generate,
     load_generator,
     make_optimiser,
     save_generator,
@@ -110,7 +113,12 @@ def ddim_reference(model, schedule, cond, x_T, steps, guidance, prediction):
 
 
 def initial_noise(n, d, seed):
-    return torch.randn(n, d, generator=torch.Generator().manual_seed(seed)).numpy()
+    """The first draw of `sample`'s noise generator (numpy PCG64, float32)."""
+    return np.random.default_rng(seed).standard_normal((n, d), dtype=np.float32)
+
+
+def normal32(*shape, seed=0):
+    return np.random.default_rng(seed).standard_normal(shape, dtype=np.float32)
 
 
 # ------------------------------------------------------------------ schedules
@@ -181,35 +189,66 @@ def test_ddim_matches_float64_reference(prediction, steps):
     sch = make_schedule("cosine", 1000)
     model = random_denoiser()
     cond = np.random.default_rng(1).normal(size=(7, 5)).astype(np.float32)
-    got = sample(model, sch, cond, sampler="ddim", steps=steps, guidance=1.5, seed=3,
+    got = sample(model.arrays(), sch, cond, sampler="ddim", steps=steps, guidance=1.5, seed=3,
                  prediction=prediction)  # fmt: skip
     ref = ddim_reference(model, sch, cond, initial_noise(7, 6, 3), steps, 1.5, prediction)
     assert np.isfinite(got).all()
     np.testing.assert_allclose(got, ref, rtol=1e-3, atol=1e-3 * np.abs(ref).max())
 
 
+def test_numpy_forward_equals_the_torch_module():
+    """Sampling runs the denoiser in numpy (`DenoiserArrays`, no torch import); it must be the
+    torch module's forward up to float32 rounding, conditional and null-condition rows, and
+    close to the module run in float64."""
+    model = random_denoiser(hidden=32, blocks=3)
+    arrays = model.arrays()
+    x, c = normal32(11, 6, seed=1), normal32(11, 5, seed=2)
+    t = np.array([999, 998, 700, 500, 250, 100, 10, 3, 2, 1, 0])
+    drop = np.arange(11) % 3 == 0
+    with torch.no_grad():
+        ref = model(torch.from_numpy(x), torch.from_numpy(t), torch.from_numpy(c),
+                    torch.from_numpy(drop)).numpy()  # fmt: skip
+        m64 = Denoiser(**model.dims).double()
+        m64.load_state_dict({k: v.double() for k, v in model.state_dict().items()})
+        ref64 = m64(torch.from_numpy(x).double(), torch.from_numpy(t),
+                    torch.from_numpy(c).double(), torch.from_numpy(drop)).numpy()  # fmt: skip
+    got = arrays.forward(x, t, c, drop)
+    assert got.dtype == np.float32
+    np.testing.assert_allclose(got, ref, rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(got, ref64, rtol=1e-4, atol=1e-5)
+    with pytest.raises(ValueError, match="lacks"):
+        DenoiserArrays.from_state({"inp.weight": np.zeros((2, 2))}, model.dims)
+
+
+def test_sampling_modules_do_not_import_torch():
+    """What a sample_generator job imports: the weights reader, the samplers, the edges."""
+    code = ("import sys; import tacgen_lib.generate.inference, tacgen_lib.generate.sampling, "
+            "tacgen_lib.io.edges, tacgen_lib.io.log; print('torch' in sys.modules)")  # fmt: skip
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False"
+
+
 @pytest.mark.parametrize("guidance", [0.0, 10.0])
 def test_guidance_extremes_stay_finite_and_w0_is_unconditional(guidance):
-    model = random_denoiser()
-    x = torch.randn(4, 6)
-    t = torch.tensor([999, 500, 1, 0])
-    c = torch.randn(4, 5)
+    model = random_denoiser().arrays()
+    x = normal32(4, 6, seed=1)
+    t = np.array([999, 500, 1, 0])
+    c = normal32(4, 5, seed=2)
     out = guided_output(model, x, t, c, guidance)
-    assert torch.isfinite(out).all()
-    with torch.no_grad():
-        u = model(x, t, c, torch.ones(4, dtype=torch.bool))
-        cnd = model(x, t, c)
-    torch.testing.assert_close(out, u + guidance * (cnd - u))
+    assert np.isfinite(out).all()
+    u = model.forward(x, t, c, np.ones(4, dtype=bool))
+    cnd = model.forward(x, t, c)
+    np.testing.assert_allclose(out, u + guidance * (cnd - u), rtol=1e-6, atol=1e-6)
     if guidance == 0.0:
-        torch.testing.assert_close(out, u)
+        np.testing.assert_array_equal(out, u)
     sch = make_schedule("cosine", 1000)
-    z = sample(model, sch, c.numpy(), sampler="ddim", steps=10, guidance=guidance, seed=0,
+    z = sample(model, sch, c, sampler="ddim", steps=10, guidance=guidance, seed=0,
                prediction="v")  # fmt: skip
     assert np.isfinite(z).all()
 
 
 def test_batch_of_one_and_identical_conditions():
-    model = random_denoiser()
+    model = random_denoiser().arrays()
     sch = make_schedule("linear", 100)
     one = sample(model, sch, np.ones((1, 5), np.float32), sampler="ddpm", steps=100,
                  guidance=2.0, seed=0, prediction="v")  # fmt: skip
@@ -219,31 +258,38 @@ def test_batch_of_one_and_identical_conditions():
     assert np.isfinite(same).all()
     assert np.unique(same.round(6), axis=0).shape[0] == 32  # the noise still varies rows
     # one-row guidance equals the batched computation row by row
-    x, t, c = torch.randn(3, 6), torch.tensor([10, 20, 30]), torch.randn(3, 5)
+    x, t, c = normal32(3, 6, seed=1), np.array([10, 20, 30]), normal32(3, 5, seed=2)
     batched = guided_output(model, x, t, c, 3.0)
-    rows = torch.cat([guided_output(model, x[i : i + 1], t[i : i + 1], c[i : i + 1], 3.0)
-                      for i in range(3)])  # fmt: skip
-    torch.testing.assert_close(batched, rows, rtol=1e-5, atol=1e-6)
+    rows = np.concatenate([guided_output(model, x[i : i + 1], t[i : i + 1], c[i : i + 1], 3.0)
+                           for i in range(3)])  # fmt: skip
+    np.testing.assert_allclose(batched, rows, rtol=1e-5, atol=1e-6)
 
 
 @pytest.mark.parametrize("guidance", [0.0, 1.0, 3.0])
 def test_projected_condition_matches_the_plain_forward(guidance):
     """`sample`'s shortcut (condition share of the embeddings once per batch, time MLP on one
     row) equals the plain CFG forward up to float32 rounding, and against float64."""
-    model = random_denoiser()
-    x, c = torch.randn(9, 6), torch.randn(9, 5)
-    keep_drop = torch.cat([torch.zeros(9, dtype=torch.bool), torch.ones(9, dtype=torch.bool)])
-    with torch.no_grad():
-        for t in (999, 500, 1, 0):
-            plain = guided_output(model, x, torch.full((9,), t), c, guidance)
-            got = guided_output_projected(
-                model, x, t, model.project_condition(torch.cat([c, c]), keep_drop), guidance
+    module = random_denoiser()
+    model = module.arrays()
+    x, c = normal32(9, 6, seed=1), normal32(9, 5, seed=2)
+    keep_drop = np.concatenate([np.zeros(9, dtype=bool), np.ones(9, dtype=bool)])
+    m64 = Denoiser(**module.dims).double()
+    m64.load_state_dict({k: v.double() for k, v in module.state_dict().items()})
+    for t in (999, 500, 1, 0):
+        plain = guided_output(model, x, np.full(9, t), c, guidance)
+        got = guided_output_projected(
+            model, x, t, model.project_condition(np.concatenate([c, c]), keep_drop), guidance
+        )
+        np.testing.assert_allclose(got, plain, rtol=1e-5, atol=1e-5)
+        with torch.no_grad():
+            xx, cc, tt = (
+                torch.from_numpy(x).double(),
+                torch.from_numpy(c).double(),
+                torch.full((9,), t),
             )
-            torch.testing.assert_close(got, plain, rtol=1e-5, atol=1e-5)
-            m64 = Denoiser(**model.dims).double()
-            m64.load_state_dict({k: v.double() for k, v in model.state_dict().items()})
-            ref = guided_output(m64, x.double(), torch.full((9,), t), c.double(), guidance)
-            np.testing.assert_allclose(got.double().numpy(), ref.numpy(), rtol=1e-4, atol=1e-5)
+            u = m64(xx, tt, cc, torch.ones(9, dtype=torch.bool))
+            ref = (u + guidance * (m64(xx, tt, cc) - u)).numpy()
+        np.testing.assert_allclose(got, ref, rtol=1e-4, atol=1e-5)
 
 
 def test_training_step_is_bit_reproducible_with_the_fused_optimiser():
@@ -274,24 +320,24 @@ def test_training_step_is_bit_reproducible_with_the_fused_optimiser():
 
 def test_ddpm_final_step_is_the_posterior_mean_and_x0_inverts():
     sch = make_schedule("cosine", 1000)
-    tens = sch.tensors()
-    x0 = torch.randn(5, 3)
-    eps = torch.randn(5, 3)
+    tens = sch.arrays()
+    x0 = normal32(5, 3, seed=1)
+    eps = normal32(5, 3, seed=2)
     for t in (0, 1, 500, 999):
-        a = torch.tensor(math.sqrt(sch.alphas_cumprod[t])).float()
-        s = torch.tensor(math.sqrt(1 - sch.alphas_cumprod[t])).float()
+        a = np.float32(math.sqrt(sch.alphas_cumprod[t]))
+        s = np.float32(math.sqrt(1 - sch.alphas_cumprod[t]))
         x_t = a * x0 + s * eps
         v = a * eps - s * x0
         got_x0, got_eps = predicted_x0_eps(v, x_t, a, s, "v")
-        torch.testing.assert_close(got_x0, x0, rtol=1e-4, atol=1e-4)
-        torch.testing.assert_close(got_eps, eps, rtol=1e-4, atol=1e-4)
+        np.testing.assert_allclose(got_x0, x0, rtol=1e-4, atol=1e-4)
+        np.testing.assert_allclose(got_eps, eps, rtol=1e-4, atol=1e-4)
     assert float(tens["posterior_log_variance"][0]) == pytest.approx(
         float(np.log(sch.posterior_variance[1])), rel=1e-6
     )
 
 
 def test_sampling_is_identical_given_the_same_seed():
-    model = random_denoiser()
+    model = random_denoiser().arrays()
     sch = make_schedule("cosine", 1000)
     cond = np.random.default_rng(0).normal(size=(9, 5)).astype(np.float32)
     kw = {"sampler": "ddim", "steps": 7, "guidance": 2.0, "prediction": "v", "eta": 0.5}
@@ -310,7 +356,7 @@ def test_ddim_timesteps_and_sampler_checks():
     with pytest.raises(ValueError, match="DDIM steps"):
         ddim_timesteps(10, 11)
     with pytest.raises(ValueError, match="all T = 100"):
-        sample(random_denoiser(), make_schedule("linear", 100), np.ones((1, 5), np.float32),
+        sample(random_denoiser().arrays(), make_schedule("linear", 100), np.ones((1, 5), np.float32),
                sampler="ddpm", steps=10, guidance=1.0, seed=0)  # fmt: skip
     with pytest.raises(ValueError, match="generate.samplers.ddpm"):
         check_grid({"ddpm": [50]}, 1000)
@@ -350,18 +396,26 @@ def test_training_with_a_constant_dimension_is_finite_and_bit_reproducible(tmp_p
     for k, val in a.model.state_dict().items():
         assert torch.equal(val, b.model.state_dict()[k]), k
     assert all(np.isfinite(c["val_loss"]) for c in a.curve)
-    gen = generate(a, v[120:], sampler="ddim", steps=5, guidance=1.0, seed=0)
+    gen = generate(a.weights(), v[120:], sampler="ddim", steps=5, guidance=1.0, seed=0)
     assert np.isfinite(gen).all()
-    h1 = save_generator(a, tmp_path / "a.pt")
-    h2 = save_generator(b, tmp_path / "b.pt")
+    h1 = save_generator(a, tmp_path / "a.arrow")
+    h2 = save_generator(b, tmp_path / "b.arrow")
     assert h1 == h2  # same fit, same bytes
-    back = load_generator(tmp_path / "a.pt")
+    back = load_generator(tmp_path / "a.arrow")  # torch model, for training-side use
+    for k, val in a.model.state_dict().items():
+        assert torch.equal(val, back.model.state_dict()[k]), k
+    read = read_generator(tmp_path / "a.arrow")  # what sample_generator reads, without torch
+    assert read.curve == a.curve and read.best_step == a.best_step and read.settings == s
+    np.testing.assert_array_equal(read.standardiser.scale, a.standardiser.scale)
     np.testing.assert_array_equal(
-        generate(back, v[120:], sampler="ddim", steps=5, guidance=1.0, seed=0), gen
+        generate(read, v[120:], sampler="ddim", steps=5, guidance=1.0, seed=0), gen
     )
-    (tmp_path / "a.pt").write_bytes((tmp_path / "a.pt").read_bytes() + b"x")
+    (tmp_path / "a.arrow").write_bytes((tmp_path / "a.arrow").read_bytes() + b"x")
     with pytest.raises(ValueError, match="does not match"):
-        load_generator(tmp_path / "a.pt")
+        load_generator(tmp_path / "a.arrow")
+    (tmp_path / "c.arrow").write_bytes(b"not arrow")
+    with pytest.raises(ValueError, match="c.arrow: not a readable generator"):
+        read_generator(tmp_path / "c.arrow", verify=False)
 
 
 def test_v_prediction_generator_learns_a_linear_map():
@@ -370,7 +424,7 @@ def test_v_prediction_generator_learns_a_linear_map():
     s = GenerateSettings.tiny(steps=600, hidden=64, blocks=2, lr=2e-3, prediction="v",
                               train_steps=1000, time_dim=32)  # fmt: skip
     fit = fit_generator(t[:300], v[:300], t[300:350], v[300:350], s, seed=0)
-    gen = generate(fit, v[350:], sampler="ddim", steps=20, guidance=1.0, seed=0)
+    gen = generate(fit.weights(), v[350:], sampler="ddim", steps=20, guidance=1.0, seed=0)
     r = np.corrcoef(gen.ravel(), t[350:].ravel())[0, 1]
     assert r > 0.8, r
 
@@ -440,7 +494,7 @@ def test_evaluation_real_touch_helps_where_generated_touch_cannot():
                               train_steps=200, time_dim=32, permutations=100)  # fmt: skip
     val = (splits["split"] == "val").to_numpy()
     fit = fit_generator(t[train.to_numpy()], v[train.to_numpy()], t[val], v[val], s, seed=0)
-    gen = generate(fit, v, sampler="ddim", steps=10, guidance=1.0, seed=0)
+    gen = generate(fit.weights(), v, sampler="ddim", steps=10, guidance=1.0, seed=0)
     rows = family_rows(manifest, splits, corpus="toy", target="force_p50", kind="ridge")
     ps = dataclasses.replace(
         ProbeSettings.from_config(

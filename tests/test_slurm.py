@@ -40,7 +40,7 @@ RUN_TIMEOUT = 600  # seconds for the SLURM run itself; the test fails (and clean
 SLURM_CONF = Path("/etc/slurm/slurm.conf")
 GRID = {"seeds": [42, 43], "taus": [0.07, 0.1]}
 #: generate (issue 12): one generator trained through SLURM beside the alignment grid.
-GENERATOR_WEIGHTS = "results/generate/sim_paired/seed~0/generator.pt"
+GENERATOR_WEIGHTS = "results/generate/sim_paired/seed~0/generator.arrow"
 
 
 def _skip(reason: str) -> None:

@@ -3,7 +3,8 @@
 This module owns the network (after RCG's representation diffusion model: an MLP denoiser over
 SSL feature vectors whose residual blocks add the time and condition embeddings, with a
 zero-initialised output layer), the sinusoidal timestep embedding, the learned null condition
-of classifier-free guidance, and the standardisation of the target features.
+of classifier-free guidance (the standardisation of the target features and the numpy forward
+pass that sampling uses live in `inference`, which does not import torch).
 
 - Input x_t: a standardised tactile feature (d_t), the vision feature (d_v) as condition.
 - Output: epsilon (``prediction = "eps"``) or v = sqrt(abar) eps - sqrt(1 - abar) x0
@@ -14,12 +15,11 @@ of classifier-free guidance, and the standardisation of the target features.
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
-
-import numpy as np
 import torch
 from torch import Tensor, nn
+
+from tacgen_lib.generate.inference import DenoiserArrays, Standardiser, fit_standardiser
+from tacgen_lib.generate.inference import sinusoidal_embedding as _sinusoidal
 
 __all__ = [
     "Denoiser",
@@ -30,22 +30,8 @@ __all__ = [
 
 
 def sinusoidal_embedding(t: Tensor, dim: int, max_period: float = 10_000.0) -> Tensor:
-    """Transformer-style sinusoidal embedding of (integer) timesteps: (B,) -> (B, dim).
-
-    Frequencies max_period^(-k / half), k = 0 .. half-1; cos then sin (an odd `dim` gets a zero
-    column). Computed in float32 from float64 frequencies, so t up to 1000 stays exact enough.
-    """
-    if dim < 2:
-        raise ValueError(f"time embedding dim must be >= 2, got {dim}")
-    half = dim // 2
-    freqs = torch.from_numpy(
-        np.exp(-math.log(max_period) * np.arange(half, dtype=np.float64) / half)
-    ).to(torch.float32)
-    args = t.to(torch.float32)[:, None] * freqs[None, :]
-    emb = torch.cat([torch.cos(args), torch.sin(args)], dim=1)
-    if dim % 2:
-        emb = torch.cat([emb, torch.zeros_like(emb[:, :1])], dim=1)
-    return emb
+    """`inference.sinusoidal_embedding` of integer timesteps as a float32 tensor (B,) -> (B, dim)."""
+    return torch.from_numpy(_sinusoidal(t.detach().cpu().numpy(), dim, max_period))
 
 
 class ResidualBlock(nn.Module):
@@ -102,6 +88,11 @@ class Denoiser(nn.Module):
             h = block(h, emb)
         return self._head(h)
 
+    def arrays(self) -> DenoiserArrays:
+        """This module's weights for the numpy forward pass that sampling uses."""
+        state = {k: v.detach().cpu().numpy() for k, v in self.state_dict().items()}
+        return DenoiserArrays.from_state(state, self.dims)
+
     def _head(self, h: Tensor) -> Tensor:
         return self.out(torch.nn.functional.silu(self.out_norm(h)))
 
@@ -123,33 +114,3 @@ class Denoiser(nn.Module):
         for block, pc in zip(self.blocks, projected, strict=True):
             h = block.forward_projected(h, pc + block.emb(time))
         return self._head(h)
-
-
-@dataclass(frozen=True)
-class Standardiser:
-    """Per-dimension standardisation with train-split statistics (stored beside the weights).
-
-    A dimension whose train values are constant (sd = 0, or below `min_sd` relative to the
-    largest sd) has scale 1: it is centred, never divided by zero, and comes back exactly.
-    """
-
-    mean: np.ndarray  # (d,) float64
-    scale: np.ndarray  # (d,) float64, > 0
-
-    def forward(self, x: np.ndarray) -> np.ndarray:
-        return (np.asarray(x, dtype=np.float64) - self.mean) / self.scale
-
-    def inverse(self, z: np.ndarray) -> np.ndarray:
-        return np.asarray(z, dtype=np.float64) * self.scale + self.mean
-
-
-def fit_standardiser(x: np.ndarray, min_sd: float = 1e-6) -> Standardiser:
-    """Mean and sd of the training rows (float64); zero-variance dimensions get scale 1."""
-    x = np.asarray(x, dtype=np.float64)
-    if x.ndim != 2 or x.shape[0] < 1:
-        raise ValueError(f"standardiser: expected (n >= 1, d) training features, got {x.shape}")
-    mean = x.mean(axis=0)
-    sd = x.std(axis=0)
-    floor = min_sd * max(float(sd.max(initial=0.0)), 1.0)
-    scale = np.where(sd > floor, sd, 1.0)
-    return Standardiser(mean=mean, scale=scale)

@@ -1,15 +1,17 @@
 """Samplers of the latent generator: DDPM ancestral and DDIM, with classifier-free guidance.
 
-This module owns turning a trained denoiser into tactile feature vectors:
+This module owns turning a trained denoiser into tactile feature vectors, in numpy on the
+denoiser's arrays (`inference.DenoiserArrays`), so a sampling job never imports torch:
 
 - `guided_output`: eps^ = eps_u + w (eps_c - eps_u) (Ho & Salimans 2022), the conditional and
   unconditional passes in one batch (w = 1: the plain conditional model; w = 0: unconditional).
   `guided_output_projected` is the same at one shared timestep with the condition's share of
-  the embeddings computed once per batch (`Denoiser.project_condition`); `sample` uses it.
+  the embeddings computed once per batch (`DenoiserArrays.project_condition`); `sample` uses it.
   With v-prediction the same combination is applied to v (linear in eps, so equivalent).
 - `predicted_x0_eps`: (x0, eps) from the model output (eps- or v-prediction).
 - `ddpm_step`: ancestral step with the posterior mean/variance (DDPM eq. 6-7), over all T.
 - `ddim_step`: DDIM eq. 12 with eta (eta = 0: deterministic), over any subsequence of steps.
+- `generate`: `sample` for a trained generator, back in the tactile feature's own units.
 
 Nothing is clipped: the features are standardised, unbounded vectors (diffusers' default
 ``clip_sample=True`` would clamp x0 to [-1, 1] and silently damage them).
@@ -17,17 +19,18 @@ Nothing is clipped: the features are standardised, unbounded vectors (diffusers'
 
 from __future__ import annotations
 
-import numpy as np
-import torch
-from torch import Tensor
+from typing import Any
 
-from tacgen_lib.generate.model import Denoiser
+import numpy as np
+
+from tacgen_lib.generate.inference import DenoiserArrays, GeneratorWeights
 from tacgen_lib.generate.schedules import Schedule
 
 __all__ = [
     "ddim_step",
     "ddim_timesteps",
     "ddpm_step",
+    "generate",
     "guided_output",
     "guided_output_projected",
     "predicted_x0_eps",
@@ -35,30 +38,33 @@ __all__ = [
 ]
 
 
-def guided_output(model: Denoiser, x_t: Tensor, t: Tensor, cond: Tensor, guidance: float) -> Tensor:
+def guided_output(
+    model: DenoiserArrays, x_t: np.ndarray, t: np.ndarray, cond: np.ndarray, guidance: float
+) -> np.ndarray:
     """Classifier-free guidance: out_u + w (out_c - out_u), both passes in one batch of 2B."""
     b = x_t.shape[0]
-    drop = torch.cat([torch.zeros(b, dtype=torch.bool), torch.ones(b, dtype=torch.bool)])
-    out = model(torch.cat([x_t, x_t]), torch.cat([t, t]), torch.cat([cond, cond]), drop)
+    drop = np.concatenate([np.zeros(b, dtype=bool), np.ones(b, dtype=bool)])
+    out = model.forward(np.concatenate([x_t, x_t]), np.concatenate([t, t]),
+                        np.concatenate([cond, cond]), drop)  # fmt: skip
     out_c, out_u = out[:b], out[b:]
     return out_u + guidance * (out_c - out_u)
 
 
 def guided_output_projected(
-    model: Denoiser, x_t: Tensor, t: int, projected: list[Tensor], guidance: float
-) -> Tensor:
+    model: DenoiserArrays, x_t: np.ndarray, t: int, projected: list[np.ndarray], guidance: float
+) -> np.ndarray:
     """`guided_output` at one shared timestep with the condition part precomputed:
     `projected` = ``model.project_condition(cat([cond, cond]), cat([keep, drop]))`` (conditional
     rows first). Equal to `guided_output` up to float rounding; `sample` uses it."""
     b = x_t.shape[0]
-    out = model.forward_projected(torch.cat([x_t, x_t]), t, projected)
+    out = model.forward_projected(np.concatenate([x_t, x_t]), t, projected)
     out_c, out_u = out[:b], out[b:]
     return out_u + guidance * (out_c - out_u)
 
 
 def predicted_x0_eps(
-    out: Tensor, x_t: Tensor, sqrt_abar: Tensor, sqrt_1m_abar: Tensor, prediction: str
-) -> tuple[Tensor, Tensor]:
+    out: np.ndarray, x_t: np.ndarray, sqrt_abar: float, sqrt_1m_abar: float, prediction: str
+) -> tuple[np.ndarray, np.ndarray]:
     """(x0, eps) from the model output at one step; no clipping (features are unbounded).
 
     eps-prediction: x0 = (x_t - sqrt(1 - abar) eps) / sqrt(abar) (DDIM eq. 12's "predicted x0").
@@ -72,8 +78,8 @@ def predicted_x0_eps(
 
 
 def ddpm_step(
-    x0: Tensor, x_t: Tensor, t: int, coef: dict[str, Tensor], noise: Tensor | None
-) -> Tensor:
+    x0: np.ndarray, x_t: np.ndarray, t: int, coef: dict[str, np.ndarray], noise: np.ndarray | None
+) -> np.ndarray:
     """One ancestral step x_t -> x_{t-1} ~ N(mu~_t(x_t, x0), beta~_t) (DDPM eq. 6-7).
 
     1. posterior mean mu~ = coef1_t x0 + coef2_t x_t
@@ -82,12 +88,17 @@ def ddpm_step(
     mean = coef["posterior_mean_coef1"][t] * x0 + coef["posterior_mean_coef2"][t] * x_t
     if t == 0 or noise is None:
         return mean
-    return mean + torch.exp(0.5 * coef["posterior_log_variance"][t]) * noise
+    return mean + np.exp(0.5 * coef["posterior_log_variance"][t]) * noise
 
 
 def ddim_step(
-    x0: Tensor, eps: Tensor, abar_t: float, abar_prev: float, eta: float, noise: Tensor | None
-) -> Tensor:
+    x0: np.ndarray,
+    eps: np.ndarray,
+    abar_t: float,
+    abar_prev: float,
+    eta: float,
+    noise: np.ndarray | None,
+) -> np.ndarray:
     """One DDIM step x_t -> x_{t_prev} (Song et al. 2021, eq. 12), alpha-bars in float64.
 
     1. sigma = eta sqrt((1 - abar_prev) / (1 - abar_t)) sqrt(1 - abar_t / abar_prev)
@@ -100,9 +111,9 @@ def ddim_step(
             eta * np.sqrt((1.0 - abar_prev) / (1.0 - abar_t)) * np.sqrt(1.0 - abar_t / abar_prev)
         )
     direction = float(np.sqrt(max(1.0 - abar_prev - sigma**2, 0.0)))
-    x_prev = float(np.sqrt(abar_prev)) * x0 + direction * eps
+    x_prev = np.float32(np.sqrt(abar_prev)) * x0 + np.float32(direction) * eps
     if sigma > 0 and noise is not None:
-        x_prev = x_prev + float(sigma) * noise
+        x_prev = x_prev + np.float32(sigma) * noise
     return x_prev
 
 
@@ -116,9 +127,8 @@ def ddim_timesteps(n_train: int, steps: int) -> np.ndarray:
     return np.unique(ts)[::-1].copy()
 
 
-@torch.no_grad()
 def sample(
-    model: Denoiser,
+    model: DenoiserArrays,
     schedule: Schedule,
     cond: np.ndarray,
     *,
@@ -132,45 +142,53 @@ def sample(
 ) -> np.ndarray:
     """Standardised tactile features for each condition row (n, d_v) -> (n, d_t) float64.
 
-    Noise comes from one torch.Generator seeded with `seed`, drawn batch after batch in row
-    order, so the same seed, rows and batch give the same vectors (bit for bit on one machine).
-    ``ddpm`` runs all T steps (`steps` must equal T); ``ddim`` runs `ddim_timesteps(T, steps)`.
+    Computed in float32. Noise comes from one numpy Generator (PCG64) seeded with `seed`,
+    drawn batch after batch in row order, so the same seed, rows and batch give the same
+    vectors (bit for bit on one machine). ``ddpm`` runs all T steps (`steps` must equal T);
+    ``ddim`` runs `ddim_timesteps(T, steps)`.
     """
     if sampler not in ("ddpm", "ddim"):
         raise ValueError(f"sampler must be 'ddpm' or 'ddim', got {sampler!r}")
     T = schedule.n_steps
     if sampler == "ddpm" and steps != T:
         raise ValueError(f"DDPM ancestral sampling runs all T = {T} steps, got steps = {steps}")
-    model.eval()
-    coef = schedule.tensors()
+    coef = schedule.arrays(np.float32)
     abar64 = schedule.alphas_cumprod
-    sqrt_abar = torch.from_numpy(np.sqrt(abar64)).float()
-    sqrt_1m = torch.from_numpy(np.sqrt(-np.expm1(np.cumsum(np.log1p(-schedule.betas))))).float()
+    sqrt_abar = np.sqrt(abar64).astype(np.float32)
+    sqrt_1m = np.sqrt(-np.expm1(np.cumsum(np.log1p(-schedule.betas)))).astype(np.float32)
     ts = np.arange(T - 1, -1, -1) if sampler == "ddpm" else ddim_timesteps(T, steps)
-    gen = torch.Generator().manual_seed(int(seed))
-    cond_t = torch.from_numpy(np.ascontiguousarray(cond, dtype=np.float32))
+    rng = np.random.default_rng(int(seed))
+    cond32 = np.ascontiguousarray(cond, dtype=np.float32)
     d_t = model.dims["dim_t"]
     out = []
-    for start in range(0, cond_t.shape[0], batch):
-        c = cond_t[start : start + batch]
-        x = torch.randn(c.shape[0], d_t, generator=gen)
+    for start in range(0, cond32.shape[0], batch):
+        c = cond32[start : start + batch]
+        x = rng.standard_normal((c.shape[0], d_t), dtype=np.float32)
         # the condition's share of every block's embedding: once per batch, not per step
-        keep_drop = torch.cat([torch.zeros(c.shape[0], dtype=torch.bool),
-                               torch.ones(c.shape[0], dtype=torch.bool)])  # fmt: skip
-        projected = model.project_condition(torch.cat([c, c]), keep_drop)
+        keep_drop = np.concatenate([np.zeros(c.shape[0], bool), np.ones(c.shape[0], bool)])
+        projected = model.project_condition(np.concatenate([c, c]), keep_drop)
         for i, t in enumerate(ts):
             t = int(t)
             o = guided_output_projected(model, x, t, projected, guidance)
             x0, eps = predicted_x0_eps(o, x, sqrt_abar[t], sqrt_1m[t], prediction)
             if sampler == "ddpm":
-                noise = torch.randn(x.shape, generator=gen) if t > 0 else None
+                noise = rng.standard_normal(x.shape, dtype=np.float32) if t > 0 else None
                 x = ddpm_step(x0, x, t, coef, noise)
             else:
                 t_prev = int(ts[i + 1]) if i + 1 < len(ts) else -1
                 abar_prev = float(abar64[t_prev]) if t_prev >= 0 else 1.0
-                noise = torch.randn(x.shape, generator=gen) if eta > 0 and t_prev >= 0 else None
+                draw = eta > 0 and t_prev >= 0
+                noise = rng.standard_normal(x.shape, dtype=np.float32) if draw else None
                 x = ddim_step(x0, eps, float(abar64[t]), abar_prev, eta, noise)
-        out.append(x.double().numpy())
+        out.append(x.astype(np.float64))
     if not out:
         return np.zeros((0, d_t))
     return np.concatenate(out)
+
+
+def generate(weights: GeneratorWeights, cond: np.ndarray, **sample_kw: Any) -> np.ndarray:
+    """Generated tactile features in the original (unstandardised) units, float32 (n, d_t):
+    `sample` with the generator's denoiser, schedule and prediction, then un-standardised."""
+    z = sample(weights.denoiser, weights.schedule, cond, prediction=weights.settings.prediction,
+               **sample_kw)  # fmt: skip
+    return weights.standardiser.inverse(z).astype(np.float32)

@@ -19,10 +19,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
-import torch
-from torch import Tensor
+
+if TYPE_CHECKING:  # torch only for `Schedule.tensors` (training); sampling needs numpy alone
+    import torch
 
 __all__ = [
     "SCHEDULES",
@@ -62,7 +64,8 @@ SCHEDULES = {"cosine": cosine_betas, "linear": linear_betas}
 class Schedule:
     """A noise schedule of T steps; index t = 0 .. T-1 (t = 0 is the least noisy step).
 
-    The float64 arrays are the reference; `tensors` gives float32 copies for sampling.
+    The float64 arrays are the reference; `arrays` gives float32 copies for sampling and
+    `tensors` torch copies.
     """
 
     name: str
@@ -78,13 +81,21 @@ class Schedule:
     def n_steps(self) -> int:
         return int(self.betas.size)
 
-    def tensors(self, dtype: torch.dtype = torch.float32) -> dict[str, Tensor]:
-        """Every coefficient as a tensor of `dtype` (cast from the float64 reference)."""
-        names = (
-            "betas", "alphas_cumprod", "alphas_cumprod_prev", "posterior_variance",
-            "posterior_log_variance", "posterior_mean_coef1", "posterior_mean_coef2",
-        )  # fmt: skip
-        return {n: torch.from_numpy(getattr(self, n)).to(dtype) for n in names}
+    _NAMES = (
+        "betas", "alphas_cumprod", "alphas_cumprod_prev", "posterior_variance",
+        "posterior_log_variance", "posterior_mean_coef1", "posterior_mean_coef2",
+    )  # fmt: skip
+
+    def arrays(self, dtype: type = np.float32) -> dict[str, np.ndarray]:
+        """Every coefficient as an array of `dtype` (cast from the float64 reference)."""
+        return {n: getattr(self, n).astype(dtype) for n in self._NAMES}
+
+    def tensors(self, dtype: torch.dtype | None = None) -> dict[str, torch.Tensor]:
+        """Every coefficient as a torch tensor of `dtype` (default float32)."""
+        import torch
+
+        dtype = torch.float32 if dtype is None else dtype
+        return {n: torch.from_numpy(getattr(self, n)).to(dtype) for n in self._NAMES}
 
 
 def make_schedule(name: str, n_steps: int) -> Schedule:

@@ -13,18 +13,23 @@ seeded with `seed`, validation noise from a second generator seeded with seed + 
 from __future__ import annotations
 
 import copy
-import io
 import os
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import torch
 from torch import Tensor
 
-from tacgen_lib.generate.model import Denoiser, Standardiser, fit_standardiser
-from tacgen_lib.generate.sampling import sample
+from tacgen_lib.generate.inference import (
+    GeneratorWeights,
+    Standardiser,
+    encode_generator,
+    fit_standardiser,
+    read_generator,
+)
+from tacgen_lib.generate.model import Denoiser
 from tacgen_lib.generate.schedules import Schedule, make_schedule
 from tacgen_lib.generate.settings import GenerateSettings
 from tacgen_lib.io import edges
@@ -33,14 +38,12 @@ __all__ = [
     "GeneratorFit",
     "diffusion_loss",
     "fit_generator",
-    "generate",
     "load_generator",
     "make_optimiser",
     "save_generator",
     "training_step",
 ]
 
-_FORMAT = "tacgen-generator-v1"
 #: Validation rows are cut into batches of this many (the loss is a row mean either way).
 _VAL_REPEATS = 4
 
@@ -119,6 +122,12 @@ class GeneratorFit:
     @property
     def schedule(self) -> Schedule:
         return make_schedule(self.settings.schedule, self.settings.train_steps)
+
+    def weights(self) -> GeneratorWeights:
+        """The fit as sampling reads it (numpy arrays of the EMA weights; no torch)."""
+        return GeneratorWeights(self.model.arrays(), self.standardiser, self.settings,
+                                self.seed, list(self.curve), self.best_step,
+                                self.best_val_loss, self.steps_run, self.stopped_early)  # fmt: skip
 
 
 def _as_f32(x: np.ndarray, name: str) -> Tensor:
@@ -218,40 +227,13 @@ def fit_generator(
     return GeneratorFit(ema, std, settings, int(seed), curve, best[1], best[0], step, stopped)
 
 
-def generate(fit: GeneratorFit, cond: np.ndarray, **sample_kw: Any) -> np.ndarray:
-    """Generated tactile features in the original (unstandardised) units, float32 (n, d_t)."""
-    z = sample(fit.model, fit.schedule, cond, prediction=fit.settings.prediction, **sample_kw)
-    return fit.standardiser.inverse(z).astype(np.float32)
-
-
-def _payload(fit: GeneratorFit) -> dict[str, Any]:
-    return {
-        "format": _FORMAT,
-        "dims": dict(fit.model.dims),
-        "settings": {
-            k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(fit.settings).items()
-        },  # fmt: skip
-        "seed": fit.seed,
-        "mean": torch.from_numpy(fit.standardiser.mean.copy()),
-        "scale": torch.from_numpy(fit.standardiser.scale.copy()),
-        "state": fit.model.state_dict(),
-        "curve": [dict(c) for c in fit.curve],
-        "best_step": int(fit.best_step),
-        "best_val_loss": float(fit.best_val_loss),
-        "steps_run": int(fit.steps_run),
-        "stopped_early": bool(fit.stopped_early),
-    }
-
-
 def save_generator(fit: GeneratorFit, path: str | os.PathLike[str], *, producer: str = "") -> str:
     """Write EMA weights + standardisation statistics + settings + curve atomically, with a
     sidecar hash (`edges.write_bytes`); the bytes depend only on the fit. Returns SHA-256."""
-    buf = io.BytesIO()
-    torch.save(_payload(fit), buf)
     d = fit.model.dims
     return edges.write_bytes(
         path,
-        buf.getvalue(),
+        encode_generator(fit.weights()),
         rows=1,
         key="generator",
         columns={
@@ -264,24 +246,12 @@ def save_generator(fit: GeneratorFit, path: str | os.PathLike[str], *, producer:
 
 
 def load_generator(path: str | os.PathLike[str], *, verify: bool = True) -> GeneratorFit:
-    """A generator written by `save_generator` (its hash checked first)."""
-    if verify:
-        edges.verify(path)
-    try:
-        p = torch.load(os.fspath(path), map_location="cpu", weights_only=True)
-    except Exception as exc:  # noqa: BLE001 - re-raised with the file named
-        raise ValueError(
-            f"{path}: not a readable generator ({exc}); rerun train_generator"
-        ) from exc
-    if not isinstance(p, dict) or p.get("format") != _FORMAT:
-        raise ValueError(f"{path}: not a {_FORMAT} file; rerun train_generator")
-    s = dict(p["settings"])
-    s["nonlinear_gammas"] = tuple(s["nonlinear_gammas"])
-    settings = GenerateSettings(**s)
-    d = p["dims"]
+    """A generator written by `save_generator` (its hash checked first), with its torch model;
+    sampling reads the same file without torch (`inference.read_generator`)."""
+    w = read_generator(path, verify=verify)
+    d = w.denoiser.dims
     model = Denoiser(d["dim_t"], d["dim_v"], d["hidden"], d["blocks"], d["time_dim"])
-    model.load_state_dict(p["state"])
+    model.load_state_dict({k: torch.from_numpy(v.copy()) for k, v in w.denoiser.params.items()})
     model.eval()
-    std = Standardiser(p["mean"].numpy(), p["scale"].numpy())
-    return GeneratorFit(model, std, settings, int(p["seed"]), list(p["curve"]), p["best_step"],
-                        p["best_val_loss"], p["steps_run"], p["stopped_early"])  # fmt: skip
+    return GeneratorFit(model, w.standardiser, w.settings, w.seed, w.curve, w.best_step,
+                        w.best_val_loss, w.steps_run, w.stopped_early)  # fmt: skip

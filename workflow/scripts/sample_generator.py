@@ -1,16 +1,17 @@
-"""Generated tactile features for every row of a corpus, one sampling cell (rule sample_generator)."""
+"""Generated tactile features for every row of a corpus, one sampling cell (rule sample_generator).
+
+Imports no torch: the weights are read and sampled in numpy (`tacgen_lib.generate.inference`)."""
 
 import pandas as pd
-import torch
 from threadpoolctl import threadpool_limits
 
-from tacgen_lib.generate.train import generate, load_generator
+from tacgen_lib.generate.inference import read_generator
+from tacgen_lib.generate.sampling import generate
 from tacgen_lib.io import edges, log
 
 logger = log.for_rule(snakemake)
-torch.set_num_threads(snakemake.threads)
 w = snakemake.wildcards
-fit = load_generator(snakemake.input.weights)
+weights = read_generator(snakemake.input.weights)
 vision = edges.read(snakemake.input.v, columns=["vit"], require={"vit": "vector"})
 ids = sorted(vision.ids)
 cond = vision.subset(ids).vectors["vit"]
@@ -18,12 +19,12 @@ cond = vision.subset(ids).vectors["vit"]
 seed = int(w.seed) * 1_000_003 + int(w.steps) * 101 + int(round(float(w.guidance) * 1000))
 logger.info(
     "%d rows, %s with %s steps, guidance w=%s, eta=%s", len(ids), w.sampler, w.steps,
-    w.guidance, fit.settings.eta,
+    w.guidance, weights.settings.eta,
 )  # fmt: skip
 with threadpool_limits(snakemake.threads):
     t_gen = generate(
-        fit, cond, sampler=w.sampler, steps=int(w.steps), guidance=float(w.guidance),
-        seed=seed, eta=fit.settings.eta, batch=fit.settings.batch,
+        weights, cond, sampler=w.sampler, steps=int(w.steps), guidance=float(w.guidance),
+        seed=seed, eta=weights.settings.eta, batch=weights.settings.batch,
     )  # fmt: skip
 edges.write(
     snakemake.output.t_gen,
