@@ -13,7 +13,7 @@ import textwrap
 from pathlib import Path
 
 import pytest
-from snakemake_run import ROOT, copy_tree, smk
+from snakemake_run import ROOT
 
 from tacgen_lib.io.imports import code_inputs, import_closure
 
@@ -62,9 +62,10 @@ def test_import_closure_equals_modulefinder(script):
 
 
 @pytest.mark.workflow
-def test_dry_run_inputs_of_every_job_are_its_scripts_import_closure(tmp_path):
-    """What Snakemake sees as each job's library inputs equals what its script reaches."""
-    proc = smk(copy_tree(tmp_path / "wf"), "--dry-run")
+def test_dry_run_inputs_of_every_job_are_its_scripts_import_closure(cold_dry_run):
+    """What Snakemake sees as each job's library inputs equals what its script reaches (the
+    dry run of a fresh copy of the repository, conftest.cold_dry_run)."""
+    proc = cold_dry_run
     scripts = rule_scripts()
     seen = set()
     for rule, inputs in re.findall(
