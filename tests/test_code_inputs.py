@@ -122,3 +122,25 @@ def test_closure_names_a_script_that_does_not_parse(tmp_path):
         import_closure(tmp_path / "bad.py", lib)
     with pytest.raises(FileNotFoundError, match="missing.py"):
         import_closure(tmp_path / "missing.py", lib)
+
+
+def test_closure_follows_an_edit_made_after_a_first_closure_in_the_same_process(tmp_path):
+    """Parsed files are remembered per process (one parse per Snakemake start); an edited
+    file is parsed again, so the new import is followed and the dropped one is not."""
+    lib = write_library(
+        tmp_path,
+        {
+            "tacgen_lib/__init__.py": "",
+            "tacgen_lib/one.py": "from tacgen_lib import two\n",
+            "tacgen_lib/two.py": "",
+            "tacgen_lib/three.py": "",
+            "script.py": "from tacgen_lib import one\n",
+        },
+    )
+
+    def closure() -> list[str]:
+        return [p.name for p in import_closure(tmp_path / "script.py", lib)]
+
+    assert closure() == ["__init__.py", "one.py", "two.py"]
+    (lib / "one.py").write_text("from tacgen_lib import three  # an edit of a parsed file\n")
+    assert closure() == ["__init__.py", "one.py", "three.py"]
