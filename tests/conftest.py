@@ -6,6 +6,7 @@ in `fixtures_real.py` (plain modules: pytest puts tests/ on sys.path).
 
 from __future__ import annotations
 
+import subprocess
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -32,3 +33,10 @@ def reference_run(tmp_path_factory) -> Path:
     work = copy_tree(tmp_path_factory.mktemp("reference") / "run")
     smk(work)
     return work
+
+
+@pytest.fixture(scope="session")
+def cold_dry_run(tmp_path_factory) -> subprocess.CompletedProcess:
+    """`snakemake --dry-run` of config/test.yaml in a fresh copy of the repository (nothing
+    built), run once for every module that reads its plan (workflow, cost, code inputs)."""
+    return smk(copy_tree(tmp_path_factory.mktemp("dry") / "run"), "--dry-run")

@@ -53,7 +53,11 @@ def smk(
 
 def planned_rules(workdir: Path, *args: str) -> dict[str, int]:
     """Rules a dry run would execute, with job counts (from --summary-like job stats)."""
-    proc = smk(workdir, "--dry-run", *args)
+    return plan_of(smk(workdir, "--dry-run", *args))
+
+
+def plan_of(proc: subprocess.CompletedProcess) -> dict[str, int]:
+    """The rules and job counts in the job stats a dry run printed."""
     out = proc.stdout + proc.stderr
     if "Nothing to be done" in out:
         return {}

@@ -13,7 +13,7 @@ import textwrap
 from pathlib import Path
 
 import pytest
-from snakemake_run import ROOT, copy_tree, smk
+from snakemake_run import ROOT
 
 from tacgen_lib.io.imports import code_inputs, import_closure
 
@@ -62,9 +62,10 @@ def test_import_closure_equals_modulefinder(script):
 
 
 @pytest.mark.workflow
-def test_dry_run_inputs_of_every_job_are_its_scripts_import_closure(tmp_path):
-    """What Snakemake sees as each job's library inputs equals what its script reaches."""
-    proc = smk(copy_tree(tmp_path / "wf"), "--dry-run")
+def test_dry_run_inputs_of_every_job_are_its_scripts_import_closure(cold_dry_run):
+    """What Snakemake sees as each job's library inputs equals what its script reaches (the
+    dry run of a fresh copy of the repository, conftest.cold_dry_run)."""
+    proc = cold_dry_run
     scripts = rule_scripts()
     seen = set()
     for rule, inputs in re.findall(
@@ -121,3 +122,25 @@ def test_closure_names_a_script_that_does_not_parse(tmp_path):
         import_closure(tmp_path / "bad.py", lib)
     with pytest.raises(FileNotFoundError, match="missing.py"):
         import_closure(tmp_path / "missing.py", lib)
+
+
+def test_closure_follows_an_edit_made_after_a_first_closure_in_the_same_process(tmp_path):
+    """Parsed files are remembered per process (one parse per Snakemake start); an edited
+    file is parsed again, so the new import is followed and the dropped one is not."""
+    lib = write_library(
+        tmp_path,
+        {
+            "tacgen_lib/__init__.py": "",
+            "tacgen_lib/one.py": "from tacgen_lib import two\n",
+            "tacgen_lib/two.py": "",
+            "tacgen_lib/three.py": "",
+            "script.py": "from tacgen_lib import one\n",
+        },
+    )
+
+    def closure() -> list[str]:
+        return [p.name for p in import_closure(tmp_path / "script.py", lib)]
+
+    assert closure() == ["__init__.py", "one.py", "two.py"]
+    (lib / "one.py").write_text("from tacgen_lib import three  # an edit of a parsed file\n")
+    assert closure() == ["__init__.py", "one.py", "three.py"]

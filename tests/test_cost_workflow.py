@@ -8,7 +8,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 import yaml
-from snakemake_run import copy_run, copy_tree, planned_rules, smk
+from snakemake_run import copy_run, copy_tree, plan_of, planned_rules, smk
 
 from tacgen_lib.cost.points import read_points
 
@@ -17,9 +17,8 @@ pytestmark = pytest.mark.workflow
 SWEEP = ("--configfile", "config/test.yaml", "config/cost_tiny.yaml")
 
 
-def test_default_config_runs_no_sweep_job(tmp_path):
-    work = copy_tree(tmp_path / "dry")
-    rules = planned_rules(work)
+def test_default_config_runs_no_sweep_job(cold_dry_run):
+    rules = plan_of(cold_dry_run)  # a fresh copy of the repository (conftest)
     assert "cost_of_accuracy" in rules
     assert not {"cost_train_heads", "cost_probe", "cost_align_points", "cost_probe_points"} & set(
         rules

@@ -8,10 +8,11 @@ Opt-in for pytest, because it installs Debian packages and starts daemons as roo
 What it does, as root on Debian/Ubuntu: `apt-get install slurm-wlm munge` (a no-op when they
 are installed), writes a one-node /etc/slurm/slurm.conf (the executor plugin's job step drops
 SLURM_CONF, so the config must be at the default path; an existing file is backed up and put
-back), starts munged, slurmctld and slurmd in the foreground as children of this test, builds
-the tiny workflow's upstream (corpus, features) locally, then runs the alignment grid of
-config/test.yaml widened to 2 seeds x 2 taus through `--profile profiles/slurm` (every
-train_heads job an sbatch job; aggregate_align local). Without slurmdbd there is no accounting
+back), starts munged, slurmctld and slurmd in the foreground as children of this test, takes
+the tiny workflow's upstream (corpus, features) from a copy of the session's local run of
+config/test.yaml (conftest.reference_run) with its align and generate outputs removed, then
+runs the alignment grid of config/test.yaml widened to 2 seeds x 2 taus through
+`--profile profiles/slurm` (every train_heads job an sbatch job; aggregate_align local). Without slurmdbd there is no accounting
 database, so the profile queries job status with squeue. Everything it started is stopped at
 the end (jobs cancelled, then slurmd, slurmctld, munged by their pids), also on failure or
 timeout. It skips, printing why, when it cannot run: not root, no apt-get, a SLURM already
@@ -32,7 +33,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from snakemake_run import SNAKEMAKE, copy_tree, edge_hashes, smk
+from snakemake_run import SNAKEMAKE, copy_run, edge_hashes, planned_rules, smk
 
 pytestmark = [pytest.mark.slurm, pytest.mark.workflow]
 
@@ -230,40 +231,38 @@ def _cancel_one_running(proc: subprocess.Popen, rule: str, timeout: float = 300)
     reason="set TACGEN_SLURM_TEST=1 to run the alignment grid through a real one-node SLURM "
     "(installs slurm-wlm + munge as root, ~2-3 min); make test sets it",
 )
-def test_align_grid_through_slurm_profile(tmp_path):
+def test_align_grid_through_slurm_profile(reference_run, tmp_path):
     from tacgen_lib.io import edges
 
-    work = copy_tree(tmp_path / "wf")
+    # the upstream (corpus, splits, features) is the session's local run of config/test.yaml
+    # (conftest.reference_run); the stages the SLURM run makes start empty, so every grid cell
+    # and the generator are made here (the reference run's cell was trained at 1 thread anyway)
+    work = copy_run(reference_run, tmp_path / "wf")
+    shutil.rmtree(work / "results/align")
+    shutil.rmtree(work / "results/generate")
     (work / "config/slurm_test.yaml").write_text(
         f"align: {{seeds: {GRID['seeds']}, taus: {GRID['taus']}}}\n"
     )
     corpora = ["sim_paired", "sim_null"]
-    upstream = ["results/corpus/splits.parquet"] + [
-        f"results/features/{c}/{what}.parquet"
-        for c in corpora
-        for what in ("vision", "tactile~clip128")
+    n_cells = len(corpora) * len(GRID["seeds"]) * len(GRID["taus"])
+    targets = [
+        "results/align/summary.parquet",
+        "results/report/align/seeds.html",
+        GENERATOR_WEIGHTS,
     ]
-    started = time.monotonic()
     # (targets after an option: a bare word following --configfile would be read as a config)
-    smk(
-        work,
-        "--cores",
-        "2",
-        *upstream,
-        "--configfile",
-        "config/test.yaml",
-        "config/slurm_test.yaml",
+    planned = planned_rules(
+        work, "--cores", "2", *targets, "--configfile", "config/test.yaml", "config/slurm_test.yaml"
     )
-    print(f"upstream built locally in {time.monotonic() - started:.0f} s", flush=True)
+    # nothing upstream reruns: only the grid, its aggregate and the generator are left to make
+    assert planned == {"train_heads": n_cells, "aggregate_align": 1, "train_generator": 1}, planned
     local = tmp_path / "local"  # issue 15: the same grid run locally, for the edges' sake
     shutil.copytree(work, local, symlinks=True)
 
     with single_node_slurm(tmp_path / "slurm") as state:
         cmd = [
             *SNAKEMAKE,
-            "results/align/summary.parquet",
-            "results/report/align/seeds.html",
-            GENERATOR_WEIGHTS,  # generate (issue 12): one train_generator job through SLURM
+            *targets,  # generate (issue 12): one train_generator job through SLURM
             "--profile",
             "profiles/slurm",
             "--configfile",
@@ -300,7 +299,6 @@ def test_align_grid_through_slurm_profile(tmp_path):
         # finished jobs stay visible for MinJobAge: what each sbatch job asked for
         jobs = _run(["squeue", "-h", "-t", "all", "-o", "%k|%C|%m|%T"], timeout=10).stdout
 
-    n_cells = len(corpora) * len(GRID["seeds"]) * len(GRID["taus"])
     slurm_logs = list((work / ".snakemake/slurm_logs/rule_train_heads").rglob("*.log"))
     # one sbatch job per grid cell, and one more: the resubmission of the cancelled one
     assert n_cells <= len(slurm_logs) <= n_cells + 1, slurm_logs
@@ -330,9 +328,7 @@ def test_align_grid_through_slurm_profile(tmp_path):
     # profile gives train_heads and train_generator 2 threads where a local run gives 1
     smk(
         local,
-        "results/align/summary.parquet",
-        "results/report/align/seeds.html",
-        GENERATOR_WEIGHTS,
+        *targets,
         "--set-threads",
         "train_heads=2",
         "train_generator=2",

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 import yaml
-from snakemake_run import ROOT, SNAKEMAKE, copy_tree, edge_hashes, planned_rules, smk
+from snakemake_run import ROOT, SNAKEMAKE, copy_tree, edge_hashes, plan_of, planned_rules, smk
 
 pytestmark = pytest.mark.workflow
 
@@ -24,9 +24,8 @@ def run_dir(reference_run) -> Path:
     return reference_run
 
 
-def test_dry_run_plans_the_whole_dag(tmp_path):
-    work = copy_tree(tmp_path / "dry")
-    rules = planned_rules(work)
+def test_dry_run_plans_the_whole_dag(cold_dry_run):
+    rules = plan_of(cold_dry_run)  # a fresh copy of the repository (conftest)
     for rule in (
         "simulate_corpus",
         "merge_corpus",

@@ -71,6 +71,26 @@ def _with_packages(lib_root: Path, dotted: str) -> list[Path]:
     return out
 
 
+#: (file, lib_root, mtime_ns, size) -> the library files its own import statements reach. The
+#: workflow derives the closures of ~50 scripts at every Snakemake start and they share most
+#: modules: each file is parsed once per process, and again only if it changes.
+_DIRECT: dict[tuple[Path, Path, int, int], tuple[Path, ...]] = {}
+
+
+def _direct_imports(path: Path, root: Path) -> tuple[Path, ...]:
+    """Library files (with their packages' `__init__.py`) that `path`'s own imports reach."""
+    stat = path.stat()
+    key = (path, root, stat.st_mtime_ns, stat.st_size)
+    if key not in _DIRECT:
+        package = _package_of(root, path) if path.is_relative_to(root) else []
+        tree = ast.parse(path.read_text(), filename=str(path))
+        found = dict.fromkeys(
+            f for dotted in _imported_names(tree, package) for f in _with_packages(root, dotted)
+        )
+        _DIRECT[key] = tuple(found)
+    return _DIRECT[key]
+
+
 def import_closure(script: str | os.PathLike[str], lib_root: str | os.PathLike[str]) -> list[Path]:
     """Every library file `script` reaches through imports, transitively, sorted.
 
@@ -86,14 +106,10 @@ def import_closure(script: str | os.PathLike[str], lib_root: str | os.PathLike[s
     seen: set[Path] = set()
     todo = [start]
     while todo:
-        path = todo.pop()
-        package = _package_of(root, path) if path.is_relative_to(root) else []
-        tree = ast.parse(path.read_text(), filename=str(path))
-        for dotted in _imported_names(tree, package):
-            for found in _with_packages(root, dotted):
-                if found not in seen:
-                    seen.add(found)
-                    todo.append(found)
+        for found in _direct_imports(todo.pop(), root):
+            if found not in seen:
+                seen.add(found)
+                todo.append(found)
     return sorted(seen - {start})
 
 
