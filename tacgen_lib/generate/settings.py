@@ -42,12 +42,12 @@ class GenerateSettings:
     blocks: int = 2
     time_dim: int = 128
     p_uncond: float = 0.1
-    lr: float = 1e-3
+    lr: float = 2e-3
     weight_decay: float = 0.01
     batch_size: int = 128
-    steps: int = 800
+    steps: int = 500
     clip_grad: float = 1.0
-    ema_decay: float = 0.995
+    ema_decay: float = 0.99
     eval_every: int = 100
     patience: int = 3
     eta: float = 0.0
