@@ -22,7 +22,7 @@ import json
 import math
 import os
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, fields
 from typing import Any
 
 import numpy as np
@@ -35,6 +35,7 @@ from tacgen_lib.io import edges
 __all__ = [
     "FORMAT",
     "DenoiserArrays",
+    "GeneratorRecord",
     "GeneratorWeights",
     "Standardiser",
     "encode_generator",
@@ -211,10 +212,10 @@ def _state_names(blocks: int) -> list[str]:
 
 
 @dataclass(frozen=True)
-class GeneratorWeights:
-    """A trained generator as sampling reads it: EMA weights, standardiser, settings, curve."""
+class GeneratorRecord:
+    """What a trained generator carries besides its network: the train-split standardiser, the
+    settings, the seed and the training curve (best step, early stopping)."""
 
-    denoiser: DenoiserArrays
     standardiser: Standardiser
     settings: GenerateSettings
     seed: int
@@ -227,6 +228,17 @@ class GeneratorWeights:
     @property
     def schedule(self) -> Schedule:
         return make_schedule(self.settings.schedule, self.settings.train_steps)
+
+    def record(self) -> dict[str, Any]:
+        """The record's fields by name (to build another view of the same generator)."""
+        return {f.name: getattr(self, f.name) for f in fields(GeneratorRecord)}
+
+
+@dataclass(frozen=True)
+class GeneratorWeights(GeneratorRecord):
+    """A trained generator as sampling reads it: its record and the EMA denoiser's arrays."""
+
+    denoiser: DenoiserArrays = field(kw_only=True)
 
 
 def encode_generator(weights: GeneratorWeights) -> bytes:
@@ -291,7 +303,7 @@ def read_generator(path: str | os.PathLike[str], *, verify: bool = True) -> Gene
     s = dict(meta["settings"])
     s["nonlinear_gammas"] = tuple(s["nonlinear_gammas"])
     return GeneratorWeights(
-        DenoiserArrays.from_state(arrays, meta["dims"]), std, GenerateSettings(**s),
-        int(meta["seed"]), list(meta["curve"]), int(meta["best_step"]),
-        float(meta["best_val_loss"]), int(meta["steps_run"]), bool(meta["stopped_early"]),
+        std, GenerateSettings(**s), int(meta["seed"]), list(meta["curve"]),
+        int(meta["best_step"]), float(meta["best_val_loss"]), int(meta["steps_run"]),
+        bool(meta["stopped_early"]), denoiser=DenoiserArrays.from_state(arrays, meta["dims"]),
     )  # fmt: skip

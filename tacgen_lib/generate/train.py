@@ -23,14 +23,14 @@ import torch
 from torch import Tensor
 
 from tacgen_lib.generate.inference import (
+    GeneratorRecord,
     GeneratorWeights,
-    Standardiser,
     encode_generator,
     fit_standardiser,
     read_generator,
 )
 from tacgen_lib.generate.model import Denoiser
-from tacgen_lib.generate.schedules import Schedule, make_schedule
+from tacgen_lib.generate.schedules import make_schedule
 from tacgen_lib.generate.settings import GenerateSettings
 from tacgen_lib.io import edges
 
@@ -105,29 +105,15 @@ def training_step(
     return loss
 
 
-@dataclass
-class GeneratorFit:
-    """A trained generator: EMA denoiser (eval mode), standardiser, schedule and its curve."""
+@dataclass(frozen=True)
+class GeneratorFit(GeneratorRecord):
+    """A trained generator with its torch EMA denoiser (eval mode), for training-side use."""
 
-    model: Denoiser
-    standardiser: Standardiser
-    settings: GenerateSettings
-    seed: int
-    curve: list[dict] = field(default_factory=list)
-    best_step: int = 0
-    best_val_loss: float = float("nan")
-    steps_run: int = 0
-    stopped_early: bool = False
-
-    @property
-    def schedule(self) -> Schedule:
-        return make_schedule(self.settings.schedule, self.settings.train_steps)
+    model: Denoiser = field(kw_only=True)
 
     def weights(self) -> GeneratorWeights:
         """The fit as sampling reads it (numpy arrays of the EMA weights; no torch)."""
-        return GeneratorWeights(self.model.arrays(), self.standardiser, self.settings,
-                                self.seed, list(self.curve), self.best_step,
-                                self.best_val_loss, self.steps_run, self.stopped_early)  # fmt: skip
+        return GeneratorWeights(**self.record(), denoiser=self.model.arrays())
 
 
 def _as_f32(x: np.ndarray, name: str) -> Tensor:
@@ -224,7 +210,7 @@ def fit_generator(
                     break
     ema.load_state_dict(best[2])
     ema.eval()
-    return GeneratorFit(ema, std, settings, int(seed), curve, best[1], best[0], step, stopped)
+    return GeneratorFit(std, settings, int(seed), curve, best[1], best[0], step, stopped, model=ema)
 
 
 def save_generator(fit: GeneratorFit, path: str | os.PathLike[str], *, producer: str = "") -> str:
@@ -253,5 +239,4 @@ def load_generator(path: str | os.PathLike[str], *, verify: bool = True) -> Gene
     model = Denoiser(d["dim_t"], d["dim_v"], d["hidden"], d["blocks"], d["time_dim"])
     model.load_state_dict({k: torch.from_numpy(v.copy()) for k, v in w.denoiser.params.items()})
     model.eval()
-    return GeneratorFit(model, w.standardiser, w.settings, w.seed, w.curve, w.best_step,
-                        w.best_val_loss, w.steps_run, w.stopped_early)  # fmt: skip
+    return GeneratorFit(**w.record(), model=model)
