@@ -326,8 +326,12 @@ def test_align_grid_through_slurm_profile(reference_run, tmp_path):
     # ---- issue 15: the same grid run locally gives the same edges ---- begin
     # at the profile's thread counts: edges are bit-identical per thread count, and the
     # profile gives train_heads and train_generator 2 threads where a local run gives 1
+    # (an option before the targets: right after smk's own --configfile they would be read as
+    # more config files, and the local run would build the whole DAG instead of the grid)
     smk(
         local,
+        "--cores",
+        "2",
         *targets,
         "--set-threads",
         "train_heads=2",
