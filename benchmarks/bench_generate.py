@@ -136,7 +136,7 @@ def main() -> None:
     opt = make_optimiser(params, s)
     sch = make_schedule("cosine", 1000)
     sa = torch.from_numpy(np.sqrt(sch.alphas_cumprod)).float()
-    s1 = torch.from_numpy(np.sqrt(1 - sch.alphas_cumprod)).float()
+    s1 = torch.from_numpy(np.sqrt(sch.one_minus_alphas_cumprod)).float()
     n = 4096
     x0, cond = torch.randn(n, args.dim), torch.randn(n, args.dim)
     gen = torch.Generator().manual_seed(0)

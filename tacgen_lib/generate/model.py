@@ -46,11 +46,7 @@ class ResidualBlock(nn.Module):
         self.act = nn.SiLU()
 
     def forward(self, x: Tensor, emb: Tensor) -> Tensor:
-        return self.forward_projected(x, self.emb(emb))
-
-    def forward_projected(self, x: Tensor, projected: Tensor) -> Tensor:
-        """The block given its embedding already projected (``self.emb(emb)``, (B or 1, width))."""
-        h = self.norm(x) + projected
+        h = self.norm(x) + self.emb(emb)
         h = self.fc2(self.act(self.fc1(self.act(h))))
         return x + h
 
@@ -95,22 +91,3 @@ class Denoiser(nn.Module):
 
     def _head(self, h: Tensor) -> Tensor:
         return self.out(torch.nn.functional.silu(self.out_norm(h)))
-
-    def project_condition(self, cond: Tensor, drop: Tensor | None = None) -> list[Tensor]:
-        """What fixed condition rows contribute to each block's embedding: W_k cond_emb per
-        block k, (B, hidden) each, without the bias. Sampling computes it once per batch
-        (`forward_projected` adds the time part per step) instead of once per step."""
-        c = self.cond(self.condition(cond, drop))
-        return [torch.nn.functional.linear(c, block.emb.weight) for block in self.blocks]
-
-    def forward_projected(self, x_t: Tensor, t: int, projected: list[Tensor]) -> Tensor:
-        """`forward` for rows that share one timestep t, the condition part precomputed by
-        `project_condition`: equal to it up to float rounding, since each block's embedding
-        layer is linear, W (time + cond) + b = (W time + b) + W cond. The time MLP then runs
-        on one row per step and the condition MLP never (sampling: about half the FLOPs)."""
-        tt = torch.full((1,), int(t), dtype=torch.int64)
-        time = self.time(sinusoidal_embedding(tt, self.time_dim).to(x_t.dtype))  # (1, hidden)
-        h = self.inp(x_t)
-        for block, pc in zip(self.blocks, projected, strict=True):
-            h = block.forward_projected(h, pc + block.emb(time))
-        return self._head(h)

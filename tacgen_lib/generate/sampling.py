@@ -155,7 +155,7 @@ def sample(
     coef = schedule.arrays(np.float32)
     abar64 = schedule.alphas_cumprod
     sqrt_abar = np.sqrt(abar64).astype(np.float32)
-    sqrt_1m = np.sqrt(-np.expm1(np.cumsum(np.log1p(-schedule.betas)))).astype(np.float32)
+    sqrt_1m = np.sqrt(schedule.one_minus_alphas_cumprod).astype(np.float32)
     ts = np.arange(T - 1, -1, -1) if sampler == "ddpm" else ddim_timesteps(T, steps)
     rng = np.random.default_rng(int(seed))
     cond32 = np.ascontiguousarray(cond, dtype=np.float32)

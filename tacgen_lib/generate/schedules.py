@@ -19,12 +19,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
-
-if TYPE_CHECKING:  # torch only for `Schedule.tensors` (training); sampling needs numpy alone
-    import torch
 
 __all__ = [
     "SCHEDULES",
@@ -64,8 +60,7 @@ SCHEDULES = {"cosine": cosine_betas, "linear": linear_betas}
 class Schedule:
     """A noise schedule of T steps; index t = 0 .. T-1 (t = 0 is the least noisy step).
 
-    The float64 arrays are the reference; `arrays` gives float32 copies for sampling and
-    `tensors` torch copies.
+    The float64 arrays are the reference; `arrays` gives float32 copies for sampling.
     """
 
     name: str
@@ -76,6 +71,7 @@ class Schedule:
     posterior_log_variance: np.ndarray  # (T,) log beta~_t, clipped at t = 0
     posterior_mean_coef1: np.ndarray  # (T,) coefficient of x0 in mu~_t (DDPM eq. 7)
     posterior_mean_coef2: np.ndarray  # (T,) coefficient of x_t in mu~_t
+    one_minus_alphas_cumprod: np.ndarray  # (T,) 1 - alpha-bar_t, exact near t = 0 (expm1)
 
     @property
     def n_steps(self) -> int:
@@ -84,18 +80,12 @@ class Schedule:
     _NAMES = (
         "betas", "alphas_cumprod", "alphas_cumprod_prev", "posterior_variance",
         "posterior_log_variance", "posterior_mean_coef1", "posterior_mean_coef2",
+        "one_minus_alphas_cumprod",
     )  # fmt: skip
 
     def arrays(self, dtype: type = np.float32) -> dict[str, np.ndarray]:
         """Every coefficient as an array of `dtype` (cast from the float64 reference)."""
         return {n: getattr(self, n).astype(dtype) for n in self._NAMES}
-
-    def tensors(self, dtype: torch.dtype | None = None) -> dict[str, torch.Tensor]:
-        """Every coefficient as a torch tensor of `dtype` (default float32)."""
-        import torch
-
-        dtype = torch.float32 if dtype is None else dtype
-        return {n: torch.from_numpy(getattr(self, n)).to(dtype) for n in self._NAMES}
 
 
 def make_schedule(name: str, n_steps: int) -> Schedule:
@@ -118,4 +108,5 @@ def make_schedule(name: str, n_steps: int) -> Schedule:
     )
     coef1 = betas * np.sqrt(abar_prev) / one_minus_abar
     coef2 = one_minus_abar_prev * np.sqrt(alphas) / one_minus_abar
-    return Schedule(name, betas, abar, abar_prev, post_var, post_log_var, coef1, coef2)
+    return Schedule(name, betas, abar, abar_prev, post_var, post_log_var, coef1, coef2,
+                    one_minus_abar)  # fmt: skip

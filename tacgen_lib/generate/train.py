@@ -151,7 +151,7 @@ def fit_generator(
     c_va = _as_f32(v_val, "v_val") if len(v_val) else c_tr[:0]
     schedule = make_schedule(settings.schedule, settings.train_steps)
     sqrt_abar = torch.from_numpy(np.sqrt(schedule.alphas_cumprod)).float()
-    sqrt_1m = torch.from_numpy(np.sqrt(-np.expm1(np.cumsum(np.log1p(-schedule.betas))))).float()
+    sqrt_1m = torch.from_numpy(np.sqrt(schedule.one_minus_alphas_cumprod)).float()
     T = schedule.n_steps
 
     torch.manual_seed(int(seed))
@@ -237,6 +237,6 @@ def load_generator(path: str | os.PathLike[str], *, verify: bool = True) -> Gene
     w = read_generator(path, verify=verify)
     d = w.denoiser.dims
     model = Denoiser(d["dim_t"], d["dim_v"], d["hidden"], d["blocks"], d["time_dim"])
-    model.load_state_dict({k: torch.from_numpy(v.copy()) for k, v in w.denoiser.params.items()})
+    model.load_state_dict({k: torch.from_numpy(v) for k, v in w.denoiser.params.items()})
     model.eval()
     return GeneratorFit(**w.record(), model=model)
