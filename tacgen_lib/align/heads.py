@@ -44,6 +44,7 @@ from tacgen_lib.align.retrieval import CHANCE_COLUMNS, RETRIEVAL_METRICS, paired
 from tacgen_lib.align.settings import AlignSettings
 from tacgen_lib.corpus.splits import assert_trainable, ids_in_split
 from tacgen_lib.io import edges
+from tacgen_lib.optim import AdamW
 
 __all__ = [
     "HIDDEN_DIM",
@@ -215,20 +216,21 @@ def cosine_warmup_lr(step: int, total_steps: int, base_lr: float, warmup_frac: f
     return base_lr * 0.5 * (1.0 + math.cos(math.pi * min(progress, 1.0)))
 
 
-def make_optimizer(heads: AlignHeads, *, lr: float, weight_decay: float) -> torch.optim.AdamW:
-    """AdamW (betas 0.9/0.999) over both heads; torch's fused single-kernel variant.
+def make_optimizer(heads: AlignHeads, *, lr: float, weight_decay: float) -> AdamW:
+    """AdamW (betas 0.9/0.999) over both heads; torch's fused single-kernel variant, through
+    `tacgen_lib.optim` (no torch._dynamo import).
 
     Fused AdamW is about 5x cheaper per step than the foreach variant on CPU and is
     deterministic on CPU (checked by the reproducibility test).
     """
-    return torch.optim.AdamW(
+    return AdamW(
         heads.parameters(), lr=lr, betas=(0.9, 0.999), weight_decay=weight_decay, fused=True
     )
 
 
 def train_step(
     heads: AlignHeads,
-    opt: torch.optim.Optimizer,
+    opt: AdamW,
     v_batch: Tensor,
     t_batch: Tensor,
     *,

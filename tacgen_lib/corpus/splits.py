@@ -19,7 +19,6 @@ from collections.abc import Iterable, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
-from sklearn.model_selection import train_test_split
 
 __all__ = ["SPLITS", "LeakageError", "make_splits", "assert_trainable", "ids_in_split"]
 
@@ -47,6 +46,10 @@ def _stratified_split(
         labels = np.where(pd.Series(labels).map(counts).to_numpy() < n_parts, "rare", labels)
         counts = pd.Series(labels).value_counts()
         return labels if (counts >= n_parts).all() and len(counts) > 1 else None
+
+    # imported here: every training script imports this module for `assert_trainable`, and
+    # sklearn.model_selection costs ~0.65 s of import (scipy.stats) that they do not need
+    from sklearn.model_selection import train_test_split
 
     idx = np.arange(n)
     rest, test = idx, np.array([], dtype=int)

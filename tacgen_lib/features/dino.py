@@ -46,6 +46,7 @@ from torch import Tensor, nn
 from tacgen_lib.features.extract import imagenet_normalise, to_unit_tensor
 from tacgen_lib.features.settings import DinoSettings
 from tacgen_lib.features.vit import PATCH_SIZE, DinoVisionTransformer, build_vit
+from tacgen_lib.optim import AdamW
 
 __all__ = [
     "DINOHead",
@@ -479,7 +480,7 @@ def pretrain_dino(
         # pos_embed has ndim 3: keep it out of weight decay too (DINO does not decay it)
         decay = [p for p in decay if p is not student.backbone.pos_embed]
         no_decay.append(student.backbone.pos_embed)
-        opt = torch.optim.AdamW(
+        opt = AdamW(
             [
                 {"params": decay, "weight_decay": weight_decay},
                 {"params": no_decay, "weight_decay": 0.0},

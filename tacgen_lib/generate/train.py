@@ -33,6 +33,7 @@ from tacgen_lib.generate.model import Denoiser
 from tacgen_lib.generate.schedules import make_schedule
 from tacgen_lib.generate.settings import GenerateSettings
 from tacgen_lib.io import edges
+from tacgen_lib.optim import AdamW
 
 __all__ = [
     "GeneratorFit",
@@ -71,16 +72,16 @@ def diffusion_loss(
     return torch.mean((model(x_t, t, cond, drop) - target) ** 2)
 
 
-def make_optimiser(params: list[Tensor], settings: GenerateSettings) -> torch.optim.AdamW:
+def make_optimiser(params: list[Tensor], settings: GenerateSettings) -> AdamW:
     """AdamW over `params` with torch's fused kernel (one pass per parameter tensor per step,
-    not the ~10 elementwise passes of the default CPU loop; deterministic on CPU)."""
-    return torch.optim.AdamW(params, lr=settings.lr, weight_decay=settings.weight_decay,
-                             fused=True)  # fmt: skip
+    not the ~10 elementwise passes of the default CPU loop; deterministic on CPU), through
+    `tacgen_lib.optim` (no torch._dynamo import)."""
+    return AdamW(params, lr=settings.lr, weight_decay=settings.weight_decay, fused=True)
 
 
 def training_step(
     model: Denoiser,
-    opt: torch.optim.Optimizer,
+    opt: AdamW,
     ema_params: list[Tensor],
     batch: tuple[Tensor, Tensor, Tensor, Tensor, Tensor | None],
     sqrt_abar: Tensor,

@@ -24,6 +24,7 @@ import torch
 from torch import nn
 
 from tacgen_lib.io import edges
+from tacgen_lib.optim import AdamW
 from tacgen_lib.policy.settings import LEARNED_CONDITIONS
 
 __all__ = ["condition_features", "null_pairing", "BCPolicy", "fit_bc", "save_bc", "load_bc"]
@@ -112,7 +113,7 @@ def fit_bc(
     torch.manual_seed(seed)
     gen = torch.Generator().manual_seed(seed)
     net = _mlp(x.shape[1], hidden, layers)
-    opt = torch.optim.AdamW(net.parameters(), lr=lr, weight_decay=weight_decay)
+    opt = AdamW(net.parameters(), lr=lr, weight_decay=weight_decay)
     xt = torch.from_numpy(((x - mean) / sd).astype(np.float32))
     yt = torch.from_numpy(((y - y_mean) / y_sd).astype(np.float32))[:, None]
     losses = []
