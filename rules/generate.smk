@@ -2,7 +2,9 @@
 guidance x steps x sampler grid, judged by what generated touch adds to the probes.
 
 train_generator -> sample_generator (per cell) -> evaluate_generator (every cell of one
-generator in one job, so the V fits are shared) -> aggregate_generate (summary + report).
+generator in one job) -> aggregate_generate (summary + report). The probes no generator
+changes (V, V+T_real, the nonlinear V baseline) are fitted once per corpus by
+fit_generator_baselines, beside training, and shared by every seed's evaluate_generator.
 """
 
 
@@ -12,6 +14,7 @@ include: "generate_common.smk"
 TARGETS += ["results/generate/summary.parquet"]
 TARGETS += [f"{GENERATE_REPORT}/{n}.{e}" for n, e in GENERATE_ITEMS.items()]
 EDGES += ["results/generate/evaluation.parquet"]
+EDGES += [BASELINES.format(corpus=c) for c in GENERATE_CORPORA]
 EDGES += generator_files(f"{GENERATOR}/generator.arrow")
 EDGES += generator_files(f"{GENERATOR}/curve.parquet")
 EDGES += generator_files(f"{GENERATOR}/evaluation.parquet")
@@ -82,13 +85,49 @@ rule sample_generator:
         "../workflow/scripts/sample_generator.py"
 
 
-rule evaluate_generator:
-    """V vs V+T_real vs V+T_gen (shuffled, nonlinear-V baseline, fidelity) for every cell of one generator."""
+rule fit_generator_baselines:
+    """V alone, V+T_real and the nonlinear V baseline of one corpus: the probes every generator seed shares."""
     input:
         manifest="results/corpus/manifest.parquet",
         splits="results/corpus/splits.parquet",
         v=lambda w: feature_edge(w.corpus, "vision"),
         t=lambda w: generate_tactile(w.corpus),
+        code=imports_of("fit_generator_baselines"),
+    output:
+        baselines=BASELINES,
+    log:
+        "results/logs/fit_generator_baselines/{corpus}.log",
+    benchmark:
+        "results/benchmarks/fit_generator_baselines/{corpus}.tsv"
+    wildcard_constraints:
+        corpus=one_of(GENERATE_CORPORA),
+    conda:
+        "../envs/probes.yaml"
+    threads: 1
+    resources:
+        mem_mb=3000,
+        runtime=30,
+    params:
+        # only what these probes read: a generator knob must not refit them
+        gammas=GENERATE["nonlinear_gammas"],
+        targets=lambda w: GENERATE["corpora"][w.corpus],
+        corpus=lambda w: CORPORA[w.corpus],
+        probes={
+            k: v for k, v in config["probes"].items() if k not in ("families", "seeds")
+        },
+        probe_seed=config["probes"]["seeds"][0],
+    script:
+        "../workflow/scripts/fit_generator_baselines.py"
+
+
+rule evaluate_generator:
+    """V+T_gen (shuffled, vs the corpus's baselines, fidelity) for every cell of one generator."""
+    input:
+        manifest="results/corpus/manifest.parquet",
+        splits="results/corpus/splits.parquet",
+        v=lambda w: feature_edge(w.corpus, "vision"),
+        t=lambda w: generate_tactile(w.corpus),
+        baselines=lambda w: BASELINES.format(corpus=w.corpus),
         t_gen=lambda w: [
             sample_edge(w.corpus, w.seed, *cell) for cell in GENERATE_CELLS
         ],

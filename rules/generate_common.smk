@@ -1,6 +1,7 @@
 """Helpers of the generate stage (grid expansion, canonical cell paths); included by generate.smk."""
 
 from tacgen_lib.generate.cells import (
+    BASELINES,
     GENERATOR,
     SAMPLE_CELL,
     SAMPLE_CONSTRAINTS,

@@ -24,10 +24,14 @@ from snakemake_run import ROOT
 
 from tacgen_lib.generate.cells import guidance_text, sample_cells
 from tacgen_lib.generate.evaluate import (
+    BASELINE_INPUTS,
     TargetSpec,
+    baselines_frame,
+    baselines_from_frame,
     cosine_pairing,
     evaluate_generator,
     fidelity,
+    fit_baselines,
     frechet_distance,
     pairing_permutation,
     shuffled_rows,
@@ -501,15 +505,17 @@ def test_evaluation_real_touch_helps_where_generated_touch_cannot():
              "train_resamples": 0, "permutations": 0, "label_permutations": 0,
              "random_draws": 0}, "ridge", 0)
     )  # fmt: skip
+    spec = TargetSpec("force_p50", rows, ps)
+    vision, t_real = dict(zip(ids, v, strict=True)), dict(zip(ids, t, strict=True))
     summary, perms = evaluate_generator(
-        [TargetSpec("force_p50", rows, ps)],
+        [spec],
         corpus="toy",
         seed=0,
-        vision=dict(zip(ids, v, strict=True)),
-        t_real=dict(zip(ids, t, strict=True)),
+        vision=vision,
+        t_real=t_real,
         t_gen={("ddim", "1", "10"): dict(zip(ids, gen, strict=True))},
+        baselines={"force_p50": fit_baselines(spec, vision, t_real, gammas=(1.0,))},
         permutations=100,
-        gammas=(1.0,),
     )
     by = summary.set_index("input")
     assert set(by.index) == {"t_real", "t_gen", "t_gen_shuffled", "v_nonlinear"}
@@ -519,6 +525,80 @@ def test_evaluation_real_touch_helps_where_generated_touch_cannot():
     assert by.loc["t_gen", "cos_matched"] > by.loc["t_gen", "cos_offdiag"]
     for col in ("score", "delta", "ci_low", "ci_high"):
         assert np.isfinite(by[col]).all()
+
+
+def _toy_specs():
+    """A ridge and a logistic target on the toy world, with small probe grids."""
+    ids, v, t, manifest, splits = toy_world()
+    manifest["hardness"] = np.where(manifest["force_p50"] > 0, "hard", "soft")
+    cfg = {"lambdas": [0.1, 1, 10], "C": [0.1, 10], "folds": 3, "bootstrap": 200,
+           "train_resamples": 0, "permutations": 0, "label_permutations": 0,
+           "random_draws": 0}  # fmt: skip
+    specs = [
+        TargetSpec(name, family_rows(manifest, splits, corpus="toy", target=name, kind=kind),
+                   ProbeSettings.from_config(cfg, kind, 0))
+        for name, kind in (("force_p50", "ridge"), ("hardness", "logistic"))
+    ]  # fmt: skip
+    return ids, dict(zip(ids, v, strict=True)), dict(zip(ids, t, strict=True)), specs
+
+
+def test_baselines_edge_round_trip_is_exact_and_checked():
+    """The baselines edge gives back the fitted predictions bit for bit (floats) and as the
+    training labels (logistic); rows of other splits or unknown labels are refused by name."""
+    ids, vision, t_real, specs = _toy_specs()
+    fits = [fit_baselines(s, vision, t_real, gammas=(0.5, 2.0)) for s in specs]
+    frame = baselines_frame("toy", specs, fits)
+    assert frame["row_id"].is_unique
+    assert len(frame) == sum(3 * s.rows.n_test for s in specs)
+    back = baselines_from_frame(frame, specs)
+    for spec, fit in zip(specs, fits, strict=True):
+        got = back[spec.name]
+        assert got.reg == fit.reg and got.gamma == fit.gamma
+        for inp in BASELINE_INPUTS:
+            np.testing.assert_array_equal(got.pred[inp], fit.pred[inp])
+            if spec.settings.kind == "logistic":
+                assert set(got.pred[inp]) <= set(spec.rows.y_train)
+    # the fits are the probes stage's own: V alone equals fit_probe on V
+    v_tr = np.stack([vision[i] for i in specs[0].rows.train_ids])
+    v_te = np.stack([vision[i] for i in specs[0].rows.test_ids])
+    own = fit_probe(v_tr, specs[0].rows.y_train, v_te, specs[0].settings)
+    np.testing.assert_array_equal(fits[0].pred["v"], own.pred_test)
+    # a row missing (an edge built on other splits) and a label no class has
+    missing = frame.drop(index=frame.index[(frame["target"] == "hardness")][0])
+    with pytest.raises(
+        ValueError, match=r"baselines\.parquet: target 'hardness' input 'v'.*1 missing"
+    ):
+        baselines_from_frame(missing, specs, source="baselines.parquet")
+    odd = frame.copy()
+    odd.loc[odd.index[odd["target"] == "hardness"][0], "label"] = "medium"
+    with pytest.raises(ValueError, match="'medium' is not a training class"):
+        baselines_from_frame(odd, specs)
+
+
+def test_evaluation_of_two_seeds_shares_the_baselines():
+    """V, V+T_real and the nonlinear V rows do not depend on the generator seed: both seeds'
+    rows equal, and the baselines read from the edge give the same summary as the fits."""
+    ids, vision, t_real, specs = _toy_specs()
+    fits = {s.name: fit_baselines(s, vision, t_real, gammas=(1.0,)) for s in specs}
+    edge = baselines_from_frame(baselines_frame("toy", specs, list(fits.values())), specs)
+    rng = np.random.default_rng(5)
+    cell = ("ddim", "1", "5")
+
+    def run(seed, baselines):
+        gen = {i: x + rng.normal(size=x.shape) for i, x in vision.items()}
+        return evaluate_generator(specs, corpus="toy", seed=seed, vision=vision,
+                                  t_real=t_real, t_gen={cell: gen}, baselines=baselines,
+                                  permutations=10)[0]  # fmt: skip
+
+    s0, s1 = run(0, fits), run(1, edge)
+    shared = ["target", "input", "score", "v_score", "delta", "ci_low", "ci_high", "reg",
+              "nonlinear_gamma", "delta_vs_nonlinear"]  # fmt: skip
+    for inp in ("t_real", "v_nonlinear"):
+        a = s0.loc[s0["input"] == inp, shared].reset_index(drop=True)
+        b = s1.loc[s1["input"] == inp, shared].reset_index(drop=True)
+        pd.testing.assert_frame_equal(a, b)
+    with pytest.raises(ValueError, match="no baselines for target 'hardness'"):
+        run(0, {"force_p50": fits["force_p50"]})
 
 
 def test_logistic_c_is_chosen_on_the_reference_cell_and_reused():
@@ -537,10 +617,12 @@ def test_logistic_c_is_chosen_on_the_reference_cell_and_reused():
         ("ddim", str(w), "5"): dict(zip(ids, v @ rng.normal(size=(4, 4)) + w * t, strict=True))
         for w in (0, 1, 3)
     }
+    spec = TargetSpec("hardness", rows, ps)
+    vision, t_real = dict(zip(ids, v, strict=True)), dict(zip(ids, t, strict=True))
     summary, _ = evaluate_generator(
-        [TargetSpec("hardness", rows, ps)], corpus="toy", seed=0,
-        vision=dict(zip(ids, v, strict=True)), t_real=dict(zip(ids, t, strict=True)),
-        t_gen=cells, permutations=10, gammas=(1.0,), reference=("ddim", "1", "5"),
+        [spec], corpus="toy", seed=0, vision=vision, t_real=t_real, t_gen=cells,
+        baselines={"hardness": fit_baselines(spec, vision, t_real, gammas=(1.0,))},
+        permutations=10, reference=("ddim", "1", "5"),
     )  # fmt: skip
     gen = summary[summary["input"].isin(["t_gen", "t_gen_shuffled"])].set_index(
         ["input", "guidance"]

@@ -304,6 +304,15 @@ UNITS: dict[str, UnitRule] = {
         lambda c, w: ("", _n(c, w["corpus"]) * int(w["steps"])),
         lambda c, w: 2.0 * _n(c, w["corpus"]) * int(w["steps"]) * _generator_mlp(c),
     ),
+    "fit_generator_baselines": UnitRule(
+        "sample × target (3 CV probes + one per nonlinear gamma)",
+        lambda c, w: (
+            "",
+            _n(c, w["corpus"])
+            * len(c["generate"]["corpora"][w["corpus"]])
+            * (2 + len(c["generate"]["nonlinear_gammas"])),
+        ),
+    ),
     "evaluate_generator": UnitRule(
         "sample × (sampling cells × targets + permutations / 100)",
         lambda c, w: (

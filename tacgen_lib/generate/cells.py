@@ -8,6 +8,7 @@ steps (`SAMPLE_CELL`). Guidance is written canonically (`guidance_text`: 1.0 -> 
 from __future__ import annotations
 
 __all__ = [
+    "BASELINES",
     "GENERATOR",
     "SAMPLE_CELL",
     "SAMPLE_CONSTRAINTS",
@@ -18,6 +19,8 @@ __all__ = [
 
 #: Directory of one generator (train_generator's outputs, evaluate_generator's outputs).
 GENERATOR = "results/generate/{corpus}/seed~{seed}"
+#: The probes of one corpus that no generator changes (fit_generator_baselines's edge).
+BASELINES = "results/generate/{corpus}/baselines.parquet"
 #: Directory of one sampling cell of a generator.
 SAMPLE_CELL = GENERATOR + "/sampler~{sampler}/guidance~{guidance}/steps~{steps}"
 #: Wildcard constraints that keep cell text canonical.

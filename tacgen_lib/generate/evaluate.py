@@ -1,18 +1,22 @@
 """Judging generated touch by what it adds to the probes (paper: Delta R^2_gen), with controls.
 
-This module owns the evaluation of one generator (corpus x seed) over all its sampling cells.
-The probes are the probes stage's own (`tacgen_lib.probes.protocol.fit_probe` on the same
-`family_rows` train/test rows, `fixed_test_bootstrap` for the CIs), not a fork. Per target:
+This module owns the evaluation of one generator (corpus x seed) over all its sampling cells
+(`evaluate_generator`), and the probes no generator changes (`fit_baselines`: V alone, V +
+T_real and the nonlinear V baseline, fitted once per corpus and shared by every seed through
+the baselines edge, `baselines_frame` / `baselines_from_frame`). The probes are the probes
+stage's own (`tacgen_lib.probes.protocol.fit_probe` on the same `family_rows` train/test rows,
+`fixed_test_bootstrap` for the CIs), not a fork. Per target:
 
-- ``v``: V alone (the reference of every Delta); fitted once and shared by every cell;
+- ``v``: V alone (the reference of every Delta); fitted once per corpus (`fit_baselines`);
 - ``t_real``: V + T_real, the protocol-matched real-touch point (ViT tactile features);
 - ``t_gen``: V + T_gen of one sampling cell;
 - ``t_gen_shuffled``: V + T_gen where row i gets the vector generated for another row
   (a seeded permutation of all rows of the corpus: the pairing is broken, the marginal kept);
 - ``v_nonlinear``: V + phi(V), phi an RBF Nystroem map of V with as many components as T has
   dimensions, gamma (a multiple of the median heuristic) and the regulariser chosen by CV on
-  the train rows only. T_gen is a function of V, so a gain of V + T_gen over linear V may be
-  nonlinearity, not touch; ``delta_vs_nonlinear`` = score(V + x) - score(V + phi(V)) says.
+  the train rows only (Nystroem drawn with the probe seed: it does not depend on the generator).
+  T_gen is a function of V, so a gain of V + T_gen over linear V may be nonlinearity, not
+  touch; ``delta_vs_nonlinear`` = score(V + x) - score(V + phi(V)) says.
 
 Every Delta is paired on the same test rows with the same 5,000 fixed-test resamples (drawn
 once per target and shared by every bootstrap of that target: identical to drawing them per
@@ -47,17 +51,31 @@ from scipy import linalg
 from scipy.spatial.distance import pdist
 from sklearn.kernel_approximation import Nystroem
 
+from tacgen_lib.corpus.splits import assert_trainable
 from tacgen_lib.probes.bootstrap import fixed_test_bootstrap, resample_indices
 from tacgen_lib.probes.logistic import FixedLogistic
-from tacgen_lib.probes.protocol import FamilyRows, FittedProbe, ProbeSettings, fit_probe
+from tacgen_lib.probes.protocol import (
+    FamilyRows,
+    FittedProbe,
+    ProbeSettings,
+    family_rows,
+    fit_probe,
+    strata_for,
+)
 
 __all__ = [
     "INPUTS",
     "FIDELITY_COLUMNS",
     "PERMUTATION_COLUMNS",
+    "BASELINE_INPUTS",
+    "Baselines",
     "TargetSpec",
+    "baselines_frame",
+    "baselines_from_frame",
     "cosine_pairing",
     "evaluate_generator",
+    "fit_baselines",
+    "target_specs",
     "fidelity",
     "frechet_distance",
     "nonlinear_baseline",
@@ -221,6 +239,166 @@ class TargetSpec:
     settings: ProbeSettings
 
 
+def target_specs(
+    manifest: pd.DataFrame,
+    splits: pd.DataFrame,
+    *,
+    corpus: str,
+    targets: Mapping[str, str],
+    corpus_config: Mapping,
+    probes_config: Mapping,
+    probe_seed: int,
+    rule: str,
+) -> list[TargetSpec]:
+    """The `TargetSpec` of each generator target of `corpus` (target -> ridge | logistic).
+
+    The probes' rows (`family_rows`, the probes stage's strata) train on train + val rows, as
+    in the probes stage: `assert_trainable` refuses any test row in them, naming `rule`.
+    """
+    out = []
+    for target, kind in targets.items():
+        rows = family_rows(manifest, splits, corpus=corpus, target=target, kind=kind,
+                           strata=strata_for(corpus_config))  # fmt: skip
+        assert_trainable(rows.train_ids, splits, rule=rule, allowed=("train", "val"))
+        out.append(TargetSpec(target, rows, ProbeSettings.from_config(probes_config, kind,
+                                                                      probe_seed)))  # fmt: skip
+    return out
+
+
+#: The probes of the baselines edge, by what they fit: V alone, V + T_real, V + phi(V).
+BASELINE_INPUTS = ("v", "t_real", "v_nonlinear")
+#: Columns of the baselines edge (one row per target x baseline input x test row).
+BASELINE_COLUMNS = ("row_id", "corpus", "target", "kind", "input", "sample_id", "prediction",
+                    "label", "reg", "nonlinear_gamma")  # fmt: skip
+
+
+def _block(source: Mapping[str, np.ndarray], ids: np.ndarray) -> np.ndarray:
+    """Rows `ids` of a sample_id -> vector mapping, stacked as float64."""
+    return np.stack([source[i] for i in ids]).astype(np.float64)
+
+
+@dataclass(frozen=True)
+class Baselines:
+    """The probes of one target that no generator changes, fitted once per corpus.
+
+    ``pred``: input (`BASELINE_INPUTS`) -> test predictions in ``rows.test_ids`` order (floats
+    for ridge, labels for logistic); ``reg``: input -> the lambda or C its CV chose;
+    ``gamma``: the nonlinear baseline's RBF gamma.
+    """
+
+    target: str
+    pred: Mapping[str, np.ndarray]
+    reg: Mapping[str, float]
+    gamma: float
+
+
+def fit_baselines(
+    spec: TargetSpec,
+    vision: Mapping[str, np.ndarray],
+    t_real: Mapping[str, np.ndarray],
+    *,
+    gammas: Sequence[float],
+) -> Baselines:
+    """V alone, V + T_real and the nonlinear V baseline of one target (module docstring).
+
+    Nothing here depends on a generator, so one fit per corpus serves every generator seed;
+    the nonlinear baseline's Nystroem draw uses the probe seed.
+    """
+    rows, ps = spec.rows, spec.settings
+    v_tr, v_te = _block(vision, rows.train_ids), _block(vision, rows.test_ids)
+    t_tr, t_te = _block(t_real, rows.train_ids), _block(t_real, rows.test_ids)
+
+    def fit(x_tr: np.ndarray, x_te: np.ndarray) -> FittedProbe:
+        return fit_probe(x_tr, rows.y_train, x_te, ps,
+                         train_ids=rows.train_ids, test_ids=rows.test_ids)  # fmt: skip
+
+    v_fit, real_fit = fit(v_tr, v_te), fit(np.hstack([v_tr, t_tr]), np.hstack([v_te, t_te]))
+    nl, gamma = nonlinear_baseline(v_tr, v_te, rows, ps, gammas=gammas,
+                                   n_components=t_tr.shape[1], seed=ps.seed)  # fmt: skip
+    fits = {"v": v_fit, "t_real": real_fit, "v_nonlinear": nl}
+    return Baselines(
+        spec.name,
+        {k: f.pred_test for k, f in fits.items()},
+        {k: float(f.reg) for k, f in fits.items()},
+        float(gamma),
+    )
+
+
+def baselines_frame(
+    corpus: str, specs: Sequence[TargetSpec], fits: Sequence[Baselines]
+) -> pd.DataFrame:
+    """The baselines edge: one row per target x input x test row (`BASELINE_COLUMNS`).
+
+    Ridge predictions go to ``prediction`` (float64, bit-exact through Parquet), logistic
+    labels to ``label`` (the targets' labels are strings); the other column is NaN / "".
+    """
+    out = []
+    for spec, b in zip(specs, fits, strict=True):
+        if spec.name != b.target:
+            raise ValueError(f"baselines_frame: target {spec.name!r} got the fit of {b.target!r}")
+        logistic = spec.settings.kind == "logistic"
+        for inp in BASELINE_INPUTS:
+            pred = np.asarray(b.pred[inp])
+            for sid, value in zip(spec.rows.test_ids, pred, strict=True):
+                out.append({
+                    "row_id": f"{spec.name}|{inp}|{sid}", "corpus": corpus,
+                    "target": spec.name, "kind": spec.settings.kind, "input": inp,
+                    "sample_id": str(sid),
+                    "prediction": np.nan if logistic else float(value),
+                    "label": str(value) if logistic else "",
+                    "reg": b.reg[inp], "nonlinear_gamma": b.gamma,
+                })  # fmt: skip
+    return pd.DataFrame(out, columns=list(BASELINE_COLUMNS))
+
+
+def baselines_from_frame(
+    frame: pd.DataFrame, specs: Sequence[TargetSpec], *, source: str = "baselines edge"
+) -> dict[str, Baselines]:
+    """Target -> `Baselines` read back from `baselines_frame`'s rows, checked against `specs`.
+
+    Every target and input must hold exactly the spec's test rows (same sample_ids), and
+    every logistic label must be a class of the training rows; anything else is an error
+    naming `source`, the target and the offending sample_id (the edge was built from other
+    splits or another probe config).
+    """
+    out: dict[str, Baselines] = {}
+    for spec in specs:
+        rows, logistic = spec.rows, spec.settings.kind == "logistic"
+        sub = frame[frame["target"] == spec.name]
+        if sub.empty:
+            raise ValueError(f"{source}: no rows for target {spec.name!r}")
+        pred, reg = {}, {}
+        want = [str(i) for i in rows.test_ids]
+        classes = {str(c): c for c in np.unique(rows.y_train)}
+        for inp in BASELINE_INPUTS:
+            part = sub[sub["input"] == inp].set_index("sample_id")
+            got = set(part.index)
+            missing = [i for i in want if i not in got]
+            extra = sorted(got - set(want))
+            if missing or extra:
+                bad = (missing or extra)[0]
+                raise ValueError(
+                    f"{source}: target {spec.name!r} input {inp!r} does not hold this "
+                    f"evaluation's test rows ({len(missing)} missing, {len(extra)} extra; "
+                    f"sample_id {bad!r}): rebuild it from the same splits and probe config"
+                )
+            part = part.loc[want]
+            if logistic:
+                unknown = part.index[~part["label"].isin(list(classes))]
+                if len(unknown):
+                    raise ValueError(
+                        f"{source}: target {spec.name!r} input {inp!r}, sample_id "
+                        f"{unknown[0]!r}: label {part.loc[unknown[0], 'label']!r} is not a "
+                        f"training class ({sorted(classes)})"
+                    )
+                pred[inp] = np.array([classes[x] for x in part["label"]], dtype=object)
+            else:
+                pred[inp] = part["prediction"].to_numpy(dtype=np.float64)
+            reg[inp] = float(part["reg"].iloc[0])
+        out[spec.name] = Baselines(spec.name, pred, reg, float(sub["nonlinear_gamma"].iloc[0]))
+    return out
+
+
 def _row(base: dict, inp: str, boot: dict, vs_nl: dict | None) -> dict:
     return {
         **base,
@@ -263,8 +441,8 @@ def evaluate_generator(
     vision: Mapping[str, np.ndarray],
     t_real: Mapping[str, np.ndarray],
     t_gen: Mapping[tuple[str, str, str], Mapping[str, np.ndarray]],
+    baselines: Mapping[str, Baselines],
     permutations: int,
-    gammas: Sequence[float],
     reference: tuple[str, str, str] | None = None,
     labels: Mapping[str, object] | None = None,
     progress: Callable[[str], None] | None = None,
@@ -272,14 +450,12 @@ def evaluate_generator(
     """Summary rows (one per target x cell x input) and permutation draws of one generator.
 
     vision, t_real: sample_id -> vector, for every row of the corpus (dicts keep this
-    function free of edge I/O); t_gen: (sampler, guidance, steps) -> sample_id -> vector.
+    function free of edge I/O); t_gen: (sampler, guidance, steps) -> sample_id -> vector;
+    baselines: target -> its `fit_baselines` (V, V + T_real, nonlinear V: shared by seeds).
     `reference`: the cell whose CV chooses the logistic C of every cell (module docstring;
     default: the first cell).
     """
     say = progress or (lambda _m: None)
-
-    def block(source: Mapping[str, np.ndarray], ids: np.ndarray) -> np.ndarray:
-        return np.stack([source[i] for i in ids]).astype(np.float64)
 
     all_ids = np.array(sorted(vision), dtype=object)
     perm = shuffled_rows(len(all_ids), seed)
@@ -290,8 +466,8 @@ def evaluate_generator(
     fid_cache: dict[tuple, dict] = {}
     for spec in targets:
         rows, ps = spec.rows, spec.settings
-        v_tr, v_te = block(vision, rows.train_ids), block(vision, rows.test_ids)
-        t_tr, t_te = block(t_real, rows.train_ids), block(t_real, rows.test_ids)
+        v_tr, v_te = _block(vision, rows.train_ids), _block(vision, rows.test_ids)
+        t_tr, t_te = _block(t_real, rows.train_ids), _block(t_real, rows.test_ids)
         # one draw of the 5,000 test resamples, shared by every bootstrap of this target
         resamples = resample_indices(len(rows.y_test), ps.bootstrap, ps.seed,
                                      strata=rows.strata_test)  # fmt: skip
@@ -333,11 +509,14 @@ def evaluate_generator(
                 chosen[inp] = float(probe.reg)
             return probe.pred_test, float(probe.reg), REG_CV
 
-        v_fit, real_fit = fit(v_tr, v_te), fit(np.hstack([v_tr, t_tr]), np.hstack([v_te, t_te]))
-        p_v, p_real = v_fit.pred_test, real_fit.pred_test
-        nl, gamma = nonlinear_baseline(v_tr, v_te, rows, ps, gammas=gammas,
-                                       n_components=t_tr.shape[1], seed=seed)  # fmt: skip
-        p_nl = nl.pred_test
+        if spec.name not in baselines:
+            raise ValueError(f"evaluate_generator: no baselines for target {spec.name!r}")
+        bl = baselines[spec.name]
+        p_v, p_real, p_nl = (np.asarray(bl.pred[k]) for k in BASELINE_INPUTS)
+        if not len(p_v) == len(p_real) == len(p_nl) == rows.n_test:
+            raise ValueError(f"evaluate_generator: {spec.name} baselines are not on its "
+                             f"{rows.n_test} test rows")  # fmt: skip
+        gamma = bl.gamma
         base = {
             "corpus": corpus, "target": spec.name, "kind": ps.kind, "metric": ps.metric,
             "seed": int(seed), "probe_seed": ps.seed, "n_train": rows.n_train,
@@ -346,8 +525,8 @@ def evaluate_generator(
         # the rows every cell repeats (they do not depend on the cell): bootstrapped once
         real_row = _row({}, "t_real", boot(p_v, p_real), boot(p_nl, p_real))
         nl_row = _row({}, "v_nonlinear", boot(p_v, p_nl), None)
-        real_row.update(reg=float(real_fit.reg), reg_source=REG_CV)
-        nl_row.update(reg=float(nl.reg), reg_source=REG_CV)
+        real_row.update(reg=bl.reg["t_real"], reg_source=REG_CV)
+        nl_row.update(reg=bl.reg["v_nonlinear"], reg_source=REG_CV)
         say(f"{spec.name}: V {real_row['v_score']:.3f}, V+T_real delta {real_row['delta']:+.3f} "
             f"[{real_row['ci_low']:+.3f}, {real_row['ci_high']:+.3f}], nonlinear V delta "
             f"{nl_row['delta']:+.3f}")  # fmt: skip
@@ -356,9 +535,9 @@ def evaluate_generator(
             sampler, guidance, steps = cell
             cell_base = {**base, "sampler": sampler, "guidance": float(guidance),
                          "steps": int(steps)}  # fmt: skip
-            g_tr, g_te = block(gen, rows.train_ids), block(gen, rows.test_ids)
+            g_tr, g_te = _block(gen, rows.train_ids), _block(gen, rows.test_ids)
             shuf = {i: gen[shuffled_of[i]] for i in vision}
-            s_tr, s_te = block(shuf, rows.train_ids), block(shuf, rows.test_ids)
+            s_tr, s_te = _block(shuf, rows.train_ids), _block(shuf, rows.test_ids)
             p_gen, reg_gen, src_gen = fit_cell("t_gen", np.hstack([v_tr, g_tr]),
                                                np.hstack([v_te, g_te]))  # fmt: skip
             p_shuf, reg_shuf, src_shuf = fit_cell("t_gen_shuffled", np.hstack([v_tr, s_tr]),

@@ -1,30 +1,32 @@
-"""Probe V vs V+T_real vs V+T_gen (and controls) for every cell of one generator (rule evaluate_generator)."""
+"""Probe V+T_gen (and its controls) for every cell of one generator against the corpus's
+baselines (rule evaluate_generator)."""
 
 from threadpoolctl import threadpool_limits
 
-from tacgen_lib.corpus.splits import assert_trainable
-from tacgen_lib.generate.evaluate import TargetSpec, evaluate_generator
+from tacgen_lib.generate.evaluate import baselines_from_frame, evaluate_generator, target_specs
 from tacgen_lib.generate.settings import GenerateSettings
 from tacgen_lib.io import edges, log
-from tacgen_lib.probes.protocol import ProbeSettings, family_rows, strata_for
 
 logger = log.for_rule(snakemake)
 w, params = snakemake.wildcards, snakemake.params
 settings = GenerateSettings.from_config(params.settings)
 corpus_cfg = params.corpus
-manifest = edges.read(snakemake.input.manifest).frame
-splits = edges.read(snakemake.input.splits).frame
-targets = []
-for target, kind in params.targets.items():
-    rows = family_rows(
-        manifest, splits, corpus=w.corpus, target=target, kind=kind,
-        strata=strata_for(corpus_cfg),
-    )  # fmt: skip
-    # The probes train on train + val rows (as in the probes stage); test rows only score.
-    assert_trainable(rows.train_ids, splits, rule=snakemake.rule, allowed=("train", "val"))
-    probe_settings = ProbeSettings.from_config(params.probes, kind, params.probe_seed)
-    targets.append(TargetSpec(target, rows, probe_settings))
-    logger.info("%s (%s): %d train/val, %d test rows", target, kind, rows.n_train, rows.n_test)
+targets = target_specs(
+    edges.read(snakemake.input.manifest).frame,
+    edges.read(snakemake.input.splits).frame,
+    corpus=w.corpus,
+    targets=params.targets,
+    corpus_config=corpus_cfg,
+    probes_config=params.probes,
+    probe_seed=params.probe_seed,
+    rule=snakemake.rule,
+)
+for spec in targets:
+    logger.info("%s (%s): %d train/val, %d test rows", spec.name, spec.settings.kind,
+                spec.rows.n_train, spec.rows.n_test)  # fmt: skip
+baselines = baselines_from_frame(
+    edges.read(snakemake.input.baselines).frame, targets, source=snakemake.input.baselines
+)
 
 
 def vectors(path, column):
@@ -46,8 +48,8 @@ with threadpool_limits(snakemake.threads):
         vision=vision,
         t_real=t_real,
         t_gen=t_gen,
+        baselines=baselines,
         permutations=settings.permutations,
-        gammas=settings.nonlinear_gammas,
         reference=tuple(params.reference),
         labels={
             "design": corpus_cfg.get("design", corpus_cfg["kind"]),

@@ -1,0 +1,43 @@
+"""V alone, V+T_real and the nonlinear V baseline of one corpus's generator targets, once for
+every generator seed (rule fit_generator_baselines)."""
+
+from threadpoolctl import threadpool_limits
+
+from tacgen_lib.generate.evaluate import baselines_frame, fit_baselines, target_specs
+from tacgen_lib.generate.settings import GenerateSettings
+from tacgen_lib.io import edges, log
+
+logger = log.for_rule(snakemake)
+w, params = snakemake.wildcards, snakemake.params
+# validated as the generate settings validate them
+gammas = GenerateSettings(nonlinear_gammas=tuple(float(g) for g in params.gammas)).nonlinear_gammas
+specs = target_specs(
+    edges.read(snakemake.input.manifest).frame,
+    edges.read(snakemake.input.splits).frame,
+    corpus=w.corpus,
+    targets=params.targets,
+    corpus_config=params.corpus,
+    probes_config=params.probes,
+    probe_seed=params.probe_seed,
+    rule=snakemake.rule,
+)
+
+
+def vectors(path):
+    edge = edges.read(path, columns=["vit"], require={"vit": "vector"})
+    return dict(zip(edge.ids, edge.vectors["vit"], strict=True))
+
+
+vision, t_real = vectors(snakemake.input.v), vectors(snakemake.input.t)
+fits = []
+with threadpool_limits(snakemake.threads):
+    for spec in specs:
+        logger.info("%s (%s): %d train/val, %d test rows; fitting V, V+T_real, nonlinear V",
+                    spec.name, spec.settings.kind, spec.rows.n_train, spec.rows.n_test)  # fmt: skip
+        fit = fit_baselines(spec, vision, t_real, gammas=gammas)
+        fits.append(fit)
+        logger.info("%s: regularisers %s, nonlinear gamma %.4g", spec.name,
+                    {k: f"{v:g}" for k, v in fit.reg.items()}, fit.gamma)  # fmt: skip
+frame = baselines_frame(w.corpus, specs, fits)
+edges.write(snakemake.output.baselines, frame, key="row_id", producer=snakemake.rule)
+logger.info("%d baseline predictions", len(frame))
