@@ -47,6 +47,7 @@ def test_dry_run_plans_the_whole_dag(cold_dry_run):
         # >>> generate (issue 12)
         "train_generator",
         "sample_generator",
+        "fit_generator_baselines",
         "evaluate_generator",
         "aggregate_generate",
         # <<< generate
@@ -103,9 +104,9 @@ def test_changed_probe_param_reruns_only_the_probes(run_dir, tmp_path):
     )
     assert "probes:\n  bootstrap: 150" in cfg.read_text()
     # the robustness rules (issue 16) read the same probes subtree, and the generator's
-    # evaluation uses the probes' settings (same probe code): both are downstream too
+    # evaluation and its baselines use the probes' settings (same probe code): all downstream
     robustness = {"probe_training_size", "probe_within_scale", "aggregate_robustness"}
-    generate = {"evaluate_generator", "aggregate_generate"}
+    generate = {"fit_generator_baselines", "evaluate_generator", "aggregate_generate"}
     # the cost page's free generator knobs read the generation summary (issue 14)
     cost = {"cost_generate_points", "cost_of_accuracy"}
     assert set(planned_rules(work)) == {"probe", "aggregate_probes", "edge_manifest", "all"} | (
@@ -139,13 +140,15 @@ def test_edit_to_an_indirectly_imported_module_reruns_exactly_its_users(run_dir,
         for p in scripts.glob("*.py")
         if ROOT / module in import_closure(p, ROOT / "tacgen_lib")
     }
-    # evaluate_generator reaches it through probes.protocol too (generate, issue 12)
+    # evaluate_generator and fit_generator_baselines reach it through probes.protocol too
+    # (generate, issue 12)
     robustness = {"probe_training_size", "probe_within_scale", "aggregate_robustness"}
     # cost_sim_probe (issue 14) fits the probes stage's probes on each simulation setting;
     # cost_probe (the permutations knob) calls the tactile-permutation control itself
     cost = {"cost_sim_probe", "cost_probe"}
     assert direct == ["cost_probe.py"]
-    assert users == {"probe", "aggregate_probes", "evaluate_generator"} | (robustness | cost)
+    generate = {"evaluate_generator", "fit_generator_baselines"}
+    assert users == {"probe", "aggregate_probes"} | generate | (robustness | cost)
     work = copy_tree(tmp_path / "f")
     shutil.copytree(run_dir / "results", work / "results")
     shutil.copytree(run_dir / ".snakemake", work / ".snakemake")
