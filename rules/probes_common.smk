@@ -1,7 +1,6 @@
 """Helpers of the probes stage (family specs, input lists, report items); included by probes.smk."""
 
-from tacgen_lib.probes.protocol import check_families, has_aligned_rows
-from tacgen_lib.probes.robustness import RobustnessSettings
+from tacgen_lib.probes.settings import RobustnessSettings, check_families, has_aligned_rows
 from tacgen_lib.probes.variants import PROTOCOLS
 
 PROBES = config["probes"]

@@ -144,3 +144,25 @@ def test_closure_follows_an_edit_made_after_a_first_closure_in_the_same_process(
     assert closure() == ["__init__.py", "one.py", "two.py"]
     (lib / "one.py").write_text("from tacgen_lib import three  # an edit of a parsed file\n")
     assert closure() == ["__init__.py", "one.py", "three.py"]
+
+
+def test_the_snakefile_parses_without_the_numerics_libraries():
+    """What every Snakemake start (and every cluster job, which parses the Snakefile again)
+    imports from tacgen_lib: the modules the Snakefile and rules/*.smk import at their top
+    level (a function that imports a heavy module, as the backbone-arch knob does, pays only
+    where it runs). None of them
+    may pull in scikit-learn, SciPy or torch (scikit-learn and SciPy cost ~1 s of a ~3 s dry
+    run before the probes' settings moved to `probes.settings`)."""
+    import subprocess
+    import sys
+
+    sources = [ROOT / "Snakefile", *sorted((ROOT / "rules").glob("*.smk"))]
+    modules = sorted({m for src in sources
+                      for m in re.findall(r"^from (tacgen_lib[\w.]*) import", src.read_text(),
+                                          re.MULTILINE)})  # fmt: skip
+    assert "tacgen_lib.probes.settings" in modules, modules
+    code = (f"import sys; import {', '.join(modules)}; "
+            "print(sorted(m for m in ('sklearn', 'scipy', 'torch') if m in sys.modules))")  # fmt: skip
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         cwd=ROOT)  # fmt: skip
+    assert out.stdout.strip() == "[]", f"parse-time imports load {out.stdout.strip()}: {modules}"

@@ -20,7 +20,6 @@ and its ConvergenceWarning is swallowed into that flag (the probe row says so).
 
 from __future__ import annotations
 
-import itertools
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -38,36 +37,9 @@ from tacgen_lib.probes.folds import make_folds
 from tacgen_lib.probes.inputs import check_features, check_target
 from tacgen_lib.probes.metrics import score
 from tacgen_lib.probes.refits import Refits, Refitted
+from tacgen_lib.probes.settings import MLPGrid
 
 __all__ = ["FixedMLP", "MLPGrid", "MLPProbe", "fit_mlp_probe", "mlp_model"]
-
-
-@dataclass(frozen=True)
-class MLPGrid:
-    """The 2-layer probe's CV grid and solver budget (config ``probes.robustness.mlp``)."""
-
-    widths: tuple[int, ...] = (64,)
-    weight_decays: tuple[float, ...] = (0.01, 1.0)
-    folds: int = 3
-    max_iter: int = 200
-
-    def __post_init__(self) -> None:
-        if not self.widths or min(self.widths) < 1:
-            raise ValueError(f"probes.robustness.mlp.widths: need widths >= 1, got {self.widths}")
-        if not self.weight_decays or min(self.weight_decays) < 0:
-            raise ValueError(
-                f"probes.robustness.mlp.weight_decays: need values >= 0, got {self.weight_decays}"
-            )
-        if self.folds < 2 or self.max_iter < 1:
-            raise ValueError(
-                f"probes.robustness.mlp: need folds >= 2 and max_iter >= 1, got {self.folds}, "
-                f"{self.max_iter}"
-            )
-
-    @property
-    def points(self) -> list[tuple[float, int]]:
-        """(weight decay, width) grid points in CV order (GridSearchCV's: alpha outermost)."""
-        return list(itertools.product(self.weight_decays, self.widths))
 
 
 def mlp_model(

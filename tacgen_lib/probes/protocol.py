@@ -83,6 +83,7 @@ from tacgen_lib.probes.mlp import FixedMLP, MLPGrid, fit_mlp_probe
 from tacgen_lib.probes.refits import FixedProbe
 from tacgen_lib.probes.ridge import FixedRidge, fit_ridge_probe
 from tacgen_lib.probes.scaling import FixedStandardisedRidge, fit_standardised_ridge
+from tacgen_lib.probes.settings import check_families, has_aligned_rows
 from tacgen_lib.probes.subsets import within_scale_split
 from tacgen_lib.probes.variants import check_protocol
 
@@ -528,41 +529,6 @@ def fit_probe(
 
 
 # --------------------------------------------------------------------------- plan
-
-
-#: The V features the alignment heads project: only families with this V have aligned rows.
-ALIGNED_VISION = "vit"
-
-
-def has_aligned_rows(vision: str) -> bool:
-    """Whether a family whose V is `vision` ("pixel" | "vit") gets aligned comparisons.
-
-    The heads project ViT features, so aligned V is ViT-derived whatever the family's V; in a
-    pixel-V family aligned rows would set a different V baseline than its raw rows and repeat
-    the rows of the ViT family of the same target. A pixel-V family is raw rows only.
-    """
-    return vision == ALIGNED_VISION
-
-
-def check_families(families: Mapping[str, Mapping]) -> None:
-    """Refuse families whose rows would repeat another's (config ``probes.families``).
-
-    Raw rows are set by (corpus, target, kind, V features); two families that share these
-    would repeat every raw row. Aligned rows exist only for ViT-V families
-    (`has_aligned_rows`), so the same key also keeps two families' aligned rows apart unless
-    they differ in ``heads_from`` -- and then their raw rows would repeat, which is refused.
-    """
-    seen: dict[tuple, str] = {}
-    for name in sorted(families):
-        fam = families[name]
-        key = (fam["corpus"], fam["target"], fam["kind"], fam["vision"])
-        if key in seen:
-            raise ValueError(
-                f"probes.families: {name!r} and {seen[key]!r} would produce identical raw rows "
-                f"({', '.join(map(str, key))}); drop one or change its corpus, target, kind or "
-                "vision"
-            )
-        seen[key] = name
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,8 @@
 """Probe robustness: the headline Deltas under protocol variants, training sizes and splits.
 
-This module owns the settings of the robustness runs (config ``probes.robustness``,
-`RobustnessSettings`) and the two analyses that are not a protocol variant:
+This module owns the two analyses of the robustness runs that are not a protocol variant (their
+settings, `RobustnessSettings` of config ``probes.robustness``, live in the import-light
+`probes.settings`, which the Snakefile reads):
 
 - `training_size_sweep`: the headline comparison (raw V vs V+T, ``concat``,
   heads' tactile variant) refitted on nested subsets of the training rows, n in a configured
@@ -18,123 +19,17 @@ This module owns the settings of the robustness runs (config ``probes.robustness
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from collections.abc import Callable, Sequence
+from dataclasses import replace
 
 import numpy as np
 import pandas as pd
 
-from tacgen_lib.probes.mlp import MLPGrid
 from tacgen_lib.probes.protocol import FamilyRows, ProbeSettings, compare
+from tacgen_lib.probes.settings import RobustnessSettings
 from tacgen_lib.probes.subsets import nested_subsets
-from tacgen_lib.probes.variants import PROTOCOLS, same_as_raw
 
 __all__ = ["SIZE_COLUMNS", "RobustnessSettings", "training_size_sweep"]
-
-
-@dataclass(frozen=True)
-class RobustnessSettings:
-    """Config ``probes.robustness``: which families run under which protocol variants, how
-    much of each, the training-size sweep and the within-scale diagnosis."""
-
-    protocols: tuple[str, ...] = ("raw", "standardised", "mlp2")
-    families: tuple[str, ...] = ()
-    comparisons: str = "headline"  # "headline" | "all" comparisons under a non-raw protocol
-    controls: bool = False  # controls under a non-raw protocol
-    mlp: MLPGrid = field(default_factory=MLPGrid)
-    size_families: tuple[str, ...] = ()
-    size_n_train: tuple[int | str, ...] = (50, "all")
-    size_seeds: tuple[int, ...] = (42,)
-    within_families: tuple[str, ...] = ()
-    within_test_fraction: float = 0.33
-    within_seed: int = 42
-
-    def __post_init__(self) -> None:
-        for p in self.protocols:
-            if p not in PROTOCOLS:
-                raise ValueError(
-                    f"probes.robustness.protocols: unknown {p!r}; choose from {sorted(PROTOCOLS)}"
-                )
-        if "raw" not in self.protocols:
-            raise ValueError("probes.robustness.protocols must include 'raw' (the reference)")
-        if self.comparisons not in ("headline", "all"):
-            raise ValueError(
-                f"probes.robustness.comparisons must be 'headline' or 'all', got {self.comparisons!r}"
-            )
-        if not 0.0 < self.within_test_fraction < 1.0:
-            raise ValueError(
-                "probes.robustness.within_scale.test_fraction must be in (0, 1), got "
-                f"{self.within_test_fraction}"
-            )
-        for n in self.size_n_train:
-            if n != "all" and (not isinstance(n, int) or n < 2):
-                raise ValueError(
-                    f"probes.robustness.training_size.n_train: {n!r} is not 'all' or an int >= 2"
-                )
-
-    @classmethod
-    def from_config(cls, cfg: Mapping, families: Mapping[str, Mapping] | None = None):
-        """From ``probes.robustness``; `families` (``probes.families``) checks the names."""
-        size, within, mlp = cfg["training_size"], cfg["within_scale"], cfg["mlp"]
-        out = cls(
-            protocols=tuple(cfg["protocols"]),
-            families=tuple(cfg["families"]),
-            comparisons=str(cfg["comparisons"]),
-            controls=bool(cfg["controls"]),
-            mlp=MLPGrid(
-                widths=tuple(int(w) for w in mlp["widths"]),
-                weight_decays=tuple(float(a) for a in mlp["weight_decays"]),
-                folds=int(mlp["folds"]),
-                max_iter=int(mlp["max_iter"]),
-            ),
-            size_families=tuple(size["families"]),
-            size_n_train=tuple(n if n == "all" else int(n) for n in size["n_train"]),
-            size_seeds=tuple(int(s) for s in size["seeds"]),
-            within_families=tuple(within["families"]),
-            within_test_fraction=float(within["test_fraction"]),
-            within_seed=int(within["seed"]),
-        )
-        if families is not None:
-            for key, names in (
-                ("families", out.families),
-                ("training_size.families", out.size_families),
-                ("within_scale.families", out.within_families),
-            ):
-                unknown = [n for n in names if n not in families]
-                if unknown:
-                    raise ValueError(
-                        f"probes.robustness.{key}: {unknown} not in probes.families "
-                        f"({', '.join(sorted(families))})"
-                    )
-        return out
-
-    @classmethod
-    def tiny(cls, **overrides) -> RobustnessSettings:
-        base = cls(
-            families=("fam",),
-            mlp=MLPGrid(widths=(8,), weight_decays=(1.0,), folds=2, max_iter=50),
-            size_families=("fam",),
-            size_n_train=(10, "all"),
-            size_seeds=(0, 1),
-            within_families=("fam",),
-        )
-        return replace(base, **overrides)
-
-    def jobs(self, families: Mapping[str, Mapping]) -> list[tuple[str, str]]:
-        """(family, protocol) of every probe job: raw for every family, each other protocol
-        for `families` where it differs from raw (`variants.same_as_raw`)."""
-        out = [(f, "raw") for f in sorted(families)]
-        for p in self.protocols:
-            if p == "raw":
-                continue
-            out += [(f, p) for f in self.families if not same_as_raw(p, families[f]["kind"])]
-        return out
-
-    def headline_only(self, protocol: str) -> bool:
-        return protocol != "raw" and self.comparisons == "headline"
-
-    def run_controls(self, protocol: str) -> bool:
-        return protocol == "raw" or self.controls
 
 
 # --------------------------------------------------------------------------- subsets
