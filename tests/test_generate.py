@@ -44,6 +44,7 @@ from tacgen_lib.generate.sampling import (
     guided_output,
     guided_output_projected,
     predicted_x0_eps,
+    project_guidance,
     sample,
 )
 from tacgen_lib.generate.schedules import cosine_betas, linear_betas, make_schedule
@@ -275,15 +276,20 @@ def test_projected_condition_matches_the_plain_forward(guidance):
     module = random_denoiser()
     model = module.arrays()
     x, c = normal32(9, 6, seed=1), normal32(9, 5, seed=2)
-    keep_drop = np.concatenate([np.zeros(9, dtype=bool), np.ones(9, dtype=bool)])
     m64 = Denoiser(**module.dims).double()
     m64.load_state_dict({k: v.double() for k, v in module.state_dict().items()})
+    projected = project_guidance(model, c, guidance)
+    assert projected[0].shape[0] == 9 * (1 if guidance in (0.0, 1.0) else 2)  # passes w needs
     for t in (999, 500, 1, 0):
         plain = guided_output(model, x, np.full(9, t), c, guidance)
-        got = guided_output_projected(
-            model, x, t, model.project_condition(np.concatenate([c, c]), keep_drop), guidance
-        )
+        got = guided_output_projected(model, x, t, projected, guidance)
         np.testing.assert_allclose(got, plain, rtol=1e-5, atol=1e-5)
+        # the one pass at w = 0 / 1 is exactly the unconditional / conditional projected forward
+        if guidance in (0.0, 1.0):
+            drop = np.full(9, guidance == 0.0)
+            both = model.project_condition(np.concatenate([c, c]), np.concatenate([~drop, drop]))
+            one = model.forward_projected(np.concatenate([x, x]), t, both)[9:]
+            np.testing.assert_array_equal(got, one)
         with torch.no_grad():
             xx, cc, tt = (
                 torch.from_numpy(x).double(),

@@ -6,7 +6,10 @@ denoiser's arrays (`inference.DenoiserArrays`), so a sampling job never imports 
 - `guided_output`: eps^ = eps_u + w (eps_c - eps_u) (Ho & Salimans 2022), the conditional and
   unconditional passes in one batch (w = 1: the plain conditional model; w = 0: unconditional).
   `guided_output_projected` is the same at one shared timestep with the condition's share of
-  the embeddings computed once per batch (`DenoiserArrays.project_condition`); `sample` uses it.
+  the embeddings computed once per batch (`project_guidance`); `sample` uses it. It runs only
+  the passes w needs (`guidance_passes`): both in one batch in general, the conditional pass
+  alone at w = 1 and the unconditional alone at w = 0, where the other term cancels (exactly
+  eps_c or eps_u, not the rounding of eps_u + 1 (eps_c - eps_u); half the FLOPs).
   With v-prediction the same combination is applied to v (linear in eps, so equivalent).
 - `predicted_x0_eps`: (x0, eps) from the model output (eps- or v-prediction).
 - `ddpm_step`: ancestral step with the posterior mean/variance (DDPM eq. 6-7), over all T.
@@ -31,9 +34,11 @@ __all__ = [
     "ddim_timesteps",
     "ddpm_step",
     "generate",
+    "guidance_passes",
     "guided_output",
     "guided_output_projected",
     "predicted_x0_eps",
+    "project_guidance",
     "sample",
 ]
 
@@ -50,12 +55,33 @@ def guided_output(
     return out_u + guidance * (out_c - out_u)
 
 
+def guidance_passes(guidance: float) -> tuple[bool, ...]:
+    """The ``drop`` flag of each pass eps^ = eps_u + w (eps_c - eps_u) needs at w: (False, True)
+    (conditional, unconditional) in general; (False,) at w = 1, where eps^ = eps_c, and (True,)
+    at w = 0, where eps^ = eps_u."""
+    if guidance == 1.0:
+        return (False,)
+    if guidance == 0.0:
+        return (True,)
+    return (False, True)
+
+
+def project_guidance(model: DenoiserArrays, cond: np.ndarray, guidance: float) -> list[np.ndarray]:
+    """The condition's share of every block's embedding for the passes of `guidance_passes`:
+    ``model.project_condition`` of one copy of `cond` per pass (conditional copy first)."""
+    passes = guidance_passes(guidance)
+    drop = np.repeat(np.array(passes, dtype=bool), cond.shape[0])
+    return model.project_condition(np.concatenate([cond] * len(passes)), drop)
+
+
 def guided_output_projected(
     model: DenoiserArrays, x_t: np.ndarray, t: int, projected: list[np.ndarray], guidance: float
 ) -> np.ndarray:
     """`guided_output` at one shared timestep with the condition part precomputed:
-    `projected` = ``model.project_condition(cat([cond, cond]), cat([keep, drop]))`` (conditional
-    rows first). Equal to `guided_output` up to float rounding; `sample` uses it."""
+    `projected` = ``project_guidance(model, cond, guidance)``. Equal to `guided_output` up to
+    float rounding; `sample` uses it. At w = 0 or 1 one pass runs (`guidance_passes`)."""
+    if len(guidance_passes(guidance)) == 1:
+        return model.forward_projected(x_t, t, projected)
     b = x_t.shape[0]
     out = model.forward_projected(np.concatenate([x_t, x_t]), t, projected)
     out_c, out_u = out[:b], out[b:]
@@ -165,8 +191,7 @@ def sample(
         c = cond32[start : start + batch]
         x = rng.standard_normal((c.shape[0], d_t), dtype=np.float32)
         # the condition's share of every block's embedding: once per batch, not per step
-        keep_drop = np.concatenate([np.zeros(c.shape[0], bool), np.ones(c.shape[0], bool)])
-        projected = model.project_condition(np.concatenate([c, c]), keep_drop)
+        projected = project_guidance(model, c, guidance)
         for i, t in enumerate(ts):
             t = int(t)
             o = guided_output_projected(model, x, t, projected, guidance)
