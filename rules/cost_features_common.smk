@@ -2,6 +2,7 @@
 of each knob's points); included by cost_features.smk."""
 
 from tacgen_lib.cost.knob_metrics import knob_metric_ids
+from tacgen_lib.features.archs import ARCHS
 
 register_cost_knobs("corpus", ["presses", "tactile_resolution"])
 register_cost_knobs("features", ["image_size", "backbone_arch", "pretrain_epochs"])
@@ -67,10 +68,6 @@ def knob_settings(knob):
             if knob == "image_size":
                 w["size"], label, num = int(value), str(int(value)), int(value)
             elif knob == "backbone_arch":
-                # imported here, not at the top: vit imports torch (~1 s), and every
-                # Snakemake start (each test's run, each SLURM job) would pay for it
-                from tacgen_lib.features.vit import ARCHS
-
                 w["arch"], label = str(value), str(value)
                 num = ARCHS[str(value)].embed_dim
             else:

@@ -21,6 +21,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from tacgen_lib.features.archs import ARCHS, PATCH_SIZE
+
 __all__ = [
     "UnitRule",
     "UNITS",
@@ -32,11 +34,6 @@ __all__ = [
 
 Config = Mapping[str, Any]
 Wildcards = Mapping[str, str]
-
-#: ViT shapes by arch name (tacgen_lib.features.vit.ARCHS): (embed_dim, depth). Kept here as
-#: numbers so that estimating does not import torch.
-_VIT = {"vit_tiny": (192, 6), "vit_small": (384, 12), "vit_base": (768, 12)}
-_PATCH = 14
 
 
 class MissingUnitsError(KeyError):
@@ -85,8 +82,8 @@ def _train_rows(c: Config, name: str) -> float:
 def _vit_flops(arch: str, image_size: int) -> float:
     """FLOPs of one frame through a ViT forward: 2 × depth × tokens × (12 width² + 2 tokens ×
     width) (projections and MLP, attention)."""
-    width, depth = _VIT[arch]
-    tokens = (int(image_size) // _PATCH) ** 2 + 1
+    width, depth = ARCHS[arch].embed_dim, ARCHS[arch].depth
+    tokens = (int(image_size) // PATCH_SIZE) ** 2 + 1
     return 2.0 * depth * tokens * (12 * width**2 + 2 * tokens * width)
 
 

@@ -26,13 +26,14 @@ from __future__ import annotations
 import math
 import pickle
 from collections.abc import Mapping
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
+
+from tacgen_lib.features.archs import ARCHS, PATCH_SIZE, ViTConfig
 
 __all__ = [
     "ARCHS",
@@ -48,27 +49,6 @@ __all__ = [
     "save_backbone",
     "unwrap_state_dict",
 ]
-
-PATCH_SIZE = 14
-
-
-@dataclass(frozen=True)
-class ViTConfig:
-    """Width, depth and heads of one named architecture (mlp_ratio 4, LayerScale 1.0 as DINOv2)."""
-
-    embed_dim: int
-    depth: int
-    num_heads: int
-    mlp_ratio: float = 4.0
-
-
-# vit_small / vit_base are the DINOv2 ViT-S/14 and ViT-B/14 shapes. vit_tiny is ours, sized for
-# in-workflow DINO pretraining on 2 CPU cores (DeiT-Ti width, half the depth).
-ARCHS: dict[str, ViTConfig] = {
-    "vit_tiny": ViTConfig(embed_dim=192, depth=6, num_heads=3),
-    "vit_small": ViTConfig(embed_dim=384, depth=12, num_heads=6),
-    "vit_base": ViTConfig(embed_dim=768, depth=12, num_heads=12),
-}
 
 
 class PatchEmbed(nn.Module):
