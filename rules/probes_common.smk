@@ -1,6 +1,10 @@
 """Helpers of the probes stage (family specs, input lists, report items); included by probes.smk."""
 
-from tacgen_lib.probes.settings import RobustnessSettings, check_families, has_aligned_rows
+from tacgen_lib.probes.settings import (
+    RobustnessSettings,
+    check_families,
+    has_aligned_rows,
+)
 from tacgen_lib.probes.variants import PROTOCOLS
 
 PROBES = config["probes"]
