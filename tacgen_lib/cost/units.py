@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from tacgen_lib.features.archs import ARCHS, PATCH_SIZE
+from tacgen_lib.generate.cells import guidance_passes
 
 __all__ = [
     "UnitRule",
@@ -297,9 +298,14 @@ UNITS: dict[str, UnitRule] = {
         ),
     ),
     "sample_generator": UnitRule(
-        "sample × sampling step (+ MLP FLOPs, 2 passes for guidance)",
+        "sample × sampling step (+ MLP FLOPs × the passes guidance w needs: 1 at w = 0, 1; else 2)",
         lambda c, w: ("", _n(c, w["corpus"]) * int(w["steps"])),
-        lambda c, w: 2.0 * _n(c, w["corpus"]) * int(w["steps"]) * _generator_mlp(c),
+        lambda c, w: (
+            len(guidance_passes(w["guidance"]))
+            * _n(c, w["corpus"])
+            * int(w["steps"])
+            * _generator_mlp(c)
+        ),
     ),
     "fit_generator_baselines": UnitRule(
         "sample × target (3 CV probes + one per nonlinear gamma)",

@@ -13,6 +13,7 @@ __all__ = [
     "SAMPLE_CELL",
     "SAMPLE_CONSTRAINTS",
     "cell_label",
+    "guidance_passes",
     "guidance_text",
     "sample_cells",
 ]
@@ -38,6 +39,19 @@ def guidance_text(w: float | str) -> str:
     if value < 0:
         raise ValueError(f"guidance must be >= 0, got {w!r}")
     return f"{value:g}"
+
+
+def guidance_passes(guidance: float | str) -> tuple[bool, ...]:
+    """The ``drop`` flag of each network pass eps^ = eps_u + w (eps_c - eps_u) needs at w:
+    (False, True) (conditional, unconditional) in general; (False,) at w = 1, where
+    eps^ = eps_c, and (True,) at w = 0, where eps^ = eps_u. Sampling runs these passes
+    (`sampling.project_guidance`); the run-time estimate counts them."""
+    w = float(guidance)
+    if w == 1.0:
+        return (False,)
+    if w == 0.0:
+        return (True,)
+    return (False, True)
 
 
 def cell_label(sampler: str, guidance: float | str, steps: int | str) -> str:

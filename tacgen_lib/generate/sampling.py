@@ -26,6 +26,7 @@ from typing import Any
 
 import numpy as np
 
+from tacgen_lib.generate.cells import guidance_passes
 from tacgen_lib.generate.inference import DenoiserArrays, GeneratorWeights
 from tacgen_lib.generate.schedules import Schedule
 
@@ -53,17 +54,6 @@ def guided_output(
                         np.concatenate([cond, cond]), drop)  # fmt: skip
     out_c, out_u = out[:b], out[b:]
     return out_u + guidance * (out_c - out_u)
-
-
-def guidance_passes(guidance: float) -> tuple[bool, ...]:
-    """The ``drop`` flag of each pass eps^ = eps_u + w (eps_c - eps_u) needs at w: (False, True)
-    (conditional, unconditional) in general; (False,) at w = 1, where eps^ = eps_c, and (True,)
-    at w = 0, where eps^ = eps_u."""
-    if guidance == 1.0:
-        return (False,)
-    if guidance == 0.0:
-        return (True,)
-    return (False, True)
 
 
 def project_guidance(model: DenoiserArrays, cond: np.ndarray, guidance: float) -> list[np.ndarray]:
