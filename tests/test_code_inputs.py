@@ -149,10 +149,9 @@ def test_closure_follows_an_edit_made_after_a_first_closure_in_the_same_process(
 def test_the_snakefile_parses_without_the_numerics_libraries():
     """What every Snakemake start (and every cluster job, which parses the Snakefile again)
     imports from tacgen_lib: the modules the Snakefile and rules/*.smk import at their top
-    level (a function that imports a heavy module, as the backbone-arch knob does, pays only
-    where it runs). None of them
-    may pull in scikit-learn, SciPy or torch (scikit-learn and SciPy cost ~1 s of a ~3 s dry
-    run before the probes' settings moved to `probes.settings`)."""
+    level (a module imported inside a function pays only where that function runs). None of
+    them may pull in scikit-learn, SciPy or torch (scikit-learn and SciPy cost ~1 s of a ~3 s
+    dry run before the probes' settings moved to `probes.settings`)."""
     import subprocess
     import sys
 

@@ -35,7 +35,6 @@ __all__ = [
     "ddim_timesteps",
     "ddpm_step",
     "generate",
-    "guidance_passes",
     "guided_output",
     "guided_output_projected",
     "predicted_x0_eps",
