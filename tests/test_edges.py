@@ -189,3 +189,40 @@ def test_empty_edge_round_trips(tmp_path):
         key="epoch_id",
     )
     assert len(edges.read(path)) == 0
+
+
+def test_vectors_only_edge_is_the_same_file_without_pandas(tmp_path):
+    """write_vectors / read_vectors (the sampling jobs' path) give the bytes `write` gives for
+    a key-and-vectors frame, and read back what `read` reads, in file order."""
+    ids = [f"p-{i:04d}" for i in (3, 0, 4, 1, 2)]
+    vec = _vec()
+    a, b = tmp_path / "a.parquet", tmp_path / "b.parquet"
+    digest = edges.write_vectors(a, ids, {"v": vec}, producer="unit")
+    assert digest == edges.write(b, pd.DataFrame({"sample_id": ids}), {"v": vec}, producer="unit")
+    assert a.read_bytes() == b.read_bytes()
+    side_a, side_b = (json.loads(edges.sidecar_path(p).read_text()) for p in (a, b))
+    assert {**side_a, "file": ""} == {**side_b, "file": ""}
+    got_ids, got = edges.read_vectors(a, "v")
+    assert list(got_ids) == ids and got.dtype == np.float32
+    np.testing.assert_array_equal(got, edges.read(a).vectors["v"])
+
+
+def test_vectors_only_path_refuses_what_the_frame_path_refuses(tmp_path):
+    path = tmp_path / "e.parquet"
+    with pytest.raises(EdgeError, match="sample_id 'p-1' appears more than once"):
+        edges.write_vectors(path, ["p-0", "p-1", "p-1"], {"v": _vec(3)})
+    with pytest.raises(EdgeError, match="null sample_id at row 1"):
+        edges.write_vectors(path, ["p-0", None, "p-2"], {"v": _vec(3)})
+    vec = _vec(3)
+    vec[2, 0] = np.nan
+    with pytest.raises(EdgeError, match="sample_id 'p-2' has a NaN or inf in column 'v'"):
+        edges.write_vectors(path, ["p-0", "p-1", "p-2"], {"v": vec})
+    assert not path.exists()
+    edges.write(path, _frame(), {"v": _vec()})
+    with pytest.raises(EdgeError, match=r"e\.parquet: missing column 'w' \(has: "):
+        edges.read_vectors(path, "w")
+    with pytest.raises(EdgeError, match="column 'mass' must be a fixed_size_list"):
+        edges.read_vectors(path, "mass")
+    path.write_bytes(path.read_bytes()[:-1] + b"\0")
+    with pytest.raises(EdgeError, match="does not match the manifest"):
+        edges.read_vectors(path, "v")

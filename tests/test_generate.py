@@ -224,12 +224,14 @@ def test_numpy_forward_equals_the_torch_module():
         DenoiserArrays.from_state({"inp.weight": np.zeros((2, 2))}, model.dims)
 
 
-def test_sampling_modules_do_not_import_torch():
-    """What a sample_generator job imports: the weights reader, the samplers, the edges."""
+def test_sampling_modules_do_not_import_torch_or_pandas():
+    """What a sample_generator job imports: the weights reader, the samplers, the edges (its
+    start-up, paid by every sampling cell: torch ~1.2 s, pandas ~0.25 s)."""
     code = ("import sys; import tacgen_lib.generate.inference, tacgen_lib.generate.sampling, "
-            "tacgen_lib.io.edges, tacgen_lib.io.log; print('torch' in sys.modules)")  # fmt: skip
+            "tacgen_lib.io.edges, tacgen_lib.io.log, threadpoolctl; "
+            "print('torch' in sys.modules, 'pandas' in sys.modules)")  # fmt: skip
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.strip() == "False"
+    assert out.stdout.strip() == "False False"
 
 
 @pytest.mark.parametrize("guidance", [0.0, 10.0])

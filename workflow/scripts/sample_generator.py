@@ -1,8 +1,9 @@
 """Generated tactile features for every row of a corpus, one sampling cell (rule sample_generator).
 
-Imports no torch: the weights are read and sampled in numpy (`tacgen_lib.generate.inference`)."""
+Imports no torch and no pandas: the weights are read and sampled in numpy
+(`tacgen_lib.generate.inference`), the edges read and written through pyarrow."""
 
-import pandas as pd
+import numpy as np
 from threadpoolctl import threadpool_limits
 
 from tacgen_lib.generate.inference import read_generator
@@ -12,9 +13,9 @@ from tacgen_lib.io import edges, log
 logger = log.for_rule(snakemake)
 w = snakemake.wildcards
 weights = read_generator(snakemake.input.weights)
-vision = edges.read(snakemake.input.v, columns=["vit"], require={"vit": "vector"})
-ids = sorted(vision.ids)
-cond = vision.subset(ids).vectors["vit"]
+ids, vit = edges.read_vectors(snakemake.input.v, "vit")
+order = np.argsort(ids, kind="stable")  # rows by sample_id
+ids, cond = ids[order], vit[order]
 # Sampling noise: seeded by the generator seed and the cell, so each cell is reproducible.
 seed = int(w.seed) * 1_000_003 + int(w.steps) * 101 + int(round(float(w.guidance) * 1000))
 logger.info(
@@ -26,10 +27,5 @@ with threadpool_limits(snakemake.threads):
         weights, cond, sampler=w.sampler, steps=int(w.steps), guidance=float(w.guidance),
         seed=seed, eta=weights.settings.eta, batch=weights.settings.batch,
     )  # fmt: skip
-edges.write(
-    snakemake.output.t_gen,
-    pd.DataFrame({"sample_id": ids}),
-    {"t_gen": t_gen},
-    producer=snakemake.rule,
-)
+edges.write_vectors(snakemake.output.t_gen, ids, {"t_gen": t_gen}, producer=snakemake.rule)
 logger.info("wrote %d x %d generated vectors", *t_gen.shape)
