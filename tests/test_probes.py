@@ -16,6 +16,7 @@ from sklearn.model_selection import GridSearchCV
 from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import StandardScaler
 
+from tacgen_lib.probes import logistic
 from tacgen_lib.probes.batched import block_basis, fit_logistic_batch
 from tacgen_lib.probes.folds import make_folds
 from tacgen_lib.probes.logistic import fit_logistic
@@ -278,6 +279,40 @@ def test_logistic_C_selection_equals_gridsearchcv_on_same_folds():
     gs = GridSearchCV(pipe, {"m__C": grid}, cv=cv).fit(X, y)
     assert probe.C == gs.best_params_["m__C"]
     np.testing.assert_allclose(probe.cv_scores, gs.cv_results_["mean_test_score"], atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("n", "p", "classes", "grid"),
+    [
+        (400, 40, 2, [0.1, 1.0, 10.0]),  # binary, the default C grid
+        (300, 60, 3, [0.1, 1.0, 10.0]),  # multinomial
+        (75, 60, 2, [0.01, 1.0, 100.0]),  # folds keep barely more rows (60) than features
+    ],
+)
+def test_batched_cv_gives_the_scikit_learn_loops_scores(n, p, classes, grid, monkeypatch):
+    """The CV's folds solved together (`cv_batches`) give the one-fit-at-a-time loop's held-out
+    scores, hence its C and its final fit (always scikit-learn's)."""
+    rng = np.random.default_rng(n + p)
+    X = rng.standard_normal((n, p)) * rng.uniform(0.1, 30.0, p) + rng.uniform(-50, 50, p)
+    signal = X[:, :3] @ np.array([1.0, -0.5, 0.25]) / X[:, :3].std(0).mean()
+    y = np.digitize(
+        signal + rng.standard_normal(n), np.quantile(signal, np.linspace(0, 1, classes + 1)[1:-1])
+    )
+    labels = np.array(["hard", "medium", "soft"], dtype=object)[y]  # labels as the probes see them
+    folds = make_folds(n, 5, 7, labels=labels)
+    assert logistic.cv_batches(X.shape, folds)
+    batched = fit_logistic(X, labels, grid, seed=7)
+    monkeypatch.setattr(logistic, "cv_batches", lambda shape, folds: False)
+    loop = fit_logistic(X, labels, grid, seed=7)
+    np.testing.assert_array_equal(batched.cv_scores, loop.cv_scores)
+    assert batched.C == loop.C and batched.cv_converged and loop.cv_converged
+    np.testing.assert_array_equal(batched.predict(X), loop.predict(X))
+
+
+def test_cv_with_fewer_rows_than_features_per_fold_is_not_batched():
+    folds = make_folds(120, 5, 0)  # 96 training rows per fold
+    assert not logistic.cv_batches((120, 960), folds)  # the density probe's shape
+    assert logistic.cv_batches((1200, 384), make_folds(1200, 5, 0))  # the hardness probe's
 
 
 # --------------------------------------------------------------------------- ridge grid refit

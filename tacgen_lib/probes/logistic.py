@@ -4,7 +4,9 @@ This module owns:
 
 - `fit_logistic` / `LogisticProbe`: scikit-learn ``LogisticRegression`` (lbfgs; multinomial
   for more than two classes) on standardised features, C chosen by stratified K-fold CV on
-  the training rows. Convergence is never silently assumed: lbfgs runs up to ``max_iter``
+  the training rows (the K folds of each C solved together by `batched.fit_logistic_batch`
+  where `cv_batches` allows it: the same objective and stopping rule, tested to give
+  scikit-learn's CV scores). Convergence is never silently assumed: lbfgs runs up to ``max_iter``
   (by default the cap itself, one run: lbfgs's iterates do not depend on its iteration
   budget, so a first run at 200 that is doubled until it converges returns the same
   coefficients bit for bit after ~2x the work, measured 3.0 s against 1.35 s of CPU on the
@@ -37,7 +39,14 @@ from tacgen_lib.probes.metrics import accuracy
 from tacgen_lib.probes.objective import standardise_block
 from tacgen_lib.probes.refits import Refits, Refitted
 
-__all__ = ["FixedLogistic", "LogisticFit", "LogisticProbe", "fit_logistic", "fit_logistic_once"]
+__all__ = [
+    "FixedLogistic",
+    "LogisticFit",
+    "LogisticProbe",
+    "cv_batches",
+    "fit_logistic",
+    "fit_logistic_once",
+]
 
 
 @dataclass(frozen=True)
@@ -134,7 +143,9 @@ def fit_logistic(
     convex with a finite minimiser even for linearly separable classes, so lbfgs converges.
     Ties in CV accuracy go to the first C of the grid in the order given. ``tol`` is tighter
     than scikit-learn's 1e-4 default so the fitted probabilities agree with a float64
-    reference optimum to ~1e-5.
+    reference optimum to ~1e-5. The CV's folds are solved together by the batched solver
+    where every fold keeps at least as many rows as features (`cv_batches`), else one
+    scikit-learn fit at a time; the final fit at the chosen C is always scikit-learn's.
     """
     X = check_features(X, sample_ids=sample_ids)
     y = check_target(y, X.shape[0], sample_ids=sample_ids, numeric=False)
@@ -151,20 +162,77 @@ def fit_logistic(
             "row(s); stratified CV needs at least 2 per class"
         )
     folds = make_folds(X.shape[0], k, seed, labels=y)
-    scores = np.zeros((k, C.size))
-    all_conv = True
-    worst = 0
-    for f, ho in enumerate(folds):
-        tr = np.setdiff1d(np.arange(X.shape[0]), ho, assume_unique=True)
-        for c, cval in enumerate(C):
-            fit = fit_logistic_once(X[tr], y[tr], float(cval), max_iter, max_iter_cap, tol)
-            all_conv &= fit.converged
-            worst = max(worst, fit.n_iter)
-            scores[f, c] = accuracy(y[ho], fit.model.predict(X[ho]))
+    if cv_batches(X.shape, folds):
+        scores, all_conv, worst = _cv_scores_batched(X, y, folds, C, max_iter_cap, tol)
+    else:
+        scores = np.zeros((k, C.size))
+        all_conv = True
+        worst = 0
+        for f, ho in enumerate(folds):
+            tr = np.setdiff1d(np.arange(X.shape[0]), ho, assume_unique=True)
+            for c, cval in enumerate(C):
+                fit = fit_logistic_once(X[tr], y[tr], float(cval), max_iter, max_iter_cap, tol)
+                all_conv &= fit.converged
+                worst = max(worst, fit.n_iter)
+                scores[f, c] = accuracy(y[ho], fit.model.predict(X[ho]))
     cv = scores.mean(axis=0)
     best = float(C[int(np.argmax(cv))])
     final = fit_logistic_once(X, y, best, max_iter, max_iter_cap, tol)
     return LogisticProbe(best, C, cv, final, bool(all_conv), int(worst))
+
+
+def cv_batches(shape: tuple[int, int], folds: Sequence[np.ndarray]) -> bool:
+    """Whether `fit_logistic`'s CV solves its folds together (`_cv_scores_batched`).
+
+    When every fold's training part has at least as many rows as there are features: the
+    batched solver preconditions with the shared scatter, and a fold that drops rows from a
+    design with fewer rows than columns has directions whose only curvature is the L2 term,
+    which that scatter does not see (`FixedLogistic.batches`, the same rule for the controls).
+    """
+    n, p = shape
+    return n - max(len(ho) for ho in folds) >= p
+
+
+def _cv_scores_batched(
+    X: np.ndarray, y: np.ndarray, folds: Sequence[np.ndarray], C: np.ndarray,
+    max_iter_cap: int, tol: float,
+) -> tuple[np.ndarray, bool, int]:  # fmt: skip
+    """(folds x C held-out accuracies, every fit converged, most iterations) of the CV, the
+    K folds of each C solved together by `batched.fit_logistic_batch`.
+
+    Fold f is problem f: its held-out rows get weight 0, and its block is standardised on its
+    own training rows (`standardise_block` with those weights: StandardScaler on X[train]);
+    the held-out rows are predicted under that scaler, ties as scikit-learn. The objective and
+    the stopping rule (max |gradient| <= tol) are scikit-learn's lbfgs's, so the held-out
+    labels are scikit-learn's wherever a row's decision is not within the solvers' tolerance of
+    0 (tested equal on the CV scores; the probe's final fit at the chosen C stays
+    scikit-learn's). Measured 3.9x faster than the one-fit-at-a-time loop on the paired
+    hardness probe (960 rows, 384 features, 5 folds x 3 C, one thread).
+    """
+    n = X.shape[0]
+    weights = np.ones((len(folds), n))
+    for f, ho in enumerate(folds):
+        weights[f, ho] = 0.0
+    block = standardise_block(np.asarray(X, dtype=np.float64), weights=weights)
+    classes = np.unique(y)
+    scores = np.zeros((len(folds), C.size))
+    all_conv, worst = True, 0
+    for c, cval in enumerate(C):
+        batch = fit_logistic_batch([block], y, float(cval), sample_weight=weights,
+                                   classes=classes, tol=tol, max_iter=max_iter_cap)  # fmt: skip
+        for b in np.flatnonzero(~batch.converged):
+            warnings.warn(
+                f"fit_logistic: CV fold {int(b)} did not converge within max_iter="
+                f"{max_iter_cap} (C={float(cval)}) -- check feature scaling or C",
+                ConvergenceWarning,
+                stacklevel=3,
+            )
+        pred = batch.predict([block])  # (folds, n): every row under each fold's fit
+        for f, ho in enumerate(folds):
+            scores[f, c] = accuracy(y[ho], pred[f, ho])
+        all_conv &= bool(batch.converged.all())
+        worst = max(worst, int(batch.n_iter.max()))
+    return scores, all_conv, worst
 
 
 @dataclass(frozen=True)

@@ -447,7 +447,9 @@ class FittedProbe:
     grid: np.ndarray
     cv_scores: np.ndarray  # mean held-out score per grid value
     converged: bool
-    n_iter: int | None  # lbfgs iterations (logistic); None for ridge (closed form)
+    # most L-BFGS iterations of any of its fits (the CV's folds, batched where
+    # `logistic.cv_batches`, and the final scikit-learn fit); None for ridge (closed form)
+    n_iter: int | None
     pred_grid: np.ndarray | None = None  # (L, m) test predictions at every lambda (ridge)
     fixed_probe: FixedProbe | None = None  # set by protocols other than raw
     notes: str = ""  # what the protocol chose beyond `reg` (e.g. the MLP's width)
