@@ -309,6 +309,21 @@ def test_batched_cv_gives_the_scikit_learn_loops_scores(n, p, classes, grid, mon
     np.testing.assert_array_equal(batched.predict(X), loop.predict(X))
 
 
+def test_folds_the_batched_solve_leaves_unfinished_are_refitted_by_scikit_learn(monkeypatch):
+    """Past its iteration budget the batched CV hands each unfinished fold to scikit-learn:
+    with a budget of 1 every fold is refitted, and the CV is the loop's exactly."""
+    rng = np.random.default_rng(5)
+    X = rng.standard_normal((200, 8))
+    y = np.where(X[:, 0] + 0.5 * rng.standard_normal(200) > 0, "hard", "soft").astype(object)
+    folds = make_folds(200, 5, 1, labels=y)
+    C = np.array([0.1, 1.0, 10.0])
+    scores, converged, _ = logistic._cv_scores_batched(X, y, folds, C, 12800, 12800, 1e-6, budget=1)
+    monkeypatch.setattr(logistic, "cv_batches", lambda shape, folds: False)
+    loop = fit_logistic(X, y, list(C), seed=1)
+    np.testing.assert_array_equal(scores.mean(axis=0), loop.cv_scores)
+    assert converged
+
+
 def test_cv_with_fewer_rows_than_features_per_fold_is_not_batched():
     folds = make_folds(120, 5, 0)  # 96 training rows per fold
     assert not logistic.cv_batches((120, 960), folds)  # the density probe's shape
