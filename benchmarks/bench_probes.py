@@ -51,6 +51,14 @@ def synthetic_features(n: int, d: int, rng: np.random.Generator) -> np.ndarray:
     return rng.standard_normal((n, d)) * scales + rng.standard_normal(d)
 
 
+def hardness_like(n: int, d: int = 192) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(V, T, labels) of a binary probe where both V and T carry the label (seeded)."""
+    rng = np.random.default_rng(11)
+    v, t = synthetic_features(n, d, rng), synthetic_features(n, d, rng)
+    score = v[:, :4].sum(axis=1) + 1.5 * t[:, :4].sum(axis=1) + 2.0 * rng.standard_normal(n)
+    return v, t, np.where(score > np.median(score), "hard", "soft").astype(object)
+
+
 CPU: dict[str, float] = {}  # CPU seconds of the best repeat, by step name
 
 
@@ -75,12 +83,8 @@ class LoopLogistic(FixedLogistic):
 
 def logistic_controls(args) -> list[tuple]:
     """Rows (name, ours, reference name, reference) for the logistic controls, per refit."""
-    rng = np.random.default_rng(11)
-    n_tr, n_te, d = 960, 240, 192
-    v = synthetic_features(n_tr + n_te, d, rng)
-    t = synthetic_features(n_tr + n_te, d, rng)
-    score = v[:, :4].sum(axis=1) + 1.5 * t[:, :4].sum(axis=1) + 2.0 * rng.standard_normal(len(v))
-    y = np.where(score > np.median(score), "hard", "soft").astype(object)
+    n_tr, n_te = 960, 240
+    v, t, y = hardness_like(n_tr + n_te)
     tr, te = slice(0, n_tr), slice(n_tr, None)
     probe, loop = FixedLogistic(1.0, tol=1e-4), LoopLogistic(1.0, tol=1e-4)
     rows_ = PairedRows(v[tr], t[tr], y[tr], v[te], t[te], y[te])
@@ -108,10 +112,7 @@ def logistic_cv() -> tuple:
 
     This synthetic design is well conditioned (scikit-learn converges in ~50 iterations), where
     the batched solve gains nothing; the real ViT probes take ~1,000 (README, Probes)."""
-    rng = np.random.default_rng(11)
-    v, t = synthetic_features(960, 192, rng), synthetic_features(960, 192, rng)
-    score = v[:, :4].sum(axis=1) + 1.5 * t[:, :4].sum(axis=1) + 2.0 * rng.standard_normal(960)
-    y = np.where(score > np.median(score), "hard", "soft").astype(object)
+    v, t, y = hardness_like(960)
     x, grid = np.hstack([v, t]), [0.1, 1.0, 10.0]
     ours, batched = best_of(lambda: fit_logistic(x, y, grid, seed=42), 1, "logistic cv")
     batches = logistic.cv_batches
