@@ -85,3 +85,25 @@ def test_bad_values_name_the_key(edit, message):
     edit(cfg)
     with pytest.raises(ConfigError, match=message):
         validate_config(cfg, SCHEMA, source="config/config.yaml")
+
+
+@pytest.mark.parametrize(
+    "where, value",
+    [
+        (("align", "lr"), float("inf")),  # found by the fuzz test: `exclusiveMinimum: 0` lets it by
+        (("align", "taus", 0), float("-inf")),
+        (("features", "pretrain", "lr"), float("nan")),
+    ],
+)
+def test_non_finite_numbers_are_refused_naming_the_key(where, value):
+    cfg = _config()
+    node = cfg
+    for part in where[:-1]:
+        node = node[part]
+    node[where[-1]] = value
+    with pytest.raises(ConfigError, match="is not a finite number") as err:
+        validate_config(cfg, SCHEMA, source="bad.yaml")
+    dotted = ".".join(str(p) for p in where[:-1]) + (
+        f"[{where[-1]}]" if isinstance(where[-1], int) else f".{where[-1]}"
+    )
+    assert f"bad.yaml: invalid configuration\n  {dotted}: {value!r}" in str(err.value)

@@ -6,6 +6,7 @@ run before any job starts with a message that says what to fix.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -23,6 +24,12 @@ class ConfigError(ValueError):
 def load_yaml(path: str | Path) -> Any:
     with open(path) as fh:
         return yaml.safe_load(fh)
+
+
+def _get(node: Any, path: tuple) -> Any:
+    for part in path:
+        node = node[part]
+    return node
 
 
 def _key_path(parts) -> str:
@@ -55,12 +62,28 @@ def _fill_defaults(instance: Any, schema: Mapping, root: Mapping) -> None:
                     _fill_defaults(value, extra, root)
 
 
+def _non_finite_numbers(node: Any, path: tuple = ()) -> list[tuple]:
+    """Key paths of the NaN and infinite numbers in a config tree (YAML `.nan`, `.inf`)."""
+    if isinstance(node, Mapping):
+        return [p for k, v in node.items() for p in _non_finite_numbers(v, (*path, k))]
+    if isinstance(node, list):
+        return [p for i, v in enumerate(node) for p in _non_finite_numbers(v, (*path, i))]
+    if isinstance(node, float) and not math.isfinite(node):
+        return [path]
+    return []
+
+
 def validate_config(config: dict, schema_path: str | Path, *, source: str = "config") -> dict:
     """Validate `config` in place against the schema, fill defaults, check cross-references.
 
     Raises ConfigError naming the key (e.g. `align.taus[0]: -0.1 is less than or equal to the
-    minimum of 0`).
+    minimum of 0`). NaN and infinity are refused everywhere: no setting takes them, and a
+    JSON-schema bound such as `exclusiveMinimum: 0` lets `.inf` through.
     """
+    bad = _non_finite_numbers(config)
+    if bad:
+        lines = [f"{_key_path(p)}: {_get(config, p)!r} is not a finite number" for p in bad[:5]]
+        raise ConfigError(f"{source}: invalid configuration\n  " + "\n  ".join(lines))
     schema = load_yaml(schema_path)
     validator = jsonschema.Draft202012Validator(schema)
     errors = sorted(
