@@ -3,7 +3,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 CORES ?= 2
 
-.PHONY: setup run report test lint resume estimate
+.PHONY: setup run report test test-kernels lint resume estimate
 
 setup:
 	@bash tools/setup.sh $(VENV)
@@ -38,7 +38,23 @@ lint:
 	$(BIN)/snakemake --lint --configfile config/test.yaml
 
 ## Set up, lint, run every test (unit, property, hard cases, workflow runs on config/test.yaml,
-## and the real one-node SLURM fan-out, which skips itself, saying why, where it cannot run).
+## and the real one-node SLURM fan-out, which skips itself, saying why, where it cannot run),
+## on $(CORES) pytest-xdist workers (a module stays on one worker; the longest workflow modules go first).
+## Beside them, the tests that are not workflow runs again under other CPU kernels
+## (test-kernels: its output follows the main run's). Fails if either fails.
 ## TACGEN_SLURM_TEST=0 leaves the SLURM test out (it installs slurm-wlm + munge as root).
 test: setup lint
-	TACGEN_SLURM_TEST=$${TACGEN_SLURM_TEST:-1} $(BIN)/python -m pytest -ra
+	@kernels_log=$$(mktemp); \
+	$(BIN)/python tools/kernel_variants.py >"$$kernels_log" 2>&1 & kernels=$$!; \
+	TACGEN_SLURM_TEST=$${TACGEN_SLURM_TEST:-1} $(BIN)/python -m pytest -ra --durations=15 -n $(CORES) --dist loadfile --no-loadscope-reorder; \
+	main=$$?; wait $$kernels; kernels_rc=$$?; \
+	echo "---- the same tests under other CPU kernels (tools/kernel_variants.py) ----"; \
+	cat "$$kernels_log"; rm -f "$$kernels_log"; \
+	test $$main -eq 0 && test $$kernels_rc -eq 0
+
+## The tests that are not workflow runs again under other CPU kernels (OpenBLAS core type, MKL
+## and torch instruction sets, numpy's AVX-512 dispatch, 2 threads): a float comparison that
+## holds on this CPU's kernels only fails here, not on a user's CPU. One variant:
+##   make test-kernels ARGS='--variant generic'    (every variant: ARGS=--all)
+test-kernels: setup
+	$(BIN)/python tools/kernel_variants.py $(ARGS)

@@ -9,9 +9,12 @@ sidecars) equal to the clean run's.
   in `KILL_STAGES` is running. The stages share one run: it is started cold, killed while a
   job of the first stage runs, resumed with `tools/resume.py` (what `make resume` runs), killed
   again while a job of the next stage runs, and so on; the last resume runs to the end. So
-  the whole table costs about one cold run, not one per stage.
+  the whole table costs about one cold run, not one per stage; that run is the session's
+  (conftest.resumed_run, faults_run.kill_series), and test_workflow.py's determinism test
+  compares its edges with the reference run's.
 - SIGKILL of one job's process; a full disk under results/ (a tmpfs the test mounts); corrupt
-  data inside well-hashed edges; two runs in one directory.
+  data inside well-hashed edges; two runs in one directory (the first holding a job that
+  stays running until the test releases it, so the refusal never depends on timing).
 - Hostile inputs: dataset CSV rows and symlinks leaving the dataset root, a crafted pickle
   checkpoint, fuzzed configs.
 - 5,000 tactile + RGB frames rendered in one process without RSS growth.
@@ -25,7 +28,7 @@ from __future__ import annotations
 import copy
 import json
 import os
-import re
+import shlex
 import shutil
 import signal
 import subprocess
@@ -36,106 +39,27 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from hypothesis import HealthCheck, given, settings
+from faults_run import (
+    CONFIG,
+    KILL_STAGES,
+    RESUME,
+    START_TIMEOUT,
+    assert_no_half_written_edge,
+    launch,
+    resume,
+    wait_for_job,
+)
+from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from snakemake_run import ROOT, SNAKEMAKE, copy_run, copy_tree, edge_hashes, planned_rules, smk
 
 from tacgen_lib.io import edges
 
-sys.path.insert(0, str(ROOT / "tools"))
-import resume  # noqa: E402 - tools/ is not a package
-
 pytestmark = pytest.mark.workflow
 
-#: stage -> the rule whose running job the whole-run kill interrupts, in DAG order. One row per
-#: stage; a new stage (generator, policy) is one more row.
-KILL_STAGES: dict[str, str] = {
-    "corpus": "simulate_corpus",
-    "preprocess": "background_subtract",
-    "features": "pretrain_backbone",
-    "align": "train_heads",
-    "generate": "train_generator",
-    "probes": "probe",
-    "policy": "train_policy",
-    "report": "edge_manifest",
-}
-
-RESUME = [sys.executable, str(ROOT / "tools/resume.py"), "--cores", "2"]
-CONFIG = ["--configfile", "config/test.yaml"]
-START_TIMEOUT = 600  # seconds to wait for a job of a stage to start
 # `smk` ends its command with `--configfile config/test.yaml`: an option must come between
 # that and a target, or the target is read as one more config file
 TARGETS = ("--cores", "2")
-
-
-def _scripts_of_rules() -> dict[str, str]:
-    """rule -> the stem of its script (`script: "../workflow/scripts/<stem>.py"`)."""
-    out: dict[str, str] = {}
-    text = "\n".join(p.read_text() for p in sorted((ROOT / "rules").glob("*.smk")))
-    for block in re.split(r"(?m)^(?=rule \w+:)", text):
-        name = re.match(r"rule (\w+):", block)
-        script = re.search(r'script:\s*"\.\./workflow/scripts/(\w+)\.py"', block)
-        if name and script:
-            out[name.group(1)] = script.group(1)
-    return out
-
-
-SCRIPTS = _scripts_of_rules()
-
-
-def _job_pids(work: Path, rule: str) -> list[int]:
-    """Live job processes of `rule` in `work` (Snakemake runs a script as
-    `python <work>/.snakemake/scripts/tmpXXXX.<script>.py`)."""
-    tail = f".{SCRIPTS[rule]}.py"
-    return [
-        pid for pid, cmd in resume.live_runs(work) if ".snakemake/scripts/" in cmd and tail in cmd
-    ]
-
-
-def _scheduled(work: Path, rule: str) -> bool:
-    """Snakemake's own log of the newest run says a job of `rule` was started."""
-    logs = sorted((work / ".snakemake/log").glob("*.snakemake.log"))
-    return bool(logs) and re.search(rf"(?m)^(local)?rule {rule}:", logs[-1].read_text()) is not None
-
-
-def _wait_for_job(proc: subprocess.Popen, work: Path, rule: str) -> list[int] | None:
-    """Pids of a running job of `rule`, or None if the run ended first."""
-    deadline = time.monotonic() + START_TIMEOUT
-    while time.monotonic() < deadline:
-        pids = _job_pids(work, rule)
-        if pids and _scheduled(work, rule):
-            return pids
-        if proc.poll() is not None:
-            return None
-        time.sleep(0.1)
-    os.killpg(proc.pid, signal.SIGKILL)
-    raise AssertionError(f"no job of rule {rule} started within {START_TIMEOUT} s")
-
-
-def _wait_dead(work: Path, timeout: float = 30) -> None:
-    deadline = time.monotonic() + timeout
-    while resume.live_runs(work):
-        assert time.monotonic() < deadline, resume.live_runs(work)
-        time.sleep(0.1)
-
-
-def _launch(work: Path, cmd: list[str], log: Path) -> subprocess.Popen:
-    """Start `cmd` in `work` in its own process group (so the whole run can be killed)."""
-    return subprocess.Popen(
-        cmd, cwd=work, stdout=log.open("ab"), stderr=subprocess.STDOUT, start_new_session=True
-    )
-
-
-def assert_no_half_written_edge(work: Path) -> int:
-    """Every edge present beside its sidecar verifies (the atomic writers only ever rename a
-    complete file into place). Returns how many were checked."""
-    checked = 0
-    for side in (work / "results").rglob("*" + edges.SIDECAR_SUFFIX):
-        edge = side.with_name(side.name.removesuffix(edges.SIDECAR_SUFFIX))
-        if edge.exists():
-            edges.verify(edge)
-            checked += 1
-    return checked
 
 
 def _report(what: str, **figures) -> None:
@@ -145,62 +69,45 @@ def _report(what: str, **figures) -> None:
 # --------------------------------------------------------------------- kill -9 of the whole run
 
 
-@pytest.fixture(scope="module")
-def killed_run(tmp_path_factory) -> dict:
-    """The run the kill-per-stage tests interrupt one stage after another (state shared)."""
-    work = copy_tree(tmp_path_factory.mktemp("faults") / "killed")
-    return {"work": work, "log": work / "run.log", "started": False, "kills": []}
-
-
 @pytest.mark.parametrize("stage", list(KILL_STAGES))
-def test_sigkill_of_the_whole_run_during_each_stage(killed_run, stage):
-    rule = KILL_STAGES[stage]
-    work, log = killed_run["work"], killed_run["log"]
-    # cold the first time; afterwards the one recovery command after the previous kill
-    cmd = RESUME + CONFIG if killed_run["started"] else [*SNAKEMAKE, "--cores", "2", *CONFIG]
-    t0 = time.monotonic()
-    proc = _launch(work, cmd, log)
-    killed_run["started"] = True
-    pids = _wait_for_job(proc, work, rule)
-    if pids is None:  # the run finished before reaching the stage: force the stage again
-        assert proc.returncode == 0, log.read_text()[-4000:]
-        proc = _launch(work, [*SNAKEMAKE, "--cores", "2", *CONFIG, "--forcerun", rule], log)
-        pids = _wait_for_job(proc, work, rule)
-        assert pids is not None, log.read_text()[-4000:]
-    os.killpg(proc.pid, signal.SIGKILL)  # the whole run: scheduler, resume wrapper and jobs
-    proc.wait()
-    _wait_dead(work)
-    killed_run["kills"].append((stage, rule, round(time.monotonic() - t0, 1)))
-    # what a user finds: a stale lock and the killed job's incomplete marker ...
-    assert list((work / ".snakemake/locks").iterdir()), "the killed run left no lock"
-    assert list((work / ".snakemake/incomplete").iterdir()), "no incomplete marker"
+def test_sigkill_of_the_whole_run_during_each_stage(resumed_run, stage):
+    """The session's kill series (conftest.resumed_run, faults_run.kill_series) killed the
+    whole run while a job of `stage` ran: what a user finds then."""
+    seen = resumed_run["kills"][stage]
+    rule = seen["rule"]
+    assert seen["pids"], f"no {rule} job was running"
+    if seen["finished_early_exit"] is not None:  # the stage was forced after a finished run
+        assert seen["finished_early_exit"] == 0, seen["log_tail"]
+    # a stale lock and the killed job's incomplete marker ...
+    assert seen["lock"], "the killed run left no lock"
+    assert seen["incomplete"], "no incomplete marker"
     # ... and never a half-written edge
-    n = assert_no_half_written_edge(work)
-    if len(killed_run["kills"]) == 1:  # once: a plain rerun is refused, as the issue found
-        plain = smk(work, check=False)
+    assert seen["edge_error"] is None, seen["edge_error"]
+    if "plain_rerun" in seen:  # after the first kill: a plain rerun is refused
+        plain = seen["plain_rerun"]
         assert plain.returncode != 0
         assert "LockException" in plain.stdout + plain.stderr or "locked" in plain.stderr
-    _report(f"kill -9 during {stage} ({rule})", edges_verified=n, job_pids=pids)
+    _report(
+        f"kill -9 during {stage} ({rule})",
+        edges_verified=seen["edges_verified"],
+        job_pids=seen["pids"],
+        seconds=seen["seconds"],
+    )
 
 
-def test_one_resume_after_the_kills_gives_a_clean_runs_edges(killed_run, reference_run):
-    work, log = killed_run["work"], killed_run["log"]
-    assert killed_run["kills"], "run the kill-per-stage tests first (same module)"
-    t0 = time.monotonic()
-    proc = _launch(work, RESUME + CONFIG, log)
-    assert proc.wait(timeout=900) == 0, log.read_text()[-6000:]
-    seconds = time.monotonic() - t0
-    text = log.read_text()
-    assert "resume: lock cleared" in text
+def test_one_resume_after_the_kills_gives_a_clean_runs_edges(resumed_run, reference_run):
+    work, final = resumed_run["work"], resumed_run["final"]
+    assert final["exit"] == 0, final["log"][-6000:]
+    assert "resume: lock cleared" in final["log"]
     got, want = edge_hashes(work), edge_hashes(reference_run)
     assert want and got == want, {k: (got.get(k), v) for k, v in want.items() if got.get(k) != v}
     assert not resume.stale_temporaries(work)
     assert planned_rules(work) == {}
     _report(
         "resume after kills",
-        kills=killed_run["kills"],
+        kills=[(s, k["rule"], k["seconds"]) for s, k in resumed_run["kills"].items()],
         edges_equal=f"{len(got)}/{len(want)}",
-        last_resume_seconds=round(seconds, 1),
+        last_resume_seconds=final["seconds"],
     )
 
 
@@ -215,8 +122,8 @@ def test_sigkill_of_one_job_is_reported_and_only_it_and_its_downstream_rerun(
     planned = planned_rules(work, "--forcerun", rule)
     assert planned.get(rule) == 1 and "probe" not in planned, planned
     log = tmp_path / "job.log"
-    proc = _launch(work, [*SNAKEMAKE, "--cores", "2", *CONFIG, "--forcerun", rule], log)
-    pids = _wait_for_job(proc, work, rule)
+    proc = launch(work, [*SNAKEMAKE, "--cores", "2", *CONFIG, "--forcerun", rule], log)
+    pids = wait_for_job(proc, work, rule)
     assert pids, log.read_text()[-4000:]
     for pid in pids:
         os.kill(pid, signal.SIGKILL)  # the job only; Snakemake lives on
@@ -242,45 +149,62 @@ def test_sigkill_of_one_job_is_reported_and_only_it_and_its_downstream_rerun(
 # --------------------------------------------------------------------- two runs, one directory
 
 
+#: a rule the two-runs test appends to its copy's Snakefile: its job says it has started, then
+#: stays running, its output not yet written, until the test creates the release file
+HOLD_RULE = """
+
+rule hold_for_test:
+    output:
+        "results/test_hold/released.txt",
+    shell:
+        "touch {started}; while [ ! -e {release} ]; do sleep 0.05; done; touch {{output:q}}"
+"""
+
+
 def test_second_run_in_the_same_directory_is_refused_and_the_first_completes(
     reference_run, tmp_path
 ):
-    """The first run is frozen (SIGSTOP of its process group) while its job runs, so the
-    second attempts always meet the same state: a live run holding the lock with a job's
-    output marked incomplete. Without the freeze the job may finish between two attempts,
-    and which refusal Snakemake gives would depend on timing."""
-    rule = "pretrained_vs_random"
+    """The first run holds a job that stays running, its output not yet written, until the
+    test releases it; so every attempt of a second run meets the same state, whatever the
+    timing. Snakemake checks incomplete markers only on outputs that exist (none here), then
+    locks the files its jobs read and write: a live run holding a lock on an output the second
+    run must make refuses it with LockException ("Directory cannot be locked"), with or without
+    --rerun-incomplete; `make resume` refuses it too, naming the live run's pid."""
     work = copy_run(reference_run, tmp_path / "two")
+    started, release = tmp_path / "hold.started", tmp_path / "hold.release"
+    with (work / "Snakefile").open("a") as fh:
+        fh.write(
+            HOLD_RULE.format(started=shlex.quote(str(started)), release=shlex.quote(str(release)))
+        )
+    target = "results/test_hold/released.txt"
     log = tmp_path / "first.log"
-    first = _launch(work, [*SNAKEMAKE, "--cores", "2", *CONFIG, "--forcerun", rule], log)
+    first = launch(work, [*SNAKEMAKE, "--cores", "2", *CONFIG, "--", target], log)
     try:
-        assert _wait_for_job(first, work, rule), log.read_text()[-4000:]
-        os.killpg(first.pid, signal.SIGSTOP)
-        try:
-            # plain snakemake is refused by the live run's lock, or before it, by the running
-            # job's incomplete marker if the frozen job had already renamed its output into
-            # place (Snakemake checks markers only on outputs that exist): both are refusals
-            second = smk(work, check=False)
+        deadline = time.monotonic() + START_TIMEOUT
+        while not started.exists():
+            assert first.poll() is None, log.read_text()[-4000:]
+            assert time.monotonic() < deadline, "the held job never started"
+            time.sleep(0.05)
+        assert not (work / target).exists()  # the held job's output is not written yet
+        for extra in ((), ("--rerun-incomplete",)):
+            second = smk(work, *extra, "--", target, check=False)
             out = second.stdout + second.stderr
-            assert second.returncode != 0
-            assert "LockException" in out or "IncompleteFilesException" in out, out[-3000:]
-            # what the incomplete message suggests (--rerun-incomplete) skips the marker
-            # check and always meets the lock
-            forced = smk(work, "--rerun-incomplete", check=False)
-            out = forced.stdout + forced.stderr
-            assert forced.returncode != 0
-            assert "LockException" in out, out[-3000:]
-            refused = subprocess.run(
-                RESUME + CONFIG, cwd=work, capture_output=True, text=True, timeout=60
-            )
-            assert refused.returncode == 3, refused.stderr
-            assert f"pid {first.pid}" in refused.stderr and "refused" in refused.stderr
-            assert first.poll() is None  # no attempt touched the first run
-        finally:
-            os.killpg(first.pid, signal.SIGCONT)
+            assert second.returncode != 0, out[-3000:]
+            assert "LockException" in out and "Directory cannot be locked" in out, out[-3000:]
+            assert "IncompleteFilesException" not in out
+        refused = subprocess.run(
+            [*RESUME, *CONFIG, "--", target], cwd=work, capture_output=True, text=True, timeout=60
+        )
+        assert refused.returncode == 3, refused.stderr
+        assert f"pid {first.pid}" in refused.stderr and "refused" in refused.stderr
+        assert first.poll() is None  # no attempt touched the first run
     finally:
-        rc = first.wait(timeout=600)
+        release.touch()
+    rc = first.wait(timeout=120)
     assert rc == 0, log.read_text()[-4000:]
+    assert (work / target).exists()
+    locks = work / ".snakemake/locks"
+    assert not locks.exists() or not list(locks.iterdir())  # the first run released its lock
     assert edge_hashes(work) == edge_hashes(reference_run)
 
 
@@ -562,6 +486,7 @@ def _build_every_settings_object(cfg: dict) -> None:
 
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(where=st.sampled_from(_PATHS), value=_HOSTILE)
+@example(where=("align", "lr"), value=float("inf"))  # found by this test once: kept as a case
 def test_fuzzed_config_validates_or_names_the_key(where, value):
     from tacgen_lib.io.config import ConfigError, validate_config
 

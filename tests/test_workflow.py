@@ -1,7 +1,8 @@
 """Workflow runs on config/test.yaml: the DAG as a user meets it.
 
-One tiny run in a copy of the repository serves most tests (module-scoped); a second clean copy
-checks that every edge is reproduced bit for bit.
+One tiny run in a copy of the repository serves most tests (conftest.reference_run); the
+session's second run (conftest.resumed_run, killed and resumed in every stage) checks that
+every edge is reproduced bit for bit.
 """
 
 from __future__ import annotations
@@ -13,7 +14,15 @@ from pathlib import Path
 
 import pytest
 import yaml
-from snakemake_run import ROOT, SNAKEMAKE, copy_tree, edge_hashes, plan_of, planned_rules, smk
+from snakemake_run import (
+    ROOT,
+    SNAKEMAKE,
+    copy_tree,
+    edge_hashes,
+    plan_of,
+    planned_rules,
+    smk,
+)
 
 pytestmark = pytest.mark.workflow
 
@@ -165,10 +174,13 @@ def test_edit_to_an_indirectly_imported_module_reruns_exactly_its_users(run_dir,
     }
 
 
-def test_two_clean_runs_give_identical_edges(run_dir, tmp_path):
-    work = copy_tree(tmp_path / "again")
-    smk(work)
-    first, second = edge_hashes(run_dir), edge_hashes(work)
+def test_two_runs_give_identical_edges(run_dir, resumed_run):
+    """Determinism: every edge of a second run in another directory (the session's kill series,
+    conftest.resumed_run: cold, killed in every stage, resumed to the end, so each of its edges
+    was computed there again) equals the clean run's bit for bit. The same computation twice:
+    same code, config, seeds and thread counts on one machine."""
+    assert resumed_run["final"]["exit"] == 0, resumed_run["final"]["log"][-6000:]
+    first, second = edge_hashes(run_dir), edge_hashes(resumed_run["work"])
     assert first and first == second
 
 
@@ -284,3 +296,4 @@ def test_real_corpus_path_runs_on_fixtures(tmp_path):
     assert len(edges.read(work / "results/features/hct/tactile~clip128.parquet")) == 8
     vision = edges.read(work / "results/features/ssvtp/vision.parquet", require={"vit": 384})
     assert len(vision) == 12  # ViT-S/14 features from the checkpoint
+

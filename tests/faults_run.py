@@ -1,0 +1,167 @@
+"""Killing and resuming workflow runs from tests: shared by the fault tests and the
+session's kill series (conftest.resumed_run), which also serves as the independent second
+computation of every edge that the determinism test compares with the reference run.
+
+A plain module (pytest puts tests/ on sys.path), like snakemake_run.py.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+from snakemake_run import ROOT, SNAKEMAKE, smk
+
+from tacgen_lib.io import edges
+
+sys.path.insert(0, str(ROOT / "tools"))
+import resume  # noqa: E402 - tools/ is not a package
+
+#: stage -> the rule whose running job the whole-run kill interrupts, in DAG order. One row per
+#: stage; a new stage is one more row.
+KILL_STAGES: dict[str, str] = {
+    "corpus": "simulate_corpus",
+    "preprocess": "background_subtract",
+    "features": "pretrain_backbone",
+    "align": "train_heads",
+    "generate": "train_generator",
+    "probes": "probe",
+    "policy": "train_policy",
+    "report": "edge_manifest",
+}
+
+RESUME = [sys.executable, str(ROOT / "tools/resume.py"), "--cores", "2"]
+CONFIG = ["--configfile", "config/test.yaml"]
+START_TIMEOUT = 600  # seconds to wait for a job of a stage to start
+
+
+def _scripts_of_rules() -> dict[str, str]:
+    """rule -> the stem of its script (`script: "../workflow/scripts/<stem>.py"`)."""
+    out: dict[str, str] = {}
+    text = "\n".join(p.read_text() for p in sorted((ROOT / "rules").glob("*.smk")))
+    for block in re.split(r"(?m)^(?=rule \w+:)", text):
+        name = re.match(r"rule (\w+):", block)
+        script = re.search(r'script:\s*"\.\./workflow/scripts/(\w+)\.py"', block)
+        if name and script:
+            out[name.group(1)] = script.group(1)
+    return out
+
+
+SCRIPTS = _scripts_of_rules()
+
+
+def job_pids(work: Path, rule: str) -> list[int]:
+    """Live job processes of `rule` in `work` (Snakemake runs a script as
+    `python <work>/.snakemake/scripts/tmpXXXX.<script>.py`)."""
+    tail = f".{SCRIPTS[rule]}.py"
+    return [
+        pid for pid, cmd in resume.live_runs(work) if ".snakemake/scripts/" in cmd and tail in cmd
+    ]
+
+
+def _scheduled(work: Path, rule: str) -> bool:
+    """Snakemake's own log of the newest run says a job of `rule` was started."""
+    logs = sorted((work / ".snakemake/log").glob("*.snakemake.log"))
+    return bool(logs) and re.search(rf"(?m)^(local)?rule {rule}:", logs[-1].read_text()) is not None
+
+
+def wait_for_job(proc: subprocess.Popen, work: Path, rule: str) -> list[int] | None:
+    """Pids of a running job of `rule`, or None if the run ended first."""
+    deadline = time.monotonic() + START_TIMEOUT
+    while time.monotonic() < deadline:
+        pids = job_pids(work, rule)
+        if pids and _scheduled(work, rule):
+            return pids
+        if proc.poll() is not None:
+            return None
+        time.sleep(0.1)
+    os.killpg(proc.pid, signal.SIGKILL)
+    raise AssertionError(f"no job of rule {rule} started within {START_TIMEOUT} s")
+
+
+def wait_dead(work: Path, timeout: float = 30) -> None:
+    deadline = time.monotonic() + timeout
+    while resume.live_runs(work):
+        assert time.monotonic() < deadline, resume.live_runs(work)
+        time.sleep(0.1)
+
+
+def launch(work: Path, cmd: list[str], log: Path) -> subprocess.Popen:
+    """Start `cmd` in `work` in its own process group (so the whole run can be killed)."""
+    return subprocess.Popen(
+        cmd, cwd=work, stdout=log.open("ab"), stderr=subprocess.STDOUT, start_new_session=True
+    )
+
+
+def assert_no_half_written_edge(work: Path) -> int:
+    """Every edge present beside its sidecar verifies (the atomic writers only ever rename a
+    complete file into place). Returns how many were checked."""
+    checked = 0
+    for side in (work / "results").rglob("*" + edges.SIDECAR_SUFFIX):
+        edge = side.with_name(side.name.removesuffix(edges.SIDECAR_SUFFIX))
+        if edge.exists():
+            edges.verify(edge)
+            checked += 1
+    return checked
+
+
+def kill_series(work: Path) -> dict:
+    """A cold run of config/test.yaml in `work`, SIGKILLed (its whole process group) while a
+    job of each stage in `KILL_STAGES` runs, each time restarted by the one recovery command
+    (`tools/resume.py`, what `make resume` runs); a last resume runs it to the end.
+
+    Returns what a user finds after each kill (`kills[stage]`: the job's pids, whether a
+    stale lock and an incomplete marker are left, how many edges verify or the error of the
+    one that did not, and, after the first kill, a plain rerun's output and exit code) and
+    after the last resume (`final`): observations, not assertions, so that each stage's test
+    reports its own failure."""
+    log = work / "run.log"
+    kills: dict[str, dict] = {}
+    started = False
+    for stage, rule in KILL_STAGES.items():
+        # cold the first time; afterwards the one recovery command after the previous kill
+        cmd = RESUME + CONFIG if started else [*SNAKEMAKE, "--cores", "2", *CONFIG]
+        t0 = time.monotonic()
+        proc = launch(work, cmd, log)
+        started = True
+        pids = wait_for_job(proc, work, rule)
+        forced_exit = None
+        if pids is None:  # the run finished before reaching the stage: force the stage again
+            forced_exit = proc.returncode
+            proc = launch(work, [*SNAKEMAKE, "--cores", "2", *CONFIG, "--forcerun", rule], log)
+            pids = wait_for_job(proc, work, rule)
+            if pids is None:
+                raise AssertionError(f"no {rule} job to kill:\n{log.read_text()[-4000:]}")
+        os.killpg(proc.pid, signal.SIGKILL)  # the whole run: scheduler, resume wrapper and jobs
+        proc.wait()
+        wait_dead(work)
+        seen = {
+            "rule": rule,
+            "pids": pids,
+            "finished_early_exit": forced_exit,
+            "seconds": round(time.monotonic() - t0, 1),
+            "lock": bool(list((work / ".snakemake/locks").iterdir())),
+            "incomplete": bool(list((work / ".snakemake/incomplete").iterdir())),
+            "log_tail": log.read_text()[-4000:],
+        }
+        try:
+            seen["edges_verified"], seen["edge_error"] = assert_no_half_written_edge(work), None
+        except Exception as err:  # noqa: BLE001 - reported by the stage's test
+            seen["edges_verified"], seen["edge_error"] = 0, repr(err)
+        if not kills:  # once: a plain rerun is refused
+            seen["plain_rerun"] = smk(work, check=False)
+        kills[stage] = seen
+    t0 = time.monotonic()
+    proc = launch(work, RESUME + CONFIG, log)
+    exit_code = proc.wait(timeout=900)
+    final = {
+        "exit": exit_code,
+        "seconds": round(time.monotonic() - t0, 1),
+        "log": log.read_text(),
+    }
+    return {"work": work, "kills": kills, "final": final}
