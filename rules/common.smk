@@ -7,9 +7,14 @@ from pathlib import Path
 from tacgen_lib.io.config import load_yaml, validate_config
 from tacgen_lib.io.imports import code_inputs
 
+#: this workflow's own tree (the repository): where its schema, scripts and library live, also
+#: when another workflow uses it as a module (`workflow.basedir` is then that workflow's
+#: directory, not this one)
+WORKFLOW_ROOT = Path(str(workflow.current_basedir)).parent
+
 validate_config(
     config,
-    Path(workflow.basedir) / "config" / "config.schema.yaml",
+    WORKFLOW_ROOT / "config" / "config.schema.yaml",
     source=" + ".join(str(f) for f in workflow.configfiles) or "config",
 )
 SCENES = (
@@ -32,7 +37,7 @@ def imports_of(script):
     Derived from the script's source (tacgen_lib.io.imports), so editing a module reruns exactly
     the jobs whose scripts reach it, however indirectly.
     """
-    base = Path(workflow.basedir)
+    base = WORKFLOW_ROOT
     return code_inputs(
         base / "workflow" / "scripts" / f"{script}.py", base / "tacgen_lib"
     )

@@ -17,7 +17,7 @@ COST_POINTS = "results/cost/points/{knob}.parquet"
 COST_KNOBS = {}  # knob -> stage, registered by rules/cost*.smk
 COST_FREE_KNOBS = set()
 # The embedded default marks each knob's default setting (a --configfile may widen a grid).
-DEFAULT_CONFIG = _load_yaml(Path(workflow.basedir) / "config" / "config.yaml")
+DEFAULT_CONFIG = _load_yaml(WORKFLOW_ROOT / "config" / "config.yaml")
 
 
 def register_cost_knobs(stage, names, free=False):

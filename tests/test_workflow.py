@@ -19,6 +19,7 @@ from snakemake_run import (
     SNAKEMAKE,
     copy_tree,
     edge_hashes,
+    merged_config,
     plan_of,
     planned_rules,
     smk,
@@ -297,3 +298,36 @@ def test_real_corpus_path_runs_on_fixtures(tmp_path):
     vision = edges.read(work / "results/features/ssvtp/vision.parquet", require={"vit": 384})
     assert len(vision) == 12  # ViT-S/14 features from the checkpoint
 
+
+def test_runs_as_a_module_from_another_directory(tmp_path):
+    """Deployed as catalogue workflows are (what `snakedeploy deploy-workflow` writes): a
+    directory holding a `Snakefile` whose `module` block points at this repository, and the
+    user's `config/` (a full config and the scenes it names). The files the workflow reads
+    from its own tree (schema, scripts, library) resolve against its source: the whole DAG is
+    planned there, and the corpus stage runs through to the splits."""
+    repo = copy_tree(tmp_path / "repo")
+    user = tmp_path / "user"
+    (user / "config").mkdir(parents=True)
+    cfg = merged_config()
+    cfg["run_name"] = "deployed"
+    (user / "config" / "config.yaml").write_text(yaml.safe_dump(cfg, sort_keys=False))
+    shutil.copy2(repo / "config" / "scenes.yaml", user / "config" / "scenes.yaml")
+    (user / "Snakefile").write_text(
+        'configfile: "config/config.yaml"\n\n'
+        "module tacgen:\n"
+        f"    snakefile:\n        {str(repo / 'Snakefile')!r}\n"
+        "    config:\n        config\n\n"
+        "use rule * from tacgen\n"
+    )
+    cmd = [*SNAKEMAKE, "--cores", "2"]
+    dry = subprocess.run([*cmd, "--dry-run"], cwd=user, capture_output=True, text=True, timeout=300)
+    assert dry.returncode == 0, dry.stderr[-4000:]
+    planned = plan_of(dry)
+    assert planned == plan_of(smk(copy_tree(tmp_path / "plain"), "--dry-run")), planned
+    run = subprocess.run([*cmd, "results/corpus/splits.parquet"], cwd=user, capture_output=True,
+                         text=True, timeout=600)  # fmt: skip
+    assert run.returncode == 0, run.stderr[-4000:]
+    from tacgen_lib.io import edges
+
+    edges.verify(user / "results/corpus/splits.parquet")
+    assert not (repo / "results").exists()  # everything lands in the user's directory
