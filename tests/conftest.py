@@ -56,7 +56,7 @@ LONG_FIRST = ("test_slurm.py", "test_faults.py", "test_cost_features_workflow.py
               "test_cost_workflow.py", "test_probes_workflow.py")  # fmt: skip
 
 
-def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """Mark workflow tests, and order the modules for pytest-xdist. `make test` runs
     `-n 2 --dist loadfile --no-loadscope-reorder`: each module stays on one worker (its
     module-scoped runs are built once), the modules are handed out in this order (the long

@@ -83,16 +83,22 @@ VARIANTS: dict[str, tuple[dict[str, str], int, str]] = {
 DEFAULT_VARIANTS = ("avx2-2threads",)
 
 
+def numpy_dispatch() -> list[str]:
+    """The SIMD targets this process's numpy dispatches to (those its build has and the CPU,
+    less NPY_DISABLE_CPU_FEATURES, allows)."""
+    try:
+        from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+    except ImportError:  # numpy < 2
+        from numpy.core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+    return sorted(t for t in __cpu_dispatch__ if __cpu_features__.get(t))
+
+
 def active_kernels() -> dict[str, object]:
     """The kernels this process's numpy, OpenBLAS, torch and MKL are using (imports them)."""
     import numpy as np
     import threadpoolctl
     import torch
 
-    try:
-        from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
-    except ImportError:  # numpy < 2
-        from numpy.core._multiarray_umath import __cpu_dispatch__, __cpu_features__
     blas = [
         f"{p.get('internal_api')} {p.get('architecture', '?')} x{p.get('num_threads')}"
         for p in threadpoolctl.threadpool_info()
@@ -100,7 +106,7 @@ def active_kernels() -> dict[str, object]:
     ]
     return {
         "numpy": np.__version__,
-        "numpy_dispatch": sorted(t for t in __cpu_dispatch__ if __cpu_features__.get(t)),
+        "numpy_dispatch": numpy_dispatch(),
         "openblas": blas,
         "torch": torch.__version__,
         "torch_capability": torch.backends.cpu.get_cpu_capability(),
@@ -110,19 +116,18 @@ def active_kernels() -> dict[str, object]:
 
 
 def _numpy_avx512_targets() -> str:
-    """The AVX-512 targets this numpy dispatches to on this CPU (names numpy accepts)."""
+    """The AVX-512 targets numpy dispatches to on this CPU, asked of a process without
+    NPY_DISABLE_CPU_FEATURES (names numpy accepts in that variable)."""
     code = (
-        "import json\n"
-        "try:\n"
-        "    from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__\n"
-        "except ImportError:\n"
-        "    from numpy.core._multiarray_umath import __cpu_dispatch__, __cpu_features__\n"
-        f"print(json.dumps([t for t in __cpu_dispatch__ if t in {NUMPY_AVX512!r} "
-        "and __cpu_features__.get(t)]))"
+        f"import json, sys; sys.path.insert(0, {str(ROOT / 'tools')!r})\n"
+        "from kernel_variants import numpy_dispatch\n"
+        "print(json.dumps(numpy_dispatch()))"
     )
     env = {k: v for k, v in os.environ.items() if k != "NPY_DISABLE_CPU_FEATURES"}
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
-    return " ".join(json.loads(out.stdout)) if out.returncode == 0 else ""
+    if out.returncode != 0:
+        return ""
+    return " ".join(t for t in json.loads(out.stdout) if t in NUMPY_AVX512)
 
 
 def _environment(name: str) -> dict[str, str]:
