@@ -299,7 +299,7 @@ def test_real_corpus_path_runs_on_fixtures(tmp_path):
     assert len(vision) == 12  # ViT-S/14 features from the checkpoint
 
 
-def test_runs_as_a_module_from_another_directory(tmp_path):
+def test_runs_as_a_module_from_another_directory(tmp_path, cold_dry_run):
     """Deployed as catalogue workflows are (what `snakedeploy deploy-workflow` writes): a
     directory holding a `Snakefile` whose `module` block points at this repository, and the
     user's `config/` (a full config and the scenes it names). The files the workflow reads
@@ -323,7 +323,7 @@ def test_runs_as_a_module_from_another_directory(tmp_path):
     dry = subprocess.run([*cmd, "--dry-run"], cwd=user, capture_output=True, text=True, timeout=300)
     assert dry.returncode == 0, dry.stderr[-4000:]
     planned = plan_of(dry)
-    assert planned == plan_of(smk(copy_tree(tmp_path / "plain"), "--dry-run")), planned
+    assert planned == plan_of(cold_dry_run), planned  # a plain dry run of test.yaml
     run = subprocess.run([*cmd, "results/corpus/splits.parquet"], cwd=user, capture_output=True,
                          text=True, timeout=600)  # fmt: skip
     assert run.returncode == 0, run.stderr[-4000:]

@@ -26,12 +26,6 @@ def load_yaml(path: str | Path) -> Any:
         return yaml.safe_load(fh)
 
 
-def _get(node: Any, path: tuple) -> Any:
-    for part in path:
-        node = node[part]
-    return node
-
-
 def _key_path(parts) -> str:
     out = ""
     for p in parts:
@@ -62,14 +56,14 @@ def _fill_defaults(instance: Any, schema: Mapping, root: Mapping) -> None:
                     _fill_defaults(value, extra, root)
 
 
-def _non_finite_numbers(node: Any, path: tuple = ()) -> list[tuple]:
-    """Key paths of the NaN and infinite numbers in a config tree (YAML `.nan`, `.inf`)."""
+def _non_finite_numbers(node: Any, path: tuple = ()) -> list[tuple[tuple, float]]:
+    """(key path, value) of the NaN and infinite numbers in a config tree (`.nan`, `.inf`)."""
     if isinstance(node, Mapping):
         return [p for k, v in node.items() for p in _non_finite_numbers(v, (*path, k))]
     if isinstance(node, list):
         return [p for i, v in enumerate(node) for p in _non_finite_numbers(v, (*path, i))]
     if isinstance(node, float) and not math.isfinite(node):
-        return [path]
+        return [(path, node)]
     return []
 
 
@@ -82,7 +76,7 @@ def validate_config(config: dict, schema_path: str | Path, *, source: str = "con
     """
     bad = _non_finite_numbers(config)
     if bad:
-        lines = [f"{_key_path(p)}: {_get(config, p)!r} is not a finite number" for p in bad[:5]]
+        lines = [f"{_key_path(p)}: {v!r} is not a finite number" for p, v in bad[:5]]
         raise ConfigError(f"{source}: invalid configuration\n  " + "\n  ".join(lines))
     schema = load_yaml(schema_path)
     validator = jsonschema.Draft202012Validator(schema)
