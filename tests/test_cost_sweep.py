@@ -151,7 +151,9 @@ def test_sentence_from_numbers_resamples():
     assert "1,000 resamples is within the default's uncertainty at 0.3× its time" in text
     no_default = knob_sentence(p.assign(is_default=False), unit="resamples")
     assert no_default.startswith("probe_bootstrap: from 200 resamples to 5,000 resamples, ")
-    assert "improves by 0.016 (0.02 → 0.004, outside the interval of 200 resamples)" in no_default
+    assert (
+        "improves by 0.016 (0.020 → 0.004, outside the interval of 5,000 resamples)" in no_default
+    )
     assert "22.5× as long" not in no_default and "4.5× as long (1 s → 4.5 s)" in no_default
     assert "Pareto" not in no_default
 
@@ -168,7 +170,7 @@ def test_sentence_names_a_cheaper_setting_inside_the_default_interval():
     )
     text = knob_sentence(p, unit="steps")
     assert "from the default 900 steps to 2700 steps, top-1 improves by 0.02" in text
-    assert "inside the interval of 900 steps" in text
+    assert "inside the interval of 2700 steps" in text  # the dearer setting's interval
     assert "2.0× as long (30 s → 60 s)" in text
     assert "300 steps is within the default's uncertainty at 0.3× its time" in text
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 import pytest
@@ -18,6 +19,7 @@ from sklearn.metrics import r2_score
 
 from tacgen_lib.probes import protocol as ps
 from tacgen_lib.report import probes as probe_report
+from tacgen_lib.report.write import figure_problems
 
 VARIANTS = ["clip128", "histmatch"]
 FUSIONS = ["concat", "mean"]
@@ -416,7 +418,10 @@ def test_report_tables_and_figures_from_a_summary(ridge_signal, logistic_signal)
     assert first["input"] == "aligned" or first["input"] == "raw"
     assert paired["null: Δ [95% CI]"].str.len().gt(0).all()
     controlled = probe_report.controlled_table(summary)
-    assert set(controlled["family"]) == {"hard"} and len(controlled) == 6
+    # the raw same-dimension fusions planned as skipped are left out, and said once below
+    assert set(controlled["family"]) == {"hard"} and len(controlled) == 5
+    (note,) = probe_report.skipped_note(summary, controlled=True)
+    assert note.startswith("1 comparison not run and not listed")
     seeds = probe_report.align_seed_table(summary)
     row = seeds.loc[(seeds["family"] == "fam") & (seeds["fusion"] == "concat")].iloc[0]
     assert row["align seeds"] == "42, 43" and row["criterion met"] == "2/2"
@@ -430,15 +435,22 @@ def test_report_tables_and_figures_from_a_summary(ridge_signal, logistic_signal)
     assert {"lambda=0.1", "lambda=100", "C=0.1", "C=1"} <= set(sweep.columns)
     assert sweep.filter(like="lambda=").apply(lambda c: c.str.endswith("*")).to_numpy().any()
     assert len(probe_report.fusions_frame()) == 5  # concat, mean, max, two weighted sums
-    fig = probe_report.forest_plot(summary)
     shown = summary.loc[(summary["control"] == "none") & (summary["status"] == "ok")
                         & (summary["t_variant"] == summary["heads_variant"])]  # fmt: skip
-    panels = {ax.get_title().split(" (")[0]: ax for ax in fig.axes if ax.get_title()}
-    assert set(panels) == set(shown["family"])  # one panel per family
-    for fam, ax in panels.items():
+    families = probe_report.forest_families(summary)
+    assert set(families) == set(shown["family"])  # one figure per family
+    for fam in families:
+        fig = probe_report.forest_plot(summary, fam)
+        assert not figure_problems(fig)  # fits the viewer, text >= 8 pt
+        (ax,) = fig.axes
+        assert ax.get_title().startswith(f"{fam} (")
         labels = [t.get_text() for t in ax.get_yticklabels()]
         assert len(labels) == (shown["family"] == fam).sum()
-    assert "raw / concat  a~- s~42" in [t.get_text() for t in panels["fam_null"].get_yticklabels()]
+        if fam == "fam_null":
+            assert "raw / concat  a~- s~42" in labels
+        plt.close(fig)
     conf = logistic_signal.confusion.assign(family="hard")
-    fig = probe_report.confusion_figure(conf)
-    assert len(fig.axes) == 2 * 3  # raw + two alignment seeds, V and V+T each
+    figs = probe_report.confusion_figures(conf)
+    assert list(figs) == ["hard"]
+    assert sum(ax.has_data() for ax in figs["hard"].axes) == 2 * 3  # raw + two seeds, V and V+T
+    assert not figure_problems(figs["hard"])

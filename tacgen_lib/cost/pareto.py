@@ -21,6 +21,8 @@ import numpy as np
 import pandas as pd
 
 from tacgen_lib.cost.points import DIRECTIONS
+from tacgen_lib.report import format as fmt
+from tacgen_lib.report.claims import gain_within_uncertainty
 
 __all__ = ["MARGINAL_COLUMNS", "improvement", "knob_sentence", "marginal_table", "pareto_front"]
 
@@ -67,7 +69,8 @@ def pareto_front(seconds: Sequence[float], values: Sequence[float], direction: s
 
 
 def _num(x: float) -> str:
-    """A figure as the page prints it: 3 significant digits, thousands separated."""
+    """Seconds as the page prints them: 3 significant digits, thousands separated (metric
+    values go through `tacgen_lib.report.format`, like every other number of the report)."""
     if not math.isfinite(x):
         return "n/a"
     if x == 0:
@@ -86,8 +89,9 @@ def knob_sentence(points: pd.DataFrame, unit: str = "") -> str:
 
     "What does more X buy, and for how long": compares the default setting with the next
     larger setting of the knob (the next smaller if the default is the largest; the smallest
-    with the largest if no setting is the default): the metric's change, whether it lies
-    inside the first setting's interval (not measurable) and the ratio of wall times. Then
+    with the largest if no setting is the default): the metric's change, whether the cheaper
+    setting's value lies inside the dearer one's interval (`claims.gain_within_uncertainty`:
+    not measurable; the marginal table uses the same test) and the ratio of wall times. Then
     names the cheapest setting whose value lies inside the default's interval (what could be
     saved without a measurable loss), and whether the default is on the Pareto front.
     Settings are ordered by `setting` (then by seconds); `unit` follows their labels.
@@ -105,9 +109,7 @@ def knob_sentence(points: pd.DataFrame, unit: str = "") -> str:
 
     if len(p) == 1:
         r = p.iloc[0]
-        return (
-            f"{knob}: one setting ({lab(r)}), {metric} {_num(r['value'])} in {_num(r['wall_s'])} s."
-        )
+        return f"{knob}: one setting ({lab(r)}), {metric} {fmt.number(r['value'])} in {_num(r['wall_s'])} s."
     defaults = np.flatnonzero(p["is_default"].astype(bool).to_numpy())
     if defaults.size:
         i = int(defaults[0])
@@ -118,11 +120,12 @@ def knob_sentence(points: pd.DataFrame, unit: str = "") -> str:
     gain = improvement(d["value"], other["value"], direction)
     has_ci = math.isfinite(d["ci_low"]) and math.isfinite(d["ci_high"])
     verb = "improves" if gain > 0 else "worsens" if gain < 0 else "does not change"
-    change = f"{metric} {verb}" + (f" by {_num(abs(gain))}" if gain != 0 else "")
-    change += f" ({_num(d['value'])} → {_num(other['value'])}"
-    if has_ci:
-        inside = d["ci_low"] <= other["value"] <= d["ci_high"]
-        change += f", {'inside' if inside else 'outside'} the interval of {lab(d)})"
+    change = f"{metric} {verb}" + (f" by {fmt.number(abs(gain))}" if gain != 0 else "")
+    change += f" ({fmt.number(d['value'])} → {fmt.number(other['value'])}"
+    cheap, dear = (d, other) if d["wall_s"] <= other["wall_s"] else (other, d)
+    if math.isfinite(dear["ci_low"]) and math.isfinite(dear["ci_high"]):
+        inside = gain_within_uncertainty(cheap["value"], dear["ci_low"], dear["ci_high"])
+        change += f", {'inside' if inside else 'outside'} the interval of {lab(dear)})"
     else:
         change += ")"
     start = "from the default " if defaults.size else "from "
@@ -132,8 +135,9 @@ def knob_sentence(points: pd.DataFrame, unit: str = "") -> str:
         f"{_num(other['wall_s'])} s)."
     )
     if defaults.size and has_ci:
-        cheap = p[(p["value"] >= d["ci_low"]) & (p["value"] <= d["ci_high"])]
-        cheap = cheap[cheap["wall_s"] < d["wall_s"]].sort_values("wall_s", kind="stable")
+        inside = [gain_within_uncertainty(v, d["ci_low"], d["ci_high"]) for v in p["value"]]
+        cheap = p[np.asarray(inside, dtype=bool) & (p["wall_s"] < d["wall_s"]).to_numpy()]
+        cheap = cheap.sort_values("wall_s", kind="stable")
         if len(cheap):
             c = cheap.iloc[0]
             text += (
@@ -149,7 +153,8 @@ def knob_sentence(points: pd.DataFrame, unit: str = "") -> str:
 def marginal_table(points: pd.DataFrame) -> pd.DataFrame:
     """Between consecutive Pareto points of every knob and metric (in order of seconds): the
     extra wall seconds, the metric gained (in its improving direction), the gain per extra
-    minute, and whether the gain lies inside the cheaper point's interval (not measurable)."""
+    minute, and whether the cheaper value lies inside the dearer point's interval (the gain is
+    not measurable: `claims.gain_within_uncertainty`, the test the knob sentences use)."""
     out = []
     for (knob, metric), g in points.groupby(["knob", "metric"], sort=False):
         direction = str(g["direction"].iloc[0]) if "direction" in g.columns else "higher"
@@ -159,11 +164,9 @@ def marginal_table(points: pd.DataFrame) -> pd.DataFrame:
         for a, b in zip(rows, rows[1:], strict=False):
             extra = float(b.wall_s - a.wall_s)
             gain = improvement(float(a.value), float(b.value), direction)
-            within = bool(
-                math.isfinite(a.ci_low)
-                and math.isfinite(a.ci_high)
-                and a.ci_low <= b.value <= a.ci_high
-            )
+            # the same test as the knob sentences': the cheaper value inside the dearer
+            # point's interval (the gain is not measurable at its precision)
+            within = gain_within_uncertainty(float(a.value), float(b.ci_low), float(b.ci_high))
             out.append(
                 (
                     knob,

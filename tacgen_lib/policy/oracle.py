@@ -7,6 +7,12 @@
   given size, the force maximising the probability of landing inside the window, by Monte Carlo
   over the invisible attributes drawn from the task's own prior (same rejection rule). Its
   success is then measured by physics rollouts like every other condition's.
+- `vision_ceiling_success`: the ceiling itself, a number no V-only policy can beat in
+  expectation: for each size, the largest probability over forces that the window holds the
+  force, averaged over the task's prior of sizes (the sizes of freshly drawn episodes, so the
+  rejection rule shapes that prior as it shapes the held-out episodes). It is computed from the
+  generative process, not re-scored on the held-out episodes, so it does not carry their
+  sampling noise; a V-only policy's held-out success can sit above it by that noise only.
 """
 
 from __future__ import annotations
@@ -14,9 +20,14 @@ from __future__ import annotations
 import numpy as np
 
 from tacgen_lib.policy.settings import PolicySettings
-from tacgen_lib.policy.task import GRAVITY, Episode, window
+from tacgen_lib.policy.task import GRAVITY, Episode, sample_episodes, window
 
-__all__ = ["oracle_force", "invisible_prior", "vision_ceiling_force"]
+__all__ = [
+    "oracle_force",
+    "invisible_prior",
+    "vision_ceiling_force",
+    "vision_ceiling_success",
+]
 
 
 def oracle_force(ep: Episode, settings: PolicySettings) -> float:
@@ -47,9 +58,25 @@ def invisible_prior(
     return np.concatenate(los)[:n], np.concatenate(his)[:n]
 
 
-def vision_ceiling_force(settings: PolicySettings, size: float, seed: int) -> float:
-    """The force maximising P(lo <= F <= hi | size) over a log grid spanning every window."""
+def _best_force(settings: PolicySettings, size: float, seed: int) -> tuple[float, float]:
+    """(force, P(lo <= force <= hi | size)) maximising that probability over a log grid
+    spanning every window of the prior at `size`."""
     lo, hi = invisible_prior(settings, size, settings.ceiling_draws, seed)
     grid = np.exp(np.linspace(np.log(lo.min()), np.log(hi.max()), settings.force_grid * 4))
     p = ((lo[None, :] <= grid[:, None]) & (grid[:, None] <= hi[None, :])).mean(axis=1)
-    return float(grid[int(np.argmax(p))])
+    best = int(np.argmax(p))
+    return float(grid[best]), float(p[best])
+
+
+def vision_ceiling_force(settings: PolicySettings, size: float, seed: int) -> float:
+    """The force maximising P(lo <= F <= hi | size) over a log grid spanning every window."""
+    return _best_force(settings, size, seed)[0]
+
+
+def vision_ceiling_success(settings: PolicySettings, seed: int, n_sizes: int = 256) -> float:
+    """Expected success of the best force given the size, over the prior of sizes: the mean
+    over `n_sizes` freshly drawn episodes (a stream apart from the held-out episodes') of
+    max_F P(lo <= F <= hi | size). The maximum is taken on the same Monte Carlo draws it is
+    scored on, which can only raise it: the ceiling errs on the side of being a bound."""
+    episodes = sample_episodes(settings, seed, n_sizes, prefix="ceiling")
+    return float(np.mean([_best_force(settings, ep.size, seed)[1] for ep in episodes]))

@@ -8,9 +8,10 @@ this).
 
 Variants
 - ``concat``: [v, t]; raw backbone features (e.g. 384 + 768) or aligned projections.
-- ``mean``: (v + t) / 2; aligned projections of the same dimension.
-- ``max``: element-wise maximum; aligned, same dimension.
-- ``weighted_75_25`` / ``weighted_25_75``: 0.75 v + 0.25 t and 0.25 v + 0.75 t; aligned.
+- ``mean``: (v + t) / 2; inputs of the same dimension (the aligned projections, or raw
+  features where V and T have the same size, e.g. two ViTs of one width).
+- ``max``: element-wise maximum; same dimension.
+- ``weighted_75_25`` / ``weighted_25_75``: 0.75 v + 0.25 t and 0.25 v + 0.75 t; same dimension.
 
 No ``attention`` (dropped in issue 17). The parameter-free form that stood here, scaled
 dot-product self-attention over the two tokens {v, t} of a sample, weights each modality by
@@ -43,7 +44,7 @@ class Fusion:
 
     name: str
     description: str
-    inputs: str  # "raw or aligned" | "aligned"
+    inputs: str  # "raw or aligned" | "equal dimension (...)"
     same_dim: bool
     fn: Callable[[np.ndarray, np.ndarray], np.ndarray]
 
@@ -75,10 +76,30 @@ FUSIONS: dict[str, Fusion] = {
     f.name: f
     for f in [
         Fusion("concat", "[v, t] concatenated", "raw or aligned", False, _concat),
-        Fusion("mean", "(v + t) / 2", "aligned", True, _mean),
-        Fusion("max", "element-wise max(v, t)", "aligned", True, _max),
-        Fusion("weighted_75_25", "0.75 v + 0.25 t", "aligned", True, _weighted(0.75)),
-        Fusion("weighted_25_75", "0.25 v + 0.75 t", "aligned", True, _weighted(0.25)),
+        Fusion(
+            "mean", "(v + t) / 2", "equal dimension: aligned, or raw of equal size", True, _mean
+        ),
+        Fusion(
+            "max",
+            "element-wise max(v, t)",
+            "equal dimension: aligned, or raw of equal size",
+            True,
+            _max,
+        ),
+        Fusion(
+            "weighted_75_25",
+            "0.75 v + 0.25 t",
+            "equal dimension: aligned, or raw of equal size",
+            True,
+            _weighted(0.75),
+        ),
+        Fusion(
+            "weighted_25_75",
+            "0.25 v + 0.75 t",
+            "equal dimension: aligned, or raw of equal size",
+            True,
+            _weighted(0.25),
+        ),
     ]
 }
 

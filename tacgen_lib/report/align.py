@@ -18,6 +18,8 @@ import pandas as pd
 
 from tacgen_lib.align.cells import CELL_COLUMNS
 from tacgen_lib.align.retrieval import RETRIEVAL_METRICS
+from tacgen_lib.report import claims
+from tacgen_lib.report.write import panel_grid
 
 __all__ = [
     "CELL_COLUMNS",
@@ -135,21 +137,29 @@ def curve_figure(curves: pd.DataFrame, *, n_train: str) -> plt.Figure:
     if rows.empty:
         raise ValueError(f"curve_figure: no curve has n_train={n_train!r}")
     panels = sorted({(r.corpus, r.variant) for r in rows.itertuples()})
-    fig, axes = plt.subplots(
-        len(panels), 1, figsize=(7, 2.8 * len(panels)), squeeze=False, sharex=False
-    )
-    for ax, (corpus, variant) in zip(axes[:, 0], panels, strict=True):
+    nrows, ncols, figsize = panel_grid(len(panels), (4.7, 2.8))
+    fig, axes = plt.subplots(nrows, ncols, figsize=figsize, squeeze=False, sharex=False)
+    for ax in axes.flat[len(panels) :]:
+        ax.set_visible(False)
+    for ax, (corpus, variant) in zip(axes.flat, panels, strict=False):
         sub = rows[(rows["corpus"] == corpus) & (rows["variant"] == variant)]
         lines = sorted({(int(s), str(t)) for s, t in zip(sub["seed"], sub["tau"], strict=True)})
+        falling = 0
         for seed, tau in lines:
             one = sub[(sub["seed"].astype(int) == seed) & (sub["tau"].astype(str) == tau)]
             one = one.sort_values("step")
             (line,) = ax.plot(one["step"], one["val_loss"], lw=1.2, label=f"seed {seed}, τ {tau}")
             best = one.loc[one["val_loss"].idxmin()]
             ax.plot([best["step"]], [best["val_loss"]], "o", color=line.get_color(), ms=4)
-        ax.set_title(f"{corpus} / {variant} / N={n_train}", fontsize=9)
+            falling += claims.still_falling(one["step"], one["val_loss"])
+        note = f"\nval loss still falling at the end ({falling} of {len(lines)})" if falling else ""
+        ax.set_title(
+            f"{corpus} / {variant} / N={n_train}{note}",
+            fontsize=9,
+            color="#b22222" if falling else "black",
+        )
         ax.set_xlabel("optimiser step")
         ax.set_ylabel("val InfoNCE loss")
-        ax.legend(fontsize=7, ncol=2)
+        ax.legend(fontsize=8, ncol=2)
     fig.tight_layout()
     return fig

@@ -19,10 +19,11 @@ from matplotlib.ticker import FuncFormatter, NullFormatter
 
 from tacgen_lib.cost.pareto import knob_sentence, marginal_table, pareto_front
 from tacgen_lib.report.tables import to_html
+from tacgen_lib.report.write import panel_grid
 
 __all__ = [
     "KNOB_UNITS",
-    "cost_figure",
+    "cost_figures",
     "cost_page_html",
     "knob_sentences",
     "marginal_view",
@@ -98,7 +99,7 @@ def marginal_view(points: pd.DataFrame) -> pd.DataFrame:
             "extra wall s": t["extra_s"].map("{:.1f}".format),
             "gain": t["gain"].map("{:+.4g}".format),
             "gain per extra minute": t["gain_per_min"].map("{:+.4g}".format),
-            "gain inside the cheaper point's interval": t["within_uncertainty"].map(
+            "gain inside the dearer point's interval": t["within_uncertainty"].map(
                 {True: "yes (not measurable)", False: "no"}
             ),
         }
@@ -137,21 +138,21 @@ def _offsets(x: np.ndarray) -> list[tuple[int, int, str]]:
     return out
 
 
-def cost_figure(points: pd.DataFrame, stages: Mapping[str, str] | None = None) -> plt.Figure:
-    """One row per knob, one panel per metric: value ± CI against wall seconds (log axis),
-    each point labelled with its setting, the default ringed in red, the Pareto front a line."""
-    knobs = list(dict.fromkeys(points["knob"]))
-    ncols = max(int(points.groupby("knob")["metric"].nunique().max()), 1) if len(points) else 1
-    fig, axes = plt.subplots(
-        max(len(knobs), 1), ncols, figsize=(5.6 * ncols, 3.1 * max(len(knobs), 1)), squeeze=False
-    )
-    for ax in axes.ravel():
-        ax.set_visible(False)
-    for i, knob in enumerate(knobs):
+def cost_figures(
+    points: pd.DataFrame, stages: Mapping[str, str] | None = None
+) -> dict[str, plt.Figure]:
+    """One figure per knob (so each is shown whole and at full size), one panel per metric:
+    value ± CI against wall seconds (log axis), each point labelled with its setting, the
+    default ringed in red, the Pareto front a line."""
+    out = {}
+    for knob in dict.fromkeys(points["knob"]):
         part = points[points["knob"] == knob]
-        for j, metric in enumerate(dict.fromkeys(part["metric"])):
-            ax = axes[i, j]
-            ax.set_visible(True)
+        metrics = list(dict.fromkeys(part["metric"]))
+        nrows, ncols, figsize = panel_grid(len(metrics), (3.6, 3.2))
+        fig, axes = plt.subplots(nrows, ncols, figsize=figsize, squeeze=False)
+        for ax in axes.ravel()[len(metrics) :]:
+            ax.set_visible(False)
+        for ax, metric in zip(axes.ravel(), metrics, strict=False):
             g = part[part["metric"] == metric].sort_values("wall_s", kind="stable")
             direction = str(g["direction"].iloc[0])
             x, y = g["wall_s"].to_numpy(float), g["value"].to_numpy(float)
@@ -170,7 +171,7 @@ def cost_figure(points: pd.DataFrame, stages: Mapping[str, str] | None = None) -
                            label="default", zorder=4)  # fmt: skip
             for (dx, dy, ha), lab, xi, yi in zip(_offsets(x), g["label"], x, y, strict=True):
                 ax.annotate(_label(str(lab)), (xi, yi), xytext=(dx, dy), textcoords="offset points",
-                            ha=ha, fontsize=7, zorder=5)  # fmt: skip
+                            ha=ha, fontsize=8, zorder=5)  # fmt: skip
             ax.set_xscale("log")
             plain = FuncFormatter(lambda v, _: f"{v:g}")
             ax.xaxis.set_major_formatter(plain)
@@ -180,15 +181,14 @@ def cost_figure(points: pd.DataFrame, stages: Mapping[str, str] | None = None) -
                 mid = float(np.sqrt(np.nanmax(x) * np.nanmin(x)))
                 ax.set_xlim(mid / 2.0, mid * 2.0)  # a narrow range still shows as a factor
             ax.margins(x=0.15, y=0.2)
-            ax.set_xlabel("wall seconds per run (benchmark files)", fontsize=7)
+            ax.set_xlabel("wall seconds per run (benchmark files)", fontsize=8)
             arrow = "↑" if direction == "higher" else "↓"
-            ax.set_ylabel(f"{metric} {arrow}", fontsize=7)
-            stage = f" ({stages[knob]})" if stages and knob in stages else ""
-            ax.set_title(f"{knob}{stage}", fontsize=9)
-            ax.tick_params(which="both", labelsize=7)
-            ax.legend(fontsize=6, loc="best")
-    fig.suptitle(
-        "Cost of accuracy: each point one setting of a knob (± its uncertainty)", fontsize=10
-    )
-    fig.tight_layout()
-    return fig
+            ax.set_ylabel(f"{metric} {arrow}", fontsize=8)
+            ax.set_title(metric, fontsize=9)
+            ax.tick_params(which="both", labelsize=8)
+            ax.legend(fontsize=8, loc="best")
+        stage = f" ({stages[knob]})" if stages and knob in stages else ""
+        fig.suptitle(f"{knob}{stage}: each point one setting (± its uncertainty)", fontsize=10)
+        fig.tight_layout()
+        out[str(knob)] = fig
+    return out

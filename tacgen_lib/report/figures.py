@@ -9,6 +9,9 @@ import numpy as np
 import pandas as pd
 
 from tacgen_lib.io.images import decode_png
+from tacgen_lib.report import format as fmt
+from tacgen_lib.report.format import numeric_order
+from tacgen_lib.report.write import panel_grid
 
 __all__ = ["corpus_example_grid"]
 
@@ -33,7 +36,8 @@ def _pick_examples(
 def corpus_example_grid(
     samples: pd.DataFrame, sensors: pd.DataFrame, splits: pd.DataFrame, *, n: int, title: str
 ) -> plt.Figure:
-    """Rows of RGB | raw tactile | background | tactile_proc, captioned with id, split, caption."""
+    """Examples as RGB | raw tactile | background | tactile_proc (tactile − background + 128),
+    each captioned with its id, split, sensor and caption; two examples per row."""
     from tacgen_lib.preprocess.background import tactile_proc
 
     picks = _pick_examples(samples, splits, n)
@@ -41,31 +45,48 @@ def corpus_example_grid(
         r.sensor_id: decode_png(r.background, where=f"sensor {r.sensor_id}")
         for r in sensors.itertuples()
     }
+    # two examples side by side per row, so eight fit the viewer at full size
+    per_row = 1 if len(picks) == 1 else 2
+    nrows = -(-len(picks) // per_row)
     fig, axes = plt.subplots(
-        len(picks),
-        5,
-        figsize=(12, 2.3 * len(picks)),
+        nrows,
+        5 * per_row,
+        figsize=(9.5 if per_row == 2 else 5.0, 1.45 * nrows + 0.55),
         squeeze=False,
-        gridspec_kw={"width_ratios": [1.3, 1, 1, 1, 1]},
+        gridspec_kw={"width_ratios": [1.7, 1, 1, 1, 1] * per_row},
     )
-    names = ["RGB", "tactile (raw)", "background", "tactile_proc"]
-    for row, (_, s) in zip(axes, picks.iterrows(), strict=True):
+    names = ["RGB", "raw", "background", "subtracted"]
+    for ax in axes.flat:
+        ax.axis("off")
+    for k, (_, s) in enumerate(picks.iterrows()):
+        r, c = divmod(k, per_row)
+        row = axes[r, 5 * c : 5 * c + 5]
         tac = decode_png(s["tactile"], where=s["sample_id"])
         bg = backgrounds[s["sensor_id"]]
         panels = [decode_png(s["rgb"], where=s["sample_id"]), tac, bg, tactile_proc(tac, bg)]
+        caption = textwrap.wrap(str(s["caption"]), 19)
+        sensor = str(s["sensor_id"]).rsplit("/", 1)[-1]
         label = (
-            f"{s['sample_id']}\nsplit {s.get('split', '?')}, sensor {s['sensor_id']}\n\n"
-            + "\n".join(textwrap.wrap(str(s["caption"]), 30))
+            f"{str(s['sample_id']).rsplit('-', 1)[-1]} ({s.get('split', '?')})\n{sensor}\n"
+            + "\n".join(caption[:4] + (["…"] if len(caption) > 4 else []))
         )
-        row[0].axis("off")
         row[0].text(0.0, 0.5, label, fontsize=8, va="center", ha="left", transform=row[0].transAxes)
         for ax, img, name in zip(row[1:], panels, names, strict=True):
+            ax.axis("on")
             ax.imshow(img)
             ax.set_xticks([])
             ax.set_yticks([])
-            ax.set_title(name, fontsize=8)
-    fig.suptitle(f"corpus {title}: examples", fontsize=10)
-    fig.tight_layout()
+            if r == 0:
+                ax.set_title(name, fontsize=8)
+    # fixed margins, not tight_layout: the caption text may run into its cell's right edge
+    # without shrinking every image to make room for it
+    top = 1 - 0.55 / fig.get_figheight()
+    fig.subplots_adjust(left=0.01, right=0.99, top=top, bottom=0.02, wspace=0.06, hspace=0.15)
+    fig.suptitle(
+        f"corpus {title}: examples (sample number, split, sensor, caption); background "
+        "subtracted: tactile − background + 128",
+        fontsize=9,
+    )
     return fig
 
 
@@ -95,8 +116,8 @@ def pretrain_curve_figure(
                 label="teacher entropy",
             )
             ax2.set_ylabel("teacher entropy (nats)")
-            ax2.legend(loc="upper right", fontsize=7)
-        ax.legend(loc="upper left", fontsize=7)
+            ax2.legend(loc="upper right", fontsize=8)
+        ax.legend(loc="upper left", fontsize=8)
     ax.set_title(title, fontsize=9)
     fig.tight_layout()
     return fig
@@ -121,14 +142,17 @@ def label_distribution_figure(samples: pd.DataFrame, *, title: str) -> plt.Figur
         panels.append(("bands", "force"))
     if not panels and "adjectives" in samples.columns:
         panels.append(("adjectives", "adjectives"))
-    fig, axes = plt.subplots(
-        1, max(len(panels), 1), figsize=(3.2 * max(len(panels), 1), 3.0), squeeze=False
-    )
-    for ax, (kind, col) in zip(axes[0], panels, strict=False):
+    nrows, ncols, figsize = panel_grid(max(len(panels), 1), (3.1, 2.9))
+    fig, axes = plt.subplots(nrows, ncols, figsize=figsize, squeeze=False)
+    for ax in axes.flat[len(panels) :]:
+        ax.set_visible(False)
+    for ax, (kind, col) in zip(axes.flat, panels, strict=False):
         if kind == "counts":
-            counts = samples[col].astype(str).value_counts().sort_index()
-            ax.bar(counts.index, counts.to_numpy())
-            ax.tick_params(axis="x", labelrotation=45, labelsize=7)
+            counts = samples[col].value_counts()
+            counts = counts.reindex(numeric_order(counts.index))  # 500, 2000, 5000: by value
+            ax.bar([fmt.cell(x, integral=True) if isinstance(x, float) and float(x).is_integer()
+                    else str(x) for x in counts.index], counts.to_numpy())  # fmt: skip
+            ax.tick_params(axis="x", labelrotation=45, labelsize=8)
             ax.set_title(f"{col} (samples)", fontsize=9)
         elif kind == "hist":
             ax.hist(samples[col].dropna().to_numpy(), bins=30)
@@ -151,7 +175,7 @@ def label_distribution_figure(samples: pd.DataFrame, *, title: str) -> plt.Figur
             ax.set_xlabel("mass (kg)")
             ax.set_ylabel("contact force (N)")
             ax.set_title("force bands", fontsize=9)
-            ax.legend(fontsize=6)
+            ax.legend(fontsize=8)
         else:
             words = (
                 pd.Series([w for adj in samples[col] for w in list(adj)]).value_counts().head(12)

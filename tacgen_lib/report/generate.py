@@ -19,6 +19,10 @@ import pandas as pd
 from matplotlib.patches import Ellipse
 from scipy import stats
 
+from tacgen_lib.report import claims
+from tacgen_lib.report import format as fmt
+from tacgen_lib.report.write import panel_grid
+
 __all__ = [
     "cross_seed_interval",
     "curve_figure",
@@ -65,14 +69,10 @@ def cross_seed_interval(values: np.ndarray) -> tuple[float, float, float]:
 
 
 def _ci(d: float, lo: float, hi: float) -> str:
-    if not np.isfinite(d):
-        return "–"
-    if not (np.isfinite(lo) and np.isfinite(hi)):
-        return f"{d:+.3f} (1 seed)"
-    return f"{d:+.3f} [{lo:+.3f}, {hi:+.3f}]"
+    return fmt.with_ci(d, lo, hi, sign=True)
 
 
-def _ref(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
+def reference_cell_rows(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
     return summary[(summary["sampler"] == ref["sampler"]) & (summary["steps"] == int(ref["steps"]))
                    & np.isclose(summary["guidance"], float(ref["guidance"]))]  # fmt: skip
 
@@ -81,7 +81,7 @@ def headline_table(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
     """Paper-style table at the reference cell: per corpus x target, first-seed Delta_gen with
     its bootstrap CI, the cross-seed mean with its 95 % interval, protocol-matched Delta_real,
     the nonlinear V-only baseline, Delta_gen against that baseline, and the shuffled control."""
-    s = _ref(summary, ref)
+    s = reference_cell_rows(summary, ref)
     out = []
     for (corpus, target), g in s.groupby(["corpus", "target"], sort=True):
         first = int(g["seed"].min())
@@ -117,7 +117,7 @@ def honesty_table(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
     Controlled corpus (appearance carries no density): real touch must show Delta > 0 (CI
     lower bound > 0) and generated touch must not (its CI covers 0 or lies below). Null
     corpus: touch carries no label, so neither may help. Every cross-seed row is listed."""
-    s = _ref(summary, ref)
+    s = reference_cell_rows(summary, ref)
     out = []
     for r in s[s["input"].isin(["t_real", "t_gen"])].itertuples():
         if r.design == "controlled":
@@ -151,11 +151,9 @@ def fidelity_table(summary: pd.DataFrame) -> pd.DataFrame:
     })  # fmt: skip
 
 
-def _panels(n: int, ncols: int = 3, size: tuple[float, float] = (4.2, 3.4)):
-    ncols = max(1, min(ncols, n))
-    nrows = max(1, math.ceil(n / ncols))
-    fig, axes = plt.subplots(nrows, ncols, figsize=(size[0] * ncols, size[1] * nrows),
-                             squeeze=False)  # fmt: skip
+def _panels(n: int, ncols: int = 3, size: tuple[float, float] = (3.1, 3.0)):
+    nrows, ncols, figsize = panel_grid(n, size, max_cols=ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=figsize, squeeze=False)
     for ax in axes.ravel()[n:]:
         ax.set_visible(False)
     return fig, axes.ravel()
@@ -179,18 +177,23 @@ def guidance_seed_figure(summary: pd.DataFrame, sampler: str, steps: int) -> plt
     s = summary[(summary["input"] == "t_gen") & (summary["sampler"] == sampler)
                 & (summary["steps"] == int(steps))]  # fmt: skip
     groups = list(s.groupby(["corpus", "target"], sort=True))
-    fig, axes = _panels(len(groups))
+    fig, axes = _panels(len(groups), size=(3.0, 3.0))
+    # one colour scale for every panel, symmetric about 0, with its colour bar
+    finite = s["delta"].to_numpy(float)
+    finite = finite[np.isfinite(finite)]
+    lim = max(float(np.abs(finite).max()) if finite.size else 0.0, 1e-3)
+    image = None
     for ax, ((corpus, target), g) in zip(axes, groups, strict=False):
         ws, seeds = sorted(g["guidance"].unique()), sorted(g["seed"].unique())
         grid = np.full((len(ws), len(seeds)), np.nan)
         for r in g.itertuples():
             grid[ws.index(r.guidance), seeds.index(r.seed)] = r.delta
-        lim = max(float(np.nanmax(np.abs(grid))) if np.isfinite(grid).any() else 0.0, 1e-3)
         image = ax.imshow(grid, cmap="RdBu_r", vmin=-lim, vmax=lim, aspect="auto")
         for r in g.itertuples():
             i, j = ws.index(r.guidance), seeds.index(r.seed)
-            ax.text(j, i, f"{r.delta:+.3f}\n[{r.ci_low:+.2f}, {r.ci_high:+.2f}]", ha="center",
-                    va="center", fontsize=7,
+            ax.text(j, i, f"{fmt.signed(r.delta)}\n[{fmt.signed(r.ci_low, 2)}, "
+                    f"{fmt.signed(r.ci_high, 2)}]", ha="center",
+                    va="center", fontsize=8,
                     color=text_colour(image.cmap(image.norm(r.delta))))  # fmt: skip
         ax.set_xticks(range(len(seeds)), [str(x) for x in seeds])
         ax.set_yticks(range(len(ws)), [f"{w:g}" for w in ws])
@@ -199,6 +202,8 @@ def guidance_seed_figure(summary: pd.DataFrame, sampler: str, steps: int) -> plt
         ax.set_title(f"{corpus}: {target}", fontsize=9)
     fig.suptitle(f"Δ_gen = score(V+T_gen) − score(V), {sampler} {steps} steps", fontsize=10)
     fig.tight_layout()
+    if image is not None:
+        fig.colorbar(image, ax=list(axes), shrink=0.8, label="Δ_gen (one scale for all panels)")
     return fig
 
 
@@ -206,24 +211,24 @@ def steps_seconds_figure(summary: pd.DataFrame) -> plt.Figure:
     """What accuracy costs in time: sampling seconds (benchmark) against Delta_gen (mean over
     seeds and guidance, per target) and against the Frechet distance, points labelled by steps."""
     s = summary[summary["input"] == "t_gen"]
-    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4))
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(9.5, 4))
     for (corpus, target, sampler), g in s.groupby(["corpus", "target", "sampler"], sort=True):
         agg = g.groupby("steps").agg(sec=("sample_seconds", "mean"), d=("delta", "mean"),
                                       fd=("frechet", "mean")).reset_index()  # fmt: skip
         line = ax1.plot(agg["sec"], agg["d"], "o-", label=f"{corpus}:{target} ({sampler})")[0]
         for r in agg.itertuples():
-            ax1.annotate(str(r.steps), (r.sec, r.d), fontsize=7, xytext=(3, 3),
+            ax1.annotate(str(r.steps), (r.sec, r.d), fontsize=8, xytext=(3, 3),
                          textcoords="offset points")  # fmt: skip
         ax2.plot(agg["sec"], agg["fd"], "o-", color=line.get_color())
         for r in agg.itertuples():
-            ax2.annotate(str(r.steps), (r.sec, r.fd), fontsize=7, xytext=(3, 3),
+            ax2.annotate(str(r.steps), (r.sec, r.fd), fontsize=8, xytext=(3, 3),
                          textcoords="offset points")  # fmt: skip
     ax1.axhline(0, color="grey", lw=0.8)
     ax1.set_xlabel("sampling job seconds (benchmark file)")
     ax1.set_ylabel("Δ_gen (mean over seeds and w)")
     ax2.set_xlabel("sampling job seconds (benchmark file)")
     ax2.set_ylabel("Fréchet distance, generated vs real test")
-    ax1.legend(fontsize=6)
+    ax1.legend(fontsize=8)
     fig.tight_layout()
     return fig
 
@@ -252,7 +257,7 @@ def pca_figure(real: np.ndarray, gen: np.ndarray, *, title: str) -> plt.Figure:
     ax.set_xlabel("PC 1 (real)")
     ax.set_ylabel("PC 2 (real)")
     ax.set_title(title, fontsize=9)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=8)
     fig.tight_layout()
     return fig
 
@@ -271,23 +276,28 @@ def permutation_figure(perms: pd.DataFrame, ref: Mapping) -> plt.Figure:
         pval = (1 + np.sum(g["statistic"] >= obs)) / (1 + len(g))
         ax.set_title(f"{corpus}: {target} (p = {pval:.3f})", fontsize=9)
         ax.set_xlabel("mean matched cosine, re-paired")
-        ax.legend(fontsize=7)
+        ax.legend(fontsize=8)
     fig.tight_layout()
     return fig
 
 
 def curve_figure(curves: pd.DataFrame) -> plt.Figure:
-    """Train and validation denoising loss per generator (corpus x seed)."""
+    """Train and validation denoising loss per generator (corpus x seed); a panel whose
+    validation loss still falls at its last step says so in its title (`claims.still_falling`)."""
     groups = list(curves.groupby("corpus", sort=True))
     fig, axes = _panels(max(len(groups), 1))
     for ax, (corpus, g) in zip(axes, groups, strict=False):
+        falling = []
         for seed, c in g.groupby("seed"):
             line = ax.plot(c["step"], c["train_loss"], "-", label=f"seed {seed} train")[0]
             ax.plot(c["step"], c["val_loss"], "--", color=line.get_color(),
                     label=f"seed {seed} val")  # fmt: skip
-        ax.set_title(corpus, fontsize=9)
+            if claims.still_falling(c["step"], c["val_loss"]):
+                falling.append(str(seed))
+        note = f"\nval loss still falling at the end (seed {', '.join(falling)})" if falling else ""
+        ax.set_title(f"{corpus}{note}", fontsize=9, color="#b22222" if falling else "black")
         ax.set_xlabel("optimiser step")
         ax.set_ylabel("denoising loss")
-        ax.legend(fontsize=6)
+        ax.legend(fontsize=8)
     fig.tight_layout()
     return fig

@@ -19,8 +19,10 @@ import pandas as pd
 
 from tacgen_lib.io.images import decode_png
 from tacgen_lib.policy.task import FAILURE_MODES
+from tacgen_lib.report import claims
+from tacgen_lib.report import format as fmt
 
-__all__ = ["success_table", "sweep_figure", "failure_figure", "filmstrip"]
+__all__ = ["success_table", "sweep_figure", "sweep_notes", "failure_figure", "filmstrip"]
 
 COLOURS = {
     "success": "#4c956c",
@@ -31,9 +33,14 @@ COLOURS = {
 }
 
 
-def _ci(x: float, lo: float, hi: float, signed: bool = False) -> str:
-    f = "{:+.3f}" if signed else "{:.3f}"
-    return f"{f.format(x)} [{f.format(lo)}, {f.format(hi)}]"
+def _success_ci(r: Mapping) -> str:
+    """Success with its bootstrap CI; where the bootstrap has no width (every episode the same
+    outcome), the Wilson interval instead, saying so."""
+    if r["ci_low"] == r["ci_high"]:
+        k = int(round(r["success"] * r["n_episodes"]))
+        lo, hi = claims.proportion_interval(k, int(r["n_episodes"]))
+        return f"{fmt.with_ci(r['success'], lo, hi)} (Wilson: all {k}/{r['n_episodes']} alike)"
+    return fmt.with_ci(r["success"], r["ci_low"], r["ci_high"])
 
 
 def success_table(summary: pd.DataFrame, deltas: pd.DataFrame, main: list[str]) -> pd.DataFrame:
@@ -47,12 +54,12 @@ def success_table(summary: pd.DataFrame, deltas: pd.DataFrame, main: list[str]) 
                 "condition": r["condition"],
                 "cell": r["cell"],
                 "episodes": r["n_episodes"],
-                "success [95% CI]": _ci(r["success"], r["ci_low"], r["ci_high"]),
-                "Δ vs V [paired 95% CI]": "—"
+                "success [95% CI]": _success_ci(r),
+                "Δ vs V [paired 95% CI]": fmt.MISSING
                 if delta is None
-                else _ci(delta["delta"], delta["ci_low"], delta["ci_high"], True),
+                else fmt.with_ci(delta["delta"], delta["ci_low"], delta["ci_high"], sign=True),
                 **{m: r[m] for m in FAILURE_MODES[1:]},
-                "median force (N)": round(r["median_force"], 3),
+                "median force (N)": r["median_force"],
             }
         )
     return pd.DataFrame(rows)
@@ -62,18 +69,25 @@ def sweep_figure(sweep: pd.DataFrame) -> plt.Figure:
     fig, ax = plt.subplots(figsize=(5.5, 3.6))
     for e, g in sweep.groupby("epochs"):
         ax.errorbar(
-            g["hidden"], g["success"], yerr=g["sd"], marker="o", capsize=3, label=f"V-only, E={e}"
+            g["hidden"],
+            g["success"],
+            yerr=g["sd"].fillna(0.0),
+            marker="o",
+            capsize=3,
+            label=f"V-only, E={e}",
         )
     ceiling = float(sweep["vision_ceiling"].iloc[0])
     vt = float(sweep["vt_aligned"].iloc[0])
-    ax.axhline(ceiling, color="k", ls="--", lw=1, label=f"vision-only ceiling {ceiling:.3f}")
-    ax.axhline(vt, color="#4c956c", ls="-", lw=1.5, label=f"V+T aligned {vt:.3f}")
+    ax.axhline(
+        ceiling, color="k", ls="--", lw=1, label=f"vision-only ceiling {fmt.number(ceiling)}"
+    )
+    ax.axhline(vt, color="#4c956c", ls="-", lw=1.5, label=f"V+T aligned {fmt.number(vt)}")
     ax.set_xscale("log", base=2)
     ax.set_xlabel("MLP hidden width H")
     ax.set_ylabel("held-out success")
     ax.set_ylim(0, 1.02)
-    ax.legend(fontsize=7, loc="lower right")
-    ax.set_title("V-only capacity sweep", fontsize=9)
+    ax.legend(fontsize=8, loc="lower right")
+    ax.set_title("V-only capacity sweep (error bars: sd over seeds)", fontsize=9)
     fig.tight_layout()
     return fig
 
@@ -91,8 +105,8 @@ def failure_figure(summary: pd.DataFrame, main: list[str]) -> plt.Figure:
         )
         bottom += vals / np.maximum(n, 1)
     ax.set_ylabel("fraction of held-out episodes")
-    ax.legend(fontsize=7, ncol=5, loc="upper center", bbox_to_anchor=(0.5, 1.18))
-    ax.tick_params(axis="x", labelsize=7)
+    ax.legend(fontsize=8, ncol=5, loc="upper center", bbox_to_anchor=(0.5, 1.18))
+    ax.tick_params(axis="x", labelsize=8)
     fig.tight_layout()
     return fig
 
@@ -109,8 +123,10 @@ def filmstrip(
                 row = hit.iloc[0]
                 picks.append((cond, row["episode_id"], row["mode"], row["grip_force"]))
     cols = 1 + len(frames)
+    rows = max(len(picks), 1)
+    side = min(1.3, 8.0 / rows, 8.2 / cols)  # every frame square; the whole fits the viewer
     fig, axes = plt.subplots(
-        max(len(picks), 1), cols, figsize=(1.3 * cols, 1.3 * max(len(picks), 1)), squeeze=False
+        rows, cols, figsize=(side * cols + 1.6, side * rows + 0.6), squeeze=False
     )
     ep = episodes.set_index("episode_id")
     for i, (cond, eid, mode, force) in enumerate(picks):
@@ -121,8 +137,33 @@ def filmstrip(
             ax.set_xticks([])
             ax.set_yticks([])
             if j == 0:
-                ax.set_ylabel(f"{cond}\n{eid}\n{mode}, {force:.2f} N", fontsize=5)
+                ax.set_ylabel(
+                    f"{cond}\n{eid}\n{mode}, {fmt.number(force, 2)} N",
+                    fontsize=8,
+                    rotation=0,
+                    ha="right",
+                    va="center",
+                )
             if i == 0:
-                ax.set_title("RGB" if j == 0 else frames[j - 1].replace("tactile_", ""), fontsize=5)
+                name = "RGB" if j == 0 else frames[j - 1].replace("tactile_", "")
+                ax.set_title(name.replace("_", "\n", 1), fontsize=8)
     fig.tight_layout()
     return fig
+
+
+def sweep_notes(summary: pd.DataFrame, sweep: pd.DataFrame) -> list[str]:
+    """What the sweep table's reader needs beside it: where each V-only policy sits against the
+    vision-only ceiling (`claims.ceiling_verdict`, with the main V cell's bootstrap CI)."""
+    ceiling = float(sweep["vision_ceiling"].iloc[0])
+    notes = [
+        f"vision_ceiling {fmt.number(ceiling)}: the expected success of the best grip force "
+        "given the visible size, over the task's prior (computed from the generative process, "
+        "not re-scored on the held-out episodes); vision_ceiling_rollout is that force rolled "
+        "out on the held-out episodes, with their sampling noise."
+    ]
+    v = summary.loc[summary["condition"] == "v"]
+    for r in v.itertuples():
+        notes.append(
+            f"{r.cell}: " + claims.ceiling_verdict(r.success, r.ci_low, r.ci_high, ceiling)
+        )
+    return notes

@@ -14,9 +14,9 @@ HTML with `report_tables.to_html`) or a matplotlib Figure; none reads or writes 
 - `align_seed_table`: aligned-input results as mean +- sd over alignment seeds.
 - `variant_table`: the tactile preprocessing ablation (raw V + raw T of each variant, concat).
 - `controls_table`: every control row next to its comparison's Delta.
-- `forest_plot`: Delta with its 95% CI for every main comparison, labelled by
+- `forest_plot`: Delta with its 95% CI for every main comparison of one family, labelled by
   family / input / fusion and seeds; null-corpus families in their own colour.
-- `confusion_figure`: confusion matrices of the logistic probes (concat comparisons).
+- `confusion_figures`: confusion matrices of the logistic probes (concat comparisons), per family.
 """
 
 from __future__ import annotations
@@ -29,13 +29,17 @@ import pandas as pd
 
 from tacgen_lib.probes.fusion import fusion_table
 from tacgen_lib.probes.protocol import class_order
+from tacgen_lib.report import claims
+from tacgen_lib.report import format as fmt
 
 __all__ = [
     "align_seed_table",
-    "confusion_figure",
+    "confusion_figures",
     "controlled_table",
     "controls_table",
     "forest_plot",
+    "forest_families",
+    "skipped_note",
     "fusions_frame",
     "main_rows",
     "paired_table",
@@ -46,10 +50,12 @@ __all__ = [
 _ORDER = ["family", "input", "t_variant", "fusion", "align_seed", "probe_seed"]
 
 
-def _num(x: object, fmt: str = "{:.3f}") -> str:
-    if x is None or (isinstance(x, float) and math.isnan(x)) or x is pd.NA:
-        return ""
-    return fmt.format(float(x))
+def _num(x: object, spec: str = "{:.3f}") -> str:
+    """`x` written by `tacgen_lib.report.format`: signed where `spec` has a sign, 4 decimals
+    for p-values (`spec` "{:.4f}"), else 3."""
+    if "+" in spec:
+        return fmt.signed(x)
+    return fmt.number(x, 4 if ".4f" in spec else 3)
 
 
 def _seed(x: object) -> str:
@@ -65,8 +71,8 @@ def _delta_ci(row: pd.Series) -> str:
 
 
 def _criterion(x: object) -> str:
-    if x is None or x is pd.NA or (isinstance(x, float) and math.isnan(x)):
-        return "n/a"
+    if fmt.is_missing(x):
+        return "not evaluated"
     return "yes" if bool(x) else "no"
 
 
@@ -120,15 +126,42 @@ def _comparison_columns(rows: pd.DataFrame) -> pd.DataFrame:
             "p (Holm, family)": _col(rows, "p_holm_family").map(lambda x: _num(x, "{:.4f}")),
             "q (BH, all)": _col(rows, "p_bh").map(lambda x: _num(x, "{:.4f}")),
             "n train/test": rows["n_train"].astype(str) + "/" + rows["n_test"].astype(str),
+            "flag": [
+                claims.extreme_flag(
+                    r.metric,
+                    r.v_score,
+                    r.vt_score,
+                    r.ci_low,
+                    r.ci_high,
+                    getattr(r, "baseline_score", math.nan),
+                )  # fmt: skip
+                for r in rows.itertuples()
+            ],
             "notes": rows["notes"],
         }
     ).reset_index(drop=True)
 
 
-def controlled_table(summary: pd.DataFrame) -> pd.DataFrame:
-    """Families on the appearance-controlled corpus: pixel-V families first (the headline)."""
+def skipped_note(summary: pd.DataFrame, controlled: bool) -> list[str]:
+    """One footnote for the comparisons planned as skipped on a corpus design (they are left
+    out of its table): how many, and each distinct reason once."""
     rows = _headline(main_rows(summary))
-    rows = rows.loc[rows["design"] == "controlled"].copy()
+    rows = rows.loc[
+        ((rows["design"] == "controlled") == controlled) & (rows["status"] == "skipped")
+    ]
+    if not len(rows):
+        return []
+    reasons = "; ".join(dict.fromkeys(str(n) for n in rows["notes"] if n))
+    fusions = ", ".join(sorted(set(rows["fusion"])))
+    s = "" if len(rows) == 1 else "s"
+    return [f"{len(rows)} comparison{s} not run and not listed ({fusions}): {reasons}"]
+
+
+def controlled_table(summary: pd.DataFrame) -> pd.DataFrame:
+    """Families on the appearance-controlled corpus: pixel-V families first (the headline).
+    Comparisons planned as skipped are left out (`skipped_note` says which and why)."""
+    rows = _headline(main_rows(summary))
+    rows = rows.loc[(rows["design"] == "controlled") & (rows["status"] != "skipped")].copy()
     rows["_vit"] = rows["vision"] != "pixel"
     rows = rows.sort_values(["_vit", "family"], kind="stable")
     return _comparison_columns(rows)
@@ -148,9 +181,10 @@ def _keys(rows: pd.DataFrame, columns: list[str]) -> list[str]:
 
 
 def paired_table(summary: pd.DataFrame) -> pd.DataFrame:
-    """Paired-corpus families, each with its ``_null`` sibling's result in the columns beside."""
+    """Paired-corpus families, each with its ``_null`` sibling's result in the columns beside;
+    comparisons planned as skipped are left out (`skipped_note`)."""
     rows = _headline(main_rows(summary))
-    rows = rows.loc[rows["design"] != "controlled"]
+    rows = rows.loc[(rows["design"] != "controlled") & (rows["status"] != "skipped")]
     families = sorted(rows["family"].unique())
     main = [f for f in families if not (f.endswith("_null") and f[: -len("_null")] in families)]
     key = ["input", "fusion", "align_seed", "probe_seed"]
@@ -288,111 +322,114 @@ def fusions_frame() -> pd.DataFrame:
     return pd.DataFrame(fusion_table())
 
 
-def forest_plot(summary: pd.DataFrame, *, min_delta: float = 0.03, ncols: int = 4) -> plt.Figure:
-    """Delta with its 95% fixed-test bootstrap CI for every main comparison (heads' variant),
-    one panel per probe family.
+def forest_plot(summary: pd.DataFrame, family: str, *, min_delta: float = 0.03) -> plt.Figure:
+    """Delta with its 95% fixed-test bootstrap CI for every main comparison (heads' variant) of
+    one probe family: one figure per family, so each is shown at full size in the viewer.
 
-    A panel's lines are labelled ``input / fusion  a~align seed s~probe seed``; each panel has
-    its own Delta axis (R^2 and accuracy gains differ in scale), with 0 (solid) and the paper's
-    min Delta (dashed). Null-corpus families are drawn in grey; a diamond marks a comparison
-    that meets the paper's criterion. Beside each line, the scores that size its Delta: V,
-    V+T, the train-mean baseline and (where the manifest has shape and scale) the shape-only
-    ceiling; a grey bar marks where Delta would be if V+T scored the shape-only ceiling.
+    Lines are labelled ``input / fusion  a~align seed s~probe seed``, with 0 (solid) and the
+    paper's min Delta (dashed). Null-corpus families are drawn in grey. The marker says what
+    the paper's criterion says of the line: a diamond where it is met, a filled circle where it
+    is not, an open circle where it was not evaluated (its controls run on one comparison per
+    family: concat, first seeds). Beside each line, the scores that size its Delta: V, V+T, the
+    train-mean baseline and (where the manifest has shape and scale) the shape-only ceiling; a
+    grey bar marks where Delta would be if V+T scored the shape-only ceiling.
     """
     rows = _headline(main_rows(summary))
-    rows = rows.loc[rows["status"] == "ok"]
-    families = list(dict.fromkeys(rows["family"])) or ["(no comparison)"]
-    ncols = max(1, min(ncols, len(families)))
-    nrows = -(-len(families) // ncols)
-    height = max((rows["family"] == f).sum() for f in families) if len(rows) else 1
-    fig, axes = plt.subplots(
-        nrows, ncols, figsize=(7.4 * ncols, nrows * (1.3 + 0.2 * height)), squeeze=False
-    )
-    for ax in axes.flat[len(families) :]:
-        ax.axis("off")
-    for ax, fam in zip(axes.flat, families, strict=False):
-        part = rows.loc[rows["family"] == fam].iloc[::-1]
-        null = bool(part["null_corpus"].astype(bool).any()) if len(part) else False
-        colour = "#888888" if null else "#1f5fa8"
-        y = np.arange(len(part))
-        for yi, (_, r) in zip(y, part.iterrows(), strict=True):
-            ax.plot([r["ci_low"], r["ci_high"]], [yi, yi], color=colour, lw=1.6)
-            met = r["criterion_met"] is True
+    part = rows.loc[(rows["status"] == "ok") & (rows["family"] == family)].iloc[::-1]
+    fig, ax = plt.subplots(figsize=(9.5, 1.9 + 0.34 * max(len(part), 1)))
+    null = bool(part["null_corpus"].astype(bool).any()) if len(part) else False
+    colour = "#888888" if null else "#1f5fa8"
+    y = np.arange(len(part))
+    for yi, (_, r) in zip(y, part.iterrows(), strict=True):
+        ax.plot([r["ci_low"], r["ci_high"]], [yi, yi], color=colour, lw=1.6)
+        met = r["criterion_met"]
+        if fmt.is_missing(met):
+            ax.plot([r["delta"]], [yi], marker="o", mfc="white", mec=colour, ms=6)
+        else:
             ax.plot(
-                [r["delta"]], [yi], marker="D" if met else "o", color=colour, ms=6 if met else 4
+                [r["delta"]], [yi], marker="D" if met else "o", color=colour, ms=7 if met else 5
             )
-            shape = r.get("visible_score", math.nan)
-            if shape is not None and np.isfinite(shape):
-                ax.plot([shape - r["v_score"]], [yi], marker="|", color="#999999", ms=9)
-            ax.text(1.02, yi, _baselines(r), transform=ax.get_yaxis_transform(), fontsize=6,
-                    va="center")  # fmt: skip
-        labels = [
-            f"{r['input']} / {r['fusion']}  a~{_seed(r['align_seed'])} s~{_seed(r['probe_seed'])}"
-            for _, r in part.iterrows()
-        ]
-        ax.set_yticks(y, labels, fontsize=7)
-        ax.set_ylim(-0.8, max(len(part), 1) - 0.2)
-        ax.axvline(0.0, color="black", lw=0.8)
-        ax.axvline(min_delta, color="black", lw=0.8, ls="--")
-        metric = part["metric"].iloc[0] if len(part) and "metric" in part else ""
-        corpus = part["corpus"].iloc[0] if len(part) and "corpus" in part else ""
-        ax.set_title(f"{fam} ({corpus}, {metric})" if len(part) else fam, fontsize=9)
-        ax.set_xlabel("Δ = V+T − V, 95% CI", fontsize=8)
-        ax.tick_params(axis="x", labelsize=7)
-        ax.grid(axis="x", color="#dddddd", lw=0.6)
-    fig.suptitle(
-        "Probe gains with 95% fixed-test bootstrap CIs (blue: main corpora, grey: null corpus; "
-        "◆: criterion met; dashed: the paper's min Δ; grey |: Δ at the shape-only ceiling; "
-        "right: V, V+T, train-mean baseline, shape-only ceiling)",
-        fontsize=10,
+        shape = r.get("visible_score", math.nan)
+        if shape is not None and np.isfinite(shape):
+            ax.plot([shape - r["v_score"]], [yi], marker="|", color="#999999", ms=9)
+        ax.text(1.02, yi, _baselines(r), transform=ax.get_yaxis_transform(), fontsize=8,
+                va="center")  # fmt: skip
+    labels = [
+        f"{r['input']} / {r['fusion']}  a~{_seed(r['align_seed'])} s~{_seed(r['probe_seed'])}"
+        for _, r in part.iterrows()
+    ]
+    ax.set_yticks(y, labels, fontsize=8)
+    ax.set_ylim(-0.8, max(len(part), 1) - 0.2)
+    ax.axvline(0.0, color="black", lw=0.8)
+    ax.axvline(min_delta, color="black", lw=0.8, ls="--")
+    metric = part["metric"].iloc[0] if len(part) else ""
+    corpus = part["corpus"].iloc[0] if len(part) else ""
+    ax.set_title(
+        f"{family} ({corpus}, {metric}{', null corpus' if null else ''}): Δ = V+T − V with 95% "
+        "CI\n◆ criterion met  ● not met  ○ not evaluated; dashed: the paper's min Δ",
+        fontsize=9,
     )
+    ax.set_xlabel("Δ = V+T − V, 95% fixed-test bootstrap CI", fontsize=8)
+    ax.tick_params(axis="x", labelsize=8)
+    ax.grid(axis="x", color="#dddddd", lw=0.6)
     fig.tight_layout()
+    fig.subplots_adjust(right=0.64)
     return fig
 
 
-def confusion_figure(confusion: pd.DataFrame) -> plt.Figure:
-    """Confusion matrices (test rows) of the logistic probes' concat comparisons: V and V+T."""
+def forest_families(summary: pd.DataFrame) -> list[str]:
+    """The families `forest_plot` draws, in summary order."""
+    rows = _headline(main_rows(summary))
+    return list(dict.fromkeys(rows.loc[rows["status"] == "ok", "family"]))
+
+
+def confusion_figures(confusion: pd.DataFrame) -> dict[str, plt.Figure]:
+    """Confusion matrices (test rows) of the logistic probes' concat comparisons, V beside
+    V+T: one figure per family (two comparisons side by side per row)."""
     conf = confusion.loc[confusion["fusion"] == "concat"] if len(confusion) else confusion
     if len(conf):
         conf = conf.loc[conf["t_variant"] == conf["heads_variant"]]
-    groups = (
-        list(
-            conf.assign(_a=conf["align_seed"].fillna(-1)).groupby(
-                ["family", "input", "_a", "probe_seed"], sort=True
-            )
+    out = {}
+    if not len(conf):
+        return out
+    conf = conf.assign(_a=conf["align_seed"].fillna(-1))
+    for fam, fam_rows in conf.groupby("family", sort=True):
+        groups = list(fam_rows.groupby(["input", "_a", "probe_seed"], sort=True))
+        per_row = 1 if len(groups) == 1 else 2
+        nrows = -(-len(groups) // per_row)
+        fig, axes = plt.subplots(
+            nrows, 2 * per_row, figsize=(4.6 * per_row, min(2.9 * nrows, 8.6)), squeeze=False
         )
-        if len(conf)
-        else []
-    )
-    if not groups:
-        fig, ax = plt.subplots(figsize=(4, 1.5))
-        ax.axis("off")
-        ax.text(0.5, 0.5, "no logistic probe in this run", ha="center", va="center")
-        return fig
-    fig, axes = plt.subplots(len(groups), 2, figsize=(6.4, 2.6 * len(groups)), squeeze=False)
-    for row_axes, ((fam, inp, a, s), g) in zip(axes, groups, strict=True):
-        classes = class_order(g["true"])
-        for ax, model in zip(row_axes, ("V", "V+T"), strict=True):
-            m = g.loc[g["model"] == model]
-            mat = (
-                m.pivot_table(index="true", columns="pred", values="count", aggfunc="sum")
-                .reindex(index=classes, columns=classes)
-                .fillna(0)
-                .to_numpy()
-            )
-            top = max(mat.max(), 1)
-            ax.imshow(mat, cmap="Blues", vmin=0, vmax=top)
-            for (i, j), v in np.ndenumerate(mat):
-                colour = "white" if v > 0.6 * top else "black"
-                ax.text(j, i, f"{int(v)}", ha="center", va="center", fontsize=8, color=colour)
-            ax.set_xticks(range(len(classes)), classes, fontsize=7, rotation=30)
-            ax.set_yticks(range(len(classes)), classes, fontsize=7)
-            ax.set_xlabel("predicted", fontsize=7)
-            ax.set_ylabel("true", fontsize=7)
-            acc = np.trace(mat) / max(mat.sum(), 1)
-            ax.set_title(
-                f"{fam} / {inp} a~{_seed(a if a >= 0 else None)} s~{int(s)}\n{model}: acc {acc:.3f}",
-                fontsize=8,
-            )
-    fig.tight_layout()
-    return fig
+        for ax in axes.flat[2 * len(groups) :]:
+            ax.axis("off")
+        for k, ((inp, a, s), g) in enumerate(groups):
+            classes = class_order(g["true"])
+            row, col = divmod(k, per_row)
+            for m_i, model in enumerate(("V", "V+T")):
+                ax = axes[row, 2 * col + m_i]
+                m = g.loc[g["model"] == model]
+                mat = (
+                    m.pivot_table(index="true", columns="pred", values="count", aggfunc="sum")
+                    .reindex(index=classes, columns=classes)
+                    .fillna(0)
+                    .to_numpy()
+                )
+                top = max(mat.max(), 1)
+                ax.imshow(mat, cmap="Blues", vmin=0, vmax=top)
+                for (i, j), v in np.ndenumerate(mat):
+                    colour = "white" if v > 0.6 * top else "black"
+                    ax.text(j, i, f"{int(v)}", ha="center", va="center", fontsize=8, color=colour)
+                ax.set_xticks(range(len(classes)), classes, fontsize=8, rotation=30)
+                ax.set_yticks(range(len(classes)), classes, fontsize=8)
+                ax.set_xlabel("predicted", fontsize=8)
+                ax.set_ylabel("true", fontsize=8)
+                acc = np.trace(mat) / max(mat.sum(), 1)
+                ax.set_title(
+                    f"{inp} a~{_seed(a if a >= 0 else None)} s~{int(s)}\n"
+                    f"{model}: accuracy {fmt.number(acc)}",
+                    fontsize=8,
+                )
+        fig.suptitle(f"{fam}: confusion matrices on the test rows", fontsize=9)
+        fig.tight_layout()
+        out[str(fam)] = fig
+    return out

@@ -16,7 +16,6 @@ frames or a Figure out.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping, Sequence
 
 import matplotlib.pyplot as plt
@@ -25,6 +24,9 @@ import pandas as pd
 from matplotlib.ticker import NullFormatter
 
 from tacgen_lib.probes.variants import same_as_raw
+from tacgen_lib.report import claims
+from tacgen_lib.report import format as fmt
+from tacgen_lib.report.write import panel_grid
 
 __all__ = [
     "headline_long",
@@ -45,13 +47,12 @@ LONG_COLUMNS = (
 
 
 def _fmt(x: object, spec: str = "{:+.3f}") -> str:
-    if x is None or x is pd.NA or (isinstance(x, float) and math.isnan(x)):
-        return ""
-    return spec.format(float(x))
+    """`x` written by `tacgen_lib.report.format` (signed where `spec` has a sign)."""
+    return fmt.signed(x) if "+" in spec else fmt.number(x)
 
 
 def _ci(d: float, lo: float, hi: float) -> str:
-    return f"{_fmt(d)} [{_fmt(lo)}, {_fmt(hi)}]"
+    return fmt.with_ci(d, lo, hi, sign=True)
 
 
 def _input(r: pd.Series) -> str:
@@ -137,8 +138,13 @@ def robustness_table(
                 row[p] = f"({h['status']})"
                 above.append(False)
                 continue
-            row[p] = _ci(h["delta"], h["ci_low"], h["ci_high"]) + (
-                " (= raw)" if h["same_as_raw"] else ""
+            flag = claims.extreme_flag(
+                h["metric"], h["v_score"], h["vt_score"], h["ci_low"], h["ci_high"]
+            )
+            row[p] = (
+                _ci(h["delta"], h["ci_low"], h["ci_high"])
+                + (" (= raw)" if h["same_as_raw"] else "")
+                + (f" ⚠ {flag}" if flag else "")
             )
             above.append(bool(h["ci_low"] > 0))
         ran = [a for a in above if a is not None]
@@ -280,9 +286,8 @@ def training_size_figure(size: pd.DataFrame, *, ncols: int = 3) -> plt.Figure:
         ax.axis("off")
         ax.text(0.5, 0.5, "no training-size sweep in this run", ha="center", va="center")
         return fig
-    ncols = max(1, min(ncols, len(families)))
-    nrows = -(-len(families) // ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(4.2 * ncols, 3.2 * nrows), squeeze=False)
+    nrows, ncols, figsize = panel_grid(len(families), (3.1, 2.9), max_cols=ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=figsize, squeeze=False)
     for ax in axes.flat[len(families) :]:
         ax.axis("off")
     for ax, fam in zip(axes.flat, families, strict=False):
@@ -305,8 +310,8 @@ def training_size_figure(size: pd.DataFrame, *, ncols: int = 3) -> plt.Figure:
         ax.set_title(f"{fam}{' (null corpus)' if null else ''}, {metric}", fontsize=9)
         ax.set_xlabel("training rows (nested subsets)", fontsize=8)
         ax.set_ylabel("Δ = V+T − V, 95% CI", fontsize=8)
-        ax.tick_params(labelsize=7)
-        ax.legend(fontsize=6)
+        ax.tick_params(labelsize=8)
+        ax.legend(fontsize=8)
     fig.suptitle(
         "Probe-side training-size sweep (raw V vs V+T, concat; full test split)", fontsize=10
     )

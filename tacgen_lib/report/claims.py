@@ -1,0 +1,236 @@
+"""Every sentence the report states about a number, generated from that number.
+
+One function per claim, used by every page that states it, so two pages cannot say different
+things about the same figures. Each returns a short sentence (or a short verdict for a table
+cell); none reads files. The words follow fixed rules:
+
+- an interval *above 0* has its lower bound > 0; *below 0*, its upper bound < 0; an interval that
+  has 0 as a bound *touches 0* and, like one containing 0, does not exclude it;
+- a point without an interval (one seed, one run) is never called significant;
+- "within the uncertainty" has one meaning everywhere: the cheaper setting's value lies inside
+  the dearer setting's interval (the gain is not measurable at the dearer point's precision).
+"""
+
+from __future__ import annotations
+
+import math
+
+from tacgen_lib.report import format as fmt
+
+__all__ = [
+    "interval_side",
+    "delta_verdict",
+    "probe_verdict",
+    "generation_verdict",
+    "gain_within_uncertainty",
+    "ceiling_verdict",
+    "proportion_interval",
+    "degenerate_interval_note",
+    "extreme_flag",
+    "still_falling",
+    "curve_note",
+]
+
+
+def interval_side(lo: float, hi: float) -> str:
+    """Where a 95 % interval lies against 0: "above", "below", "touches" (0 is a bound),
+    "spans" (0 strictly inside), or "none" (no interval)."""
+    if fmt.is_missing(lo) or fmt.is_missing(hi):
+        return "none"
+    if lo > 0:
+        return "above"
+    if hi < 0:
+        return "below"
+    if lo == 0 or hi == 0:
+        return "touches"
+    return "spans"
+
+
+def delta_verdict(delta: float, lo: float, hi: float, *, what: str = "V+T") -> str:
+    """One sentence on a difference with its interval: does it exclude 0, and in which
+    direction."""
+    if fmt.is_missing(delta):
+        return "not computed."
+    side = interval_side(lo, hi)
+    d = fmt.signed(delta)
+    if side == "none":
+        return f"Δ = {d} from one point: no interval, so no claim either way."
+    ci = f"[{fmt.signed(lo)}, {fmt.signed(hi)}]"
+    if side == "above":
+        return f"{what} helps: Δ = {d}, 95 % CI {ci} above 0."
+    if side == "below":
+        return f"{what} hurts: Δ = {d}, 95 % CI {ci} below 0."
+    if side == "touches":
+        return f"No measurable difference: Δ = {d}, 95 % CI {ci} touches 0."
+    return f"No measurable difference: Δ = {d}, 95 % CI {ci} contains 0."
+
+
+def probe_verdict(
+    delta: float,
+    lo: float,
+    hi: float,
+    *,
+    null_corpus: bool,
+    criterion_met: bool | None,
+    delta_ctrl: float,
+) -> str:
+    """The verdict on one probe family's V vs V+T comparison, read against its control
+    (`delta_ctrl`: the mean Δ with touch permuted across rows) and the paper's criterion
+    (Δ >= 0.03, CI above 0, Δ_ctrl < Δ).
+
+    On a null corpus touch carries no label: a gain there is a defect of the pipeline, and the
+    expected outcome is an interval that does not lie above 0."""
+    side = interval_side(lo, hi)
+    base = delta_verdict(delta, lo, hi)
+    if null_corpus:
+        if side == "above":
+            return "UNEXPECTED: touch helps on the null corpus, where it carries no label. " + base
+        return "As expected on the null corpus (touch carries no label): no gain. " + base
+    if criterion_met is True:
+        return (
+            base + f" With touch permuted across rows Δ_ctrl = {fmt.signed(delta_ctrl)}: "
+            "criterion met."
+        )
+    if criterion_met is False and side == "above":
+        return (
+            base + f" But a control reaches Δ_ctrl = {fmt.signed(delta_ctrl)}: criterion not met."
+        )
+    return base
+
+
+def generation_verdict(
+    gen: tuple[float, float, float], real: tuple[float, float, float], nonlinear: tuple[float, ...]
+) -> str:
+    """Generated touch against real touch and against the nonlinear V-only baseline (each a
+    (Δ, lo, hi) triple of Δ against linear V)."""
+    g_side, r_side = interval_side(*gen[1:]), interval_side(*real[1:])
+    g = fmt.with_ci(*gen, sign=True)
+    parts = []
+    if g_side == "above":
+        parts.append(f"Generated touch helps (Δ_gen {g})")
+    else:
+        parts.append(f"Generated touch does not help (Δ_gen {g})")
+    if r_side == "above":
+        parts.append(f"real touch does (Δ_real {fmt.with_ci(*real, sign=True)})")
+    else:
+        parts.append(f"nor does real touch (Δ_real {fmt.with_ci(*real, sign=True)})")
+    text = "; ".join(parts) + "."
+    if g_side == "above" and not fmt.is_missing(nonlinear[0]):
+        n_side = interval_side(*nonlinear[1:])
+        if n_side == "above" and nonlinear[0] >= gen[0]:
+            text += (
+                f" A nonlinear V-only probe gains as much ({fmt.signed(nonlinear[0])}): the gain "
+                "is in the probe, not in generated touch."
+            )
+    return text
+
+
+def gain_within_uncertainty(cheap_value: float, dear_lo: float, dear_hi: float) -> bool:
+    """Whether the cheaper setting's value lies inside the dearer setting's interval: then the
+    gain the dearer setting buys is not measurable at its precision. False without an interval.
+    """
+    if any(fmt.is_missing(x) for x in (cheap_value, dear_lo, dear_hi)):
+        return False
+    return bool(dear_lo <= cheap_value <= dear_hi)
+
+
+def ceiling_verdict(
+    score: float, lo: float, hi: float, ceiling: float, *, what: str = "V-only"
+) -> str:
+    """Where a V-only policy's success sits against the vision-only ceiling (the expected
+    success of the best force given what vision sees). A point estimate above the ceiling with
+    an interval reaching below it is sampling noise; an interval wholly above it is a defect."""
+    s = fmt.with_ci(score, lo, hi)
+    c = fmt.number(ceiling)
+    if fmt.is_missing(score) or fmt.is_missing(ceiling):
+        return f"{what}: not computed."
+    if not fmt.is_missing(lo) and lo > ceiling:
+        return (
+            f"UNEXPECTED: {what} success {s} lies above the vision-only ceiling {c}: vision "
+            "must see more than the ceiling assumes."
+        )
+    if score > ceiling:
+        return (
+            f"{what} success {s} is at the vision-only ceiling {c}: its point is above it by "
+            "sampling noise only (the interval reaches below)."
+        )
+    if fmt.is_missing(hi) or hi >= ceiling:
+        return f"{what} success {s} reaches the vision-only ceiling {c} within its interval."
+    return f"{what} success {s} stays below the vision-only ceiling {c}."
+
+
+def proportion_interval(
+    successes: int, n: int, z: float = 1.959963984540054
+) -> tuple[float, float]:
+    """Wilson score interval of a proportion (95 % by default). Unlike a bootstrap, it does not
+    collapse to a point when every trial succeeds (or fails): 128/128 gives [0.971, 1]."""
+    if n <= 0:
+        return math.nan, math.nan
+    p = successes / n
+    den = 1 + z * z / n
+    centre = (p + z * z / (2 * n)) / den
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / den
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def degenerate_interval_note(lo: float, hi: float, n: int) -> str:
+    """Why an interval has no width, or "" if it has one."""
+    if fmt.is_missing(lo) or fmt.is_missing(hi) or lo != hi:
+        return ""
+    return (
+        f"the bootstrap interval has no width: every one of the {n} resampled rows has the same "
+        "outcome (all successes or all failures); the Wilson interval gives its real width"
+    )
+
+
+def extreme_flag(
+    metric: str, v: float, vt: float, lo: float, hi: float, baseline: float = float("nan")
+) -> str:
+    """Why a comparison's numbers are extreme, or "": an R² below −1 (the probe predicts worse
+    than the train mean by more than the target's variance: too few rows for its features, or
+    test rows outside the train range), or a Δ interval reaching beyond ±1 (wider than the
+    metric's own range: Δ then measures one probe's failure, not what touch adds), or a V
+    accuracy below `baseline`, the majority-class rate."""
+    reasons = []
+    if metric == "r2":
+        low = [name for name, x in (("V", v), ("V+T", vt)) if not fmt.is_missing(x) and x < -1]
+        if low:
+            reasons.append(
+                f"R² of {' and '.join(low)} below −1: worse than predicting the train mean"
+            )
+    if any(not fmt.is_missing(x) and abs(x) > 1 for x in (lo, hi)):
+        reasons.append("Δ interval beyond ±1, wider than the metric's range")
+    if metric == "accuracy" and not fmt.is_missing(baseline) and not fmt.is_missing(v):
+        if v < baseline:
+            reasons.append(
+                f"V accuracy {fmt.number(v)} below the majority-class rate "
+                f"{fmt.number(baseline)}: the V probe does worse than always guessing the "
+                "commonest train class"
+            )
+    return "; ".join(reasons)
+
+
+def still_falling(steps, losses, *, tail: float = 0.2, rel: float = 0.02) -> bool:
+    """Whether a loss curve still falls at its end: over the last `tail` of its steps the
+    validation loss dropped by more than `rel` of its value there (training stopped before it
+    levelled off). False for a curve of fewer than 3 points."""
+    import numpy as np
+
+    s, y = np.asarray(steps, dtype=float), np.asarray(losses, dtype=float)
+    keep = np.isfinite(s) & np.isfinite(y)
+    s, y = s[keep], y[keep]
+    if s.size < 3:
+        return False
+    order = np.argsort(s, kind="stable")
+    s, y = s[order], y[order]
+    start = s[-1] - tail * (s[-1] - s[0])
+    before = y[s <= start]
+    ref = before[-1] if before.size else y[0]
+    return bool(ref - y[-1] > rel * abs(y[-1]))
+
+
+def curve_note(name: str, steps, losses) -> str:
+    """The sentence a training-curve figure carries about its end."""
+    if still_falling(steps, losses):
+        return f"{name}: validation loss still falling at the last step (more steps would lower it)"
+    return ""

@@ -1,0 +1,176 @@
+"""The findings page: the headline results of every evidence branch in one table, each with
+its control beside it and a verdict sentence generated from the numbers (`claims`).
+
+One row per finding: probes (per family, the comparison whose controls were run: V, V+T, Δ
+with its CI, Δ_ctrl with touch permuted across rows, and the criterion), generation (per corpus × target at the
+reference cell: Δ_gen over seeds against Δ_real, the shuffled-pair control and the nonlinear
+V-only baseline), policy (V+T against V with the null-touch control; V-only against the
+vision-only ceiling). Pure functions over the stages' summary edges; none reads files.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+import pandas as pd
+
+from tacgen_lib.report import claims
+from tacgen_lib.report import format as fmt
+from tacgen_lib.report.generate import cross_seed_interval, reference_cell_rows
+from tacgen_lib.report_pages import category
+
+__all__ = ["FINDINGS_COLUMNS", "probe_findings", "generation_findings", "policy_findings"]
+
+FINDINGS_COLUMNS = ["evidence", "question", "result", "control", "verdict", "page"]
+
+
+def _input_label(r: Mapping) -> str:
+    if r["input"] == "aligned":
+        return f"aligned heads (seed {int(r['align_seed'])})"
+    return "raw features"
+
+
+def _flag(r: Mapping) -> str:
+    flag = claims.extreme_flag(
+        r["metric"], r["v_score"], r["vt_score"], r["ci_low"], r["ci_high"],
+        r.get("baseline_score", np.nan),
+    )  # fmt: skip
+    return f" ⚠ {flag}." if flag else ""
+
+
+def probe_findings(summary: pd.DataFrame) -> pd.DataFrame:
+    """Per probe family and input, the headline comparison (concat fusion, the heads' tactile
+    variant, controls run; the first alignment seed), with its controls' largest Δ."""
+    s = summary[
+        (summary["control"] == "none")
+        & (summary["fusion"] == "concat")
+        & (summary["t_variant"] == summary["heads_variant"])
+        & summary["delta_ctrl"].notna()
+        & (summary["status"] == "ok")
+    ].copy()
+    s["_a"] = s["align_seed"].fillna(-1)
+    s = s.sort_values(["null_corpus", "family", "input", "_a"], kind="stable")
+    s = s.drop_duplicates(["family", "input"], keep="first")
+    rows = []
+    for r in s.to_dict("records"):
+        null = bool(r["null_corpus"])
+        rows.append(
+            {
+                "evidence": "probe",
+                "question": f"{r['family']}: does touch add to vision on {r['target']}? "
+                f"({r['corpus']}, {_input_label(r)}, {r['metric']})",
+                "result": f"V {fmt.number(r['v_score'])} → V+T {fmt.number(r['vt_score'])}; "
+                f"Δ {fmt.with_ci(r['delta'], r['ci_low'], r['ci_high'], sign=True)}",
+                "control": f"touch permuted across rows: Δ_ctrl {fmt.signed(r['delta_ctrl'])}"
+                + ("; null corpus: touch carries no label" if null else ""),
+                "verdict": claims.probe_verdict(
+                    r["delta"],
+                    r["ci_low"],
+                    r["ci_high"],
+                    null_corpus=null,
+                    criterion_met=None
+                    if fmt.is_missing(r["criterion_met"])
+                    else bool(r["criterion_met"]),
+                    delta_ctrl=r["delta_ctrl"],
+                )
+                + _flag(r),
+                "page": category("Probes"),
+            }
+        )
+    return pd.DataFrame(rows, columns=FINDINGS_COLUMNS)
+
+
+def _first_seed(rows: pd.DataFrame, col: str = "delta") -> tuple[float, float, float]:
+    """(Δ, lo, hi) of the first generator seed with its fixed-test bootstrap CI."""
+    if rows is None or not len(rows):
+        return (np.nan, np.nan, np.nan)
+    r = rows.sort_values("seed", kind="stable").iloc[0]
+    if col == "delta":
+        return (float(r["delta"]), float(r["ci_low"]), float(r["ci_high"]))
+    return tuple(float(r[c]) for c in (col, "ci_low_vs_nonlinear", "ci_high_vs_nonlinear"))
+
+
+def generation_findings(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
+    """Per corpus × target at the reference sampling cell: generated touch against real touch,
+    with the shuffled-pair control and the nonlinear V-only baseline.
+
+    The verdict reads the first generator seed's fixed-test bootstrap CIs (they carry the test
+    rows' sampling noise; real touch and the baselines do not depend on the generator seed); the
+    mean over seeds with its t-interval, which carries only the seeds' spread, is shown beside."""
+    s = reference_cell_rows(summary, ref)
+    rows = []
+    for (corpus, target), g in s.groupby(["corpus", "target"], sort=True):
+        by = {k: v for k, v in g.groupby("input")}
+        if not {"t_gen", "t_real"} <= set(by):
+            continue
+        gen, real = _first_seed(by["t_gen"]), _first_seed(by["t_real"])
+        shuffled = _first_seed(by.get("t_gen_shuffled"))
+        nonlin = _first_seed(by.get("v_nonlinear"))
+        seeds = cross_seed_interval(by["t_gen"]["delta"].to_numpy())
+        n = int(g["seed"].nunique())
+        first = int(g["seed"].min())
+        rows.append(
+            {
+                "evidence": "generation",
+                "question": f"does touch generated from RGB add to vision on {target}? "
+                f"({corpus}, {g['metric'].iloc[0]})",
+                "result": f"Δ_gen {fmt.with_ci(*gen, sign=True)} (seed {first}; mean over "
+                f"{n} seeds {fmt.with_ci(*seeds, sign=True)}); "
+                f"Δ_real {fmt.with_ci(*real, sign=True)}",
+                "control": f"shuffled pairs Δ {fmt.with_ci(*shuffled, sign=True)}; nonlinear "
+                f"V only Δ {fmt.with_ci(*nonlin, sign=True)}",
+                "verdict": claims.generation_verdict(gen, real, nonlin),
+                "page": category("Generation"),
+            }
+        )
+    return pd.DataFrame(rows, columns=FINDINGS_COLUMNS)
+
+
+def policy_findings(
+    summary: pd.DataFrame, deltas: pd.DataFrame, sweep: pd.DataFrame
+) -> pd.DataFrame:
+    """V+T (aligned) against V on the same held-out episodes with the null-touch control, and
+    the V-only policy against the vision-only ceiling."""
+    d = deltas.set_index("condition")
+    s = summary.drop_duplicates("condition").set_index("condition")
+    rows = []
+    if "vt_aligned" in d.index and "v" in s.index:
+        r, v, vt = d.loc["vt_aligned"], s.loc["v"], s.loc["vt_aligned"]
+        null = d.loc["vt_null"] if "vt_null" in d.index else None
+        rows.append(
+            {
+                "evidence": "policy",
+                "question": "does touch let a grasping policy succeed where vision alone "
+                f"cannot? ({int(r['n_episodes'])} held-out episodes)",
+                "result": f"success V {fmt.with_ci(v['success'], v['ci_low'], v['ci_high'])} → "
+                f"V+T {fmt.with_ci(vt['success'], vt['ci_low'], vt['ci_high'])}; Δ "
+                f"{fmt.with_ci(r['delta'], r['ci_low'], r['ci_high'], sign=True)}",
+                "control": "another episode's touch (vt_null) Δ "
+                + (
+                    fmt.with_ci(null["delta"], null["ci_low"], null["ci_high"], sign=True)
+                    if null is not None
+                    else fmt.MISSING
+                ),
+                "verdict": claims.delta_verdict(
+                    r["delta"], r["ci_low"], r["ci_high"], what="Touch"
+                ),
+                "page": category("Policy"),
+            }
+        )
+    if "v" in s.index and len(sweep):
+        v = s.loc["v"]
+        ceiling = float(sweep["vision_ceiling"].iloc[0])
+        rows.append(
+            {
+                "evidence": "policy",
+                "question": "is the V-only policy limited by what vision sees, not by capacity?",
+                "result": f"V-only success {fmt.with_ci(v['success'], v['ci_low'], v['ci_high'])}; "
+                f"best of the capacity sweep {fmt.number(sweep['success'].max())}",
+                "control": f"vision-only ceiling {fmt.number(ceiling)} (expected success of the "
+                "best force given the visible size)",
+                "verdict": claims.ceiling_verdict(v["success"], v["ci_low"], v["ci_high"], ceiling),
+                "page": category("Policy"),
+            }
+        )
+    return pd.DataFrame(rows, columns=FINDINGS_COLUMNS)

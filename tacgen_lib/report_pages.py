@@ -1,0 +1,38 @@
+"""The report's pages (Snakemake report categories) in the paper's order.
+
+Snakemake's viewer sorts categories as text, so each carries its position as a two-digit
+prefix (`category`): the reader meets the findings first, then corpus → preprocessing →
+features → alignment → probes → robustness → generation → policy → cost → provenance. Kept
+apart from `tacgen_lib.report` (which loads matplotlib) because the DAG reads it at parse time.
+"""
+
+from __future__ import annotations
+
+__all__ = ["PAGES", "category", "page_of"]
+
+PAGES = (
+    "Findings",
+    "Corpus",
+    "Preprocessing",
+    "Features",
+    "Alignment",
+    "Probes",
+    "Robustness",
+    "Generation",
+    "Policy",
+    "Cost of accuracy",
+    "Provenance",
+)
+
+
+def category(page: str) -> str:
+    """The report category of `page`: its position in `PAGES` and its name ("01 Findings")."""
+    if page not in PAGES:
+        raise KeyError(f"report page {page!r} is not one of {', '.join(PAGES)}")
+    return f"{PAGES.index(page) + 1:02d} {page}"
+
+
+def page_of(category_name: str) -> str:
+    """The page name of a category ("06 Probes" -> "Probes")."""
+    head, _, rest = category_name.partition(" ")
+    return rest if head.isdigit() and rest else category_name

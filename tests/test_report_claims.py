@@ -1,0 +1,293 @@
+"""The report's words and numbers: one formatter (tacgen_lib.report.format), one function per
+claim (tacgen_lib.report.claims), the findings page built from them, and the figure check that
+keeps every figure readable in the viewer. Edge cases: a tie, a CI touching 0, a single point,
+a degenerate interval, values that round to zero."""
+
+from __future__ import annotations
+
+import math
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+from scipy.stats import binomtest
+
+from tacgen_lib.cost.pareto import knob_sentence, marginal_table
+from tacgen_lib.policy import oracle
+from tacgen_lib.policy.settings import PolicySettings
+from tacgen_lib.report import claims, findings
+from tacgen_lib.report import format as fmt
+from tacgen_lib.report.tables import to_html
+from tacgen_lib.report.write import MAX_FIGURE_PX, figure_problems, panel_grid, write_figure
+from tacgen_lib.report_pages import PAGES, category, page_of
+
+# ----------------------------------------------------------------------------- format
+
+
+def test_numbers_have_three_decimals_and_no_negative_zero():
+    assert fmt.number(0.123456) == "0.123"
+    assert fmt.number(-0.0004) == "0.000"  # rounds to zero: no "-0.000"
+    assert fmt.signed(-0.0004) == "+0.000"
+    assert fmt.signed(0.0123) == "+0.012" and fmt.signed(-0.03) == "-0.030"
+    assert fmt.number(16) == "16" and fmt.number(np.int64(16)) == "16"
+    assert fmt.number(math.nan) == fmt.MISSING and fmt.number(None) == fmt.MISSING
+    assert fmt.number(pd.NA) == fmt.MISSING
+    assert fmt.number(math.inf) == "∞"
+
+
+def test_a_value_without_an_interval_says_why():
+    assert fmt.with_ci(0.5, 0.4, 0.6) == "0.500 [0.400, 0.600]"
+    assert fmt.with_ci(0.05, -0.01, 0.1, sign=True) == "+0.050 [-0.010, +0.100]"
+    assert fmt.with_ci(0.05, math.nan, math.nan, sign=True) == "+0.050 (no interval: one point)"
+    assert fmt.with_ci(math.nan, 0.0, 1.0) == fmt.MISSING
+
+
+def test_count_columns_are_integers_and_score_columns_stay_scores():
+    counts = pd.Series([16.0, 8.0, math.nan])
+    assert fmt.column_cells(counts) == ["16", "8", fmt.MISSING]
+    scores = pd.Series([1.0, 0.0, 1.0])  # 0/1 scores stay scores
+    assert fmt.column_cells(scores) == ["1.000", "0.000", "1.000"]
+    assert fmt.column_cells(pd.Series([True, False])) == ["yes", "no"]
+
+
+def test_class_labels_sort_by_value():
+    assert fmt.numeric_order(["2000.0", "500.0", "5000.0"]) == ["500.0", "2000.0", "5000.0"]
+    assert fmt.numeric_order([5000, 500, 2000]) == [500, 2000, 5000]
+    assert fmt.numeric_order(["soft", "hard"]) == ["hard", "soft"]
+
+
+def test_tables_write_no_nan_and_footnote_the_dash():
+    table = pd.DataFrame({"rows": [16.0, math.nan], "Δ": [-0.0001, 0.25], "score": [0.5, 0.12345]})
+    page = to_html(table, title="t", missing="not run for this row")
+    assert "nan" not in page.lower().replace("name", "")
+    assert ">16<" in page and "16.0" not in page
+    assert "+0.000" in page and "-0.000" not in page and "+0.250" in page
+    assert f"{fmt.MISSING}: not run for this row." in page
+    assert "0.123" in page and "0.12345" not in page
+
+
+@given(st.floats(allow_nan=True, allow_infinity=True, width=64))
+def test_every_real_formats_without_nan_or_negative_zero(x):
+    for text in (fmt.number(x), fmt.signed(x), fmt.cell(x)):
+        assert "nan" not in text and text != "-0.000"
+
+
+# ----------------------------------------------------------------------------- claims
+
+
+@pytest.mark.parametrize(
+    ("lo", "hi", "side", "words"),
+    [
+        (0.01, 0.2, "above", "helps"),
+        (-0.2, -0.01, "below", "hurts"),
+        (0.0, 0.2, "touches", "touches 0"),  # a CI touching 0 does not exclude it
+        (-0.2, 0.0, "touches", "touches 0"),
+        (-0.1, 0.1, "spans", "contains 0"),
+        (0.0, 0.0, "touches", "touches 0"),  # a tie
+        (math.nan, math.nan, "none", "no interval"),  # a single point
+    ],
+)
+def test_delta_verdict_reads_the_interval(lo, hi, side, words):
+    assert claims.interval_side(lo, hi) == side
+    assert words in claims.delta_verdict(0.05 if side != "below" else -0.05, lo, hi)
+
+
+def test_probe_verdict_reads_the_controls_and_the_null_corpus():
+    met = claims.probe_verdict(
+        0.3, 0.2, 0.4, null_corpus=False, criterion_met=True, delta_ctrl=0.01
+    )
+    assert "criterion met" in met and "helps" in met
+    not_met = claims.probe_verdict(
+        0.3, 0.2, 0.4, null_corpus=False, criterion_met=False, delta_ctrl=0.35
+    )
+    assert "criterion not met" in not_met
+    null_ok = claims.probe_verdict(0.01, -0.05, 0.07, null_corpus=True, criterion_met=False,
+                                   delta_ctrl=0.0)  # fmt: skip
+    assert null_ok.startswith("As expected on the null corpus")
+    null_bad = claims.probe_verdict(0.2, 0.1, 0.3, null_corpus=True, criterion_met=True,
+                                    delta_ctrl=0.0)  # fmt: skip
+    assert null_bad.startswith("UNEXPECTED")
+
+
+def test_generation_verdict_credits_the_probe_when_a_nonlinear_v_gains_as_much():
+    text = claims.generation_verdict((0.1, 0.05, 0.15), (0.3, 0.2, 0.4), (0.12, 0.06, 0.18))
+    assert text.startswith("Generated touch helps") and "gain is in the probe" in text
+    text = claims.generation_verdict((0.0, -0.05, 0.05), (0.3, 0.2, 0.4), (0.0, 0.0, 0.0))
+    assert text.startswith("Generated touch does not help") and "real touch does" in text
+    one_seed = claims.generation_verdict((0.1, math.nan, math.nan), (0.3, 0.2, 0.4), (0, 0, 0))
+    assert one_seed.startswith("Generated touch does not help") and "one point" in one_seed
+
+
+def test_ceiling_verdict_never_calls_a_point_above_the_ceiling_a_breach_unless_its_ci_is():
+    assert "below the vision-only ceiling" in claims.ceiling_verdict(0.3, 0.22, 0.36, 0.383)
+    noise = claims.ceiling_verdict(0.430, 0.352, 0.516, 0.383)
+    assert "sampling noise" in noise and "UNEXPECTED" not in noise
+    assert claims.ceiling_verdict(0.6, 0.5, 0.7, 0.383).startswith("UNEXPECTED")
+    assert "within its interval" in claims.ceiling_verdict(0.36, 0.3, 0.4, 0.383)
+
+
+@pytest.mark.parametrize(("k", "n"), [(0, 10), (10, 10), (128, 128), (55, 128), (1, 1)])
+def test_wilson_interval_matches_scipy(k, n):
+    lo, hi = claims.proportion_interval(k, n)
+    ref = binomtest(k, n).proportion_ci(confidence_level=0.95, method="wilson")
+    # scipy's z comes from its own normal quantile: equal within float rounding
+    np.testing.assert_allclose([lo, hi], [ref.low, ref.high], rtol=1e-9, atol=1e-12)
+    assert hi > lo  # never degenerate, unlike a bootstrap of all-successes
+
+
+def test_degenerate_interval_says_why():
+    assert "no width" in claims.degenerate_interval_note(1.0, 1.0, 128)
+    assert claims.degenerate_interval_note(0.9, 1.0, 128) == ""
+
+
+def test_extreme_values_are_flagged_with_their_reason():
+    assert "below −1" in claims.extreme_flag("r2", -28.3, 0.5, -3.0, 1.0)
+    assert "beyond ±1" in claims.extreme_flag("r2", -0.87, 0.94, 1.35, 2.51)
+    assert "majority-class" in claims.extreme_flag("accuracy", 0.43, 0.73, 0.2, 0.4, 0.5)
+    assert claims.extreme_flag("r2", 0.4, 0.9, 0.42, 0.61) == ""
+
+
+def test_still_falling_reads_the_end_of_a_curve():
+    steps = np.arange(0, 501, 50)
+    assert claims.still_falling(steps, 1.0 / (1 + steps / 50))  # still dropping fast
+    assert not claims.still_falling(steps, 0.5 + np.exp(-steps / 20))  # flat at the end
+    assert not claims.still_falling([0, 1], [1.0, 0.5])  # too short to say
+
+
+# the cost page: the knob sentence and the marginal table use one test ("within uncertainty")
+def _points(rows):
+    cols = ["label", "setting", "is_default", "value", "ci_low", "ci_high", "wall_s"]
+    p = pd.DataFrame(rows, columns=cols)
+    return p.assign(knob="steps", metric="Δ", direction="higher")
+
+
+@pytest.mark.parametrize(
+    "rows",
+    [
+        # the cheaper 5-step value inside the dearer default's interval, not the reverse
+        [("5", 5, False, 0.10, 0.02, 0.18, 60.0), ("25", 25, True, 0.14, 0.08, 0.20, 200.0)],
+        # the reverse: the dearer value inside the cheaper point's wide interval only
+        [("5", 5, False, 0.10, 0.00, 0.30, 60.0), ("25", 25, True, 0.25, 0.22, 0.28, 200.0)],
+    ],
+)
+def test_cost_sentence_and_marginal_table_agree(rows):
+    p = _points(rows)
+    sentence = knob_sentence(p)
+    marginal = marginal_table(p)
+    within = bool(marginal["within_uncertainty"].iloc[0])
+    cheap, dear = p.iloc[0], p.iloc[1]
+    assert within == claims.gain_within_uncertainty(cheap["value"], dear["ci_low"], dear["ci_high"])
+    assert ("inside the interval of 25" in sentence) == within
+    assert ("is within the default's uncertainty" in sentence) == within
+
+
+# ----------------------------------------------------------------------------- ceiling
+
+
+def test_vision_ceiling_is_the_expected_success_of_the_best_force_given_size():
+    s = PolicySettings(ceiling_draws=600)
+    c = oracle.vision_ceiling_success(s, seed=5, n_sizes=24)
+    assert 0.0 < c < 1.0
+    assert c == oracle.vision_ceiling_success(s, seed=5, n_sizes=24)  # same computation twice
+    # the best force given the size beats any single force for every size, so in expectation
+    # the ceiling beats the policy that grips every object with one force
+    sizes = np.linspace(*s.size_range, 24)
+    one_force = oracle.vision_ceiling_force(s, float(np.mean(s.size_range)), seed=5)
+    p_one = []
+    for size in sizes:
+        lo, hi = oracle.invisible_prior(s, float(size), s.ceiling_draws, seed=5)
+        p_one.append(np.mean((lo <= one_force) & (one_force <= hi)))
+    assert c >= float(np.mean(p_one)) - 0.05
+
+
+# ----------------------------------------------------------------------------- findings
+
+
+def _probe_summary():
+    base = dict(
+        control="none", fusion="concat", t_variant="clip128", heads_variant="clip128",
+        status="ok", corpus="sim_paired", metric="accuracy", align_seed=math.nan, input="raw",
+    )  # fmt: skip
+    return pd.DataFrame(
+        [
+            {**base, "family": "hardness", "target": "hardness", "null_corpus": False,
+             "v_score": 0.45, "vt_score": 0.75, "delta": 0.30, "ci_low": 0.22, "ci_high": 0.37,
+             "delta_ctrl": 0.01, "criterion_met": True},
+            {**base, "family": "hardness_null", "target": "hardness", "null_corpus": True,
+             "corpus": "sim_null", "v_score": 0.48, "vt_score": 0.49, "delta": 0.01,
+             "ci_low": -0.05, "ci_high": 0.07, "delta_ctrl": 0.01, "criterion_met": False},
+            # no controls run on this one: not a finding
+            {**base, "family": "hardness", "target": "hardness", "null_corpus": False,
+             "fusion": "max", "v_score": 0.45, "vt_score": 0.7, "delta": 0.25, "ci_low": 0.2,
+             "ci_high": 0.3, "delta_ctrl": math.nan, "criterion_met": None},
+        ]
+    )  # fmt: skip
+
+
+def test_findings_rows_carry_result_control_verdict_and_page():
+    rows = findings.probe_findings(_probe_summary())
+    assert list(rows.columns) == findings.FINDINGS_COLUMNS
+    assert len(rows) == 2  # one per family with its controls; the max fusion is not a finding
+    main = rows.iloc[0]
+    assert "Δ +0.300 [+0.220, +0.370]" in main["result"]
+    assert "criterion met" in main["verdict"] and main["page"] == category("Probes")
+    assert rows.iloc[1]["verdict"].startswith("As expected on the null corpus")
+
+
+def test_policy_findings_use_the_ceiling_claim():
+    summary = pd.DataFrame(
+        [
+            {"condition": "v", "success": 0.43, "ci_low": 0.35, "ci_high": 0.52},
+            {"condition": "vt_aligned", "success": 1.0, "ci_low": 1.0, "ci_high": 1.0},
+        ]
+    )
+    deltas = pd.DataFrame(
+        [
+            {"condition": "vt_aligned", "delta": 0.57, "ci_low": 0.48, "ci_high": 0.65,
+             "n_episodes": 128},
+            {"condition": "vt_null", "delta": -0.07, "ci_low": -0.16, "ci_high": 0.02,
+             "n_episodes": 128},
+        ]
+    )  # fmt: skip
+    sweep = pd.DataFrame({"success": [0.38, 0.44], "vision_ceiling": [0.363, 0.363]})
+    rows = findings.policy_findings(summary, deltas, sweep)
+    assert rows["verdict"].iloc[0].startswith("Touch helps")
+    assert rows["verdict"].iloc[1] == claims.ceiling_verdict(0.43, 0.35, 0.52, 0.363)
+
+
+# ----------------------------------------------------------------------------- pages, figures
+
+
+def test_pages_are_numbered_in_the_papers_order():
+    names = [category(p) for p in PAGES]
+    assert names == sorted(names)  # the viewer's text sort keeps the paper's order
+    assert names[0] == "01 Findings" and page_of("06 Probes") == "Probes"
+    with pytest.raises(KeyError, match="not one of"):
+        category("Results")
+
+
+def test_a_figure_the_viewer_cannot_show_is_refused(tmp_path):
+    fig, ax = plt.subplots(figsize=(14, 4))
+    ax.set_title("too wide", fontsize=10)
+    assert "larger than the viewer" in figure_problems(fig)[0]
+    with pytest.raises(ValueError, match="wide.png: figure not readable"):
+        write_figure(fig, tmp_path / "wide.png")
+    assert not (tmp_path / "wide.png").exists()  # nothing half-written
+    fig, ax = plt.subplots(figsize=(5, 3))
+    ax.text(0.5, 0.5, "tiny", fontsize=5)
+    assert "text below 8 pt" in figure_problems(fig)[0]
+    plt.close(fig)
+
+
+@given(st.integers(1, 12), st.floats(2.0, 6.0), st.floats(1.8, 4.0))
+def test_panel_grid_fits_the_viewer_or_says_to_split(n, w, h):
+    try:
+        nrows, ncols, (fw, fh) = panel_grid(n, (w, h))
+    except ValueError as err:
+        assert "split them" in str(err)
+        return
+    assert nrows * ncols >= n
+    assert fw * 110 <= MAX_FIGURE_PX[0] + 1e-6 and fh * 110 <= MAX_FIGURE_PX[1] + 1e-6
