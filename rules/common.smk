@@ -6,6 +6,7 @@ from pathlib import Path
 
 from tacgen_lib.io.config import load_yaml, validate_config
 from tacgen_lib.io.imports import code_inputs
+from tacgen_lib.report_pages import category
 
 #: this workflow's own tree (the repository): where its schema, scripts and library live, also
 #: when another workflow uses it as a module (`workflow.basedir` is then that workflow's

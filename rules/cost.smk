@@ -229,20 +229,22 @@ rule cost_of_accuracy:
         html=report(
             "results/report/cost_of_accuracy.html",
             caption="../workflow/report/cost_of_accuracy.rst",
-            category="Cost of accuracy",
+            category=category("Cost of accuracy"),
             labels={"table": "knobs: what each setting buys"},
         ),
         marginal=report(
             "results/report/cost_marginal.html",
             caption="../workflow/report/cost_marginal.rst",
-            category="Cost of accuracy",
+            category=category("Cost of accuracy"),
             labels={"table": "marginal accuracy per extra minute"},
         ),
         figure=report(
-            "results/report/cost_of_accuracy.png",
+            directory("results/report/cost_of_accuracy"),
+            patterns=["{knob}.png"],
             caption="../workflow/report/cost_of_accuracy_figure.rst",
-            category="Cost of accuracy",
-            labels={"figure": "accuracy against seconds"},
+            category=category("Cost of accuracy"),
+            subcategory="Figures: accuracy against seconds",
+            labels={"knob": "{knob}"},
         ),
         tsv="results/report/cost_of_accuracy.tsv",
     log:

@@ -3,6 +3,7 @@
 FEAT = config["features"]
 PRETRAIN = FEAT["pretrain"]
 MODALITIES = ["vision", "tactile"]
+
 for _corpus in sorted(CORPORA):
     TARGETS.append(feature_edge(_corpus, "vision"))
     EDGES.append(feature_edge(_corpus, "vision"))
@@ -23,12 +24,10 @@ rule pretrain_backbone:
     output:
         weights="results/features/backbones/{modality}.pt",
         curve="results/features/backbones/{modality}_curve.parquet",
-        figure=report(
+        figure=features_report_item(
             "results/report/features/{modality}_pretrain_curve.png",
-            caption="../workflow/report/pretrain_curve.rst",
-            category="Features",
-            subcategory="Backbone pretraining",
-            labels={"modality": "{modality}", "figure": "DINO training curve"},
+            "../workflow/report/pretrain_curve.rst",
+            {"modality": "{modality}", "figure": "DINO training curve"},
         ),
     log:
         "results/logs/pretrain_backbone/{modality}.log",
@@ -118,12 +117,10 @@ rule pretrained_vs_random:
         code=imports_of("pretrained_vs_random"),
     output:
         table="results/features/pretrained_vs_random.parquet",
-        html=report(
+        html=features_report_item(
             "results/features/pretrained_vs_random.html",
-            caption="../workflow/report/pretrained_vs_random.rst",
-            category="Features",
-            subcategory="Backbone pretraining",
-            labels={"table": "pretrained vs random init"},
+            "../workflow/report/pretrained_vs_random.rst",
+            {"table": "pretrained vs random init"},
         ),
     log:
         "results/logs/pretrained_vs_random.log",

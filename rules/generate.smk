@@ -187,7 +187,7 @@ rule aggregate_generate:
             name: report(
                 f"{GENERATE_REPORT}/{name}.{ext}",
                 caption=f"../workflow/report/generate_{name}.rst",
-                category="Generation",
+                category=category("Generation"),
                 subcategory="Figures" if ext == "png" else "Tables",
                 labels={"item": name},
             )

@@ -167,6 +167,7 @@ rule aggregate_policy:
     input:
         rollouts=policy_rollouts(),
         benchmarks=policy_rollouts("results/benchmarks/rollout_policy/{cell}/{k}.tsv"),
+        train_benchmarks=policy_train_benchmarks(),
         collect=[
             p.replace(f"{POLICY_DIR}/episodes/", "results/benchmarks/collect_demos/")
             .replace("shard~", "")
@@ -184,49 +185,49 @@ rule aggregate_policy:
         success=report(
             f"{POLICY_REPORT}/success.html",
             caption="../workflow/report/policy_success.rst",
-            category="Policy",
+            category=category("Policy"),
             subcategory="Success",
             labels={"table": "success and Δ vs V"},
         ),
         sweep_table=report(
             f"{POLICY_REPORT}/sweep.html",
             caption="../workflow/report/policy_sweep.rst",
-            category="Policy",
+            category=category("Policy"),
             subcategory="Capacity sweep",
             labels={"table": "V-only capacity sweep"},
         ),
         regression_table=report(
             f"{POLICY_REPORT}/regression.html",
             caption="../workflow/report/policy_regression.rst",
-            category="Policy",
+            category=category("Policy"),
             subcategory="Grip-force regression",
             labels={"table": "grip-force regression"},
         ),
         sweep_figure=report(
             f"{POLICY_REPORT}/sweep.png",
             caption="../workflow/report/policy_sweep.rst",
-            category="Policy",
+            category=category("Policy"),
             subcategory="Capacity sweep",
-            labels={"figure": "V-only capacity sweep"},
+            labels={"figure": "V-only success against width, with the ceiling"},
         ),
         failures_figure=report(
             f"{POLICY_REPORT}/failures.png",
             caption="../workflow/report/policy_failures.rst",
-            category="Policy",
+            category=category("Policy"),
             subcategory="Success",
             labels={"figure": "failure modes"},
         ),
         filmstrip=report(
             f"{POLICY_REPORT}/filmstrip.png",
             caption="../workflow/report/policy_filmstrip.rst",
-            category="Policy",
+            category=category("Policy"),
             subcategory="Episodes",
             labels={"figure": "filmstrip"},
         ),
         cost=report(
             f"{POLICY_REPORT}/cost.html",
             caption="../workflow/report/policy_cost.rst",
-            category="Cost of accuracy",
+            category=category("Cost of accuracy"),
             subcategory="Policy rollouts",
             labels={"table": "policy rollout cost"},
         ),

@@ -64,6 +64,15 @@ def policy_rollouts(pattern="{d}/rollouts/{cell}/shard~{k}.parquet"):
     ]
 
 
+def policy_train_benchmarks():
+    """The benchmark files of every learned cell's training job (the references train none)."""
+    return [
+        f"results/benchmarks/train_policy/{policy_cell_name(c)}.tsv"
+        for c in all_cells(POLICY_SETTINGS)
+        if c[0] not in ("oracle", "vision_ceiling")
+    ]
+
+
 def policy_weights(wildcards):
     if wildcards.condition in ("oracle", "vision_ceiling"):
         return []

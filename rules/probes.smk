@@ -12,7 +12,7 @@ include: "probes_common.smk"
 
 TARGETS += ["results/probes/summary.parquet"]
 TARGETS += expand("{d}/{t}.html", d=PROBE_REPORT, t=PROBE_TABLES)
-TARGETS += expand("{d}/{f}.png", d=PROBE_REPORT, f=PROBE_FIGURES)
+TARGETS += expand("{d}/{f}", d=PROBE_REPORT, f=PROBE_FIGURES)  # one PNG per family
 EDGES += [path for edge in PROBE_EDGES for path in probe_job_edges(edge)]
 EDGES += expand("results/probes/{t}.parquet", t=["summary", "sweep", "confusion"])
 
@@ -79,10 +79,8 @@ rule aggregate_probes:
         ),
         controls=probe_report_item("controls", "html", "controls", "controls"),
         fusions=probe_report_item("fusions", "html", "fusions", "fusion variants"),
-        forest=probe_report_item("forest", "png", "forest", "forest plot"),
-        confusion_png=probe_report_item(
-            "confusion", "png", "confusion", "confusion matrices"
-        ),
+        forest=probe_report_dir("forest", "forest plot"),
+        confusion_png=probe_report_dir("confusion", "confusion matrices"),
     log:
         "results/logs/aggregate_probes.log",
     benchmark:

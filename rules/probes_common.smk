@@ -88,11 +88,23 @@ def probe_raw_inputs(wildcards):
     return {k: v for k, v in probe_inputs(wildcards).items() if k != "aligned"}
 
 
-def probe_report_item(name, ext, caption, label, category="Probes"):
+def probe_report_dir(name, label):
+    """A directory of figures, one per probe family, each its own report item."""
+    return report(
+        directory(f"{PROBE_REPORT}/{name}"),
+        patterns=["{family}.png"],
+        caption=f"../workflow/report/probe_{name}.rst",
+        category=category("Probes"),
+        subcategory=f"Figures: {label}",
+        labels={"family": "{family}"},
+    )
+
+
+def probe_report_item(name, ext, caption, label, page="Probes"):
     return report(
         f"{PROBE_REPORT}/{name}.{ext}",
         caption=f"../workflow/report/probe_{caption}.rst",
-        category=category,
+        category=category(page),
         subcategory="Figures" if ext == "png" else "Tables",
         labels={"item": label},
     )

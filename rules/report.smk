@@ -4,6 +4,7 @@
 localrules:
     corpus_examples,
     edge_manifest,
+    findings,
 
 
 TARGETS += ["results/report/edge_manifest.html"]
@@ -21,16 +22,17 @@ rule corpus_examples:
         examples=report(
             "results/report/corpus/{corpus}_examples.png",
             caption="../workflow/report/corpus_examples.rst",
-            category="Corpus",
-            subcategory="{corpus}",
-            labels={"corpus": "{corpus}", "figure": "examples"},
+            category=category("Preprocessing"),
+            labels={
+                "corpus": "{corpus}",
+                "figure": "RGB, tactile, background, subtracted",
+            },
         ),
         labels=report(
             "results/report/corpus/{corpus}_labels.png",
             caption="../workflow/report/corpus_labels.rst",
-            category="Corpus",
-            subcategory="{corpus}",
-            labels={"corpus": "{corpus}", "figure": "labels"},
+            category=category("Corpus"),
+            labels={"corpus": "{corpus}", "figure": "label distributions"},
         ),
     log:
         "results/logs/corpus_examples/{corpus}.log",
@@ -57,7 +59,7 @@ rule edge_manifest:
         html=report(
             "results/report/edge_manifest.html",
             caption="../workflow/report/edge_manifest.rst",
-            category="Provenance",
+            category=category("Provenance"),
             labels={"table": "edge manifest"},
         ),
         tsv="results/report/edge_manifest.tsv",
@@ -73,3 +75,38 @@ rule edge_manifest:
         runtime=5,
     script:
         "../workflow/scripts/edge_manifest.py"
+
+
+TARGETS += ["results/report/findings.html"]
+
+
+rule findings:
+    """The findings page: headline results with their controls and generated verdicts."""
+    input:
+        unpack(findings_policy_inputs),
+        probes="results/probes/summary.parquet",
+        generation="results/generate/evaluation.parquet",
+        code=imports_of("findings"),
+    output:
+        html=report(
+            "results/report/findings.html",
+            caption="../workflow/report/findings.rst",
+            category=category("Findings"),
+            labels={"table": "headline results, controls and verdicts"},
+        ),
+    log:
+        "results/logs/findings.log",
+    benchmark:
+        "results/benchmarks/findings.tsv"
+    conda:
+        "../envs/report.yaml"
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=5,
+    params:
+        run_name=config["run_name"],
+        generate_ref=generate_ref(),
+        policy=POLICY_ON,
+    script:
+        "../workflow/scripts/findings.py"

@@ -18,6 +18,7 @@ from snakemake_run import copy_tree, merged_config, smk
 
 from tacgen_lib.io import edges  # noqa: E402
 from tacgen_lib.probes import protocol as probe_suite  # noqa: E402
+from tacgen_lib.report import probes as probe_report  # noqa: E402
 
 pytestmark = pytest.mark.workflow
 
@@ -30,8 +31,8 @@ ROBUSTNESS = ["robustness", "multiplicity", "within_scale", "training_size"]
 TARGETS = [
     "results/probes/summary.parquet",
     *[f"results/report/probes/{t}.html" for t in TABLES],
-    "results/report/probes/forest.png",
-    "results/report/probes/confusion.png",
+    "results/report/probes/forest",
+    "results/report/probes/confusion",
     "results/probes/robustness.parquet",
     *[f"results/report/probes/{t}.html" for t in ROBUSTNESS],
     "results/report/probes/training_size.png",
@@ -195,8 +196,15 @@ def test_report_items_exist(probes_run):
     paired = (report / "paired.html").read_text()
     assert "hardness" in paired and "null: Δ [95% CI]" in paired
     assert "mass_vit" in (report / "controlled.html").read_text()
-    for name in ("forest", "confusion"):
-        assert (report / f"{name}.png").read_bytes()[:4] == b"\x89PNG", name
+    # one figure per family: every family with a comparison has a forest plot, every family
+    # with a logistic probe its confusion matrices
+    summary = edges.read(probes_run / "results/probes/summary.parquet").frame
+    forest = sorted(p.stem for p in (report / "forest").glob("*.png"))
+    assert forest == sorted(probe_report.forest_families(summary))
+    confusion = sorted(p.stem for p in (report / "confusion").glob("*.png"))
+    assert "hardness" in confusion and "force" not in confusion
+    for png in [*(report / "forest").glob("*.png"), *(report / "confusion").glob("*.png")]:
+        assert png.read_bytes()[:4] == b"\x89PNG", png
 
 
 def test_probe_edges_are_verified_and_keyed_by_row_id(probes_run, cfg):

@@ -45,10 +45,17 @@ write_table(
     title="Held-out success per condition (matched capacity) and Δ vs V-only",
     mono=("cell",),
 )
-write_table(sweep.round(4), snakemake.output.sweep_table, title="V-only capacity sweep", mono=())
+write_table(
+    sweep,
+    snakemake.output.sweep_table,
+    title="V-only capacity sweep",
+    mono=(),
+    missing="one seed per cell: no spread over seeds",
+    notes=report_policy.sweep_notes(summary, sweep),
+)
 regression = edges.read(snakemake.input.regression).frame
 write_table(
-    regression.round(4),
+    regression,
     snakemake.output.regression_table,
     title="Palpation grip-force regression: ridge V vs V+T-aligned -> log required force",
     mono=(),
@@ -64,18 +71,25 @@ write_figure(
 )
 collect = sum(benchmark_seconds(p) for p in snakemake.input.collect)
 # wall times (benchmark files) go only into this report table, never into a hashed edge
+# one run of a cell = its training job + its rollout shards (as the cost page counts it)
+train = {
+    str(Path(b).relative_to("results/benchmarks/train_policy").with_suffix("")): benchmark_seconds(
+        b
+    )
+    for b in snakemake.input.train_benchmarks
+}
 cost = summary[["cell", "n_episodes", "success"]].copy()
-cost["seconds"] = [seconds[c] for c in cost["cell"]]
-cost["episodes_per_s"] = cost["n_episodes"] / cost["seconds"]
-cost.loc[len(cost)] = [
-    "collect_demos (all shards)",
-    len(heldout),
-    float("nan"),
-    collect,
-    float("nan"),
-]
+cost["training s"] = [train.get(c, 0.0) for c in cost["cell"]]
+cost["rollout s"] = [seconds[c] for c in cost["cell"]]
+cost["total s"] = cost["training s"] + cost["rollout s"]
+cost["episodes per rollout s"] = cost["n_episodes"] / cost["rollout s"]
+cost.loc[len(cost)] = ["collect_demos (all shards)", len(heldout), None, None, None, collect, None]
 write_table(
-    cost.round(4), snakemake.output.cost, title="Policy: rollout cost per cell", mono=("cell",)
+    cost,
+    snakemake.output.cost,
+    title="Policy: cost per cell (training + rollouts, as on the cost page)",
+    mono=("cell",),
+    missing="the episode collection is not a policy cell: it has no success, training or rollout",
 )
 for r in summary.itertuples():
     logger.info("%-40s success %.3f [%.3f, %.3f]", r.cell, r.success, r.ci_low, r.ci_high)

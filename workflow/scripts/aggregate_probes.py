@@ -1,6 +1,8 @@
 """Probe summary over families and seeds, and the probes' report tables and figures
 (rule aggregate_probes)."""
 
+from pathlib import Path
+
 import pandas as pd
 
 from tacgen_lib.io import edges, log
@@ -56,15 +58,20 @@ tables = {
     ),
     "fusions": (probe_report.fusions_frame(), "Fusion variants of V and T features"),
 }
-for name, (table, title) in tables.items():
-    write_table(table, snakemake.output[name], title=title, mono=())
-    logger.info("table %s: %d rows", name, len(table))
-figures = {
-    "forest": probe_report.forest_plot(summary),
-    "confusion_png": probe_report.confusion_figure(confusion),
+notes = {
+    "controlled": probe_report.skipped_note(summary, controlled=True),
+    "paired": probe_report.skipped_note(summary, controlled=False),
 }
-for name, fig in figures.items():
-    write_figure(fig, snakemake.output[name])
+for name, (table, title) in tables.items():
+    write_table(table, snakemake.output[name], title=title, mono=(), notes=notes.get(name, ()))
+    logger.info("table %s: %d rows", name, len(table))
+# one figure per family: forest plots and confusion matrices (report directories)
+Path(snakemake.output.forest).mkdir(parents=True, exist_ok=True)
+for fam in probe_report.forest_families(summary):
+    write_figure(probe_report.forest_plot(summary, fam), f"{snakemake.output.forest}/{fam}.png")
+Path(snakemake.output.confusion_png).mkdir(parents=True, exist_ok=True)
+for fam, fig in probe_report.confusion_figures(confusion).items():
+    write_figure(fig, f"{snakemake.output.confusion_png}/{fam}.png")
 main = summary.loc[summary["control"] == "none"]
 logger.info(
     "%d raw-protocol summary rows; %d comparisons (%s); criterion met in %d of %d evaluated "

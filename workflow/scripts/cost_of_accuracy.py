@@ -1,13 +1,15 @@
 """The cost-of-accuracy page: every knob's points, sentences, Pareto fronts and the marginal
 accuracy per extra minute (rule cost_of_accuracy)."""
 
+from pathlib import Path
+
 import pandas as pd
 
 from tacgen_lib.cost.benchmarks import cpu_label
 from tacgen_lib.cost.points import POINT_COLUMNS, read_points
 from tacgen_lib.io import log
 from tacgen_lib.io.edges import atomic_write_bytes
-from tacgen_lib.report.cost import cost_figure, cost_page_html, knob_sentences, marginal_view
+from tacgen_lib.report.cost import cost_figures, cost_page_html, knob_sentences, marginal_view
 from tacgen_lib.report.write import write_figure, write_table
 
 logger = log.for_rule(snakemake)
@@ -42,7 +44,9 @@ write_table(
     title="Marginal accuracy per extra minute between consecutive Pareto points",
     mono=(),
 )
-write_figure(cost_figure(points, params.stages), snakemake.output.figure)
+Path(snakemake.output.figure).mkdir(parents=True, exist_ok=True)
+for knob, fig in cost_figures(points, params.stages).items():
+    write_figure(fig, f"{snakemake.output.figure}/{knob}.png")
 points.to_csv(snakemake.output.tsv, sep="\t", index=False)
 for s in sentences:
     logger.info("%s", s)

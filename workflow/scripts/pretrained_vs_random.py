@@ -8,6 +8,7 @@ from tacgen_lib.features.extract import extract_features
 from tacgen_lib.features.pretrained_vs_random import pretrained_vs_random, random_backbone
 from tacgen_lib.io import edges, log
 from tacgen_lib.preprocess.frames import decode_frames
+from tacgen_lib.report.tables import pretrained_vs_random_view
 from tacgen_lib.report.write import write_table
 
 logger = log.for_rule(snakemake)
@@ -76,4 +77,4 @@ if int(cfg["pretrain"]["epochs"]) == 0:
         "attain. Why it is off: README, Backbones (measured Δ of 8 DINO epochs), and the "
         "pretrain_epochs knob of the cost-of-accuracy sweep (config/cost.yaml)"
     )
-write_table(table.round(4), snakemake.output.html, title=title, mono=())
+write_table(pretrained_vs_random_view(table), snakemake.output.html, title=title, mono=())

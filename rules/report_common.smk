@@ -1,0 +1,31 @@
+"""Helpers of the report's items that rule files share (included before the stages)."""
+
+#: whether the backbones learned anything: DINO epochs, or an official checkpoint. Without, the
+#: pretraining curve and the pretrained-vs-random table (Δ = 0 by construction) are still made
+#: and hashed, but left out of the report rather than shown as placeholders.
+PRETRAINED = config["features"]["pretrain"]["epochs"] > 0 or any(
+    config["features"]["backbones"][m].get("checkpoint") for m in ("vision", "tactile")
+)
+
+
+def features_report_item(path, caption, labels):
+    """`path` as a report item of the Features page where the backbones were pretrained."""
+    if not PRETRAINED:
+        return path
+    return report(
+        path,
+        caption=caption,
+        category=category("Features"),
+        subcategory="Backbone pretraining",
+        labels=labels,
+    )
+
+
+def findings_policy_inputs(wildcards):
+    """The policy summaries the findings page reads, where the policy stage runs."""
+    if not POLICY_ON:
+        return {}
+    return {
+        f"policy_{t}": f"{POLICY_DIR}/{t}.parquet"
+        for t in ("summary", "deltas", "sweep")
+    }

@@ -1,0 +1,39 @@
+"""The findings page: every evidence branch's headline with its control and a verdict
+generated from the numbers (rule findings)."""
+
+import pandas as pd
+
+from tacgen_lib.io import edges, log
+from tacgen_lib.report import findings
+from tacgen_lib.report.write import write_table
+
+logger = log.for_rule(snakemake)
+parts = [
+    findings.probe_findings(edges.read(snakemake.input.probes).frame),
+    findings.generation_findings(
+        edges.read(snakemake.input.generation).frame, snakemake.params.generate_ref
+    ),
+]
+if snakemake.params.policy:
+    parts.append(
+        findings.policy_findings(
+            edges.read(snakemake.input.policy_summary).frame,
+            edges.read(snakemake.input.policy_deltas).frame,
+            edges.read(snakemake.input.policy_sweep).frame,
+        )
+    )
+table = pd.concat(parts, ignore_index=True)
+write_table(
+    table,
+    snakemake.output.html,
+    title=f"Findings of run {snakemake.params.run_name}",
+    mono=(),
+    notes=[
+        "Intervals are 95 %: fixed-test bootstrap for probes and policy (paired for Δ), a "
+        "t-interval over generator seeds for generation. A verdict calls a difference real "
+        "only when its interval excludes 0; each sentence is generated from the numbers beside "
+        "it (tacgen_lib.report.claims). The page column names the report page with the detail."
+    ],
+)
+for r in table.itertuples():
+    logger.info("%s: %s", r.evidence, r.verdict)
