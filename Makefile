@@ -3,7 +3,7 @@ VENV ?= .venv
 BIN := $(VENV)/bin
 CORES ?= 2
 
-.PHONY: setup run report test test-kernels lint resume estimate
+.PHONY: setup setup-test run report test test-kernels lint resume estimate
 
 setup:
 	@bash tools/setup.sh $(VENV)
@@ -43,7 +43,10 @@ lint:
 ## Beside them, the tests that are not workflow runs again under other CPU kernels
 ## (test-kernels: its output follows the main run's). Fails if either fails.
 ## TACGEN_SLURM_TEST=0 leaves the SLURM test out (it installs slurm-wlm + munge as root).
-test: setup lint
+setup-test:
+	@bash tools/setup.sh $(VENV) --browser
+
+test: setup-test lint
 	@kernels_log=$$(mktemp); \
 	$(BIN)/python tools/kernel_variants.py >"$$kernels_log" 2>&1 & kernels=$$!; \
 	TACGEN_SLURM_TEST=$${TACGEN_SLURM_TEST:-1} $(BIN)/python -m pytest -ra --durations=15 -n $(CORES) --dist loadfile --no-loadscope-reorder; \

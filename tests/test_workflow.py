@@ -53,6 +53,7 @@ def test_dry_run_plans_the_whole_dag(cold_dry_run):
         "aggregate_probes",
         "cost_of_accuracy",
         "edge_manifest",
+        "findings",
         "corpus_examples",
         # >>> generate (issue 12)
         "train_generator",
@@ -164,13 +165,14 @@ def test_edit_to_an_indirectly_imported_module_reruns_exactly_its_users(run_dir,
     shutil.copytree(run_dir / ".snakemake", work / ".snakemake")
     (work / module).write_text((work / module).read_text() + "\n# an edit\n")
     # its users rerun, then only what reads their outputs: the generation summary (issue 12),
-    # the edge manifest and `all`
+    # the findings page, the edge manifest and `all`
     # (the cost sweeps run only under config/cost.yaml: not planned here)
     assert set(planned_rules(work)) == (users - cost) | {
         "aggregate_generate",
         "cost_generate_points",
         "cost_of_accuracy",
         "edge_manifest",
+        "findings",
         "all",
     }
 
@@ -185,12 +187,29 @@ def test_two_runs_give_identical_edges(run_dir, resumed_run):
     assert first and first == second
 
 
-def test_report_builds_offline(run_dir):
+def test_report_builds_offline_and_reads_in_a_browser(run_dir, tmp_path):
+    """The report as a reader meets it: opened in headless Chromium (Debian's chromium and
+    chromium-driver, driven by Selenium) at 1600 × 1000, every category and every result
+    clicked. Fails if the findings page is not first, a result shows nothing, a figure is
+    cropped or shown smaller than its pixels, a table is wider than its frame, or a caption is
+    missing (tools/browse_report.py says which and why)."""
     smk(run_dir, "--report", "results/report.html")
     html = (run_dir / "results/report.html").read_text(errors="replace")
     assert len(html) > 10_000
-    for needle in ("edge_manifest", "sim_paired_examples", "Corpus"):
+    for needle in ("edge_manifest", "sim_paired_examples", "01 Findings"):
         assert needle in html, needle
+    sys.path.insert(0, str(ROOT / "tools"))
+    from browse_report import browse
+
+    from tacgen_lib.report_pages import PAGES, page_of
+
+    menu, visits, problems = browse(run_dir / "results/report.html", tmp_path / "shots")
+    assert [page_of(c) for c in menu] == [p for p in PAGES if p in map(page_of, menu)]
+    assert menu[0] == "01 Findings" and not problems, problems
+    bad = [f"{v.category} / {v.subcategory} / {v.name}: {v.problems}" for v in visits if v.problems]
+    assert not bad, "\n".join(bad)
+    # every result of the report was visited, figures and tables alike
+    assert {v.kind for v in visits} == {"img", "html"} and len(visits) >= 30
 
 
 def test_tampered_edge_is_refused(run_dir, tmp_path):

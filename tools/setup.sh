@@ -2,14 +2,25 @@
 # Set up a machine for TacGen workflow: Debian's Mesa (EGL/OSMesa) for MuJoCo rendering on the
 # CPU, then a virtual environment with the pinned CPU torch and the project installed.
 # Idempotent: a second run checks and returns in seconds.
-#   usage: tools/setup.sh [VENV_DIR]   (default .venv)
+# With --browser (make test), also Debian's Chromium and its driver: the report's browser test
+# opens results/report.html in headless Chromium through Selenium.
+#   usage: tools/setup.sh [VENV_DIR] [--browser]   (default .venv)
 set -euo pipefail
 cd "$(dirname "$0")/.."
-VENV=${1:-.venv}
+VENV=.venv
+BROWSER=0
+for arg in "$@"; do
+  case "$arg" in
+    --browser) BROWSER=1 ;;
+    *) VENV=$arg ;;
+  esac
+done
 PYTHON=${PYTHON:-python3}
 
-# 1. System packages for offscreen MuJoCo rendering (EGL through Mesa llvmpipe; OSMesa fallback).
+# 1. System packages for offscreen MuJoCo rendering (EGL through Mesa llvmpipe; OSMesa fallback),
+#    and with --browser headless Chromium with its WebDriver.
 APT_PKGS="libegl1 libegl-mesa0 libgl1-mesa-dri libglx-mesa0 libosmesa6"
+[ "$BROWSER" = 1 ] && APT_PKGS="$APT_PKGS chromium chromium-driver"
 missing=""
 for p in $APT_PKGS; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing="$missing $p"
