@@ -291,3 +291,24 @@ def test_panel_grid_fits_the_viewer_or_says_to_split(n, w, h):
         return
     assert nrows * ncols >= n
     assert fw * 110 <= MAX_FIGURE_PX[0] + 1e-6 and fh * 110 <= MAX_FIGURE_PX[1] + 1e-6
+
+
+# the Probes page's fusion table says what the plan does: same-dimension fusions run on raw
+# features where V and T have equal size (the forest plot then shows raw/max rows), and are
+# skipped, with the reason, where they do not
+def test_fusion_table_states_the_planning_rule():
+    from tacgen_lib.probes.fusion import FUSIONS
+    from tacgen_lib.probes.protocol import plan_comparisons
+
+    def raw(dim_t):
+        plan = plan_comparisons(list(FUSIONS), heads_variant="clip128", variants=["clip128"],
+                                align_seeds=[42], dim_v_raw=192, dim_t_raw=dim_t)  # fmt: skip
+        return {s.fusion: s.skip_reason for s in plan if s.input == "raw"}
+
+    equal, unequal = raw(192), raw(384)
+    for name, f in FUSIONS.items():
+        if f.same_dim:
+            assert equal[name] is None and unequal[name] is not None
+            assert "raw of equal size" in f.inputs  # what the table says, what the plan does
+        else:
+            assert equal[name] is None and unequal[name] is None

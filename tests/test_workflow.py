@@ -12,6 +12,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 import yaml
 from snakemake_run import (
@@ -350,3 +351,26 @@ def test_runs_as_a_module_from_another_directory(tmp_path, cold_dry_run):
 
     edges.verify(user / "results/corpus/splits.parquet")
     assert not (repo / "results").exists()  # everything lands in the user's directory
+
+
+def test_policy_cost_table_and_cost_page_give_one_run_the_same_seconds(run_dir):
+    """A policy setting's seconds on the cost page (training job + rollout shards) and the
+    total the Policy page's cost table gives its cell are one number, not two."""
+    import html as html_lib
+    import re
+
+    import pandas as pd
+
+    points = pd.read_parquet(run_dir / "results/cost/points/policy_width.parquet")
+    page = (run_dir / "results/report/policy/cost.html").read_text()
+    rows = re.findall(r"<tr>(.*?)</tr>", page)
+    heads = [html_lib.unescape(h) for h in re.findall(r"<th>(.*?)</th>", rows[0])]
+    table = {}
+    for row in rows[1:]:
+        cells = [html_lib.unescape(c) for c in re.findall(r"<td[^>]*>(.*?)</td>", row)]
+        table[cells[0]] = dict(zip(heads, cells, strict=True))
+    for p in points.itertuples():
+        cells = [c for c in table if c.startswith(f"v/H~{int(p.setting)}/")]
+        assert cells, (p.label, list(table))
+        totals = [float(table[c]["total s"]) for c in cells]
+        assert np.mean(totals) == pytest.approx(p.wall_s, abs=0.01), (p.label, totals)

@@ -18,6 +18,7 @@ import pandas as pd
 from matplotlib.ticker import FuncFormatter, NullFormatter
 
 from tacgen_lib.cost.pareto import knob_sentence, marginal_table, pareto_front
+from tacgen_lib.report import PALETTE
 from tacgen_lib.report.tables import to_html
 from tacgen_lib.report.write import panel_grid
 
@@ -160,14 +161,14 @@ def cost_figures(
             err = np.vstack(
                 [np.where(np.isfinite(lo), y - lo, 0), np.where(np.isfinite(hi), hi - y, 0)]
             )
-            ax.errorbar(x, y, yerr=err, fmt="o", ms=4, color="tab:blue", ecolor="tab:blue",
+            ax.errorbar(x, y, yerr=err, fmt="o", ms=4, color=PALETTE["blue"], ecolor=PALETTE["blue"],
                         elinewidth=1, capsize=2, zorder=3)  # fmt: skip
             front = pareto_front(x, y, direction)
-            ax.plot(x[front], y[front], "-", color="tab:green", lw=1.2, alpha=0.8,
+            ax.plot(x[front], y[front], "-", color=PALETTE["green"], lw=1.2, alpha=0.8,
                     label="Pareto front", zorder=2)  # fmt: skip
             d = g["is_default"].to_numpy(bool)
             if d.any():
-                ax.scatter(x[d], y[d], s=110, facecolors="none", edgecolors="tab:red", lw=1.6,
+                ax.scatter(x[d], y[d], s=110, facecolors="none", edgecolors=PALETTE["vermillion"], lw=1.6,
                            label="default", zorder=4)  # fmt: skip
             for (dx, dy, ha), lab, xi, yi in zip(_offsets(x), g["label"], x, y, strict=True):
                 ax.annotate(_label(str(lab)), (xi, yi), xytext=(dx, dy), textcoords="offset points",

@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 
 from tacgen_lib.io.images import decode_png
+from tacgen_lib.report import PALETTE
 from tacgen_lib.report import format as fmt
 from tacgen_lib.report.format import numeric_order
 from tacgen_lib.report.write import panel_grid
@@ -111,7 +112,7 @@ def pretrain_curve_figure(
             ax2.plot(
                 curve["epoch"],
                 curve["teacher_entropy"],
-                color="tab:orange",
+                color=PALETTE["orange"],
                 marker=".",
                 label="teacher entropy",
             )

@@ -19,7 +19,7 @@ import pandas as pd
 from matplotlib.patches import Ellipse
 from scipy import stats
 
-from tacgen_lib.report import claims
+from tacgen_lib.report import PALETTE, claims
 from tacgen_lib.report import format as fmt
 from tacgen_lib.report.write import panel_grid
 
@@ -250,10 +250,10 @@ def pca_figure(real: np.ndarray, gen: np.ndarray, *, title: str) -> plt.Figure:
     _, _, vt = np.linalg.svd(real - mu, full_matrices=False)
     pr, pg = (real - mu) @ vt[:2].T, (gen - mu) @ vt[:2].T
     fig, ax = plt.subplots(figsize=(5, 4.5))
-    ax.scatter(pr[:, 0], pr[:, 1], s=8, alpha=0.5, label="real T", color="tab:blue")
-    ax.scatter(pg[:, 0], pg[:, 1], s=8, alpha=0.5, label="generated T", color="tab:orange")
-    _ellipse(ax, pr, "tab:blue")
-    _ellipse(ax, pg, "tab:orange")
+    ax.scatter(pr[:, 0], pr[:, 1], s=8, alpha=0.5, label="real T", color=PALETTE["blue"])
+    ax.scatter(pg[:, 0], pg[:, 1], s=8, alpha=0.5, label="generated T", color=PALETTE["orange"])
+    _ellipse(ax, pr, PALETTE["blue"])
+    _ellipse(ax, pg, PALETTE["orange"])
     ax.set_xlabel("PC 1 (real)")
     ax.set_ylabel("PC 2 (real)")
     ax.set_title(title, fontsize=9)
@@ -272,7 +272,7 @@ def permutation_figure(perms: pd.DataFrame, ref: Mapping) -> plt.Figure:
     for ax, ((corpus, target), g) in zip(axes, groups, strict=False):
         obs = float(g["observed"].iloc[0])
         ax.hist(g["statistic"], bins=30, color="lightgrey", edgecolor="grey")
-        ax.axvline(obs, color="tab:red", label=f"observed {obs:.3f}")
+        ax.axvline(obs, color=PALETTE["vermillion"], label=f"observed {obs:.3f}")
         pval = (1 + np.sum(g["statistic"] >= obs)) / (1 + len(g))
         ax.set_title(f"{corpus}: {target} (p = {pval:.3f})", fontsize=9)
         ax.set_xlabel("mean matched cosine, re-paired")

@@ -19,17 +19,17 @@ import pandas as pd
 
 from tacgen_lib.io.images import decode_png
 from tacgen_lib.policy.task import FAILURE_MODES
-from tacgen_lib.report import claims
+from tacgen_lib.report import PALETTE, claims
 from tacgen_lib.report import format as fmt
 
 __all__ = ["success_table", "sweep_figure", "sweep_notes", "failure_figure", "filmstrip"]
 
 COLOURS = {
-    "success": "#4c956c",
-    "slip": "#f4a259",
-    "crush": "#bc4b51",
-    "drop": "#5b8e7d",
-    "miss": "#8d99ae",
+    "success": PALETTE["green"],
+    "slip": PALETTE["orange"],
+    "crush": PALETTE["vermillion"],
+    "drop": PALETTE["blue"],
+    "miss": PALETTE["grey"],
 }
 
 
@@ -81,7 +81,7 @@ def sweep_figure(sweep: pd.DataFrame) -> plt.Figure:
     ax.axhline(
         ceiling, color="k", ls="--", lw=1, label=f"vision-only ceiling {fmt.number(ceiling)}"
     )
-    ax.axhline(vt, color="#4c956c", ls="-", lw=1.5, label=f"V+T aligned {fmt.number(vt)}")
+    ax.axhline(vt, color=PALETTE["green"], ls="-", lw=1.5, label=f"V+T aligned {fmt.number(vt)}")
     ax.set_xscale("log", base=2)
     ax.set_xlabel("MLP hidden width H")
     ax.set_ylabel("held-out success")

@@ -29,7 +29,7 @@ import pandas as pd
 
 from tacgen_lib.probes.fusion import fusion_table
 from tacgen_lib.probes.protocol import class_order
-from tacgen_lib.report import claims
+from tacgen_lib.report import PALETTE, claims
 from tacgen_lib.report import format as fmt
 
 __all__ = [
@@ -338,7 +338,7 @@ def forest_plot(summary: pd.DataFrame, family: str, *, min_delta: float = 0.03) 
     part = rows.loc[(rows["status"] == "ok") & (rows["family"] == family)].iloc[::-1]
     fig, ax = plt.subplots(figsize=(9.5, 1.9 + 0.34 * max(len(part), 1)))
     null = bool(part["null_corpus"].astype(bool).any()) if len(part) else False
-    colour = "#888888" if null else "#1f5fa8"
+    colour = PALETTE["grey"] if null else PALETTE["blue"]
     y = np.arange(len(part))
     for yi, (_, r) in zip(y, part.iterrows(), strict=True):
         ax.plot([r["ci_low"], r["ci_high"]], [yi, yi], color=colour, lw=1.6)
