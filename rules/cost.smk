@@ -243,7 +243,7 @@ rule cost_of_accuracy:
             patterns=["{knob}.png"],
             caption="../workflow/report/cost_of_accuracy_figure.rst",
             category=category("Cost of accuracy"),
-            subcategory="Figures: accuracy against seconds",
+            subcategory="Figures",
             labels={"knob": "{knob}"},
         ),
         tsv="results/report/cost_of_accuracy.tsv",

@@ -79,8 +79,8 @@ rule aggregate_probes:
         ),
         controls=probe_report_item("controls", "html", "controls", "controls"),
         fusions=probe_report_item("fusions", "html", "fusions", "fusion variants"),
-        forest=probe_report_dir("forest", "forest plot"),
-        confusion_png=probe_report_dir("confusion", "confusion matrices"),
+        forest=probe_report_dir("forest", "Forest plots"),
+        confusion_png=probe_report_dir("confusion", "Confusion matrices"),
     log:
         "results/logs/aggregate_probes.log",
     benchmark:

@@ -95,7 +95,7 @@ def probe_report_dir(name, label):
         patterns=["{family}.png"],
         caption=f"../workflow/report/probe_{name}.rst",
         category=category("Probes"),
-        subcategory=f"Figures: {label}",
+        subcategory=label,
         labels={"family": "{family}"},
     )
 

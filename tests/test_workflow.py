@@ -119,10 +119,12 @@ def test_changed_probe_param_reruns_only_the_probes(run_dir, tmp_path):
     # evaluation and its baselines use the probes' settings (same probe code): all downstream
     robustness = {"probe_training_size", "probe_within_scale", "aggregate_robustness"}
     generate = {"fit_generator_baselines", "evaluate_generator", "aggregate_generate"}
-    # the cost page's free generator knobs read the generation summary (issue 14)
+    # the cost page's free generator knobs read the generation summary (issue 14); the
+    # findings page reads the probe summary
     cost = {"cost_generate_points", "cost_of_accuracy"}
-    assert set(planned_rules(work)) == {"probe", "aggregate_probes", "edge_manifest", "all"} | (
-        robustness | generate | cost
+    report = {"findings", "edge_manifest", "all"}
+    assert set(planned_rules(work)) == {"probe", "aggregate_probes"} | (
+        robustness | generate | cost | report
     )
 
 
@@ -188,7 +190,7 @@ def test_two_runs_give_identical_edges(run_dir, resumed_run):
     assert first and first == second
 
 
-def test_report_builds_offline_and_reads_in_a_browser(run_dir, tmp_path):
+def test_report_builds_offline_and_reads_in_a_browser(run_dir):
     """The report as a reader meets it: opened in headless Chromium (Debian's chromium and
     chromium-driver, driven by Selenium) at 1600 × 1000, every category and every result
     clicked. Fails if the findings page is not first, a result shows nothing, a figure is
@@ -204,7 +206,7 @@ def test_report_builds_offline_and_reads_in_a_browser(run_dir, tmp_path):
 
     from tacgen_lib.report_pages import PAGES, page_of
 
-    menu, visits, problems = browse(run_dir / "results/report.html", tmp_path / "shots")
+    menu, visits, problems = browse(run_dir / "results/report.html")
     assert [page_of(c) for c in menu] == [p for p in PAGES if p in map(page_of, menu)]
     assert menu[0] == "01 Findings" and not problems, problems
     bad = [f"{v.category} / {v.subcategory} / {v.name}: {v.problems}" for v in visits if v.problems]
