@@ -240,8 +240,14 @@ def test_findings_rows_carry_result_control_verdict_and_page():
 def test_policy_findings_use_the_ceiling_claim():
     summary = pd.DataFrame(
         [
-            {"condition": "v", "success": 0.43, "ci_low": 0.35, "ci_high": 0.52},
-            {"condition": "vt_aligned", "success": 1.0, "ci_low": 1.0, "ci_high": 1.0},
+            {"condition": "v", "success": 0.43, "ci_low": 0.35, "ci_high": 0.52, "n_episodes": 128},
+            {
+                "condition": "vt_aligned",
+                "success": 1.0,
+                "ci_low": 1.0,
+                "ci_high": 1.0,
+                "n_episodes": 128,
+            },
         ]
     )
     deltas = pd.DataFrame(
@@ -252,10 +258,18 @@ def test_policy_findings_use_the_ceiling_claim():
              "n_episodes": 128},
         ]
     )  # fmt: skip
-    sweep = pd.DataFrame({"success": [0.38, 0.44], "vision_ceiling": [0.363, 0.363]})
+    sweep = pd.DataFrame(
+        {"success": [0.38, 0.44], "gap_closed": [-0.09, 0.02], "vision_ceiling": [0.363, 0.363]}
+    )
     rows = findings.policy_findings(summary, deltas, sweep)
     assert rows["verdict"].iloc[0].startswith("Touch helps")
+    # all 128 successes: the Wilson interval, not a bootstrap of width 0
+    assert "V+T 1.000 [0.971, 1.000] (Wilson: all 128/128 alike)" in rows["result"].iloc[0]
     assert rows["verdict"].iloc[1] == claims.ceiling_verdict(0.43, 0.35, 0.52, 0.363)
+    assert (
+        "best of the capacity sweep 0.440, closing +0.020 of the V → V+T gap"
+        in rows["result"].iloc[1]
+    )
 
 
 # ----------------------------------------------------------------------------- pages, figures

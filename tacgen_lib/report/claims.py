@@ -25,6 +25,7 @@ __all__ = [
     "gain_within_uncertainty",
     "ceiling_verdict",
     "proportion_interval",
+    "proportion_with_ci",
     "degenerate_interval_note",
     "extreme_flag",
     "still_falling",
@@ -171,6 +172,16 @@ def proportion_interval(
     centre = (p + z * z / (2 * n)) / den
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / den
     return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def proportion_with_ci(p: float, lo: float, hi: float, n: int) -> str:
+    """A success rate with its bootstrap CI; where the bootstrap has no width (every trial the
+    same outcome) the Wilson interval instead, saying so."""
+    if not fmt.is_missing(lo) and lo == hi and n > 0:
+        k = int(round(p * n))
+        w_lo, w_hi = proportion_interval(k, n)
+        return f"{fmt.with_ci(p, w_lo, w_hi)} (Wilson: all {k}/{n} alike)"
+    return fmt.with_ci(p, lo, hi)
 
 
 def degenerate_interval_note(lo: float, hi: float, n: int) -> str:

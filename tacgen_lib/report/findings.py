@@ -127,6 +127,11 @@ def generation_findings(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=FINDINGS_COLUMNS)
 
 
+def _success(r: Mapping) -> str:
+    n = int(r["n_episodes"]) if "n_episodes" in r else 0
+    return claims.proportion_with_ci(r["success"], r["ci_low"], r["ci_high"], n)
+
+
 def policy_findings(
     summary: pd.DataFrame, deltas: pd.DataFrame, sweep: pd.DataFrame
 ) -> pd.DataFrame:
@@ -143,8 +148,7 @@ def policy_findings(
                 "evidence": "policy",
                 "question": "does touch let a grasping policy succeed where vision alone "
                 f"cannot? ({int(r['n_episodes'])} held-out episodes)",
-                "result": f"success V {fmt.with_ci(v['success'], v['ci_low'], v['ci_high'])} → "
-                f"V+T {fmt.with_ci(vt['success'], vt['ci_low'], vt['ci_high'])}; Δ "
+                "result": f"success V {_success(v)} → V+T {_success(vt)}; Δ "
                 f"{fmt.with_ci(r['delta'], r['ci_low'], r['ci_high'], sign=True)}",
                 "control": "another episode's touch (vt_null) Δ "
                 + (
@@ -160,13 +164,15 @@ def policy_findings(
         )
     if "v" in s.index and len(sweep):
         v = s.loc["v"]
+        best = sweep.loc[sweep["success"].idxmax()]
         ceiling = float(sweep["vision_ceiling"].iloc[0])
         rows.append(
             {
                 "evidence": "policy",
                 "question": "is the V-only policy limited by what vision sees, not by capacity?",
                 "result": f"V-only success {fmt.with_ci(v['success'], v['ci_low'], v['ci_high'])}; "
-                f"best of the capacity sweep {fmt.number(sweep['success'].max())}",
+                f"best of the capacity sweep {fmt.number(best['success'])}, closing "
+                f"{fmt.signed(best['gap_closed'])} of the V → V+T gap",
                 "control": f"vision-only ceiling {fmt.number(ceiling)} (expected success of the "
                 "best force given the visible size)",
                 "verdict": claims.ceiling_verdict(v["success"], v["ci_low"], v["ci_high"], ceiling),

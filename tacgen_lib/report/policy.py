@@ -34,13 +34,7 @@ COLOURS = {
 
 
 def _success_ci(r: Mapping) -> str:
-    """Success with its bootstrap CI; where the bootstrap has no width (every episode the same
-    outcome), the Wilson interval instead, saying so."""
-    if r["ci_low"] == r["ci_high"]:
-        k = int(round(r["success"] * r["n_episodes"]))
-        lo, hi = claims.proportion_interval(k, int(r["n_episodes"]))
-        return f"{fmt.with_ci(r['success'], lo, hi)} (Wilson: all {k}/{r['n_episodes']} alike)"
-    return fmt.with_ci(r["success"], r["ci_low"], r["ci_high"])
+    return claims.proportion_with_ci(r["success"], r["ci_low"], r["ci_high"], int(r["n_episodes"]))
 
 
 def success_table(summary: pd.DataFrame, deltas: pd.DataFrame, main: list[str]) -> pd.DataFrame:
