@@ -24,11 +24,6 @@ rule pretrain_backbone:
     output:
         weights="results/features/backbones/{modality}.pt",
         curve="results/features/backbones/{modality}_curve.parquet",
-        figure=features_report_item(
-            "results/report/features/{modality}_pretrain_curve.png",
-            "../workflow/report/pretrain_curve.rst",
-            {"modality": "{modality}", "figure": "DINO training curve"},
-        ),
     log:
         "results/logs/pretrain_backbone/{modality}.log",
     benchmark:

@@ -3,11 +3,14 @@
 
 localrules:
     corpus_examples,
+    pretrain_curve,
     edge_manifest,
     findings,
 
 
 TARGETS += ["results/report/edge_manifest.html"]
+if PRETRAINED:
+    TARGETS += expand("results/report/features/{m}_pretrain_curve.png", m=MODALITIES)
 TARGETS += expand("results/report/corpus/{corpus}_examples.png", corpus=sorted(CORPORA))
 
 
@@ -48,6 +51,35 @@ rule corpus_examples:
         n=config["report"]["examples_per_corpus"],
     script:
         "../workflow/scripts/corpus_examples.py"
+
+
+rule pretrain_curve:
+    """A backbone's DINO pretraining curve, drawn apart from the training job."""
+    input:
+        curve="results/features/backbones/{modality}_curve.parquet",
+        code=imports_of("pretrain_curve"),
+    output:
+        figure=features_report_item(
+            "results/report/features/{modality}_pretrain_curve.png",
+            "../workflow/report/pretrain_curve.rst",
+            {"modality": "{modality}", "figure": "DINO training curve"},
+        ),
+    log:
+        "results/logs/pretrain_curve/{modality}.log",
+    benchmark:
+        "results/benchmarks/pretrain_curve/{modality}.tsv"
+    wildcard_constraints:
+        modality="vision|tactile",
+    conda:
+        "../envs/report.yaml"
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=5,
+    params:
+        arch=lambda w: FEAT["backbones"][w.modality]["arch"],
+    script:
+        "../workflow/scripts/pretrain_curve.py"
 
 
 rule edge_manifest:

@@ -395,6 +395,7 @@ UNITS: dict[str, UnitRule] = {
         "example frame", lambda c, w: ("", float(c["report"]["examples_per_corpus"]))
     ),
     "edge_manifest": _const("job"),
+    "pretrain_curve": _const("job"),
     "findings": _const("job"),
     "cost_of_accuracy": _const("job"),
     # cost sweeps (config/cost.yaml)

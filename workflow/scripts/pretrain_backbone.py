@@ -9,8 +9,6 @@ from tacgen_lib.features.settings import DinoSettings
 from tacgen_lib.features.vit import build_vit, load_pretrained, random_backbone, save_backbone
 from tacgen_lib.io import edges, log
 from tacgen_lib.preprocess.frames import decode_frames
-from tacgen_lib.report.figures import pretrain_curve_figure
-from tacgen_lib.report.write import write_figure
 
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
@@ -26,7 +24,6 @@ if backbone.get("checkpoint"):
     load_pretrained(model, backbone["checkpoint"])
     curve = pd.DataFrame({"epoch": pd.Series([], dtype="int64")})
     logger.info("loaded official checkpoint %s (no pretraining)", backbone["checkpoint"])
-    empty_note = "loaded from a checkpoint: no pretraining curve"
 elif int(pretrain["epochs"]) == 0:
     # features.pretrain.epochs: 0 -> the frozen backbone is the seeded random init (README,
     # Backbones: DINO at the default budget did not beat it); no frame is read
@@ -37,7 +34,6 @@ elif int(pretrain["epochs"]) == 0:
         backbone["arch"],
         pretrain["seed"],
     )
-    empty_note = f"epochs: 0, random init (seed {pretrain['seed']}): no pretraining curve"
 else:
     splits = edges.read(snakemake.input.splits).frame
     train_ids = ids_in_split(splits, "train", corpus=pretrain["corpus"])
@@ -58,15 +54,10 @@ else:
     model = result.backbone()
     # wall-clock seconds stay in the log and the benchmark file: the edge must be reproducible
     curve = pd.DataFrame(result.curve).drop(columns=["seconds"], errors="ignore")
-    empty_note = ""
 curve.insert(
     0, "epoch_id", pd.Series([f"{modality}-{int(e):04d}" for e in curve["epoch"]], dtype=object)
 )
 save_backbone(model, snakemake.output.weights)
 digest = edges.record_file(snakemake.output.weights, producer=snakemake.rule)
 edges.write(snakemake.output.curve, curve, key="epoch_id", producer=snakemake.rule)
-fig = pretrain_curve_figure(
-    curve, title=f"{modality} backbone ({backbone['arch']})", empty_note=empty_note
-)
-write_figure(fig, snakemake.output.figure)
 logger.info("saved %s backbone, sha256 %s", modality, digest)
