@@ -170,7 +170,6 @@ rule cost_pretrain_backbone:
     output:
         weights="results/cost/features/size~{size}/arch~{arch}/epochs~{epochs}/backbones/{modality}.pt",
         curve="results/cost/features/size~{size}/arch~{arch}/epochs~{epochs}/backbones/{modality}_curve.parquet",
-        figure="results/cost/features/size~{size}/arch~{arch}/epochs~{epochs}/backbones/{modality}_curve.png",
     log:
         "results/logs/cost_pretrain_backbone/size~{size}/arch~{arch}/epochs~{epochs}/{modality}.log",
     benchmark:
