@@ -96,7 +96,7 @@ def chromium(width: int, height: int) -> Iterator[object]:
         shutil.rmtree(profile, ignore_errors=True)
 
 
-def _menu_labels(driver, heading: str | None = None) -> list[str]:
+def _menu_labels(driver) -> list[str]:
     return [
         s.text
         for s in driver.find_elements("css selector", "nav a > span, #menu a > span, ul a > span")

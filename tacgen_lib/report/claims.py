@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 from tacgen_lib.report import format as fmt
 
 __all__ = [
@@ -225,8 +227,6 @@ def still_falling(steps, losses, *, tail: float = 0.2, rel: float = 0.02) -> boo
     """Whether a loss curve still falls at its end: over the last `tail` of its steps the
     validation loss dropped by more than `rel` of its value there (training stopped before it
     levelled off). False for a curve of fewer than 3 points."""
-    import numpy as np
-
     s, y = np.asarray(steps, dtype=float), np.asarray(losses, dtype=float)
     keep = np.isfinite(s) & np.isfinite(y)
     s, y = s[keep], y[keep]

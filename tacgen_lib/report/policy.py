@@ -22,7 +22,14 @@ from tacgen_lib.policy.task import FAILURE_MODES
 from tacgen_lib.report import PALETTE, claims
 from tacgen_lib.report import format as fmt
 
-__all__ = ["success_table", "sweep_figure", "sweep_notes", "failure_figure", "filmstrip"]
+__all__ = [
+    "success_table",
+    "success_with_ci",
+    "sweep_figure",
+    "sweep_notes",
+    "failure_figure",
+    "filmstrip",
+]
 
 COLOURS = {
     "success": PALETTE["green"],
@@ -33,7 +40,8 @@ COLOURS = {
 }
 
 
-def _success_ci(r: Mapping) -> str:
+def success_with_ci(r: Mapping) -> str:
+    """A policy cell's success with its CI (`claims.proportion_with_ci`), from a summary row."""
     return claims.proportion_with_ci(r["success"], r["ci_low"], r["ci_high"], int(r["n_episodes"]))
 
 
@@ -48,7 +56,7 @@ def success_table(summary: pd.DataFrame, deltas: pd.DataFrame, main: list[str]) 
                 "condition": r["condition"],
                 "cell": r["cell"],
                 "episodes": r["n_episodes"],
-                "success [95% CI]": _success_ci(r),
+                "success [95% CI]": success_with_ci(r),
                 "Δ vs V [paired 95% CI]": fmt.MISSING
                 if delta is None
                 else fmt.with_ci(delta["delta"], delta["ci_low"], delta["ci_high"], sign=True),

@@ -25,7 +25,6 @@ __all__ = [
     "MIN_FONT_PT",
     "figure_problems",
     "panel_grid",
-    "panel_pages",
     "write_figure",
     "write_table",
 ]
@@ -106,7 +105,7 @@ def panel_grid(
     """(nrows, ncols, figsize) for `n` panels of `panel` inches laid out to fit the viewer
     (`MAX_FIGURE_PX`): as many columns as fit across, then rows; rows shorter than `panel`
     (down to `min_height`) where they would not fit down. ValueError where even that does not
-    fit: the caller splits its panels over several figures (`panel_pages`)."""
+    fit: the caller splits its panels over several figures (one per family or knob)."""
     max_w, max_h = MAX_FIGURE_PX[0] / dpi, MAX_FIGURE_PX[1] / dpi
     fit = max(1, int(max_w // panel[0]))
     ncols = max(1, min(n, fit, max_cols or fit))
@@ -118,11 +117,3 @@ def panel_grid(
             "split them over several figures"
         )
     return nrows, ncols, (min(panel[0] * ncols, max_w), height * nrows)
-
-
-def panel_pages(n: int, panel: tuple[float, float], *, min_height: float = 1.8) -> list[range]:
-    """Split `n` panels into pages (ranges of panel indices) that each fit one figure."""
-    max_w, max_h = (x / FIGURE_DPI for x in MAX_FIGURE_PX)
-    per_page = max(1, int(max_w // panel[0])) * max(1, int(max_h // max(min_height, 1e-9)))
-    per_page = min(per_page, max(1, int(max_w // panel[0])) * max(1, int(max_h // panel[1])))
-    return [range(i, min(i + per_page, n)) for i in range(0, max(n, 1), per_page)]
