@@ -138,11 +138,6 @@ def test_wilson_interval_matches_scipy(k, n):
     assert hi > lo  # never degenerate, unlike a bootstrap of all-successes
 
 
-def test_degenerate_interval_says_why():
-    assert "no width" in claims.degenerate_interval_note(1.0, 1.0, 128)
-    assert claims.degenerate_interval_note(0.9, 1.0, 128) == ""
-
-
 def test_extreme_values_are_flagged_with_their_reason():
     assert "below −1" in claims.extreme_flag("r2", -28.3, 0.5, -3.0, 1.0)
     assert "beyond ±1" in claims.extreme_flag("r2", -0.87, 0.94, 1.35, 2.51)

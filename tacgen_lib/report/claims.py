@@ -28,10 +28,8 @@ __all__ = [
     "ceiling_verdict",
     "proportion_interval",
     "proportion_with_ci",
-    "degenerate_interval_note",
     "extreme_flag",
     "still_falling",
-    "curve_note",
 ]
 
 
@@ -186,16 +184,6 @@ def proportion_with_ci(p: float, lo: float, hi: float, n: int) -> str:
     return fmt.with_ci(p, lo, hi)
 
 
-def degenerate_interval_note(lo: float, hi: float, n: int) -> str:
-    """Why an interval has no width, or "" if it has one."""
-    if fmt.is_missing(lo) or fmt.is_missing(hi) or lo != hi:
-        return ""
-    return (
-        f"the bootstrap interval has no width: every one of the {n} resampled rows has the same "
-        "outcome (all successes or all failures); the Wilson interval gives its real width"
-    )
-
-
 def extreme_flag(
     metric: str, v: float, vt: float, lo: float, hi: float, baseline: float = float("nan")
 ) -> str:
@@ -238,10 +226,3 @@ def still_falling(steps, losses, *, tail: float = 0.2, rel: float = 0.02) -> boo
     before = y[s <= start]
     ref = before[-1] if before.size else y[0]
     return bool(ref - y[-1] > rel * abs(y[-1]))
-
-
-def curve_note(name: str, steps, losses) -> str:
-    """The sentence a training-curve figure carries about its end."""
-    if still_falling(steps, losses):
-        return f"{name}: validation loss still falling at the last step (more steps would lower it)"
-    return ""
