@@ -28,15 +28,9 @@ include: "rules/corpus.smk"
 include: "rules/preprocess.smk"
 include: "rules/features.smk"
 include: "rules/align.smk"
-include: "rules/generate.smk"  # issue 12: latent V->T generator
+include: "rules/generate.smk"
 include: "rules/probes.smk"
-# --- cost of accuracy (issue 14): the knob registry, then the simulation and features knobs ---
-include: "rules/cost_common.smk"
-include: "rules/cost_features.smk"
-# --- end cost of accuracy, simulation and features knobs ---
-# --- policy stage (issue 13) ---
 include: "rules/policy.smk"
-# --- end policy stage ---
 include: "rules/cost.smk"
 include: "rules/report.smk"
 

@@ -17,7 +17,7 @@ TARGETS += expand(
     item=["tau_ablation.html", "n_scaling.html", "seeds.html", "curves.png"],
 )
 EDGES += ["results/align/metrics.parquet"]
-for _name in ("metrics.parquet", "curve.parquet", "heads.pt"):
+for _name in ("metrics.parquet", "ranks.parquet", "curve.parquet", "heads.pt"):
     EDGES += align_grid(f"{ALIGN_CELL}/{_name}")
 
 
@@ -35,6 +35,7 @@ rule train_heads:
     output:
         heads=f"{ALIGN_CELL}/heads.pt",
         metrics=f"{ALIGN_CELL}/metrics.parquet",
+        ranks=f"{ALIGN_CELL}/ranks.parquet",
         curve=f"{ALIGN_CELL}/curve.parquet",
     log:
         f"results/logs/train_heads/{CELL_PATTERN}.log",

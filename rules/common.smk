@@ -13,10 +13,14 @@ from tacgen_lib.report_pages import category
 #: directory, not this one)
 WORKFLOW_ROOT = Path(str(workflow.current_basedir)).parent
 
+_setting = (config.get("cost") or {}).get("setting")
 validate_config(
     config,
     WORKFLOW_ROOT / "config" / "config.schema.yaml",
-    source=" + ".join(str(f) for f in workflow.configfiles) or "config",
+    source=(
+        f"cost.knobs.{_setting['knob']} = {_setting['label']} over " if _setting else ""
+    )
+    + (" + ".join(str(f) for f in workflow.configfiles) or "config"),
 )
 SCENES = (
     load_yaml(config["scenes_file"]) if os.path.exists(config["scenes_file"]) else {}

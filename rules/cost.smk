@@ -1,69 +1,39 @@
-"""Cost of accuracy: sweeps of the align, probes, generator and policy knobs, and the page.
+"""Cost of accuracy: every knob's metric with its uncertainty against the seconds it costs, and
+the page.
 
 `snakemake --cores 2 cost_of_accuracy --configfile config/cost.yaml` runs every knob listed in
-config cost.knobs around the default and draws the page; the default run draws it from the
-knobs its own grids already vary (generator steps and samplers, the policy sweep).
+config cost.knobs around the run's own settings: each setting is the main workflow again with
+the knob's config keys changed (a module per setting, rules/cost_common.smk). The default run
+draws the page from the knobs its own grids already vary (generator steps and samplers, the
+policy sweep).
 """
 
 
+include: "cost_common.smk"
 include: "cost_sweep_common.smk"
 
 
-# ------------------------------------------------------------------ alignment knobs
+wildcard_constraints:
+    knob="[a-z][a-z0-9_]*",
 
 
-rule cost_train_heads:
-    """InfoNCE heads at one setting of an alignment knob and one seed; test retrieval ranks."""
+# ------------------------------------------------------------------ swept knobs
+
+
+rule cost_knob_points:
+    """Points of a swept knob: what each setting's main-rule edges show, against the seconds
+    of its jobs' benchmark files."""
     input:
-        v=lambda w: feature_edge(cost_align(w.knob)[0], "vision"),
-        t=lambda w: feature_edge(
-            cost_align(w.knob)[0], "tactile", cost_align(w.knob)[1]
-        ),
-        splits="results/corpus/splits.parquet",
-        code=imports_of("cost_train_heads"),
-    output:
-        ranks="results/cost/align/{knob}/{value}/seed~{seed}/ranks.parquet",
-    log:
-        "results/logs/cost_train_heads/{knob}/{value}/{seed}.log",
-    benchmark:
-        "results/benchmarks/cost_train_heads/{knob}/{value}/{seed}.tsv"
-    wildcard_constraints:
-        knob=one_of(ALIGN_KNOBS),
-        value=r"all|[1-9]\d*",
-        seed=r"0|[1-9]\d*",
-    conda:
-        "../envs/align.yaml"
-    threads: 2
-    resources:
-        mem_mb=4000,
-        runtime=60,
-    params:
-        settings=ALIGN,
-        corpus=lambda w: cost_align(w.knob)[0],
-        tau=config["probes"]["heads"]["tau"],
-        n_train=str(config["probes"]["heads"]["n_train"]),
-    script:
-        "../workflow/scripts/cost_train_heads.py"
-
-
-rule cost_align_points:
-    """Points of an alignment knob: top-1 and median rank with a bootstrap CI, and seconds."""
-    input:
-        ranks=cost_align_files(
-            "results/cost/align/{knob}/{value}/seed~{seed}/ranks.parquet"
-        ),
-        benchmarks=cost_align_files(
-            "results/benchmarks/cost_train_heads/{knob}/{value}/{seed}.tsv"
-        ),
-        code=imports_of("cost_align_points"),
+        unpack(cost_knob_inputs),
+        code=imports_of("cost_knob_points"),
     output:
         points=COST_POINTS,
     log:
-        "results/logs/cost_align_points/{knob}.log",
+        "results/logs/cost_knob_points/{knob}.log",
     benchmark:
-        "results/benchmarks/cost_align_points/{knob}.tsv"
+        "results/benchmarks/cost_knob_points/{knob}.tsv"
     wildcard_constraints:
-        knob=one_of(ALIGN_KNOBS),
+        knob=one_of(SWEPT_KNOBS),
     conda:
         "../envs/report.yaml"
     threads: 1
@@ -71,81 +41,11 @@ rule cost_align_points:
         mem_mb=1000,
         runtime=5,
     params:
-        cells=lambda w: cost_align_cells(w.knob),
-        default=lambda w: (
-            None
-            if w.knob == "align_steps"
-            else str(DEFAULT_CONFIG["probes"]["heads"]["n_train"])
-        ),
-        bootstrap=lambda w: cost_knob(w.knob).get("bootstrap", 2000),
+        plan=lambda w: cost_setting_plan(w.knob),
+        reads=lambda w: KNOBS[w.knob].reads,
+        options=lambda w: cost_knob_options(w.knob),
     script:
-        "../workflow/scripts/cost_align_points.py"
-
-
-# ------------------------------------------------------------------ probe knobs
-
-
-rule cost_probe:
-    """One replicate seed of a probe knob's setting: B bootstrap resamples or permutations."""
-    input:
-        unpack(cost_probe_inputs),
-        code=imports_of("cost_probe"),
-    output:
-        rows="results/cost/probes/{knob}/{value}/rep~{rep}.parquet",
-    log:
-        "results/logs/cost_probe/{knob}/{value}/{rep}.log",
-    benchmark:
-        "results/benchmarks/cost_probe/{knob}/{value}/{rep}.tsv"
-    wildcard_constraints:
-        knob=one_of(PROBE_KNOBS),
-        value=r"[1-9]\d*",
-        rep=r"0|[1-9]\d*",
-    conda:
-        "../envs/probes.yaml"
-    threads: 1
-    resources:
-        mem_mb=3000,
-        runtime=30,
-    params:
-        family=lambda w: cost_probe_family(w.knob),
-        corpus=lambda w: CORPORA[cost_probe_family(w.knob)["corpus"]],
-        settings={k: v for k, v in PROBES.items() if k not in ("families", "seeds")},
-        probe_seed=PROBES["seeds"][0],
-    script:
-        "../workflow/scripts/cost_probe.py"
-
-
-rule cost_probe_points:
-    """Points of a probe knob: Monte Carlo spread across replicate seeds, and seconds."""
-    input:
-        rows=cost_probe_files("results/cost/probes/{knob}/{value}/rep~{rep}.parquet"),
-        benchmarks=cost_probe_files(
-            "results/benchmarks/cost_probe/{knob}/{value}/{rep}.tsv"
-        ),
-        code=imports_of("cost_probe_points"),
-    output:
-        points=COST_POINTS,
-    log:
-        "results/logs/cost_probe_points/{knob}.log",
-    benchmark:
-        "results/benchmarks/cost_probe_points/{knob}.tsv"
-    wildcard_constraints:
-        knob=one_of(PROBE_KNOBS),
-    conda:
-        "../envs/report.yaml"
-    threads: 1
-    resources:
-        mem_mb=1000,
-        runtime=5,
-    params:
-        cells=lambda w: cost_probe_cells(w.knob),
-        default=lambda w: str(
-            DEFAULT_CONFIG["probes"][
-                "bootstrap" if w.knob == "probe_bootstrap" else "permutations"
-            ]
-        ),
-    script:
-        "../workflow/scripts/cost_probe_points.py"
+        "../workflow/scripts/cost_knob_points.py"
 
 
 # ------------------------------------------------------------------ generator knobs
@@ -164,7 +64,7 @@ rule cost_generate_points:
     benchmark:
         "results/benchmarks/cost_generate_points/{knob}.tsv"
     wildcard_constraints:
-        knob=one_of(GENERATE_KNOBS),
+        knob=one_of([k for k in FREE_KNOBS if KNOBS[k].stage == "generate"]),
     conda:
         "../envs/report.yaml"
     threads: 1
@@ -198,7 +98,7 @@ rule cost_policy_points:
     benchmark:
         "results/benchmarks/cost_policy_points/{knob}.tsv"
     wildcard_constraints:
-        knob=one_of(POLICY_KNOBS),
+        knob=one_of([k for k in FREE_KNOBS if KNOBS[k].stage == "policy"]),
     conda:
         "../envs/report.yaml"
     threads: 1
@@ -258,7 +158,7 @@ rule cost_of_accuracy:
         mem_mb=1000,
         runtime=5,
     params:
-        stages=COST_KNOBS,
+        stages={k: KNOBS[k].stage for k in cost_knobs()},
         swept=sorted(COST_KNOB_CONFIG),
     script:
         "../workflow/scripts/cost_of_accuracy.py"

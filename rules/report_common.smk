@@ -8,9 +8,14 @@ PRETRAINED = config["features"]["pretrain"]["epochs"] > 0 or any(
 )
 
 
+#: this run is one setting of a cost knob (a module of this Snakefile, rules/cost_common.smk):
+#: its outputs feed the cost page, never the report's own pages
+COST_SETTING_RUN = bool((config.get("cost") or {}).get("setting"))
+
+
 def features_report_item(path, caption, labels):
     """`path` as a report item of the Features page where the backbones were pretrained."""
-    if not PRETRAINED:
+    if not PRETRAINED or COST_SETTING_RUN:
         return path
     return report(
         path,

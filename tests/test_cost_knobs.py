@@ -1,5 +1,5 @@
 """The simulation and features knobs' metrics and cost points (tacgen_lib.cost.knob_metrics,
-knob_probes, scores) against plain references."""
+scores) against plain references."""
 
 import numpy as np
 import pandas as pd
@@ -8,24 +8,16 @@ from sklearn.metrics import accuracy_score, r2_score
 
 from tacgen_lib.cost.benchmarks import Benchmark
 from tacgen_lib.cost.knob_metrics import (
-    BAND_WIDTH,
-    FRAMES_PER_S,
     KnobSetting,
     features_metric_ids,
     features_metrics,
     force_band_width,
-    knob_metric_ids,
     knob_points,
     metric_row,
 )
-from tacgen_lib.cost.knob_probes import probe_metrics
 from tacgen_lib.cost.points import POINT_COLUMNS
 from tacgen_lib.cost.scores import score_ci
 from tacgen_lib.probes.bootstrap import fixed_test_bootstrap, resample_indices
-from tacgen_lib.probes.protocol import FamilyRows, ProbeSettings
-
-CONFIG = {"features": {"pretrained_vs_random": {"targets": {"vision": "shape",
-                                                            "tactile": "hardness"}}}}  # fmt: skip
 
 
 @pytest.mark.parametrize("metric", ["r2", "accuracy"])
@@ -76,42 +68,6 @@ def test_force_band_width_is_the_mean_width_with_a_bootstrap_ci():
                          seed=0)  # fmt: skip
 
 
-def _rows(n_train: int, n_test: int, y: np.ndarray, kind: str) -> FamilyRows:
-    ids = np.array([f"s-{i:04d}" for i in range(n_train + n_test)], dtype=object)
-    return FamilyRows(corpus="c", target="force_p50" if kind == "ridge" else "hardness",
-                      kind=kind, train_ids=ids[:n_train], test_ids=ids[n_train:],
-                      y_train=y[:n_train], y_test=y[n_train:], strata_test=None,
-                      bands_test=None, n_unlabelled=0)  # fmt: skip
-
-
-def _settings(kind: str) -> ProbeSettings:
-    return ProbeSettings(kind=kind, lambdas=(0.1, 1.0, 10.0), C=(0.1, 1.0, 10.0), folds=3,
-                         bootstrap=500, train_resamples=0, permutations=0,
-                         label_permutations=0, random_draws=0, seed=0)  # fmt: skip
-
-
-def test_probe_metrics_find_a_tactile_only_signal_and_not_a_missing_one():
-    rng = np.random.default_rng(3)
-    n_tr, n_te = 160, 80
-    n = n_tr + n_te
-    v = rng.normal(size=(n, 6))
-    t = rng.normal(size=(n, 4))
-    y = t[:, 0] + 0.1 * rng.normal(size=n)  # only touch sees the force
-    out = probe_metrics(_rows(n_tr, n_te, y, "ridge"), (v[:n_tr], v[n_tr:]),
-                        (t[:n_tr], t[n_tr:]), _settings("ridge"))  # fmt: skip
-    by = {r["metric_id"]: r for r in out}
-    score = by["force_p50 R² V+T"]
-    delta = by["force_p50 ΔR² V+T − V"]
-    assert 0.9 < score["ci_low"] <= score["value"] <= score["ci_high"]
-    assert delta["ci_low"] > 0.8
-    # a label touch does not see: Delta's CI holds 0
-    labels = np.where(v[:, 0] > 0, "hard", "soft").astype(object)
-    out = probe_metrics(_rows(n_tr, n_te, labels, "logistic"), (v[:n_tr], v[n_tr:]),
-                        (t[:n_tr], t[n_tr:]), _settings("logistic"))  # fmt: skip
-    delta = {r["metric_id"]: r for r in out}["hardness Δaccuracy V+T − V"]
-    assert delta["ci_low"] <= 0 <= delta["ci_high"]
-
-
 def _pvr_table() -> pd.DataFrame:
     return pd.DataFrame(
         {
@@ -142,19 +98,6 @@ def test_features_metrics_report_the_backbone_in_use():
                          n_resamples=100)  # fmt: skip
 
 
-def test_knob_metric_ids_name_each_knob_s_metrics():
-    assert knob_metric_ids("presses", CONFIG) == [BAND_WIDTH, "force_p50 R² V+T"]
-    assert knob_metric_ids("tactile_resolution", CONFIG)[-1] == FRAMES_PER_S
-    assert knob_metric_ids("pretrain_epochs", CONFIG) == [
-        "vision shape Δaccuracy pretrained − random",
-        "tactile hardness Δaccuracy pretrained − random",
-    ]
-    assert knob_metric_ids("image_size", CONFIG) == ["vision shape accuracy",
-                                                     "tactile hardness accuracy"]  # fmt: skip
-    with pytest.raises(ValueError, match="unknown"):
-        knob_metric_ids("guidance", CONFIG)
-
-
 def _setting(label: str, value: float, walls: list[float], default: bool = False) -> KnobSetting:
     metrics = pd.DataFrame([metric_row("m1", value, value - 0.1, value + 0.1, "ci"),
                             metric_row("m2", 2 * value, 2 * value, 2 * value, "ci")])  # fmt: skip
@@ -162,16 +105,15 @@ def _setting(label: str, value: float, walls: list[float], default: bool = False
                        [Benchmark(w, w / 2, 100.0) for w in walls])  # fmt: skip
 
 
-def test_knob_points_sum_benchmarks_keep_metric_order_and_append_extras():
+def test_knob_points_sum_benchmarks_and_keep_metric_order():
     settings = [_setting("2", 0.5, [1.0, 2.0]), _setting("8", 0.7, [3.0, 4.0, 5.0], True)]
-    extra = {"8": [metric_row(FRAMES_PER_S, 30.0, np.nan, np.nan, "none")]}
-    points = knob_points("presses", "corpus", settings, ["m2", "m1"], extra=extra)
+    points = knob_points("presses", "corpus", settings, ["m2", "m1"])
     assert list(points.columns) == [*POINT_COLUMNS, "direction"]  # check_points adds direction
-    assert list(points["metric"]) == ["m2", "m1", "m2", "m1", FRAMES_PER_S]
-    assert list(points["wall_s"]) == [3.0, 3.0, 12.0, 12.0, 12.0]
-    assert list(points["cpu_s"]) == [1.5, 1.5, 6.0, 6.0, 6.0]
-    assert list(points["n_jobs"]) == [2, 2, 3, 3, 3]
-    assert list(points["is_default"]) == [False, False, True, True, True]
+    assert list(points["metric"]) == ["m2", "m1", "m2", "m1"]
+    assert list(points["wall_s"]) == [3.0, 3.0, 12.0, 12.0]
+    assert list(points["cpu_s"]) == [1.5, 1.5, 6.0, 6.0]
+    assert list(points["n_jobs"]) == [2, 2, 3, 3]
+    assert list(points["is_default"]) == [False, False, True, True]
 
 
 def test_knob_points_refuse_missing_metrics_benchmarks_and_duplicates():

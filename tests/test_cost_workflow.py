@@ -1,8 +1,11 @@
 """The knob sweep runs end to end on the tiny config (config/cost_tiny.yaml over test.yaml), on
-a copy of the session's reference run, so only the sweep's own jobs run (~30-60 s)."""
+a copy of the session's reference run, so only the sweep's own jobs run (~30-60 s). Each setting
+is the main rules again under the setting's config (a module per setting): at the run's own
+setting they write the main run's edges bit for bit."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pandas as pd
@@ -20,9 +23,8 @@ SWEEP = ("--configfile", "config/test.yaml", "config/cost_tiny.yaml")
 def test_default_config_runs_no_sweep_job(cold_dry_run):
     rules = plan_of(cold_dry_run)  # a fresh copy of the repository (conftest)
     assert "cost_of_accuracy" in rules
-    assert not {"cost_train_heads", "cost_probe", "cost_align_points", "cost_probe_points"} & set(
-        rules
-    )
+    assert "cost_knob_points" not in rules
+    assert not [r for r in rules if r.startswith(("cost_align", "cost_probe"))]  # no setting
     # the free knobs (the stages' own grids) still give the page its points
     assert rules.get("cost_generate_points") == 2 and rules.get("cost_policy_points") == 2
 
@@ -35,15 +37,21 @@ def test_unknown_knob_stops_with_the_known_names(tmp_path):
     proc = smk(work, "--dry-run", "--configfile", "config/test.yaml", "config/bad_cost.yaml",
                "--", "cost_of_accuracy", check=False)  # fmt: skip
     assert proc.returncode != 0
-    assert "['align_stepz'] are not knobs" in proc.stdout + proc.stderr
+    assert "'align_stepz' is not a knob" in proc.stdout + proc.stderr
     assert "align_steps" in proc.stdout + proc.stderr
 
 
 def test_tiny_sweep_writes_points_and_the_page(reference_run: Path, tmp_path):
     work = copy_run(reference_run, tmp_path / "sweep")
     planned = planned_rules(work, *SWEEP, "--", "cost_of_accuracy")
-    assert planned["cost_train_heads"] == 4  # 2 knobs x 2 settings x 1 seed
-    assert planned["cost_probe"] == 8  # 2 knobs x 2 settings x 2 replicates
+    heads = [r for r in planned if r.startswith("cost_align") and r.endswith("_train_heads")]
+    probes = [r for r in planned if r.startswith("cost_probe") and r.endswith("_probe")]
+    assert len(heads) == 4  # 2 knobs x 2 settings (1 seed): the main rule, one module each
+    # 2 knobs x 2 settings x 2 replicates, but both knobs' own defaults (B = 200 resamples,
+    # 10 permutations: test.yaml's) are one run
+    assert len(probes) == 6
+    assert not [r for r in probes if r.startswith("cost_probe_permutations_10_")]
+    assert all(planned[r] == 1 for r in heads + probes)
     assert "train_heads" not in planned and "probe" not in planned  # the default's jobs stay
     smk(work, *SWEEP, "--", "cost_of_accuracy")
     points = {
@@ -60,7 +68,24 @@ def test_tiny_sweep_writes_points_and_the_page(reference_run: Path, tmp_path):
     assert n.loc[n["label"] == "all", "is_default"].all()  # the default's heads use all rows
     assert set(n["direction"]) == {"higher", "lower"}  # top-1 up, median rank down
     b = points["probe_bootstrap"]
-    assert set(b["label"]) == {"50", "200"} and b["value"].notna().all()
+    assert set(b["label"]) == {"100", "200"} and b["value"].notna().all()
+    assert b.loc[b["label"] == "200", "is_default"].all()  # test.yaml's probes.bootstrap
+    # at the run's own setting a knob's main rule writes the main run's edge, bit for bit
+    same = {
+        "results/align/sim_paired/clip128/seed~42/tau~0.07/n~all/metrics.parquet":
+            "results/cost/align_n/all/align/sim_paired/clip128/seed~42/tau~0.07/n~all/"
+            "metrics.parquet",
+        "results/probes/force/protocol~raw/seed~42.parquet":
+            "results/cost/probe_bootstrap/200/rep~0/probes/force/protocol~raw/seed~42.parquet",
+    }  # fmt: skip
+    for main, setting in same.items():
+        assert _sha(work / main) == _sha(work / setting), (main, setting)
+    # a setting's seconds are its own jobs' benchmark files, every one of them
+    for knob in ("align_n", "probe_bootstrap"):
+        p = points[knob]
+        files = sorted((work / "results/cost" / knob).glob("**/benchmarks/**/*.tsv"))
+        per_label = p.groupby("label")["n_jobs"].first()
+        assert per_label.sum() == len(files), (knob, per_label.to_dict(), len(files))
     perm = points["probe_permutations"]
     res = perm[perm["metric"].str.contains("resolution")].set_index("label")["value"]
     assert res.to_dict() == pytest.approx({"5": 1 / 6, "10": 1 / 11})
@@ -72,3 +97,8 @@ def test_tiny_sweep_writes_points_and_the_page(reference_run: Path, tmp_path):
     assert set(table["knob"]) == set(points)
     again = planned_rules(work, *SWEEP, "--", "cost_of_accuracy")
     assert again == {}, again  # a second run has nothing to do
+
+
+def _sha(path: Path) -> str:
+    """The SHA-256 of an edge's data, from its sidecar."""
+    return json.loads(Path(f"{path}.sha256.json").read_text())["sha256"]

@@ -157,12 +157,9 @@ def test_edit_to_an_indirectly_imported_module_reruns_exactly_its_users(run_dir,
     # evaluate_generator and fit_generator_baselines reach it through probes.protocol too
     # (generate, issue 12)
     robustness = {"probe_training_size", "probe_within_scale", "aggregate_robustness"}
-    # cost_sim_probe (issue 14) fits the probes stage's probes on each simulation setting;
-    # cost_probe (the permutations knob) calls the tactile-permutation control itself
-    cost = {"cost_sim_probe", "cost_probe"}
-    assert direct == ["cost_probe.py"]
+    assert direct == []
     generate = {"evaluate_generator", "fit_generator_baselines"}
-    assert users == {"probe", "aggregate_probes"} | generate | (robustness | cost)
+    assert users == {"probe", "aggregate_probes"} | generate | robustness
     work = copy_tree(tmp_path / "f")
     shutil.copytree(run_dir / "results", work / "results")
     shutil.copytree(run_dir / ".snakemake", work / ".snakemake")
@@ -170,7 +167,7 @@ def test_edit_to_an_indirectly_imported_module_reruns_exactly_its_users(run_dir,
     # its users rerun, then only what reads their outputs: the generation summary (issue 12),
     # the findings page, the edge manifest and `all`
     # (the cost sweeps run only under config/cost.yaml: not planned here)
-    assert set(planned_rules(work)) == (users - cost) | {
+    assert set(planned_rules(work)) == users | {
         "aggregate_generate",
         "cost_generate_points",
         "cost_of_accuracy",

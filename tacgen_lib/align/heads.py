@@ -40,7 +40,12 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from tacgen_lib.align.retrieval import CHANCE_COLUMNS, RETRIEVAL_METRICS, paired_retrieval
+from tacgen_lib.align.retrieval import (
+    CHANCE_COLUMNS,
+    RETRIEVAL_METRICS,
+    paired_retrieval,
+    retrieval_ranks,
+)
 from tacgen_lib.align.settings import AlignSettings
 from tacgen_lib.corpus.splits import assert_trainable, ids_in_split
 from tacgen_lib.io import edges
@@ -668,11 +673,14 @@ def cell_ids(
 
 @dataclass
 class CellFit:
-    """What `fit_cell` returns: the fit, its test-split retrieval metrics and its curve table."""
+    """What `fit_cell` returns: the fit, its test-split retrieval metrics, its curve table and
+    the test rows' ranks (`sample_id`, `rank_v2t`, `rank_t2v`: what a bootstrap over the test
+    rows resamples)."""
 
     result: AlignResult
     metrics: dict[str, Any]
     curve: pd.DataFrame
+    ranks: pd.DataFrame
 
 
 def fit_cell(
@@ -699,6 +707,7 @@ def fit_cell(
     metrics: `paired_retrieval` of the projected test rows (top1/top5 both ways, median ranks,
     chance levels), n_test, n_train_rows, n_val, best-step validation loss, best_step,
     steps_run, stopped_early. curve: one row per evaluation, keyed by ``eval`` = "step~<k>".
+    ranks: each test row's retrieval rank V→T and T→V (`retrieval_ranks`), keyed by sample_id.
     """
     train_ids = list(ids["train"])
     val_ids = list(ids["val"])
@@ -760,7 +769,14 @@ def fit_cell(
             for c in result.curve
         ]
     )
-    return CellFit(result=result, metrics=metrics, curve=curve)
+    ranks = pd.DataFrame(
+        {
+            "sample_id": test_ids,
+            "rank_v2t": retrieval_ranks(z_v, z_t).astype(np.int64),
+            "rank_t2v": retrieval_ranks(z_t, z_v).astype(np.int64),
+        }
+    )
+    return CellFit(result=result, metrics=metrics, curve=curve, ranks=ranks)
 
 
 _RETRIEVAL_KEYS = (*RETRIEVAL_METRICS, *CHANCE_COLUMNS)

@@ -130,7 +130,7 @@ def calibration_points(
         path = root / rel
         if not path.exists():
             continue
-        cost_class, units, flops = job_units(job.rule, config, job.wildcards)
+        cost_class, units, flops = job_units(job.rule, job.config_of(config), job.wildcards)
         b = read_benchmark(path)
         rows.append((run, cpu, cost_class, job.rule, rel, job.threads, units, flops, b.wall, b.cpu))
     return pd.DataFrame(rows, columns=CALIBRATION_COLUMNS)

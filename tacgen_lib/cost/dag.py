@@ -40,6 +40,12 @@ class DagJob:
     benchmark: str | None = None
     runs: bool = True
     deps: tuple[int, ...] = ()
+    setting: str | None = None
+    config: Mapping[str, Any] | None = None
+
+    def config_of(self, run_config: Mapping[str, Any]) -> Mapping[str, Any]:
+        """The config the job's units are counted from: its setting's, else the run's."""
+        return run_config if self.config is None else self.config
 
 
 def dag_jobs(
@@ -98,13 +104,15 @@ def dag_jobs(
             jobs = [
                 DagJob(
                     jobid=ids[job],
-                    rule=job.rule.name,
+                    rule=_setting_rule(job.rule)[0],
                     wildcards={k: str(v) for k, v in job.wildcards_dict.items()},
                     threads=int(job.threads),
                     local=job.rule.name in local_rules,
                     benchmark=str(job.benchmark) if job.benchmark is not None else None,
                     runs=not job.rule.norun,
                     deps=tuple(sorted(ids[d] for d in dag.job_dependencies(job))),
+                    setting=_setting_rule(job.rule)[1],
+                    config=_setting_rule(job.rule)[2],
                 )
                 for job in snake_jobs
             ]
@@ -112,6 +120,18 @@ def dag_jobs(
     finally:
         os.chdir(here)
     return jobs, config
+
+
+def _setting_rule(rule: Any) -> tuple[str, str | None, dict[str, Any] | None]:
+    """(main rule name, module name, module config) of a Snakemake rule; (name, None, None)
+    for a rule of the run itself."""
+    from tacgen_lib.cost.knobs import base_rule
+
+    module_config = (getattr(rule, "module_globals", None) or {}).get("config")
+    setting = ((module_config or {}).get("cost") or {}).get("setting")
+    if not setting:
+        return rule.name, None, None
+    return base_rule(rule.name, module_config), setting["module"], _plain(module_config)
 
 
 def _plain(value: Any) -> Any:

@@ -46,7 +46,7 @@ from tacgen_lib.cost.calibration import (
 )
 from tacgen_lib.cost.dag import DagJob, dag_jobs
 from tacgen_lib.cost.schedule import Machine, Task, list_schedule, local_machine, slurm_machine
-from tacgen_lib.cost.units import UNITS, flop_seconds, job_units
+from tacgen_lib.cost.units import UNITS, MissingUnitsError, flop_seconds, job_units
 
 __all__ = [
     "Estimate",
@@ -99,7 +99,7 @@ def job_seconds(
     for job in jobs:
         if not job.runs:
             continue
-        cost_class, units, flops = job_units(job.rule, config, job.wildcards)
+        cost_class, units, flops = job_units(job.rule, job.config_of(config), job.wildcards)
         if cost_class not in lines:
             have = sorted(c for c in lines if c.split(":")[0] == job.rule)
             raise MissingCalibrationError(
@@ -375,14 +375,18 @@ def main(argv: Sequence[str] | None = None) -> Estimate:
         label += f", load factor {args.load_factor:g}"
     if args.speed_factor != 1.0:
         label += f", x{args.speed_factor:g} the calibration CPU's seconds"
-    est = estimate_run(
-        jobs,
-        config,
-        calibration,
-        machine,
-        machine_label=f"{label} ({configs})",
-        speed=args.speed_factor * args.load_factor,
-    )
+    try:
+        est = estimate_run(
+            jobs,
+            config,
+            calibration,
+            machine,
+            machine_label=f"{label} ({configs})",
+            speed=args.speed_factor * args.load_factor,
+        )
+    except (MissingCalibrationError, MissingUnitsError) as exc:
+        # what to run is in the message; a traceback would only hide it
+        raise SystemExit(f"estimate: {exc}") from None
     print(format_estimate(est))
     if args.out:
         write_table(est, args.out)

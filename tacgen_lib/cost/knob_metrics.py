@@ -3,7 +3,7 @@ and the knob's cost-of-accuracy points (`tacgen_lib.cost.points`) from its jobs'
 
 Simulation knobs (presses per sample, tactile render resolution) re-simulate a reduced copy of
 a paired corpus per setting; for each copy this module measures the width of the p05-p95 force
-band (`force_band_width`), and `tacgen_lib.cost.knob_probes` the probes of the probes stage.
+band (`force_band_width`); the probes are the probes stage's own (`tacgen_lib.cost.readers`).
 
 Features knobs (backbone input size, width, pretraining epochs) read the pretrained-vs-random
 table of `tacgen_lib.features.pretrained_vs_random` (`features_metrics`).
@@ -14,7 +14,7 @@ the `benchmark:` files of the jobs each setting needed, never read from an edge.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,7 +29,6 @@ __all__ = [
     "BAND_WIDTH",
     "FRAMES_PER_S",
     "METRIC_COLUMNS",
-    "knob_metric_ids",
     "probe_metric_ids",
     "features_metric_ids",
     "KnobSetting",
@@ -86,30 +85,6 @@ def features_metric_ids(modality: str, target: str) -> tuple[str, str]:
     )
 
 
-def knob_metric_ids(knob: str, config: Mapping) -> list[str]:
-    """The metrics a knob's points report, in order (the one list rules and tests read).
-
-    presses: the force band width and the force probe's R^2 (V+T); tactile_resolution: the
-    force and hardness probes' Delta (V+T - V) and frames/s of the simulate job; image_size,
-    backbone_arch: each modality's probe accuracy on its pretrained-vs-random target;
-    pretrain_epochs: each modality's Delta pretrained - random.
-    """
-    targets = config["features"]["pretrained_vs_random"]["targets"]
-    if knob == "presses":
-        return [BAND_WIDTH, probe_metric_ids("force_p50", "r2")[0]]
-    if knob == "tactile_resolution":
-        return [
-            probe_metric_ids("force_p50", "r2")[1],
-            probe_metric_ids("hardness", "accuracy")[1],
-            FRAMES_PER_S,
-        ]
-    pick = {"image_size": 1, "backbone_arch": 1, "pretrain_epochs": 0}
-    if knob not in pick:
-        raise ValueError(f"unknown simulation/features knob {knob!r}; known: presses, "
-                         f"tactile_resolution, {', '.join(pick)}")  # fmt: skip
-    return [features_metric_ids(m, targets[m])[pick[knob]] for m in ("vision", "tactile")]
-
-
 def metric_row(metric_id: str, value: float, lo: float, hi: float, uncertainty: str) -> dict:
     """One row of `METRIC_COLUMNS`."""
     return {"metric_id": metric_id, "value": value, "ci_low": lo, "ci_high": hi,
@@ -162,14 +137,11 @@ def knob_points(
     stage: str,
     settings: Sequence[KnobSetting],
     metrics: Sequence[str] | None = None,
-    *,
-    extra: Mapping[str, Sequence[dict]] | None = None,
 ) -> pd.DataFrame:
     """The knob's cost points (`POINT_COLUMNS`, checked): one row per setting and metric.
 
     metrics: which metric_ids to keep, in order (None: all of each setting's); a setting
-    lacking one raises. extra: label -> further metric rows of that setting computed by the
-    caller (e.g. frames per second from a benchmark), appended after the kept metrics.
+    lacking one raises.
     wall_s / cpu_s: sums over the setting's benchmarks, n_jobs their count.
     """
     if not settings:
@@ -190,7 +162,6 @@ def knob_points(
                 f"(have {list(frame.index)})"
             )
         found = [dict(frame.loc[m], metric_id=m) for m in wanted]
-        found += list((extra or {}).get(s.label, []))
         wall = float(sum(b.wall for b in s.benchmarks))
         cpu = float(sum(b.cpu for b in s.benchmarks))
         for m in found:

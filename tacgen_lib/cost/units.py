@@ -50,11 +50,14 @@ class UnitRule:
     `count(config, wildcards) -> (class suffix, units)`; an empty suffix is the rule itself.
     `flops(config, wildcards)`, for rules whose time grows with a model's size, is the job's
     dense floating-point work (multiply-add = 2): it is charged at the CPU's effective GEMM
-    rate (`GFLOPS_PER_THREAD`), so a bigger model costs more without a fitted term for it."""
+    rate (`GFLOPS_PER_THREAD`), so a bigger model costs more without a fitted term for it.
+    `same_as`: another rule whose calibration prices these jobs (the same kind of work, where
+    this rule never runs in a calibration run)."""
 
     unit: str
     count: Callable[[Config, Wildcards], tuple[str, float]]
     flops: Callable[[Config, Wildcards], float] | None = None
+    same_as: str | None = None
 
 
 #: Effective dense float32 rate per thread of the calibration's CPU (2-core AMD EPYC, AVX-512):
@@ -74,6 +77,12 @@ def _corpus(c: Config, name: str) -> Mapping[str, Any]:
 def _n(c: Config, name: str) -> float:
     """Samples of a corpus: `n` of a simulated one; a real one's size is not in config (1)."""
     return float(_corpus(c, name).get("n", 1))
+
+
+def _tactile_pixels(c: Config, name: str) -> float:
+    """Tactile pixels of a simulated corpus's frames relative to 120 × 160 (1 for a real one)."""
+    h, w = _corpus(c, name).get("tactile_size", (120, 160))
+    return float(h) * float(w) / (120.0 * 160.0)
 
 
 def _train_rows(c: Config, name: str) -> float:
@@ -188,37 +197,6 @@ def _policy_cells(c: Config) -> float:
     )
 
 
-# ---- the cost sweeps (config/cost.yaml): their settings come from the job's wildcards --------
-
-
-def _sweep_n(c: Config) -> float:
-    return float((c.get("cost") or {}).get("sim_sweep", {}).get("n", 400))
-
-
-def _pixels(w: Wildcards) -> float:
-    """Tactile pixels of a sweep setting ('120x160'), relative to the default 120 × 160."""
-    h, wd = (int(v) for v in w["tactile"].split("x"))
-    return h * wd / (120.0 * 160.0)
-
-
-def _sweep_backbone(w: Wildcards) -> float:
-    """`_vit_flops` at a features-knob setting (size, arch from the wildcards)."""
-    return _vit_flops(w["arch"], w["size"])
-
-
-def _sweep_align_steps(c: Config, w: Wildcards) -> float:
-    if w["knob"] == "align_steps":
-        return float(w["value"])
-    return _align_steps(c, {"corpus": c["align"]["corpora"][0], "n_train": w["value"]})
-
-
-def _probe_knob(c: Config, w: Wildcards) -> tuple[str, float]:
-    """One replicate of a probe knob: the force family's raw probe with B = the setting."""
-    family = ((c.get("cost") or {}).get("knobs", {}).get(w["knob"]) or {}).get("family", "force")
-    cls, units = _probe_work(c, {"family": family, "protocol": "raw"})
-    return cls, units * (1 + float(w["value"]) / 1000)
-
-
 def _const(unit: str) -> UnitRule:
     """A rule whose jobs are all alike: one unit each, so its cost is its overhead."""
     return UnitRule(unit, lambda c, w: ("", 1.0))
@@ -229,12 +207,13 @@ def _const(unit: str) -> UnitRule:
 UNITS: dict[str, UnitRule] = {
     # corpus
     "simulate_corpus": UnitRule(
-        "sample-press (samples in the shard × presses)",
+        "sample-press (samples in the shard × presses × tactile pixels / 120×160)",
         lambda c, w: (
             "",
             _n(c, w["corpus"])
             / int(_corpus(c, w["corpus"])["shards"])
-            * int(_corpus(c, w["corpus"])["presses"]),
+            * int(_corpus(c, w["corpus"])["presses"])
+            * _tactile_pixels(c, w["corpus"]),
         ),
     ),
     "merge_corpus": UnitRule("sample", lambda c, w: ("", _n(c, w["corpus"]))),
@@ -246,7 +225,10 @@ UNITS: dict[str, UnitRule] = {
         "sample (all corpora)", lambda c, w: ("", sum(map(lambda k: _n(c, k), c["corpora"])))
     ),
     # preprocess
-    "background_subtract": UnitRule("frame", lambda c, w: ("", _n(c, w["corpus"]))),
+    "background_subtract": UnitRule(
+        "frame × tactile pixels / 120×160",
+        lambda c, w: ("", _n(c, w["corpus"]) * _tactile_pixels(c, w["corpus"])),
+    ),
     # features
     "pretrain_backbone": UnitRule(
         "epoch × train frame (+ ViT FLOPs)",
@@ -398,60 +380,15 @@ UNITS: dict[str, UnitRule] = {
     "pretrain_curve": _const("job"),
     "findings": _const("job"),
     "cost_of_accuracy": _const("job"),
-    # cost sweeps (config/cost.yaml)
-    "cost_simulate_corpus": UnitRule(
-        "sample-press × tactile pixels / 120×160",
-        lambda c, w: ("", _sweep_n(c) * int(w["presses"]) * _pixels(w)),
+    # cost of accuracy: the knobs' settings are the main rules' jobs under the setting's config
+    # (tacgen_lib.cost.knobs); what remains is reading points, the same kind of job everywhere
+    "cost_knob_points": UnitRule(
+        "job (priced as cost_generate_points: a points job)",
+        lambda c, w: ("", 1.0),
+        same_as="cost_generate_points",
     ),
-    "cost_merge_corpus": UnitRule("sample", lambda c, w: ("", _sweep_n(c))),
-    "cost_background_subtract": UnitRule(
-        "frame × tactile pixels / 120×160", lambda c, w: ("", _sweep_n(c) * _pixels(w))
-    ),
-    "cost_sim_features": UnitRule(
-        "frame (+ ViT FLOPs)",
-        lambda c, w: ("", _sweep_n(c)),
-        lambda c, w: _sweep_n(c) * _backbone(c, w["modality"]),
-    ),
-    "cost_sim_probe": UnitRule(
-        "row × fit (the force probe of the sweep corpus)",
-        lambda c, w: _probe_work(c, {"family": "force", "protocol": "raw"}),
-    ),
-    "cost_pretrain_backbone": UnitRule(
-        "epoch × train frame (+ ViT FLOPs)",
-        lambda c, w: (
-            "",
-            int(w["epochs"]) * _train_rows(c, c["features"]["pretrain"]["corpus"]),
-        ),
-        lambda c, w: (
-            int(w["epochs"])
-            * _train_rows(c, c["features"]["pretrain"]["corpus"])
-            * _DINO_FORWARDS
-            * _sweep_backbone(w)
-        ),
-    ),
-    "cost_features_extract": UnitRule(
-        "frame (+ ViT FLOPs)",
-        lambda c, w: ("", _n(c, c["features"]["pretrained_vs_random"]["corpus"])),
-        lambda c, w: _n(c, c["features"]["pretrained_vs_random"]["corpus"]) * _sweep_backbone(w),
-    ),
-    "cost_pretrained_vs_random": UnitRule(
-        "frame (+ FLOPs of both random-init ViTs)",
-        lambda c, w: ("", _n(c, c["features"]["pretrained_vs_random"]["corpus"])),
-        lambda c, w: (
-            _n(c, c["features"]["pretrained_vs_random"]["corpus"]) * 2 * _sweep_backbone(w)
-        ),
-    ),
-    "cost_train_heads": UnitRule(
-        "optimiser step × batch row",
-        lambda c, w: ("", _sweep_align_steps(c, w) * int(c["align"]["batch_size"])),
-    ),
-    "cost_probe": UnitRule("row × fit, × (1 + B / 1000)", _probe_knob),
-    "cost_knob_points": _const("job"),
-    "cost_align_points": _const("job"),
-    "cost_probe_points": _const("job"),
     "cost_generate_points": _const("job"),
     "cost_policy_points": _const("job"),
-    "cost_features_knobs": _const("job"),
 }
 
 
@@ -473,7 +410,8 @@ def job_units(rule: str, config: Config, wildcards: Wildcards) -> tuple[str, flo
             f"{dict(wildcards)} from this config ({type(exc).__name__}: {exc}); fix its line in "
             "tacgen_lib/cost/units.py UNITS"
         ) from exc
-    return (f"{rule}:{suffix}" if suffix else rule), float(units), float(flops)
+    name = UNITS[rule].same_as or rule
+    return (f"{name}:{suffix}" if suffix else name), float(units), float(flops)
 
 
 def flop_seconds(flops: float, threads: int) -> float:

@@ -152,6 +152,9 @@ class ProbeSettings:
     seed: int
     min_delta: float = 0.03
     protocol: str = "raw"  # a name of `variants.PROTOCOLS`
+    #: seed of the bootstrap resamples and control draws; None: `seed` (which also draws the
+    #: CV folds). The cost sweep's probe knobs vary it alone to measure Monte Carlo error.
+    resample_seed: int | None = None
     mlp: MLPGrid = field(default_factory=MLPGrid)  # the ``mlp2`` probe's grid
 
     def __post_init__(self) -> None:
@@ -162,6 +165,11 @@ class ProbeSettings:
     @property
     def metric(self) -> str:
         return "r2" if self.kind == "ridge" else "accuracy"
+
+    @property
+    def draw_seed(self) -> int:
+        """The seed of the bootstrap resamples and the controls' draws."""
+        return self.seed if self.resample_seed is None else self.resample_seed
 
     @property
     def reg_name(self) -> str:
@@ -196,6 +204,11 @@ class ProbeSettings:
             label_permutations=int(probes_cfg["label_permutations"]),
             random_draws=int(probes_cfg["random_draws"]),
             seed=int(seed),
+            resample_seed=(
+                None
+                if probes_cfg.get("resample_seed") is None
+                else int(probes_cfg["resample_seed"])
+            ),
         )
 
 
@@ -668,7 +681,7 @@ def compare(
     v_probe: the V probe fitted on (v_train, y_train), shared between the comparisons of one
     input (it does not depend on T or the fusion). Controls refit at the CV-chosen
     regularisers. Returns the main row (statistics and diagnostics) and, with controls, one
-    row per control in `CONTROLS`; seeds are all ``settings.seed``, so every comparison of a
+    row per control in `CONTROLS`; seeds are all ``settings.draw_seed``, so every comparison of a
     family sees the same bootstrap resamples and permutations (paired across comparisons).
     """
     kind, metric = settings.kind, settings.metric
@@ -687,7 +700,7 @@ def compare(
         vt_probe.pred_test,
         metric,
         n_resamples=settings.bootstrap,
-        seed=settings.seed,
+        seed=settings.draw_seed,
         strata=rows.strata_test,
         sample_ids=rows.test_ids,
     )
@@ -748,7 +761,7 @@ def compare(
         )  # fmt: skip
         return result
     fixed_v, fixed_vt = v_probe.fixed(kind), vt_probe.fixed(kind)
-    common = {"metric": metric, "seed": settings.seed}
+    common = {"metric": metric, "seed": settings.draw_seed}
     paired = PairedRows(v_train, t_train, y_tr, v_test, t_test, y_te, fusion)
     runs = {
         "train_resample": (settings.train_resamples, lambda: train_resample_diagnostic(

@@ -1,55 +1,33 @@
-"""One simulation or features knob's cost points: each setting's metrics with their CI and
-the seconds of its jobs' benchmark files (rule cost_knob_points)."""
-
-import io
-
-import numpy as np
-import pandas as pd
+"""Points of one swept knob from the main-rule edges of each of its settings and the benchmark
+files of their jobs (rule cost_knob_points; the reader: tacgen_lib.cost.readers)."""
 
 from tacgen_lib.cost.benchmarks import read_benchmark
-from tacgen_lib.cost.knob_metrics import FRAMES_PER_S, KnobSetting, features_metrics, knob_points
+from tacgen_lib.cost.points import write_points
+from tacgen_lib.cost.readers import SettingRun, read_knob
 from tacgen_lib.io import edges, log
 
 logger = log.for_rule(snakemake)
-knob = snakemake.wildcards.knob
-settings, extra = [], {}
-for p in snakemake.params.plan:
-    table = edges.read(p["metrics"]).frame
-    if snakemake.params.stage == "features":
-        table = pd.DataFrame(
-            features_metrics(
-                table, pretraining=p["pretraining"], n_resamples=snakemake.params.bootstrap
-            )
+knob, params = snakemake.wildcards.knob, snakemake.params
+runs = []
+for p in params.plan:
+    runs.append(
+        SettingRun(
+            label=p["label"],
+            number=p["number"],
+            is_default=p["is_default"],
+            rep=p["rep"],
+            edges={
+                role: [edges.read(f).frame for f in files] for role, files in p["edges"].items()
+            },
+            benchmarks=[read_benchmark(b) for b in p["benchmarks"]],
+            options=p["options"],
         )
-    benchmarks = [read_benchmark(b) for b in p["benchmarks"]]
-    settings.append(KnobSetting(p["setting"], p["label"], p["is_default"], table, benchmarks))
-    if FRAMES_PER_S in snakemake.params.metrics:
-        simulate = benchmarks[0]  # the plan lists the simulate job first
-        extra[p["label"]] = [
-            {
-                "metric_id": FRAMES_PER_S,
-                "value": snakemake.params.n_sim / simulate.wall,
-                "ci_low": np.nan,
-                "ci_high": np.nan,
-                "uncertainty": "none: one job's wall time (benchmark file)",
-            }
-        ]
-wanted = [m for m in snakemake.params.metrics if m != FRAMES_PER_S]
-points = knob_points(knob, snakemake.params.stage, settings, wanted, extra=extra)
-# not an edge: the points carry wall times, which never go into a hashed edge
-buf = io.BytesIO()
-points.to_parquet(buf, index=False)
-edges.atomic_write_bytes(snakemake.output[0], buf.getvalue())
-for r in points.itertuples(index=False):
-    logger.info(
-        "%s %s: %s = %.4f [%.4f, %.4f], %.1f s wall, %.1f s CPU over %d jobs",
-        knob,
-        r.label,
-        r.metric,
-        r.value,
-        r.ci_low,
-        r.ci_high,
-        r.wall_s,
-        r.cpu_s,
-        r.n_jobs,
     )
+    logger.info("%s = %s (replicate %d): %d edges, %d jobs", knob, p["label"], p["rep"],
+                sum(len(f) for f in p["edges"].values()), len(p["benchmarks"]))  # fmt: skip
+table = write_points(read_knob(knob, params.reads, runs, params.options), snakemake.output.points,
+                     snakemake.output.points)  # fmt: skip
+for r in table.itertuples(index=False):
+    logger.info("%s = %s: %s %.4g [%.4g, %.4g] in %.1f s wall, %.1f s CPU (%d jobs)", r.knob,
+                r.label, r.metric, r.value, r.ci_low, r.ci_high, r.wall_s, r.cpu_s,
+                r.n_jobs)  # fmt: skip

@@ -55,6 +55,7 @@ row = {
 }
 heads.save_heads(fit.result, snakemake.output.heads, producer=snakemake.rule)
 edges.write(snakemake.output.curve, fit.curve, key="eval", producer=snakemake.rule)
+edges.write(snakemake.output.ranks, fit.ranks, key="sample_id", producer=snakemake.rule)
 edges.write(snakemake.output.metrics, pd.DataFrame([row]), key="cell", producer=snakemake.rule)
 logger.info(
     "%s: best step %d of %d (early stop: %s), test top1 v2t %.3f t2v %.3f (chance %.3f)",

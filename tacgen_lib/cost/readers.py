@@ -1,0 +1,191 @@
+"""What a swept knob's settings bought: the main rules' edges of each setting, read into the
+knob's cost points (`tacgen_lib.cost.points`).
+
+Every setting of a swept knob (`tacgen_lib.cost.knobs`) ran main rules under its own folder;
+rule `cost_knob_points` hands each reader the settings (`SettingRun`: label, x position,
+default flag, replicate, the setting's edges by role, its benchmark files) and the reader
+returns the knob's points. `KNOBS[knob].reads` names the reader; `READERS` is the lookup.
+
+- `align`: the probes' heads cell of `train_heads` (its `ranks` edge per alignment seed):
+  top-1 and median rank V→T with a bootstrap CI over the test rows;
+- `probe_bootstrap`, `probe_permutations`: the headline row (raw, concat, the heads' variant)
+  of `probe` per replicate resample seed: the Monte Carlo spread of the CI ends / of Δ_ctrl;
+- `features`: the `pretrained_vs_random` table: each modality's accuracy of the backbone in
+  use, and Δ pretrained − random;
+- `simulation`: the reduced corpus's force band width, the headline Δ of its probe families
+  and the simulate job's frames per second.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import pandas as pd
+
+from tacgen_lib.cost.benchmarks import Benchmark
+from tacgen_lib.cost.knob_metrics import (
+    BAND_WIDTH,
+    FRAMES_PER_S,
+    PERCENTILE_CI,
+    KnobSetting,
+    features_metrics,
+    force_band_width,
+    knob_points,
+    metric_row,
+    probe_metric_ids,
+)
+from tacgen_lib.cost.spread import replicate_seconds
+from tacgen_lib.cost.sweeps import (
+    Seconds,
+    align_points,
+    bootstrap_spread_points,
+    permutation_points,
+)
+
+__all__ = ["READERS", "SettingRun", "headline_row", "read_knob"]
+
+
+@dataclass(frozen=True)
+class SettingRun:
+    """One run of a setting as the reader sees it. `edges`: role -> list of frames (one per
+    alignment seed, probe family...), already read; `benchmarks`: its jobs' benchmark files,
+    read; `options`: what the reader needs from the setting's config (resamples, whether the
+    backbone was pretrained, the reduced corpus's size)."""
+
+    label: str
+    number: float
+    is_default: bool
+    rep: int
+    edges: Mapping[str, Sequence[pd.DataFrame]]
+    benchmarks: Sequence[Benchmark]
+    options: Mapping[str, Any] = field(default_factory=dict)
+
+
+def _seconds(runs: Sequence[SettingRun]) -> dict[str, Seconds]:
+    """Per label: the cost of one run (replicates of a setting are averaged)."""
+    by_label: dict[str, list[SettingRun]] = {}
+    for r in runs:
+        by_label.setdefault(r.label, []).append(r)
+    out = {}
+    for label, reps in by_label.items():
+        if len(reps) == 1:
+            b = reps[0].benchmarks
+            out[label] = Seconds(sum(x.wall for x in b), sum(x.cpu for x in b), len(b))
+        else:
+            out[label] = Seconds(*replicate_seconds([x for r in reps for x in r.benchmarks]))
+    return out
+
+
+def _default_label(runs: Sequence[SettingRun]) -> str | None:
+    return next((r.label for r in runs if r.is_default), None)
+
+
+def headline_row(rows: pd.DataFrame, heads_variant: str, control: str = "none") -> pd.Series:
+    """The probe job's headline comparison: raw features, concat fusion, the heads' tactile
+    variant, and `control` ("none": the comparison itself). Raises naming what is missing."""
+    hit = rows[
+        (rows["input"] == "raw")
+        & (rows["fusion"] == "concat")
+        & (rows["t_variant"] == heads_variant)
+        & (rows["control"] == control)
+    ]
+    if len(hit) != 1:
+        raise ValueError(
+            f"probe rows of {sorted(set(rows['family']))}: {len(hit)} headline rows "
+            f"(raw, concat, t~{heads_variant}, control {control}); expected 1"
+        )
+    return hit.iloc[0]
+
+
+def read_align(knob: str, runs: Sequence[SettingRun], options: Mapping[str, Any]) -> pd.DataFrame:
+    ranks = {r.label: [f["rank_v2t"].to_numpy() for f in r.edges["ranks"]] for r in runs}
+    n_all = next(
+        (int(r.edges["metrics"][0]["n_train_rows"].iloc[0]) for r in runs if r.label == "all"),
+        None,
+    )
+    return align_points(knob, ranks, _seconds(runs), _default_label(runs),
+                        n_resamples=int(options["bootstrap"]), seed=0, n_all=n_all)  # fmt: skip
+
+
+def _replicates(runs: Sequence[SettingRun], heads_variant: str) -> pd.DataFrame:
+    out = []
+    for r in runs:
+        rows = r.edges["rows"][0]
+        main = headline_row(rows, heads_variant)
+        perm = headline_row(rows, heads_variant, "tactile_permutation")
+        out.append({"label": r.label, "rep": r.rep, "delta": main["delta"],
+                    "ci_low": main["ci_low"], "ci_high": main["ci_high"],
+                    "n_permutations": int(perm["n_resamples"]), "delta_ctrl": perm["delta"],
+                    "delta_ctrl_sd": perm["delta_sd"]})  # fmt: skip
+    return pd.DataFrame(out)
+
+
+def read_probe_bootstrap(knob: str, runs: Sequence[SettingRun], options: Mapping[str, Any]):
+    reps = _replicates(runs, options["heads_variant"])
+    return bootstrap_spread_points(knob, reps, _seconds(runs), _default_label(runs))
+
+
+def read_probe_permutations(knob: str, runs: Sequence[SettingRun], options: Mapping[str, Any]):
+    reps = _replicates(runs, options["heads_variant"])
+    return permutation_points(knob, reps, _seconds(runs), _default_label(runs))
+
+
+def _settings(knob: str, runs: Sequence[SettingRun], metrics: Callable[[SettingRun], list[dict]]):
+    return [
+        KnobSetting(r.number, r.label, r.is_default, pd.DataFrame(metrics(r)), r.benchmarks)
+        for r in runs
+    ]
+
+
+def read_features(knob: str, runs: Sequence[SettingRun], options: Mapping[str, Any]):
+    def metrics(r: SettingRun) -> list[dict]:
+        return features_metrics(r.edges["table"][0], pretraining=bool(r.options["pretraining"]),
+                                n_resamples=int(options["bootstrap"]))  # fmt: skip
+
+    return knob_points(knob, "features", _settings(knob, runs, metrics), options["metrics"])
+
+
+def read_simulation(knob: str, runs: Sequence[SettingRun], options: Mapping[str, Any]):
+    b, seed = int(options["bootstrap"]), int(options["seed"])
+
+    def metrics(r: SettingRun) -> list[dict]:
+        samples = r.edges["samples"][0]
+        width, lo, hi = force_band_width(samples["force_p05"].to_numpy(),
+                                         samples["force_p95"].to_numpy(), n_resamples=b,
+                                         seed=seed)  # fmt: skip
+        out = [metric_row(BAND_WIDTH, width, lo, hi,
+                          f"95 % bootstrap CI over the {len(samples)} samples")]  # fmt: skip
+        for rows in r.edges["rows"]:
+            h = headline_row(rows, options["heads_variant"])
+            out.append(metric_row(probe_metric_ids(h["target"], h["metric"])[1], h["delta"],
+                                  h["ci_low"], h["ci_high"],
+                                  PERCENTILE_CI.format(b=int(h["n_resamples"]))))  # fmt: skip
+        simulate = r.benchmarks[0]  # the simulate job comes first
+        out.append(metric_row(FRAMES_PER_S, len(samples) / simulate.wall, math.nan, math.nan,
+                              "none: one job's wall time (benchmark file)"))  # fmt: skip
+        return out
+
+    return knob_points(knob, "corpus", _settings(knob, runs, metrics), options["metrics"])
+
+
+READERS: dict[str, Callable[[str, Sequence[SettingRun], Mapping[str, Any]], pd.DataFrame]] = {
+    "align": read_align,
+    "probe_bootstrap": read_probe_bootstrap,
+    "probe_permutations": read_probe_permutations,
+    "features": read_features,
+    "simulation": read_simulation,
+}
+
+
+def read_knob(
+    knob: str, reader: str, runs: Sequence[SettingRun], options: Mapping[str, Any]
+) -> pd.DataFrame:
+    """The knob's points from its settings' runs (`READERS[reader]`)."""
+    if not runs:
+        raise ValueError(f"knob {knob!r}: no settings")
+    if reader not in READERS:
+        raise ValueError(f"knob {knob!r}: no reader {reader!r} (have {sorted(READERS)})")
+    return READERS[reader](knob, runs, options)
