@@ -14,14 +14,13 @@ run: setup
 	$(BIN)/snakemake --cores 1 --report results/report.html
 	@echo "report: results/report.html"
 
-# ---- issue 15: recovery is one command ---- begin
+# recovery is one command
 ## Continue an interrupted run (kill -9, lost session, OOM): refuses while a Snakemake of this
 ## directory is alive; else clears the dead run's stale lock and temporary files and reruns
 ## incomplete jobs. Extra Snakemake arguments through ARGS:
 ##   make resume ARGS='--configfile config/test.yaml'
 resume:
 	$(BIN)/python tools/resume.py --cores $(CORES) $(ARGS)
-# ---- issue 15 ---- end
 
 report:
 	$(BIN)/snakemake --cores 1 --report results/report.html

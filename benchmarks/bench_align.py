@@ -126,7 +126,7 @@ def time_fit(in_dim: int, steps: int) -> float:
         seed=0,
         settings=AlignSettings(
             budget="steps", steps=steps, batch_size=BATCH, patience=0, eval_every=50
-        ),  # fmt: skip
+        ),
     )
     return res.seconds / steps
 

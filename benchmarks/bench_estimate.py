@@ -65,10 +65,14 @@ def compare(run: Path, configfile: str, cores: int) -> float:
     speed = float(np.median(ratios))
     est = estimate_run(jobs, config, cal, local_machine(cores), speed=speed)
     ratio = est.total / log.wall
-    print(f"{configfile}: {len(ratios)} jobs with benchmark files; this run's speed "
-          f"x{speed:.2f} of the calibration ({est.source})")  # fmt: skip
-    print(f"predicted {est.total:.0f} s, measured {log.wall:.0f} s: ratio {ratio:.2f} "
-          f"({'within' if 0.75 <= ratio <= 1.25 else 'OUTSIDE'} 0.75-1.25)")  # fmt: skip
+    print(
+        f"{configfile}: {len(ratios)} jobs with benchmark files; this run's speed "
+        f"x{speed:.2f} of the calibration ({est.source})"
+    )
+    print(
+        f"predicted {est.total:.0f} s, measured {log.wall:.0f} s: ratio {ratio:.2f} "
+        f"({'within' if 0.75 <= ratio <= 1.25 else 'OUTSIDE'} 0.75-1.25)"
+    )
     return ratio
 
 

@@ -47,8 +47,11 @@ from tacgen_lib.generate.train import make_optimiser, training_step
 
 
 def linear_shapes(model: Denoiser) -> list[tuple[str, int, int]]:
-    return [(n, m.in_features, m.out_features) for n, m in model.named_modules()
-            if isinstance(m, nn.Linear)]  # fmt: skip
+    return [
+        (n, m.in_features, m.out_features)
+        for n, m in model.named_modules()
+        if isinstance(m, nn.Linear)
+    ]
 
 
 def step_flops(model: Denoiser, batch: int) -> float:
@@ -122,12 +125,15 @@ def main() -> None:
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     print(machine.describe())
-    print(f"threads {args.threads}; model {args.blocks} x {args.hidden}, d {args.dim}, "
-          f"batch {args.batch}")  # fmt: skip
+    print(
+        f"threads {args.threads}; model {args.blocks} x {args.hidden}, d {args.dim}, "
+        f"batch {args.batch}"
+    )
 
     torch.manual_seed(0)
-    s = GenerateSettings(hidden=args.hidden, blocks=args.blocks, batch_size=args.batch,
-                         prediction="v")  # fmt: skip
+    s = GenerateSettings(
+        hidden=args.hidden, blocks=args.blocks, batch_size=args.batch, prediction="v"
+    )
     model = Denoiser(args.dim, args.dim, args.hidden, args.blocks, s.time_dim)
     ema = Denoiser(args.dim, args.dim, args.hidden, args.blocks, s.time_dim)
     ema.load_state_dict(model.state_dict())
@@ -159,9 +165,11 @@ def main() -> None:
     rw, rc = gemm_rate()
     rate_w, rate_c = max(rate_w, rw), max(rate_c, rc)
     print(f"GEMM 1024^3: {rate_w / 1e9:.1f} GF/s wall, {rate_c / 1e9:.1f} GF/s per CPU second")
-    print(f"training step: {step_w * 1e3:.2f} ms ({flops / 1e9:.3f} GFLOP); roofline fraction "
-          f"{flops / rate_w / step_w:.2f} (cpu-frac {flops / rate_c / step_c:.2f}); "
-          f"{1 / step_w:.0f} steps/s")  # fmt: skip
+    print(
+        f"training step: {step_w * 1e3:.2f} ms ({flops / 1e9:.3f} GFLOP); roofline fraction "
+        f"{flops / rate_w / step_w:.2f} (cpu-frac {flops / rate_c / step_c:.2f}); "
+        f"{1 / step_w:.0f} steps/s"
+    )
 
     arrays = ema.arrays()
     rows = np.random.default_rng(0).standard_normal((args.rows, args.dim)).astype(np.float32)
@@ -174,15 +182,21 @@ def main() -> None:
     f_sample = sample_flops(model, args.rows, 50)
     f_plain = 50 * forward_flops(model, 2 * args.rows)
     print(f"numpy GEMM 1024^3: {np_w / 1e9:.1f} GF/s wall, {np_c / 1e9:.1f} GF/s per CPU second")
-    print(f"sampling DDIM-50 + CFG (numpy), {args.rows} rows: {sw:.2f} s, "
-          f"{args.rows / sw:.0f} vectors/s; roofline fraction {f_sample / np_w / sw:.2f} "
-          f"(cpu-frac {f_sample / np_c / sc:.2f}) on {f_sample / 1e9:.1f} GFLOP performed; "
-          f"forward-equivalent {f_plain / np_w / sw:.2f} ({f_plain / 1e9:.1f} GFLOP)")  # fmt: skip
-    job = import_seconds("tacgen_lib.generate.inference, tacgen_lib.generate.sampling, "
-                         "tacgen_lib.io.edges, tacgen_lib.io.log, pandas")  # fmt: skip
+    print(
+        f"sampling DDIM-50 + CFG (numpy), {args.rows} rows: {sw:.2f} s, "
+        f"{args.rows / sw:.0f} vectors/s; roofline fraction {f_sample / np_w / sw:.2f} "
+        f"(cpu-frac {f_sample / np_c / sc:.2f}) on {f_sample / 1e9:.1f} GFLOP performed; "
+        f"forward-equivalent {f_plain / np_w / sw:.2f} ({f_plain / 1e9:.1f} GFLOP)"
+    )
+    job = import_seconds(
+        "tacgen_lib.generate.inference, tacgen_lib.generate.sampling, "
+        "tacgen_lib.io.edges, tacgen_lib.io.log, pandas"
+    )
     with_torch = import_seconds("torch")
-    print(f"per sampling job, before sampling: its imports {job:.2f} s; importing torch "
-          f"{with_torch:.2f} s more would be {with_torch / max(job, 1e-9):.1f}x that")  # fmt: skip
+    print(
+        f"per sampling job, before sampling: its imports {job:.2f} s; importing torch "
+        f"{with_torch:.2f} s more would be {with_torch / max(job, 1e-9):.1f}x that"
+    )
 
 
 if __name__ == "__main__":

@@ -78,9 +78,14 @@ def main() -> None:
                 d = full.data
                 for site in sites:
                     h = tactile.height_field_rays(
-                        full.model, d, full.object_geom, d.site_xpos[site], d.site_xmat[site],
-                        optics.optics, optics.directions,
-                    )  # fmt: skip
+                        full.model,
+                        d,
+                        full.object_geom,
+                        d.site_xpos[site],
+                        d.site_xmat[site],
+                        optics.optics,
+                        optics.directions,
+                    )
                     tactile.tactile_shading(h, bg, optics.optics)
         steps += k
     dt3 = time.perf_counter() - t0

@@ -91,19 +91,31 @@ def logistic_controls(args) -> list[tuple]:
     b, k = args.logistic_perms, args.logistic_ref
     rows = []
     for name, call in (
-        ("label", lambda p, m: label_permutation_control(
-            rows_, probe_v=p, probe_vt=p, metric="accuracy", n_permutations=m, seed=0)),
-        ("tactile", lambda p, m: tactile_permutation_control(
-            rows_, probe=p, probe_v=p, metric="accuracy", n_permutations=m, seed=0)),
-    ):  # fmt: skip
+        (
+            "label",
+            lambda p, m: label_permutation_control(
+                rows_, probe_v=p, probe_vt=p, metric="accuracy", n_permutations=m, seed=0
+            ),
+        ),
+        (
+            "tactile",
+            lambda p, m: tactile_permutation_control(
+                rows_, probe=p, probe_v=p, metric="accuracy", n_permutations=m, seed=0
+            ),
+        ),
+    ):
         refits = 2 * b if name == "label" else b + 1  # V and V+T refits per permutation
         ref_refits = 2 * k if name == "label" else k + 1
         ours, _ = best_of(lambda c=call: c(probe, b), 1, f"logistic {name}")
         ref, _ = best_of(lambda c=call: c(loop, k), 1, f"ref {name}")
         rows.append(
-            (f"logistic {name} permutations ({b}), per refit", ours / refits,
-             f"sklearn lbfgs loop ({k})", ref / ref_refits)
-        )  # fmt: skip
+            (
+                f"logistic {name} permutations ({b}), per refit",
+                ours / refits,
+                f"sklearn lbfgs loop ({k})",
+                ref / ref_refits,
+            )
+        )
     return rows
 
 
@@ -122,8 +134,10 @@ def logistic_cv() -> tuple:
     finally:
         logistic.cv_batches = batches
     rows = np.abs(batched.cv_scores - loop.cv_scores) * 960  # held-out rows, over the 5 folds
-    same = (f"C {batched.C:g} vs {loop.C:g}; CV scores differ by {rows.max():.0f} held-out row(s)"
-            f", iterations {batched.cv_max_n_iter} vs {loop.cv_max_n_iter}")  # fmt: skip
+    same = (
+        f"C {batched.C:g} vs {loop.C:g}; CV scores differ by {rows.max():.0f} held-out row(s)"
+        f", iterations {batched.cv_max_n_iter} vs {loop.cv_max_n_iter}"
+    )
     return "logistic CV 5 folds x 3 C, 960 x 384", ours, "sklearn lbfgs loop", ref, same
 
 
@@ -167,9 +181,13 @@ def main() -> None:
         """The ridge tactile-permutation control at the selected lambdas (kernel path)."""
         pv, pvt = pv or selected[0], pvt or selected[1]
         return tactile_permutation_control(
-            paired, probe=FixedRidge(pvt.lam, solver=solver), probe_v=FixedRidge(pv.lam),
-            metric="r2", n_permutations=args.permutations, seed=seed,
-        )  # fmt: skip
+            paired,
+            probe=FixedRidge(pvt.lam, solver=solver),
+            probe_v=FixedRidge(pv.lam),
+            metric="r2",
+            n_permutations=args.permutations,
+            seed=seed,
+        )
 
     # pieces, each timed on its own
     t_cv, (pv, pvt) = best_of(
@@ -212,7 +230,7 @@ def main() -> None:
             method="percentile",
             vectorized=True,
             rng=np.random.default_rng(seed),
-        ),  # fmt: skip
+        ),
         args.repeats,
         "scipy",
     )
@@ -222,21 +240,31 @@ def main() -> None:
     t_all, _ = best_of(whole_probe, args.repeats, "all")
 
     print(f"machine: {machine.describe()}")
-    print(f"BLAS threads {blas}; n_train={args.n_train} n_test={args.n_test} "
-          f"d={args.d_v}+{args.d_t}; lambdas={np.round(lambdas, 3).tolist()}")  # fmt: skip
-    print(f"selected lambda V={pv.lam:g} (CV solvers {pv.selection.solver[0]}) "
-          f"V+T={pvt.lam:g} ({pvt.selection.solver[0]}); GridSearchCV agrees")  # fmt: skip
-    print(f"Delta R2 = {boot['delta']:.4f}  CI [{boot['ci_low']:.4f}, {boot['ci_high']:.4f}]  "
-          f"(scipy percentile CI [{sp.confidence_interval.low:.4f}, "
-          f"{sp.confidence_interval.high:.4f}]);  Delta_ctrl = {ctrl['delta_ctrl']:.4f}")  # fmt: skip
+    print(
+        f"BLAS threads {blas}; n_train={args.n_train} n_test={args.n_test} "
+        f"d={args.d_v}+{args.d_t}; lambdas={np.round(lambdas, 3).tolist()}"
+    )
+    print(
+        f"selected lambda V={pv.lam:g} (CV solvers {pv.selection.solver[0]}) "
+        f"V+T={pvt.lam:g} ({pvt.selection.solver[0]}); GridSearchCV agrees"
+    )
+    print(
+        f"Delta R2 = {boot['delta']:.4f}  CI [{boot['ci_low']:.4f}, {boot['ci_high']:.4f}]  "
+        f"(scipy percentile CI [{sp.confidence_interval.low:.4f}, "
+        f"{sp.confidence_interval.high:.4f}]);  Delta_ctrl = {ctrl['delta_ctrl']:.4f}"
+    )
     rows = [
         ("CV lambda select + refit (V, V+T)", t_cv, "cv", "GridSearchCV(Ridge) x2", t_gs),
-        (f"fixed_test_bootstrap ({args.resamples})", t_boot, "boot", "scipy.stats.bootstrap",
-         t_sp),
-        (f"tactile permutations ({args.permutations}), PCG", t_ctrl, "ctrl",
-         "Cholesky/permutation", t_chol),
+        (f"fixed_test_bootstrap ({args.resamples})", t_boot, "boot", "scipy.stats.bootstrap", t_sp),
+        (
+            f"tactile permutations ({args.permutations}), PCG",
+            t_ctrl,
+            "ctrl",
+            "Cholesky/permutation",
+            t_chol,
+        ),
         ("whole probe (all of the above)", t_all, "all", "", np.nan),
-    ]  # fmt: skip
+    ]
     head = f"{'step':46s} {'ours [s]':>9s} {'cpu [s]':>8s} {'reference':>24s} {'ref [s]':>8s}"
     print(f"{head} {'ref/ours':>8s}")
     for name, ours, key, ref_name, ref in rows:
@@ -247,10 +275,13 @@ def main() -> None:
         for name, ours, ref_name, ref in logistic_controls(args):
             print(f"{name:46s} {ours:9.4f} {'':8s} {ref_name:>24s} {ref:8.4f} {ref / ours:8.1f}")
         name, ours, ref_name, ref, same = logistic_cv()
-        print(f"{name:46s} {ours:9.4f} {'':8s} {ref_name:>24s} {ref:8.4f} {ref / ours:8.1f}"
-              f"  ({same})")  # fmt: skip
-    print(f"PCG: {ctrl['solver']}; load average during run: {os.getloadavg()[0]:.1f} "
-          "(CPU time sums BLAS threads)")  # fmt: skip
+        print(
+            f"{name:46s} {ours:9.4f} {'':8s} {ref_name:>24s} {ref:8.4f} {ref / ours:8.1f}  ({same})"
+        )
+    print(
+        f"PCG: {ctrl['solver']}; load average during run: {os.getloadavg()[0]:.1f} "
+        "(CPU time sums BLAS threads)"
+    )
     print("target: whole probe <= 1 s on 2 cores")
 
 

@@ -28,8 +28,15 @@ from tacgen_lib.corpus.sim import corpus, physics, tactile
 from tacgen_lib.corpus.sim.scenes import scene_xml, validate_scene
 
 SCENES = yaml.safe_load(open("config/scenes.yaml"))
-PAIRED = {"name": "bench", "kind": "simulated", "design": "paired", "seed": 1,
-          "scene": "paired_press", "sensors": 4, "presses": 8}  # fmt: skip
+PAIRED = {
+    "name": "bench",
+    "kind": "simulated",
+    "design": "paired",
+    "seed": 1,
+    "scene": "paired_press",
+    "sensors": 4,
+    "presses": 8,
+}
 
 
 def pressed_states(n: int):
@@ -50,8 +57,13 @@ def pressed_states(n: int):
         physics.apply_object(rt, spec.obj)
         res = physics.press_object(rt, scene.press_force)
         states.append((spec.obj, rt.data.qpos.copy(), res.gel_depth))
-    optics = tactile.GelOptics(scene.gel_size, (120, 160), scene.gel_camera_distance,
-                               scene.gel_saturation, scene.gel_smoothing)  # fmt: skip
+    optics = tactile.GelOptics(
+        scene.gel_size,
+        (120, 160),
+        scene.gel_camera_distance,
+        scene.gel_saturation,
+        scene.gel_smoothing,
+    )
     return rt, states, optics
 
 
@@ -83,8 +95,9 @@ def frames(method: str, n_frames: int, n_states: int = 40) -> float:
             rt.data.qpos[:] = qpos
             mujoco.mj_kinematics(rt.model, rt.data)
             if method == "rays":
-                raw = tactile.height_field_rays(rt.model, rt.data, geom, np.zeros(3),
-                                                np.eye(3).ravel(), optics, dirs)  # fmt: skip
+                raw = tactile.height_field_rays(
+                    rt.model, rt.data, geom, np.zeros(3), np.eye(3).ravel(), optics, dirs
+                )
             else:
                 raw = tactile.height_field_depth(renderer, rt.data, cam, optics)
             tactile.tactile_shading(np.minimum(raw, depth), bg, optics, noise=rng)

@@ -71,11 +71,3 @@ def backbone_frames(modality, corpus):
     if modality == "vision":
         return corpus_edge(corpus)
     return f"results/preprocess/{corpus}/{config['features']['pretrain']['variant']}.parquet"
-
-
-def simulate_benchmarks(wildcards=None):
-    return [
-        f"results/benchmarks/simulate_corpus/{c}/{s}.tsv"
-        for c in SIM_CORPORA
-        for s in range(CORPORA[c]["shards"])
-    ]

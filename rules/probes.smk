@@ -95,7 +95,7 @@ rule aggregate_probes:
         "../workflow/scripts/aggregate_probes.py"
 
 
-# --- probe robustness (issue 16): training-size sweep, within-scale split, robustness report ---
+# probe robustness: training-size sweep, within-scale split, robustness report
 TARGETS += ["results/probes/robustness.parquet"]
 TARGETS += expand("{d}/{t}.html", d=PROBE_REPORT, t=ROBUSTNESS_TABLES)
 TARGETS += [f"{PROBE_REPORT}/training_size.png"]
@@ -223,4 +223,3 @@ rule aggregate_robustness:
         "../workflow/scripts/aggregate_robustness.py"
 
 
-# --- end probe robustness ---

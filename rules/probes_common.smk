@@ -10,7 +10,7 @@ from tacgen_lib.probes.variants import PROTOCOLS
 PROBES = config["probes"]
 check_families(PROBES["families"])  # no family repeats another's rows
 PROBE_FAMILIES = sorted(PROBES["families"])
-# probe robustness (issue 16): every family under raw, the robustness families under each
+# probe robustness: every family under raw, the robustness families under each
 # other protocol variant (not where it equals raw); (family, protocol) pairs
 ROBUST = RobustnessSettings.from_config(PROBES["robustness"], PROBES["families"])
 PROBE_JOBS = ROBUST.jobs(PROBES["families"])

@@ -52,8 +52,13 @@ def pytest_report_header(config: pytest.Config) -> str:
 
 #: the test modules with the longest workflow runs, started first (in this order), so that no
 #: worker is left running one of them alone at the end of the session
-LONG_FIRST = ("test_slurm.py", "test_faults.py", "test_cost_features_workflow.py",
-              "test_cost_workflow.py", "test_probes_workflow.py")  # fmt: skip
+LONG_FIRST = (
+    "test_slurm.py",
+    "test_faults.py",
+    "test_cost_features_workflow.py",
+    "test_cost_workflow.py",
+    "test_probes_workflow.py",
+)
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
@@ -121,8 +126,9 @@ def shared_run(
     work, result, failed = root / name / "run", root / f"{name}.pickle", root / f"{name}.failed"
     with FileLock(str(root / f"{name}.lock")):
         if failed.exists():
-            raise RuntimeError(f"the shared {name} run failed in another worker:\n"
-                               f"{failed.read_text()}")  # fmt: skip
+            raise RuntimeError(
+                f"the shared {name} run failed in another worker:\n{failed.read_text()}"
+            )
         if not result.exists():
             try:
                 value = build(work)

@@ -272,9 +272,14 @@ def test_fit_heads_reaches_clearly_above_chance_on_noisy_linear_pairs():
     v, t = synthetic_pairs(800, 32, 24, noise=1.0, seed=0)
     tr, va = np.arange(600), np.arange(600, 800)
     res = fit_heads(
-        v, t, tr, va, tau=0.07, seed=0,
+        v,
+        t,
+        tr,
+        va,
+        tau=0.07,
+        seed=0,
         settings=AlignSettings.tiny(budget="epochs", epochs=30, eval_every=100, batch_size=128),
-    )  # fmt: skip
+    )
     assert res.total_steps == 30 * (600 // 128) == res.steps_run
     z_v, z_t = project(res, v[va], t[va])
     m = paired_retrieval(z_v, z_t)
@@ -300,9 +305,14 @@ def test_early_stopping_keeps_best_weights():
     t[scrambled] = t[np.random.default_rng(0).permutation(scrambled)]
     patience, every = 3, 5
     res = fit_heads(
-        v, t, tr, va, tau=0.07, seed=0,
+        v,
+        t,
+        tr,
+        va,
+        tau=0.07,
+        seed=0,
         settings=AlignSettings.tiny(steps=400, patience=patience, eval_every=every, batch_size=100),
-    )  # fmt: skip
+    )
     assert res.stopped_early and res.steps_run < res.total_steps == 400
     losses = [c["val_loss"] for c in res.curve]
     best = int(np.argmin(losses))
@@ -320,9 +330,15 @@ def test_progress_gets_one_line_per_evaluation():
     v, t = synthetic_pairs(120, 8, 8, noise=0.5, seed=3)
     lines: list[str] = []
     res = fit_heads(
-        v, t, np.arange(100), np.arange(100, 120), tau=0.1, seed=0,
-        settings=AlignSettings.tiny(steps=12, eval_every=5), progress=lines.append,
-    )  # fmt: skip
+        v,
+        t,
+        np.arange(100),
+        np.arange(100, 120),
+        tau=0.1,
+        seed=0,
+        settings=AlignSettings.tiny(steps=12, eval_every=5),
+        progress=lines.append,
+    )
     assert [c["step"] for c in res.curve] == [0, 5, 10, 12]
     assert len(lines) == 4 and "val_loss" in lines[-1] and "step 12/12" in lines[-1]
 
@@ -330,9 +346,14 @@ def test_progress_gets_one_line_per_evaluation():
 def test_save_load_project_round_trip(tmp_path):
     v, t = synthetic_pairs(150, 10, 6, noise=0.5, seed=4)
     res = fit_heads(
-        v, t, np.arange(120), np.arange(120, 150), tau=0.1, seed=3,
+        v,
+        t,
+        np.arange(120),
+        np.arange(120, 150),
+        tau=0.1,
+        seed=3,
         settings=AlignSettings.tiny(steps=8, eval_every=4),
-    )  # fmt: skip
+    )
     path = tmp_path / "sub" / "heads.pt"
     save_heads(res, path)
     loaded = load_heads(path)

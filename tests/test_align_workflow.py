@@ -183,11 +183,25 @@ def test_tables_report_mean_and_sd_over_seeds():
         for n in ("10", "all"):
             cell = cell_name("p", "clip128", seed, "0.07", n)
             rows.append(
-                {"cell": cell, "corpus": "p", "variant": "clip128", "seed": seed, "tau": "0.07",
-                 "n_train": n, "budget": "steps", "val_loss": 1.0, "top1_v2t": top1,
-                 "top1_t2v": top1, "top5_v2t": 1.0, "top5_t2v": 1.0, "median_rank_v2t": 1.0,
-                 "median_rank_t2v": 2.0, "chance_top1": 0.1, "chance_top5": 0.5}
-            )  # fmt: skip
+                {
+                    "cell": cell,
+                    "corpus": "p",
+                    "variant": "clip128",
+                    "seed": seed,
+                    "tau": "0.07",
+                    "n_train": n,
+                    "budget": "steps",
+                    "val_loss": 1.0,
+                    "top1_v2t": top1,
+                    "top1_t2v": top1,
+                    "top5_v2t": 1.0,
+                    "top5_t2v": 1.0,
+                    "median_rank_v2t": 1.0,
+                    "median_rank_t2v": 2.0,
+                    "chance_top1": 0.1,
+                    "chance_top5": 0.5,
+                }
+            )
     metrics = pd.DataFrame(rows)
     seconds = {c: 2.0 for c in metrics["cell"]}
     summary = align_report.alignment_summary(metrics, seconds)

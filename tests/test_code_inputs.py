@@ -156,12 +156,19 @@ def test_the_snakefile_parses_without_the_numerics_libraries():
     import sys
 
     sources = [ROOT / "Snakefile", *sorted((ROOT / "rules").glob("*.smk"))]
-    modules = sorted({m for src in sources
-                      for m in re.findall(r"^from (tacgen_lib[\w.]*) import", src.read_text(),
-                                          re.MULTILINE)})  # fmt: skip
+    modules = sorted(
+        {
+            m
+            for src in sources
+            for m in re.findall(r"^from (tacgen_lib[\w.]*) import", src.read_text(), re.MULTILINE)
+        }
+    )
     assert "tacgen_lib.probes.settings" in modules, modules
-    code = (f"import sys; import {', '.join(modules)}; "
-            "print(sorted(m for m in ('sklearn', 'scipy', 'torch') if m in sys.modules))")  # fmt: skip
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
-                         cwd=ROOT)  # fmt: skip
+    code = (
+        f"import sys; import {', '.join(modules)}; "
+        "print(sorted(m for m in ('sklearn', 'scipy', 'torch') if m in sys.modules))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT
+    )
     assert out.stdout.strip() == "[]", f"parse-time imports load {out.stdout.strip()}: {modules}"

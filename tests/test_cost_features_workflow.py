@@ -37,8 +37,16 @@ def test_knob_sweeps_run_on_the_tiny_config(reference_run, tmp_path):
     work = copy_run(reference_run, tmp_path / "run")
     (work / "config" / "cost_tiny.yaml").write_text(yaml.safe_dump(TINY_COST, sort_keys=False))
     targets = [f"results/cost/points/{k}.parquet" for k in KNOBS_RUN]
-    cmd = [*SNAKEMAKE, "--cores", "2", "--configfile", "config/test.yaml",
-           "config/cost_tiny.yaml", "--", *targets]  # fmt: skip
+    cmd = [
+        *SNAKEMAKE,
+        "--cores",
+        "2",
+        "--configfile",
+        "config/test.yaml",
+        "config/cost_tiny.yaml",
+        "--",
+        *targets,
+    ]
     proc = subprocess.run(cmd, cwd=work, capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-6000:]
     # only the sweep's own jobs ran: the reference run's upstream edges were reused as they are
@@ -58,8 +66,11 @@ def test_knob_sweeps_run_on_the_tiny_config(reference_run, tmp_path):
             if folder.exists():  # else the same run as another knob's setting
                 assert n_jobs == len(list(folder.glob("**/*.tsv"))), (knob, label, n_jobs)
     # a setting that is another knob's run ran once: each knob's own default
-    for knob, label in (("tactile_resolution", "120x160"), ("backbone_arch", "vit_tiny"),
-                        ("pretrain_epochs", "1")):  # fmt: skip
+    for knob, label in (
+        ("tactile_resolution", "120x160"),
+        ("backbone_arch", "vit_tiny"),
+        ("pretrain_epochs", "1"),
+    ):
         assert not (work / "results/cost" / knob / label).exists(), (knob, label)
     # at test.yaml's own image size the features rules write the main run's edges
     for edge in (
@@ -74,8 +85,13 @@ def test_knob_sweeps_run_on_the_tiny_config(reference_run, tmp_path):
     at_zero = epochs[epochs["label"] == "0"]
     assert (at_zero[["value", "ci_low", "ci_high"]] == 0).all().all()
     # a second run has nothing to do
-    again = subprocess.run([*cmd[:-len(targets) - 1], "--dry-run", "--", *targets], cwd=work,
-                           capture_output=True, text=True, timeout=300)  # fmt: skip
+    again = subprocess.run(
+        [*cmd[: -len(targets) - 1], "--dry-run", "--", *targets],
+        cwd=work,
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert "Nothing to be done" in again.stdout + again.stderr
 
 

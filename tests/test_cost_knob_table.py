@@ -67,9 +67,13 @@ def test_a_setting_sets_its_keys_and_nothing_else_of_the_run():
     assert cfg["cost"] == {
         "knobs": {},
         "grid_knobs": False,
-        "setting": {"knob": "backbone_arch", "label": "vit_small", "rep": 0,
-                    "module": "cost_backbone_arch_vit_small"},
-    }  # fmt: skip
+        "setting": {
+            "knob": "backbone_arch",
+            "label": "vit_small",
+            "rep": 0,
+            "module": "cost_backbone_arch_vit_small",
+        },
+    }
     # everything else is the run's own config, which is left untouched
     assert {k: v for k, v in cfg.items() if k not in ("features", "cost")} == {
         k: v for k, v in config.items() if k not in ("features", "cost")
@@ -164,15 +168,23 @@ def test_labels_metrics_and_bootstrap():
 
 
 def test_headline_row_is_raw_concat_at_the_heads_variant():
-    base = {"family": "force", "input": "raw", "fusion": "concat", "t_variant": "clip128",
-            "control": "none", "delta": 0.5}  # fmt: skip
-    rows = pd.DataFrame([
-        base,
-        {**base, "fusion": "mean", "delta": 0.1},
-        {**base, "t_variant": "clahe", "delta": 0.2},
-        {**base, "input": "aligned", "delta": 0.3},
-        {**base, "control": "tactile_permutation", "delta": -0.1},
-    ])  # fmt: skip
+    base = {
+        "family": "force",
+        "input": "raw",
+        "fusion": "concat",
+        "t_variant": "clip128",
+        "control": "none",
+        "delta": 0.5,
+    }
+    rows = pd.DataFrame(
+        [
+            base,
+            {**base, "fusion": "mean", "delta": 0.1},
+            {**base, "t_variant": "clahe", "delta": 0.2},
+            {**base, "input": "aligned", "delta": 0.3},
+            {**base, "control": "tactile_permutation", "delta": -0.1},
+        ]
+    )
     assert headline_row(rows, "clip128")["delta"] == 0.5
     assert headline_row(rows, "clip128", "tactile_permutation")["delta"] == -0.1
     with pytest.raises(ValueError, match="0 headline rows"):

@@ -64,8 +64,7 @@ def test_force_band_width_is_the_mean_width_with_a_bootstrap_ci():
     assert mean == pytest.approx(np.mean(p95 - p05))
     assert lo < mean < hi and hi - lo < 0.02
     with pytest.raises(ValueError, match="row 3"):
-        force_band_width(np.array([0, 0, 0, 1.0]), np.array([1, 1, 1, 0.5]), n_resamples=10,
-                         seed=0)  # fmt: skip
+        force_band_width(np.array([0, 0, 0, 1.0]), np.array([1, 1, 1, 0.5]), n_resamples=10, seed=0)
 
 
 def _pvr_table() -> pd.DataFrame:
@@ -88,21 +87,29 @@ def _pvr_table() -> pd.DataFrame:
 
 def test_features_metrics_report_the_backbone_in_use():
     for pretraining, acc in ((True, 0.80), (False, 0.81)):
-        rows = {r["metric_id"]: r for r in
-                features_metrics(_pvr_table(), pretraining=pretraining, n_resamples=100)}  # fmt: skip
+        rows = {
+            r["metric_id"]: r
+            for r in features_metrics(_pvr_table(), pretraining=pretraining, n_resamples=100)
+        }
         delta_id, acc_id = features_metric_ids("tactile", "hardness")
         assert rows[acc_id]["value"] == acc
         assert (rows[delta_id]["value"], rows[delta_id]["ci_low"]) == (-0.01, -0.05)
     with pytest.raises(ValueError, match="random_ci_low"):
-        features_metrics(_pvr_table().drop(columns="random_ci_low"), pretraining=False,
-                         n_resamples=100)  # fmt: skip
+        features_metrics(
+            _pvr_table().drop(columns="random_ci_low"), pretraining=False, n_resamples=100
+        )
 
 
 def _setting(label: str, value: float, walls: list[float], default: bool = False) -> KnobSetting:
-    metrics = pd.DataFrame([metric_row("m1", value, value - 0.1, value + 0.1, "ci"),
-                            metric_row("m2", 2 * value, 2 * value, 2 * value, "ci")])  # fmt: skip
-    return KnobSetting(float(label), label, default, metrics,
-                       [Benchmark(w, w / 2, 100.0) for w in walls])  # fmt: skip
+    metrics = pd.DataFrame(
+        [
+            metric_row("m1", value, value - 0.1, value + 0.1, "ci"),
+            metric_row("m2", 2 * value, 2 * value, 2 * value, "ci"),
+        ]
+    )
+    return KnobSetting(
+        float(label), label, default, metrics, [Benchmark(w, w / 2, 100.0) for w in walls]
+    )
 
 
 def test_knob_points_sum_benchmarks_and_keep_metric_order():

@@ -29,14 +29,27 @@ def points(knob, metric, rows, direction="higher"):
     return check_points(
         pd.DataFrame(
             [
-                dict(knob=knob, stage="probes", setting=s, label=lab, is_default=d, metric=metric,
-                     value=v, ci_low=lo, ci_high=hi, uncertainty="test", wall_s=w, cpu_s=w,
-                     n_jobs=1, direction=direction)
+                dict(
+                    knob=knob,
+                    stage="probes",
+                    setting=s,
+                    label=lab,
+                    is_default=d,
+                    metric=metric,
+                    value=v,
+                    ci_low=lo,
+                    ci_high=hi,
+                    uncertainty="test",
+                    wall_s=w,
+                    cpu_s=w,
+                    n_jobs=1,
+                    direction=direction,
+                )
                 for lab, s, d, v, lo, hi, w in rows
             ]
         ),
         "hand",
-    )  # fmt: skip
+    )
 
 
 # ------------------------------------------------------------------------------ spread
@@ -212,10 +225,17 @@ SEC = {"a": Seconds(1.0, 0.5, 2), "b": Seconds(3.0, 2.0, 2)}
 def test_align_points_carry_both_metrics_and_directions():
     ranks = {"a": [np.array([1, 2, 3, 1])], "all": [np.array([1, 1, 2, 1])]}
     p = check_points(
-        align_points("align_n", ranks, {"a": SEC["a"], "all": SEC["b"]}, "all",
-                     n_resamples=200, seed=0, n_all=840),
+        align_points(
+            "align_n",
+            ranks,
+            {"a": SEC["a"], "all": SEC["b"]},
+            "all",
+            n_resamples=200,
+            seed=0,
+            n_all=840,
+        ),
         "align",
-    )  # fmt: skip
+    )
     top1 = p[p["metric"].str.startswith("top-1")].set_index("label")
     assert top1.loc["all", "value"] == pytest.approx(0.75)
     assert top1.loc["all", "setting"] == 840 and bool(top1.loc["all", "is_default"])
@@ -223,9 +243,13 @@ def test_align_points_carry_both_metrics_and_directions():
 
 
 def test_spread_and_permutation_points():
-    reps = pd.DataFrame({"label": ["a"] * 3 + ["b"] * 3,
-                         "ci_low": [0.10, 0.12, 0.11, 0.110, 0.111, 0.112],
-                         "ci_high": [0.5, 0.52, 0.51, 0.51, 0.51, 0.51]})  # fmt: skip
+    reps = pd.DataFrame(
+        {
+            "label": ["a"] * 3 + ["b"] * 3,
+            "ci_low": [0.10, 0.12, 0.11, 0.110, 0.111, 0.112],
+            "ci_high": [0.5, 0.52, 0.51, 0.51, 0.51, 0.51],
+        }
+    )
     p = check_points(bootstrap_spread_points("probe_bootstrap", reps, SEC, "b"), "boot")
     low = p[p["metric"].str.contains("lower")].set_index("label")["value"]
     assert low["a"] == pytest.approx(0.01) and low["b"] == pytest.approx(0.001)
@@ -236,13 +260,29 @@ def test_spread_and_permutation_points():
 
 
 def test_generate_and_policy_points_average_seeds():
-    cells = pd.DataFrame({"label": ["a", "a"], "setting": [5, 5], "delta": [0.1, 0.2],
-                          "ci_low": [0.0, 0.1], "ci_high": [0.2, 0.3], "frechet": [4.0, 6.0]})  # fmt: skip
+    cells = pd.DataFrame(
+        {
+            "label": ["a", "a"],
+            "setting": [5, 5],
+            "delta": [0.1, 0.2],
+            "ci_low": [0.0, 0.1],
+            "ci_high": [0.2, 0.3],
+            "frechet": [4.0, 6.0],
+        }
+    )
     p = check_points(generate_points("generate_steps", cells, SEC, "a", target="force"), "gen")
     assert p.iloc[0][["value", "ci_low", "ci_high"]].tolist() == pytest.approx([0.15, 0.05, 0.25])
     assert p.iloc[1][["value", "ci_low", "ci_high"]].tolist() == pytest.approx([5.0, 4.0, 6.0])
     assert p.iloc[1]["direction"] == "lower"
-    pol = pd.DataFrame({"label": ["b"], "setting": [512], "success": [0.6], "ci_low": [0.5],
-                        "ci_high": [0.7], "n_episodes": [128]})  # fmt: skip
+    pol = pd.DataFrame(
+        {
+            "label": ["b"],
+            "setting": [512],
+            "success": [0.6],
+            "ci_low": [0.5],
+            "ci_high": [0.7],
+            "n_episodes": [128],
+        }
+    )
     q = check_points(policy_points("policy_width", pol, SEC, "b"), "pol")
     assert bool(q.iloc[0]["is_default"]) and q.iloc[0]["wall_s"] == 3.0

@@ -34,8 +34,16 @@ def test_unknown_knob_stops_with_the_known_names(tmp_path):
     (work / "config" / "bad_cost.yaml").write_text(
         yaml.safe_dump({"cost": {"knobs": {"align_stepz": {"values": [1, 2]}}}})
     )
-    proc = smk(work, "--dry-run", "--configfile", "config/test.yaml", "config/bad_cost.yaml",
-               "--", "cost_of_accuracy", check=False)  # fmt: skip
+    proc = smk(
+        work,
+        "--dry-run",
+        "--configfile",
+        "config/test.yaml",
+        "config/bad_cost.yaml",
+        "--",
+        "cost_of_accuracy",
+        check=False,
+    )
     assert proc.returncode != 0
     assert "'align_stepz' is not a knob" in proc.stdout + proc.stderr
     assert "align_steps" in proc.stdout + proc.stderr
@@ -56,9 +64,17 @@ def test_tiny_sweep_writes_points_and_the_page(reference_run: Path, tmp_path):
     smk(work, *SWEEP, "--", "cost_of_accuracy")
     points = {
         k: read_points(work / f"results/cost/points/{k}.parquet")
-        for k in ("align_steps", "align_n", "probe_bootstrap", "probe_permutations",
-                  "generate_steps", "generate_sampler", "policy_width", "policy_epochs")
-    }  # fmt: skip
+        for k in (
+            "align_steps",
+            "align_n",
+            "probe_bootstrap",
+            "probe_permutations",
+            "generate_steps",
+            "generate_sampler",
+            "policy_width",
+            "policy_epochs",
+        )
+    }
     for knob, p in points.items():
         assert (p["knob"] == knob).all()
         assert (p["wall_s"] > 0).all(), knob
@@ -72,12 +88,10 @@ def test_tiny_sweep_writes_points_and_the_page(reference_run: Path, tmp_path):
     assert b.loc[b["label"] == "200", "is_default"].all()  # test.yaml's probes.bootstrap
     # at the run's own setting a knob's main rule writes the main run's edge, bit for bit
     same = {
-        "results/align/sim_paired/clip128/seed~42/tau~0.07/n~all/metrics.parquet":
-            "results/cost/align_n/all/align/sim_paired/clip128/seed~42/tau~0.07/n~all/"
-            "metrics.parquet",
-        "results/probes/force/protocol~raw/seed~42.parquet":
-            "results/cost/probe_bootstrap/200/rep~0/probes/force/protocol~raw/seed~42.parquet",
-    }  # fmt: skip
+        "results/align/sim_paired/clip128/seed~42/tau~0.07/n~all/metrics.parquet": "results/cost/align_n/all/align/sim_paired/clip128/seed~42/tau~0.07/n~all/"
+        "metrics.parquet",
+        "results/probes/force/protocol~raw/seed~42.parquet": "results/cost/probe_bootstrap/200/rep~0/probes/force/protocol~raw/seed~42.parquet",
+    }
     for main, setting in same.items():
         assert _sha(work / main) == _sha(work / setting), (main, setting)
     # a setting's seconds are its own jobs' benchmark files, every one of them

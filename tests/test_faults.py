@@ -1,4 +1,4 @@
-"""Fault injection (issue 15): a crash, a full disk or a bad input never costs a result or
+"""Fault injection: a crash, a full disk or a bad input never costs a result or
 gives a wrong one.
 
 Every workflow fault runs on config/test.yaml against one clean run (`reference_run`, shared

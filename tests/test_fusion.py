@@ -15,8 +15,12 @@ def pair(n=9, d=5, seed=0):
 
 def test_table_lists_the_paper_variants():
     assert set(FUSIONS) == {
-        "concat", "mean", "max", "weighted_75_25", "weighted_25_75",
-    }  # fmt: skip
+        "concat",
+        "mean",
+        "max",
+        "weighted_75_25",
+        "weighted_25_75",
+    }
     rows = fusion_table()
     assert [r["name"] for r in rows] == list(FUSIONS)
     assert all(r["description"] and r["inputs"] for r in rows)

@@ -1,6 +1,6 @@
 """The latent generator: schedules, denoiser, samplers, training and evaluation.
 
-Hard cases (issue 12) against float64 references written as plain loops here: schedule
+Hard cases against float64 references written as plain loops here: schedule
 endpoints, the clipped posterior log-variance at t = 0, fp32 posterior coefficients at every
 t, DDIM with one step, guidance 0 and 10, a batch of one, identical conditions, a tactile
 dimension with zero variance, and sampling identical given the same seed.
@@ -127,7 +127,7 @@ def normal32(*shape, seed=0):
 
 
 #: How far one float32 denoiser pass output (of size ~1) may move when the same rows are
-#: computed in another batch shape, where BLAS may pick another kernel (issue 25: OpenBLAS's
+#: computed in another batch shape, where BLAS may pick another kernel (OpenBLAS's
 #: Haswell kernels against SkylakeX moved them by 2.4e-7): eps 1.2e-7 x sqrt(16) for the
 #: reordered sums of hidden = 16 terms, x sqrt(8) over the chained products (inp, 2 x (emb,
 #: fc1, fc2), out) ~ 1.4e-6. A guided output u + w (c - u) weighs two passes' drifts by
@@ -207,8 +207,16 @@ def test_ddim_matches_float64_reference(prediction, steps):
     sch = make_schedule("cosine", 1000)
     model = random_denoiser()
     cond = np.random.default_rng(1).normal(size=(7, 5)).astype(np.float32)
-    got = sample(model.arrays(), sch, cond, sampler="ddim", steps=steps, guidance=1.5, seed=3,
-                 prediction=prediction)  # fmt: skip
+    got = sample(
+        model.arrays(),
+        sch,
+        cond,
+        sampler="ddim",
+        steps=steps,
+        guidance=1.5,
+        seed=3,
+        prediction=prediction,
+    )
     ref = ddim_reference(model, sch, cond, initial_noise(7, 6, 3), steps, 1.5, prediction)
     assert np.isfinite(got).all()
     np.testing.assert_allclose(got, ref, rtol=1e-3, atol=1e-3 * np.abs(ref).max())
@@ -224,12 +232,17 @@ def test_numpy_forward_equals_the_torch_module():
     t = np.array([999, 998, 700, 500, 250, 100, 10, 3, 2, 1, 0])
     drop = np.arange(11) % 3 == 0
     with torch.no_grad():
-        ref = model(torch.from_numpy(x), torch.from_numpy(t), torch.from_numpy(c),
-                    torch.from_numpy(drop)).numpy()  # fmt: skip
+        ref = model(
+            torch.from_numpy(x), torch.from_numpy(t), torch.from_numpy(c), torch.from_numpy(drop)
+        ).numpy()
         m64 = Denoiser(**model.dims).double()
         m64.load_state_dict({k: v.double() for k, v in model.state_dict().items()})
-        ref64 = m64(torch.from_numpy(x).double(), torch.from_numpy(t),
-                    torch.from_numpy(c).double(), torch.from_numpy(drop)).numpy()  # fmt: skip
+        ref64 = m64(
+            torch.from_numpy(x).double(),
+            torch.from_numpy(t),
+            torch.from_numpy(c).double(),
+            torch.from_numpy(drop),
+        ).numpy()
     got = arrays.forward(x, t, c, drop)
     assert got.dtype == np.float32
     np.testing.assert_allclose(got, ref, rtol=1e-5, atol=1e-5)
@@ -241,9 +254,11 @@ def test_numpy_forward_equals_the_torch_module():
 def test_sampling_modules_do_not_import_torch_or_pandas():
     """What a sample_generator job imports: the weights reader, the samplers, the edges (its
     start-up, paid by every sampling cell: torch ~1.2 s, pandas ~0.25 s)."""
-    code = ("import sys; import tacgen_lib.generate.inference, tacgen_lib.generate.sampling, "
-            "tacgen_lib.io.edges, tacgen_lib.io.log, threadpoolctl; "
-            "print('torch' in sys.modules, 'pandas' in sys.modules)")  # fmt: skip
+    code = (
+        "import sys; import tacgen_lib.generate.inference, tacgen_lib.generate.sampling, "
+        "tacgen_lib.io.edges, tacgen_lib.io.log, threadpoolctl; "
+        "print('torch' in sys.modules, 'pandas' in sys.modules)"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False False"
 
@@ -260,36 +275,54 @@ def test_guidance_extremes_stay_finite_and_w0_is_unconditional(guidance):
     cnd = model.forward(x, t, c)
     # `out` comes from one pass over 2B = 8 rows, u and cnd from passes over B = 4 rows:
     # another batch shape, within rounding (`guided_drift`: 3.8e-5 at w = 10)
-    np.testing.assert_allclose(out, u + guidance * (cnd - u), rtol=1e-6,
-                               atol=guided_drift(guidance))  # fmt: skip
+    np.testing.assert_allclose(
+        out, u + guidance * (cnd - u), rtol=1e-6, atol=guided_drift(guidance)
+    )
     if guidance == 0.0:
         # w = 0 is the unconditional half of that same 8-row pass bit for bit (u + 0 (c - u)
         # is u): the same computation, so exact; against the 4-row `u` it is the check above
         drop = np.repeat([False, True], 4)
-        half = model.forward(np.concatenate([x, x]), np.concatenate([t, t]),
-                             np.concatenate([c, c]), drop)[4:]  # fmt: skip
+        half = model.forward(
+            np.concatenate([x, x]), np.concatenate([t, t]), np.concatenate([c, c]), drop
+        )[4:]
         np.testing.assert_array_equal(out, half)
     sch = make_schedule("cosine", 1000)
-    z = sample(model, sch, c, sampler="ddim", steps=10, guidance=guidance, seed=0,
-               prediction="v")  # fmt: skip
+    z = sample(model, sch, c, sampler="ddim", steps=10, guidance=guidance, seed=0, prediction="v")
     assert np.isfinite(z).all()
 
 
 def test_batch_of_one_and_identical_conditions():
     model = random_denoiser().arrays()
     sch = make_schedule("linear", 100)
-    one = sample(model, sch, np.ones((1, 5), np.float32), sampler="ddpm", steps=100,
-                 guidance=2.0, seed=0, prediction="v")  # fmt: skip
+    one = sample(
+        model,
+        sch,
+        np.ones((1, 5), np.float32),
+        sampler="ddpm",
+        steps=100,
+        guidance=2.0,
+        seed=0,
+        prediction="v",
+    )
     assert one.shape == (1, 6) and np.isfinite(one).all()
-    same = sample(model, sch, np.ones((32, 5), np.float32), sampler="ddpm", steps=100,
-                  guidance=2.0, seed=0, prediction="v")  # fmt: skip
+    same = sample(
+        model,
+        sch,
+        np.ones((32, 5), np.float32),
+        sampler="ddpm",
+        steps=100,
+        guidance=2.0,
+        seed=0,
+        prediction="v",
+    )
     assert np.isfinite(same).all()
     assert np.unique(same.round(6), axis=0).shape[0] == 32  # the noise still varies rows
     # one-row guidance equals the batched computation row by row
     x, t, c = normal32(3, 6, seed=1), np.array([10, 20, 30]), normal32(3, 5, seed=2)
     batched = guided_output(model, x, t, c, 3.0)
-    rows = np.concatenate([guided_output(model, x[i : i + 1], t[i : i + 1], c[i : i + 1], 3.0)
-                           for i in range(3)])  # fmt: skip
+    rows = np.concatenate(
+        [guided_output(model, x[i : i + 1], t[i : i + 1], c[i : i + 1], 3.0) for i in range(3)]
+    )
     # one row per pass against three: another batch shape, within rounding (`guided_drift`:
     # 1e-5 at w = 3; 3e-7 seen with OpenBLAS's Haswell kernels)
     np.testing.assert_allclose(batched, rows, rtol=1e-5, atol=guided_drift(3.0))
@@ -348,9 +381,13 @@ def test_training_step_is_bit_reproducible_with_the_fused_optimiser():
         opt = make_optimiser(list(model.parameters()), s)
         gen = torch.Generator().manual_seed(1)
         for _ in range(5):
-            batch = (torch.randn(8, 6, generator=gen), torch.randn(8, 5, generator=gen),
-                     torch.randint(0, 100, (8,), generator=gen),
-                     torch.randn(8, 6, generator=gen), torch.rand(8, generator=gen) < 0.1)  # fmt: skip
+            batch = (
+                torch.randn(8, 6, generator=gen),
+                torch.randn(8, 5, generator=gen),
+                torch.randint(0, 100, (8,), generator=gen),
+                torch.randn(8, 6, generator=gen),
+                torch.rand(8, generator=gen) < 0.1,
+            )
             loss = training_step(model, opt, list(ema.parameters()), batch, sa, s1, s)
         return loss.item(), [p.detach().clone() for p in ema.parameters()]
 
@@ -398,8 +435,15 @@ def test_ddim_timesteps_and_sampler_checks():
     with pytest.raises(ValueError, match="DDIM steps"):
         ddim_timesteps(10, 11)
     with pytest.raises(ValueError, match="all T = 100"):
-        sample(random_denoiser().arrays(), make_schedule("linear", 100), np.ones((1, 5), np.float32),
-               sampler="ddpm", steps=10, guidance=1.0, seed=0)  # fmt: skip
+        sample(
+            random_denoiser().arrays(),
+            make_schedule("linear", 100),
+            np.ones((1, 5), np.float32),
+            sampler="ddpm",
+            steps=10,
+            guidance=1.0,
+            seed=0,
+        )
     with pytest.raises(ValueError, match="generate.samplers.ddpm"):
         check_grid({"ddpm": [50]}, 1000)
     with pytest.raises(ValueError, match="unknown sampler"):
@@ -463,8 +507,9 @@ def test_training_with_a_constant_dimension_is_finite_and_bit_reproducible(tmp_p
 def test_v_prediction_generator_learns_a_linear_map():
     """On T = V W + small noise, generated T must correlate with the truth far above chance."""
     v, t = linear_pairs(n=400)
-    s = GenerateSettings.tiny(steps=600, hidden=64, blocks=2, lr=2e-3, prediction="v",
-                              train_steps=1000, time_dim=32)  # fmt: skip
+    s = GenerateSettings.tiny(
+        steps=600, hidden=64, blocks=2, lr=2e-3, prediction="v", train_steps=1000, time_dim=32
+    )
     fit = fit_generator(t[:300], v[:300], t[300:350], v[300:350], s, seed=0)
     gen = generate(fit.weights(), v[350:], sampler="ddim", steps=20, guidance=1.0, seed=0)
     r = np.corrcoef(gen.ravel(), t[350:].ravel())[0, 1]
@@ -518,10 +563,12 @@ def toy_world(n=240, seed=0):
     hidden = rng.normal(size=n)
     ids = [f"s{i:04d}" for i in range(n)]
     v = np.column_stack([visible, rng.normal(size=(n, 3))]).astype(np.float32)
-    t = np.column_stack([hidden, visible + 0.1 * rng.normal(size=n),
-                         rng.normal(size=(n, 2))]).astype(np.float32)  # fmt: skip
-    manifest = pd.DataFrame({"sample_id": ids, "corpus": "toy",
-                             "force_p50": visible + 2.0 * hidden})  # fmt: skip
+    t = np.column_stack(
+        [hidden, visible + 0.1 * rng.normal(size=n), rng.normal(size=(n, 2))]
+    ).astype(np.float32)
+    manifest = pd.DataFrame(
+        {"sample_id": ids, "corpus": "toy", "force_p50": visible + 2.0 * hidden}
+    )
     split = np.where(np.arange(n) % 5 == 0, "test", np.where(np.arange(n) % 5 == 1, "val", "train"))
     splits = pd.DataFrame({"sample_id": ids, "corpus": "toy", "split": split})
     return ids, v, t, manifest, splits
@@ -532,18 +579,36 @@ def test_evaluation_real_touch_helps_where_generated_touch_cannot():
     of V) does not, and the summary has every input with its CI."""
     ids, v, t, manifest, splits = toy_world()
     train = splits["split"] == "train"
-    s = GenerateSettings.tiny(steps=300, hidden=64, blocks=2, lr=2e-3, prediction="v",
-                              train_steps=200, time_dim=32, permutations=100)  # fmt: skip
+    s = GenerateSettings.tiny(
+        steps=300,
+        hidden=64,
+        blocks=2,
+        lr=2e-3,
+        prediction="v",
+        train_steps=200,
+        time_dim=32,
+        permutations=100,
+    )
     val = (splits["split"] == "val").to_numpy()
     fit = fit_generator(t[train.to_numpy()], v[train.to_numpy()], t[val], v[val], s, seed=0)
     gen = generate(fit.weights(), v, sampler="ddim", steps=10, guidance=1.0, seed=0)
     rows = family_rows(manifest, splits, corpus="toy", target="force_p50", kind="ridge")
     ps = dataclasses.replace(
         ProbeSettings.from_config(
-            {"lambdas": [0.1, 1, 10], "C": [1], "folds": 3, "bootstrap": 500,
-             "train_resamples": 0, "permutations": 0, "label_permutations": 0,
-             "random_draws": 0}, "ridge", 0)
-    )  # fmt: skip
+            {
+                "lambdas": [0.1, 1, 10],
+                "C": [1],
+                "folds": 3,
+                "bootstrap": 500,
+                "train_resamples": 0,
+                "permutations": 0,
+                "label_permutations": 0,
+                "random_draws": 0,
+            },
+            "ridge",
+            0,
+        )
+    )
     spec = TargetSpec("force_p50", rows, ps)
     vision, t_real = dict(zip(ids, v, strict=True)), dict(zip(ids, t, strict=True))
     summary, perms = evaluate_generator(
@@ -570,14 +635,24 @@ def _toy_specs():
     """A ridge and a logistic target on the toy world, with small probe grids."""
     ids, v, t, manifest, splits = toy_world()
     manifest["hardness"] = np.where(manifest["force_p50"] > 0, "hard", "soft")
-    cfg = {"lambdas": [0.1, 1, 10], "C": [0.1, 10], "folds": 3, "bootstrap": 200,
-           "train_resamples": 0, "permutations": 0, "label_permutations": 0,
-           "random_draws": 0}  # fmt: skip
+    cfg = {
+        "lambdas": [0.1, 1, 10],
+        "C": [0.1, 10],
+        "folds": 3,
+        "bootstrap": 200,
+        "train_resamples": 0,
+        "permutations": 0,
+        "label_permutations": 0,
+        "random_draws": 0,
+    }
     specs = [
-        TargetSpec(name, family_rows(manifest, splits, corpus="toy", target=name, kind=kind),
-                   ProbeSettings.from_config(cfg, kind, 0))
+        TargetSpec(
+            name,
+            family_rows(manifest, splits, corpus="toy", target=name, kind=kind),
+            ProbeSettings.from_config(cfg, kind, 0),
+        )
         for name, kind in (("force_p50", "ridge"), ("hardness", "logistic"))
-    ]  # fmt: skip
+    ]
     return ids, dict(zip(ids, v, strict=True)), dict(zip(ids, t, strict=True)), specs
 
 
@@ -625,13 +700,30 @@ def test_evaluation_of_two_seeds_shares_the_baselines():
 
     def run(seed, baselines):
         gen = {i: x + rng.normal(size=x.shape) for i, x in vision.items()}
-        return evaluate_generator(specs, corpus="toy", seed=seed, vision=vision,
-                                  t_real=t_real, t_gen={cell: gen}, baselines=baselines,
-                                  permutations=10)[0]  # fmt: skip
+        return evaluate_generator(
+            specs,
+            corpus="toy",
+            seed=seed,
+            vision=vision,
+            t_real=t_real,
+            t_gen={cell: gen},
+            baselines=baselines,
+            permutations=10,
+        )[0]
 
     s0, s1 = run(0, fits), run(1, edge)
-    shared = ["target", "input", "score", "v_score", "delta", "ci_low", "ci_high", "reg",
-              "nonlinear_gamma", "delta_vs_nonlinear"]  # fmt: skip
+    shared = [
+        "target",
+        "input",
+        "score",
+        "v_score",
+        "delta",
+        "ci_low",
+        "ci_high",
+        "reg",
+        "nonlinear_gamma",
+        "delta_vs_nonlinear",
+    ]
     for inp in ("t_real", "v_nonlinear"):
         a = s0.loc[s0["input"] == inp, shared].reset_index(drop=True)
         b = s1.loc[s1["input"] == inp, shared].reset_index(drop=True)
@@ -649,9 +741,19 @@ def test_logistic_c_is_chosen_on_the_reference_cell_and_reused():
     manifest["hardness"] = np.where(manifest["force_p50"] > 0, "hard", "soft")
     rows = family_rows(manifest, splits, corpus="toy", target="hardness", kind="logistic")
     ps = ProbeSettings.from_config(
-        {"lambdas": [1], "C": [0.01, 1, 100], "folds": 3, "bootstrap": 200,
-         "train_resamples": 0, "permutations": 0, "label_permutations": 0,
-         "random_draws": 0}, "logistic", 0)  # fmt: skip
+        {
+            "lambdas": [1],
+            "C": [0.01, 1, 100],
+            "folds": 3,
+            "bootstrap": 200,
+            "train_resamples": 0,
+            "permutations": 0,
+            "label_permutations": 0,
+            "random_draws": 0,
+        },
+        "logistic",
+        0,
+    )
     cells = {
         ("ddim", str(w), "5"): dict(zip(ids, v @ rng.normal(size=(4, 4)) + w * t, strict=True))
         for w in (0, 1, 3)
@@ -659,10 +761,16 @@ def test_logistic_c_is_chosen_on_the_reference_cell_and_reused():
     spec = TargetSpec("hardness", rows, ps)
     vision, t_real = dict(zip(ids, v, strict=True)), dict(zip(ids, t, strict=True))
     summary, _ = evaluate_generator(
-        [spec], corpus="toy", seed=0, vision=vision, t_real=t_real, t_gen=cells,
+        [spec],
+        corpus="toy",
+        seed=0,
+        vision=vision,
+        t_real=t_real,
+        t_gen=cells,
         baselines={"hardness": fit_baselines(spec, vision, t_real, gammas=(1.0,))},
-        permutations=10, reference=("ddim", "1", "5"),
-    )  # fmt: skip
+        permutations=10,
+        reference=("ddim", "1", "5"),
+    )
     gen = summary[summary["input"].isin(["t_gen", "t_gen_shuffled"])].set_index(
         ["input", "guidance"]
     )
@@ -720,8 +828,9 @@ def test_generate_settings_refuse_bad_values_naming_the_key():
     with pytest.raises(ValueError, match="generate.p_uncond"):
         GenerateSettings.tiny(p_uncond=1.5)
     with pytest.raises(KeyError, match="hidden"):
-        GenerateSettings.from_config({k: v for k, v in validated()["generate"].items()
-                                      if k != "hidden"})  # fmt: skip
+        GenerateSettings.from_config(
+            {k: v for k, v in validated()["generate"].items() if k != "hidden"}
+        )
     assert GenerateSettings.tiny().steps <= 100 and GenerateSettings.tiny(steps=5).steps == 5
 
 
@@ -743,18 +852,40 @@ def synthetic_summary() -> pd.DataFrame:
     ):
         for seed in (0, 1):
             for w in (0.0, 1.0):
-                for inp, d in (("t_real", 0.3), ("t_gen", 0.05 * seed), ("t_gen_shuffled", 0.0),
-                               ("v_nonlinear", 0.02)):  # fmt: skip
-                    rows.append({
-                        "row_id": f"{corpus}|{target}|{seed}|{w}|{inp}", "corpus": corpus,
-                        "target": target, "metric": "r2", "seed": seed, "sampler": "ddim",
-                        "guidance": w, "steps": 10, "input": inp, "score": 0.5 + d,
-                        "v_score": 0.5, "delta": d, "ci_low": d - 0.1, "ci_high": d + 0.1,
-                        "delta_vs_nonlinear": d - 0.02, "ci_low_vs_nonlinear": d - 0.12,
-                        "ci_high_vs_nonlinear": d + 0.08, "design": design, "null_corpus": null,
-                        "cos_matched": 0.3, "cos_offdiag": 0.1, "pairing_p": 0.01,
-                        "frechet": 2.0, "frechet_real_ref": 1.0,
-                    })  # fmt: skip
+                for inp, d in (
+                    ("t_real", 0.3),
+                    ("t_gen", 0.05 * seed),
+                    ("t_gen_shuffled", 0.0),
+                    ("v_nonlinear", 0.02),
+                ):
+                    rows.append(
+                        {
+                            "row_id": f"{corpus}|{target}|{seed}|{w}|{inp}",
+                            "corpus": corpus,
+                            "target": target,
+                            "metric": "r2",
+                            "seed": seed,
+                            "sampler": "ddim",
+                            "guidance": w,
+                            "steps": 10,
+                            "input": inp,
+                            "score": 0.5 + d,
+                            "v_score": 0.5,
+                            "delta": d,
+                            "ci_low": d - 0.1,
+                            "ci_high": d + 0.1,
+                            "delta_vs_nonlinear": d - 0.02,
+                            "ci_low_vs_nonlinear": d - 0.12,
+                            "ci_high_vs_nonlinear": d + 0.08,
+                            "design": design,
+                            "null_corpus": null,
+                            "cos_matched": 0.3,
+                            "cos_offdiag": 0.1,
+                            "pairing_p": 0.01,
+                            "frechet": 2.0,
+                            "frechet_real_ref": 1.0,
+                        }
+                    )
     return pd.DataFrame(rows)
 
 
@@ -790,11 +921,27 @@ def test_report_tables_and_figures_from_a_summary():
     assert verdict[("sim_controlled", 0, "t_gen")] == "yes"  # CI covers 0
     assert verdict[("sim_null", 0, "t_real")] == "NO"  # real touch "helps" on the null corpus
     assert len(rep.fidelity_table(summary)) == 12
-    perms = pd.DataFrame({"corpus": "sim_paired", "seed": 0, "target": "force_p50",
-                          "sampler": "ddim", "guidance": 1.0, "steps": 10,
-                          "statistic": np.linspace(-0.1, 0.1, 50), "observed": 0.3})  # fmt: skip
-    curves = pd.DataFrame({"corpus": "sim_paired", "seed": 0, "step": [10, 20],
-                           "train_loss": [1.0, 0.5], "val_loss": [1.1, 0.6]})  # fmt: skip
+    perms = pd.DataFrame(
+        {
+            "corpus": "sim_paired",
+            "seed": 0,
+            "target": "force_p50",
+            "sampler": "ddim",
+            "guidance": 1.0,
+            "steps": 10,
+            "statistic": np.linspace(-0.1, 0.1, 50),
+            "observed": 0.3,
+        }
+    )
+    curves = pd.DataFrame(
+        {
+            "corpus": "sim_paired",
+            "seed": 0,
+            "step": [10, 20],
+            "train_loss": [1.0, 0.5],
+            "val_loss": [1.1, 0.6],
+        }
+    )
     rng = np.random.default_rng(0)
     for fig in (
         rep.guidance_seed_figure(summary, "ddim", 10),

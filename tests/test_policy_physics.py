@@ -97,8 +97,10 @@ def test_creep_floor_far_below_slip_criterion(lift):
     no_noslip = data.compile_phase(DECL, dataclasses.replace(SETTINGS, noslip_iterations=0), "lift")
     without = task.creep_floor(no_noslip, ep, f, hold_time=1.5)
     criterion = SETTINGS.slip_limit / (SETTINGS.hold_time - task.HOLD_SETTLE)
-    print(f"creep floor {floor * 1e6:.1f} um/s (no noslip: {without * 1e6:.1f} um/s), "
-          f"slip criterion {criterion * 1e6:.0f} um/s")  # fmt: skip
+    print(
+        f"creep floor {floor * 1e6:.1f} um/s (no noslip: {without * 1e6:.1f} um/s), "
+        f"slip criterion {criterion * 1e6:.0f} um/s"
+    )
     assert floor * 20 < criterion
     assert without > 3 * floor
 

@@ -1,4 +1,4 @@
-"""Probe robustness (issue 16): protocol variants against scikit-learn, nested subsets, the
+"""Probe robustness: protocol variants against scikit-learn, nested subsets, the
 within-scale split, and multiple-comparison adjustments against SciPy / float64 references."""
 
 from __future__ import annotations
@@ -48,11 +48,20 @@ def class_data(n=90, m=30, p=8, seed=1):
 
 def settings(kind="ridge", protocol="raw", **kw):
     return ProbeSettings(
-        kind=kind, lambdas=LAMBDAS, C=(0.1, 1.0, 10.0), folds=4, bootstrap=200,
-        train_resamples=0, permutations=0, label_permutations=0, random_draws=0, seed=3,
-        protocol=protocol, mlp=MLPGrid(widths=(8, 16), weight_decays=(0.01, 1.0), folds=3,
-                                       max_iter=300), **kw,
-    )  # fmt: skip
+        kind=kind,
+        lambdas=LAMBDAS,
+        C=(0.1, 1.0, 10.0),
+        folds=4,
+        bootstrap=200,
+        train_resamples=0,
+        permutations=0,
+        label_permutations=0,
+        random_draws=0,
+        seed=3,
+        protocol=protocol,
+        mlp=MLPGrid(widths=(8, 16), weight_decays=(0.01, 1.0), folds=3, max_iter=300),
+        **kw,
+    )
 
 
 # --------------------------------------------------------------------------- standardised
@@ -63,9 +72,11 @@ def test_standardised_ridge_equals_sklearn_pipeline_gridsearch():
     folds = make_folds(len(y), 4, seed=3)
     cv = [(np.setdiff1d(np.arange(len(y)), f), f) for f in folds]
     ref = GridSearchCV(
-        make_pipeline(StandardScaler(), Ridge()), {"ridge__alpha": list(LAMBDAS)}, cv=cv,
+        make_pipeline(StandardScaler(), Ridge()),
+        {"ridge__alpha": list(LAMBDAS)},
+        cv=cv,
         scoring="r2",
-    ).fit(X, y)  # fmt: skip
+    ).fit(X, y)
     got = fit_standardised_ridge(X, y, LAMBDAS, n_folds=4, seed=3)
     assert got.lam == ref.best_params_["ridge__alpha"]
     np.testing.assert_allclose(got.cv_scores, ref.cv_results_["mean_test_score"], rtol=1e-9)
@@ -156,9 +167,9 @@ def test_mlp_classifier_equals_sklearn_gridsearch_same_seed():
     folds = make_folds(len(y), 3, seed=2, labels=y)
     cv = [(np.setdiff1d(np.arange(len(y)), f), f) for f in folds]
     est = make_pipeline(
-        StandardScaler(), MLPClassifier(hidden_layer_sizes=(8,), solver="lbfgs", max_iter=100,
-                                        random_state=2)
-    )  # fmt: skip
+        StandardScaler(),
+        MLPClassifier(hidden_layer_sizes=(8,), solver="lbfgs", max_iter=100, random_state=2),
+    )
     with _quiet():
         ref = GridSearchCV(est, {"mlpclassifier__alpha": [0.01, 1.0]}, cv=cv).fit(X, y)
     got = fit_mlp_probe(X, y, "logistic", grid, seed=2)
@@ -194,8 +205,10 @@ def _family(n=90, m=30, seed=0):
     rows = family_rows(
         pd.DataFrame({"sample_id": ids, "corpus": "c", "y": y}),
         pd.DataFrame({"sample_id": ids, "split": ["train"] * n + ["test"] * m}),
-        corpus="c", target="y", kind="ridge",
-    )  # fmt: skip
+        corpus="c",
+        target="y",
+        kind="ridge",
+    )
     return rows, (v[:n], v[n:]), {"clip128": (t[:n], t[n:])}
 
 
@@ -203,10 +216,17 @@ def _family(n=90, m=30, seed=0):
 def test_every_protocol_runs_the_family_code_with_a_protocol_column(protocol):
     rows, vision, tactile = _family()
     res = run_family(
-        "fam", rows, vision=vision, tactile=tactile, aligned={}, fusions=["concat"],
-        heads_variant="clip128", settings=settings(protocol=protocol),
-        headline_only=protocol != "raw", controls=protocol == "raw",
-    )  # fmt: skip
+        "fam",
+        rows,
+        vision=vision,
+        tactile=tactile,
+        aligned={},
+        fusions=["concat"],
+        heads_variant="clip128",
+        settings=settings(protocol=protocol),
+        headline_only=protocol != "raw",
+        controls=protocol == "raw",
+    )
     main = res.rows.loc[res.rows["control"] == "none"].iloc[0]
     assert (res.rows["protocol"] == protocol).all()
     assert main["delta"] > 0.3 and main["ci_low"] > 0
@@ -240,9 +260,14 @@ def test_nested_subsets_are_nested_stratified_and_seeded():
 def test_training_size_sweep_points_use_nested_training_rows_and_the_full_test():
     rows, vision, tactile = _family(n=80)
     out = training_size_sweep(
-        "fam", rows, vision=vision, tactile=tactile["clip128"], settings=settings(),
-        sizes=[10, 40, "all"], seeds=[0, 1],
-    )  # fmt: skip
+        "fam",
+        rows,
+        vision=vision,
+        tactile=tactile["clip128"],
+        settings=settings(),
+        sizes=[10, 40, "all"],
+        seeds=[0, 1],
+    )
     assert list(out["n_train"]) == [10, 40, 80, 10, 40, 80]
     assert (out["n_test"] == rows.n_test).all() and out["row_id"].is_unique
     assert out.loc[out["n_requested"] == "all", "ci_low"].gt(0).all()
@@ -254,12 +279,18 @@ def test_within_scale_split_uses_training_rows_only_stratified_by_scale():
     ids = np.array([f"s{i:03d}" for i in range(n)], dtype=object)
     scale = np.repeat([0.15, 0.2, 0.25], 30)
     manifest = pd.DataFrame(
-        {"sample_id": ids, "corpus": "c", "scale": scale, "shape": "box",
-         "mass": rng.uniform(1, 2, n)}
-    )  # fmt: skip
+        {
+            "sample_id": ids,
+            "corpus": "c",
+            "scale": scale,
+            "shape": "box",
+            "mass": rng.uniform(1, 2, n),
+        }
+    )
     splits = pd.DataFrame({"sample_id": ids, "split": np.where(scale == 0.25, "test", "train")})
-    rows = family_rows(manifest, splits, corpus="c", target="mass", kind="ridge",
-                       within_scale=(0.33, 4))  # fmt: skip
+    rows = family_rows(
+        manifest, splits, corpus="c", target="mass", kind="ridge", within_scale=(0.33, 4)
+    )
     used = set(rows.train_ids) | set(rows.test_ids)
     assert not used & set(ids[scale == 0.25])  # the held-out scale is never touched
     assert len(used) == 60 and not set(rows.train_ids) & set(rows.test_ids)
@@ -306,8 +337,13 @@ def holm_reference(p):
 
 def test_holm_and_bh_equal_their_references():
     rng = np.random.default_rng(0)
-    for p in (rng.uniform(size=50), rng.uniform(0, 0.05, 20), np.array([0.01, 0.01, 0.5, 1.0]),
-              np.array([1e-300, 0.02, 0.03]), np.array([0.3])):  # fmt: skip
+    for p in (
+        rng.uniform(size=50),
+        rng.uniform(0, 0.05, 20),
+        np.array([0.01, 0.01, 0.5, 1.0]),
+        np.array([1e-300, 0.02, 0.03]),
+        np.array([0.3]),
+    ):
         np.testing.assert_allclose(multiplicity.holm(p), holm_reference(p), rtol=1e-15)
         np.testing.assert_allclose(
             multiplicity.benjamini_hochberg(p), stats.false_discovery_control(p, method="bh")
@@ -334,10 +370,24 @@ def test_holm_over_all_comparisons_is_bounded_by_the_bootstrap_resolution():
 def test_adjusted_criterion_uses_holm_within_the_family():
     # 130 comparisons, all at the smallest bootstrap p: over all of them Holm rejects nothing,
     # within a family of 10 it rejects every one
-    rows = [{"row_id": f"r{i}", "family": f"f{i // 10}", "control": "none", "status": "ok",
-             "protocol": "raw", "null_corpus": False, "delta": 0.3, "ci_low": 0.1,
-             "ci_high": 0.5, "p_gt0": 1.0, "n_resamples": 5000, "delta_ctrl": 0.0,
-             "criterion_met": True} for i in range(130)]  # fmt: skip
+    rows = [
+        {
+            "row_id": f"r{i}",
+            "family": f"f{i // 10}",
+            "control": "none",
+            "status": "ok",
+            "protocol": "raw",
+            "null_corpus": False,
+            "delta": 0.3,
+            "ci_low": 0.1,
+            "ci_high": 0.5,
+            "p_gt0": 1.0,
+            "n_resamples": 5000,
+            "delta_ctrl": 0.0,
+            "criterion_met": True,
+        }
+        for i in range(130)
+    ]
     out = multiplicity.adjust(pd.DataFrame(rows))
     assert (out["p_holm"] >= multiplicity.ALPHA_ONE_SIDED).all()
     assert (out["p_holm_family"] < multiplicity.ALPHA_ONE_SIDED).all()
@@ -348,11 +398,23 @@ def test_adjust_and_counts_per_family_and_overall():
     rows = []
     for fam, null, deltas in (("a", False, [0.5, 0.4, 0.01]), ("a_null", True, [0.0, -0.1])):
         for i, d in enumerate(deltas):
-            rows.append({"row_id": f"{fam}{i}", "family": fam, "control": "none", "status": "ok",
-                         "protocol": "raw", "null_corpus": null, "delta": d,
-                         "ci_low": d - 0.05, "ci_high": d + 0.05,
-                         "p_gt0": 1.0 if d > 0.1 else 0.5, "n_resamples": 1000,
-                         "delta_ctrl": 0.0, "criterion_met": d > 0.1})  # fmt: skip
+            rows.append(
+                {
+                    "row_id": f"{fam}{i}",
+                    "family": fam,
+                    "control": "none",
+                    "status": "ok",
+                    "protocol": "raw",
+                    "null_corpus": null,
+                    "delta": d,
+                    "ci_low": d - 0.05,
+                    "ci_high": d + 0.05,
+                    "p_gt0": 1.0 if d > 0.1 else 0.5,
+                    "n_resamples": 1000,
+                    "delta_ctrl": 0.0,
+                    "criterion_met": d > 0.1,
+                }
+            )
     out = multiplicity.adjust(pd.DataFrame(rows))
     np.testing.assert_allclose(out["p_holm"], holm_reference(out["p_boot"]))
     fam_a = out["family"] == "a"

@@ -283,8 +283,9 @@ def test_logistic_C_selection_equals_gridsearchcv_on_same_folds():
     # scikit-learn's again; no such row here, so the scores must be equal)
     loop, ambiguous, n_held_out = cv_ambiguity(X, y, folds, grid, tol=1e-6)
     assert_cv_agrees(loop.mean(axis=0), gs.cv_results_["mean_test_score"], ambiguous, n_held_out)
-    slack = assert_cv_agrees(probe.cv_scores, gs.cv_results_["mean_test_score"], ambiguous,
-                             n_held_out)  # fmt: skip
+    slack = assert_cv_agrees(
+        probe.cv_scores, gs.cv_results_["mean_test_score"], ambiguous, n_held_out
+    )
     if clear_best(gs.cv_results_["mean_test_score"], slack):
         assert probe.C == gs.best_params_["m__C"]
 
@@ -455,8 +456,14 @@ def cv_ambiguity(X, y, folds, grid, tol):
             p, k = coef.shape
             if k > 1:  # softmax intercepts are defined up to a shift: centre them
                 icpt = icpt - icpt.mean()
-            grad = gradient_of(scaler.transform(X[tr]), y[tr], np.ones(len(tr)), float(C),
-                               coef.shape, model.classes_)  # fmt: skip
+            grad = gradient_of(
+                scaler.transform(X[tr]),
+                y[tr],
+                np.ones(len(tr)),
+                float(C),
+                coef.shape,
+                model.classes_,
+            )
             theta = np.concatenate([coef.ravel(), icpt])
             hess, q = objective_hessian(grad, theta, k)
             mu = np.linalg.eigvalsh(hess)[0]
@@ -493,8 +500,9 @@ def clear_best(scores, slack):
     scores are then equal, ties and their first-C rule included), or its best C beats every
     other C by more than the two slacks."""
     best = int(np.argmax(scores))
-    return not slack.any() or all(scores[best] - slack[best] > scores[j] + slack[j]
-                                  for j in range(len(scores)) if j != best)  # fmt: skip
+    return not slack.any() or all(
+        scores[best] - slack[best] > scores[j] + slack[j] for j in range(len(scores)) if j != best
+    )
 
 
 def assert_same_optimum(Z, y, sw, C, got_coef, got_icpt, ref, classes):
@@ -543,8 +551,9 @@ def test_logistic_batch_equals_sklearn_on_permuted_targets(n_classes, C):
         assert_same_optimum(
             Z, y[perm[b]], np.ones(90), C, fit.coef[b], fit.intercept[b], ref, fit.classes
         )
-        g = objective_gradient(Z, y[perm[b]], np.ones(90), loose.coef[b], loose.intercept[b], C,
-                               fit.classes)  # fmt: skip
+        g = objective_gradient(
+            Z, y[perm[b]], np.ones(90), loose.coef[b], loose.intercept[b], C, fit.classes
+        )
         assert np.abs(g).max() <= 1e-6  # the stopping rule, checked by an independent formula
         test = DesignBlock(X, None, blk.offset, blk.scale)
         got = fit.predict([test])[b]

@@ -17,15 +17,19 @@ import pytest
 from snakemake_run import copy_tree, merged_config, smk
 
 from tacgen_lib.io import edges  # noqa: E402
-from tacgen_lib.probes import protocol as probe_suite  # noqa: E402
-from tacgen_lib.report import probes as probe_report  # noqa: E402
+from tacgen_lib.probes import protocol as probe_protocol  # noqa: E402
+from tacgen_lib.report import probes as report_probes  # noqa: E402
 
 pytestmark = pytest.mark.workflow
 
 PROBE_RULES = [
-    "--allowed-rules", "probe", "aggregate_probes", "probe_training_size", "probe_within_scale",
+    "--allowed-rules",
+    "probe",
+    "aggregate_probes",
+    "probe_training_size",
+    "probe_within_scale",
     "aggregate_robustness",
-]  # fmt: skip
+]
 TABLES = ["controlled", "paired", "sweep", "align_seeds", "variants", "controls", "fusions"]
 ROBUSTNESS = ["robustness", "multiplicity", "within_scale", "training_size"]
 TARGETS = [
@@ -38,12 +42,40 @@ TARGETS = [
     "results/report/probes/training_size.png",
 ]
 SUMMARY_COLUMNS = {
-    "row_id", "family", "corpus", "target", "input", "t_variant", "fusion", "align_seed",
-    "probe_seed", "control", "status", "metric", "v_score", "vt_score", "delta", "ci_low",
-    "ci_high", "p_gt0", "criterion_met", "delta_ctrl", "controls", "v_reg", "vt_reg",
-    "reg_name", "n_train", "n_test", "converged", "notes", "null_corpus", "design",
-    "bootstrap_strata", "baseline_score", "visible_score",
-}  # fmt: skip
+    "row_id",
+    "family",
+    "corpus",
+    "target",
+    "input",
+    "t_variant",
+    "fusion",
+    "align_seed",
+    "probe_seed",
+    "control",
+    "status",
+    "metric",
+    "v_score",
+    "vt_score",
+    "delta",
+    "ci_low",
+    "ci_high",
+    "p_gt0",
+    "criterion_met",
+    "delta_ctrl",
+    "controls",
+    "v_reg",
+    "vt_reg",
+    "reg_name",
+    "n_train",
+    "n_test",
+    "converged",
+    "notes",
+    "null_corpus",
+    "design",
+    "bootstrap_strata",
+    "baseline_score",
+    "visible_score",
+}
 
 
 def write_upstream(work: Path, cfg: dict, n: int = 60) -> None:
@@ -62,12 +94,21 @@ def write_upstream(work: Path, cfg: dict, n: int = 60) -> None:
         shape = rng.choice(["box", "sphere"], n)
         frame = pd.DataFrame(
             {
-                "sample_id": ids, "corpus": corpus, "sensor_id": "s0", "caption": "",
-                "stratum": shape, "shape": shape, "scale": scale, "density": density,
-                "mass": mass, "hardness": np.where(hard, "hard", "soft"),
-                "force_p05": force - 0.5, "force_p50": force, "force_p95": force + 0.5,
+                "sample_id": ids,
+                "corpus": corpus,
+                "sensor_id": "s0",
+                "caption": "",
+                "stratum": shape,
+                "shape": shape,
+                "scale": scale,
+                "density": density,
+                "mass": mass,
+                "hardness": np.where(hard, "hard", "soft"),
+                "force_p05": force - 0.5,
+                "force_p50": force,
+                "force_p95": force + 0.5,
             }
-        )  # fmt: skip
+        )
         manifest.append(frame)
         if spec.get("design") == "controlled":
             split = np.where(scale == 0.25, "test", np.where(np.arange(n) % 9 == 0, "val", "train"))
@@ -101,13 +142,15 @@ def write_upstream(work: Path, cfg: dict, n: int = 60) -> None:
                     work / cell / f"aligned~{corpus}.parquet", key, vectors, producer="test"
                 )
     edges.write(
-        work / "results/corpus/manifest.parquet", pd.concat(manifest, ignore_index=True),
+        work / "results/corpus/manifest.parquet",
+        pd.concat(manifest, ignore_index=True),
         producer="test",
-    )  # fmt: skip
+    )
     edges.write(
-        work / "results/corpus/splits.parquet", pd.concat(splits, ignore_index=True),
+        work / "results/corpus/splits.parquet",
+        pd.concat(splits, ignore_index=True),
         producer="test",
-    )  # fmt: skip
+    )
 
 
 @pytest.fixture(scope="module")
@@ -125,7 +168,7 @@ def probes_run(tmp_path_factory, cfg) -> Path:
 
 @pytest.fixture(scope="module")
 def full_summary(probes_run) -> pd.DataFrame:
-    return probe_suite.tidy(edges.read(probes_run / "results/probes/summary.parquet").frame)
+    return probe_protocol.tidy(edges.read(probes_run / "results/probes/summary.parquet").frame)
 
 
 @pytest.fixture(scope="module")
@@ -140,7 +183,7 @@ def test_summary_edge_has_the_documented_columns_and_one_row_per_comparison(summ
     assert set(summary["family"]) == set(cfg["probes"]["families"])
     ident = ["family", "input", "t_variant", "fusion", "align_seed", "probe_seed", "control"]
     assert not summary[ident].astype(str).duplicated().any()
-    assert set(summary["control"]) == {"none", *probe_suite.CONTROLS}
+    assert set(summary["control"]) == {"none", *probe_protocol.CONTROLS}
     main = summary.loc[summary["control"] == "none"]
     assert set(main["status"]) <= {"ok", "skipped"}
     # every configured fusion on aligned features, for every alignment seed
@@ -200,7 +243,7 @@ def test_report_items_exist(probes_run):
     # with a logistic probe its confusion matrices
     summary = edges.read(probes_run / "results/probes/summary.parquet").frame
     forest = sorted(p.stem for p in (report / "forest").glob("*.png"))
-    assert forest == sorted(probe_report.forest_families(summary))
+    assert forest == sorted(report_probes.forest_families(summary))
     confusion = sorted(p.stem for p in (report / "confusion").glob("*.png"))
     assert "hardness" in confusion and "force" not in confusion
     for png in [*(report / "forest").glob("*.png"), *(report / "confusion").glob("*.png")]:
@@ -225,7 +268,7 @@ def test_second_run_has_nothing_to_do(probes_run):
     assert "Nothing to be done" in proc.stdout + proc.stderr
 
 
-# --------------------------------------------------------------------------- robustness (issue 16)
+# ------------------------------------------------------------------------ robustness
 
 
 def test_protocol_variants_run_the_headline_families_with_a_protocol_column(full_summary, cfg):
@@ -236,9 +279,12 @@ def test_protocol_variants_run_the_headline_families_with_a_protocol_column(full
         part = main.loc[main["protocol"] == protocol]
         kinds = dict(zip(part["family"], part["kind"], strict=False))
         expected = {
-            f for f in rob["families"]
-            if not (protocol == "standardised" and cfg["probes"]["families"][f]["kind"] == "logistic")
-        }  # fmt: skip
+            f
+            for f in rob["families"]
+            if not (
+                protocol == "standardised" and cfg["probes"]["families"][f]["kind"] == "logistic"
+            )
+        }
         assert set(part["family"]) == expected, (protocol, kinds)
         # the default budget: headline comparisons only, no controls under a variant
         assert (part["fusion"] == "concat").all() and (part["controls"] == "not run").all()

@@ -104,11 +104,13 @@ def test_probe_verdict_reads_the_controls_and_the_null_corpus():
         0.3, 0.2, 0.4, null_corpus=False, criterion_met=False, delta_ctrl=0.35
     )
     assert "criterion not met" in not_met
-    null_ok = claims.probe_verdict(0.01, -0.05, 0.07, null_corpus=True, criterion_met=False,
-                                   delta_ctrl=0.0)  # fmt: skip
+    null_ok = claims.probe_verdict(
+        0.01, -0.05, 0.07, null_corpus=True, criterion_met=False, delta_ctrl=0.0
+    )
     assert null_ok.startswith("As expected on the null corpus")
-    null_bad = claims.probe_verdict(0.2, 0.1, 0.3, null_corpus=True, criterion_met=True,
-                                    delta_ctrl=0.0)  # fmt: skip
+    null_bad = claims.probe_verdict(
+        0.2, 0.1, 0.3, null_corpus=True, criterion_met=True, delta_ctrl=0.0
+    )
     assert null_bad.startswith("UNEXPECTED")
 
 
@@ -203,23 +205,62 @@ def test_vision_ceiling_is_the_expected_success_of_the_best_force_given_size():
 
 def _probe_summary():
     base = dict(
-        control="none", fusion="concat", t_variant="clip128", heads_variant="clip128",
-        status="ok", corpus="sim_paired", metric="accuracy", align_seed=math.nan, input="raw",
-    )  # fmt: skip
+        control="none",
+        fusion="concat",
+        t_variant="clip128",
+        heads_variant="clip128",
+        status="ok",
+        corpus="sim_paired",
+        metric="accuracy",
+        align_seed=math.nan,
+        input="raw",
+    )
     return pd.DataFrame(
         [
-            {**base, "family": "hardness", "target": "hardness", "null_corpus": False,
-             "v_score": 0.45, "vt_score": 0.75, "delta": 0.30, "ci_low": 0.22, "ci_high": 0.37,
-             "delta_ctrl": 0.01, "criterion_met": True},
-            {**base, "family": "hardness_null", "target": "hardness", "null_corpus": True,
-             "corpus": "sim_null", "v_score": 0.48, "vt_score": 0.49, "delta": 0.01,
-             "ci_low": -0.05, "ci_high": 0.07, "delta_ctrl": 0.01, "criterion_met": False},
+            {
+                **base,
+                "family": "hardness",
+                "target": "hardness",
+                "null_corpus": False,
+                "v_score": 0.45,
+                "vt_score": 0.75,
+                "delta": 0.30,
+                "ci_low": 0.22,
+                "ci_high": 0.37,
+                "delta_ctrl": 0.01,
+                "criterion_met": True,
+            },
+            {
+                **base,
+                "family": "hardness_null",
+                "target": "hardness",
+                "null_corpus": True,
+                "corpus": "sim_null",
+                "v_score": 0.48,
+                "vt_score": 0.49,
+                "delta": 0.01,
+                "ci_low": -0.05,
+                "ci_high": 0.07,
+                "delta_ctrl": 0.01,
+                "criterion_met": False,
+            },
             # no controls run on this one: not a finding
-            {**base, "family": "hardness", "target": "hardness", "null_corpus": False,
-             "fusion": "max", "v_score": 0.45, "vt_score": 0.7, "delta": 0.25, "ci_low": 0.2,
-             "ci_high": 0.3, "delta_ctrl": math.nan, "criterion_met": None},
+            {
+                **base,
+                "family": "hardness",
+                "target": "hardness",
+                "null_corpus": False,
+                "fusion": "max",
+                "v_score": 0.45,
+                "vt_score": 0.7,
+                "delta": 0.25,
+                "ci_low": 0.2,
+                "ci_high": 0.3,
+                "delta_ctrl": math.nan,
+                "criterion_met": None,
+            },
         ]
-    )  # fmt: skip
+    )
 
 
 def test_findings_rows_carry_result_control_verdict_and_page():
@@ -247,12 +288,22 @@ def test_policy_findings_use_the_ceiling_claim():
     )
     deltas = pd.DataFrame(
         [
-            {"condition": "vt_aligned", "delta": 0.57, "ci_low": 0.48, "ci_high": 0.65,
-             "n_episodes": 128},
-            {"condition": "vt_null", "delta": -0.07, "ci_low": -0.16, "ci_high": 0.02,
-             "n_episodes": 128},
+            {
+                "condition": "vt_aligned",
+                "delta": 0.57,
+                "ci_low": 0.48,
+                "ci_high": 0.65,
+                "n_episodes": 128,
+            },
+            {
+                "condition": "vt_null",
+                "delta": -0.07,
+                "ci_low": -0.16,
+                "ci_high": 0.02,
+                "n_episodes": 128,
+            },
         ]
-    )  # fmt: skip
+    )
     sweep = pd.DataFrame(
         {"success": [0.38, 0.44], "gap_closed": [-0.09, 0.02], "vision_ceiling": [0.363, 0.363]}
     )
@@ -310,8 +361,14 @@ def test_fusion_table_states_the_planning_rule():
     from tacgen_lib.probes.protocol import plan_comparisons
 
     def raw(dim_t):
-        plan = plan_comparisons(list(FUSIONS), heads_variant="clip128", variants=["clip128"],
-                                align_seeds=[42], dim_v_raw=192, dim_t_raw=dim_t)  # fmt: skip
+        plan = plan_comparisons(
+            list(FUSIONS),
+            heads_variant="clip128",
+            variants=["clip128"],
+            align_seeds=[42],
+            dim_v_raw=192,
+            dim_t_raw=dim_t,
+        )
         return {s.fusion: s.skip_reason for s in plan if s.input == "raw"}
 
     equal, unequal = raw(192), raw(384)

@@ -13,12 +13,37 @@ from tacgen_lib.io.images import decode_png
 SCENES = yaml.safe_load(open("config/scenes.yaml"))
 for _decl in SCENES.values():
     _decl.setdefault("settle_steps", 80)
-PAIRED = {"name": "p", "kind": "simulated", "design": "paired", "n": 10, "seed": 7,
-          "scene": "paired_press", "sensors": 3, "presses": 4}  # fmt: skip
-CONTROLLED = {"name": "c", "kind": "simulated", "design": "controlled", "n": 12, "seed": 11,
-              "scene": "controlled_press", "sensors": 2, "presses": 3}  # fmt: skip
-FLOATS = ["scale", "density", "mass", "stiffness", "friction", "force_normal", "force_p05",
-          "force_p50", "force_p95"]  # fmt: skip
+PAIRED = {
+    "name": "p",
+    "kind": "simulated",
+    "design": "paired",
+    "n": 10,
+    "seed": 7,
+    "scene": "paired_press",
+    "sensors": 3,
+    "presses": 4,
+}
+CONTROLLED = {
+    "name": "c",
+    "kind": "simulated",
+    "design": "controlled",
+    "n": 12,
+    "seed": 11,
+    "scene": "controlled_press",
+    "sensors": 2,
+    "presses": 3,
+}
+FLOATS = [
+    "scale",
+    "density",
+    "mass",
+    "stiffness",
+    "friction",
+    "force_normal",
+    "force_p05",
+    "force_p50",
+    "force_p95",
+]
 
 
 @pytest.fixture(scope="module")
@@ -89,10 +114,12 @@ def imprint_energy(df, cfg):
     by_id = {
         s: decode_png(b).astype(float) for s, b in zip(bgs.sensor_id, bgs.background, strict=True)
     }
-    return np.array([
-        np.abs(decode_png(t).astype(float) - by_id[s]).mean()
-        for t, s in zip(df.tactile, df.sensor_id, strict=True)
-    ])  # fmt: skip
+    return np.array(
+        [
+            np.abs(decode_png(t).astype(float) - by_id[s]).mean()
+            for t, s in zip(df.tactile, df.sensor_id, strict=True)
+        ]
+    )
 
 
 def test_null_tactile_carries_no_label_information():

@@ -124,8 +124,15 @@ def test_without_press_jitter_one_press_per_sample(monkeypatch):
 
 
 def test_declared_effects_do_not_depend_on_unrelated_effects():
-    base = ["gravity", "contact_compliance", "friction_shear", "press", "press_jitter", "tactile",
-            "sensor_noise"]  # fmt: skip
+    base = [
+        "gravity",
+        "contact_compliance",
+        "friction_shear",
+        "press",
+        "press_jitter",
+        "tactile",
+        "sensor_noise",
+    ]
     a = run(base)
     b = run(base + ["rgb", "texture", "shadows"])
     assert a["rgb"].isna().all() and b["rgb"].notna().all()

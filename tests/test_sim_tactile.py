@@ -55,9 +55,14 @@ def test_rays_match_analytic_sphere_cap():
 
     mujoco.mj_forward(rt.model, rt.data)
     got = tactile.height_field_rays(
-        rt.model, rt.data, rt.active_geom, np.zeros(3), np.eye(3).ravel(), OPTICS,
+        rt.model,
+        rt.data,
+        rt.active_geom,
+        np.zeros(3),
+        np.eye(3).ravel(),
+        OPTICS,
         tactile.ray_directions(OPTICS),
-    )  # fmt: skip
+    )
     assert got.max() == pytest.approx(0.0015, abs=2e-5)
     np.testing.assert_allclose(got, expected, atol=1e-9)
 

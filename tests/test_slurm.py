@@ -40,7 +40,7 @@ pytestmark = [pytest.mark.slurm, pytest.mark.workflow]
 RUN_TIMEOUT = 600  # seconds for the SLURM run itself; the test fails (and cleans up) after it
 SLURM_CONF = Path("/etc/slurm/slurm.conf")
 GRID = {"seeds": [42, 43], "taus": [0.07, 0.1]}
-#: generate (issue 12): one generator trained through SLURM beside the alignment grid.
+#: generate: one generator trained through SLURM beside the alignment grid.
 GENERATOR_WEIGHTS = "results/generate/sim_paired/seed~0/generator.arrow"
 
 
@@ -204,7 +204,7 @@ def single_node_slurm(state: Path) -> Iterator[Path]:
             SLURM_CONF.unlink(missing_ok=True)
 
 
-# ---- issue 15: a dying cluster job ---- begin
+# a dying cluster job
 def _cancel_one_running(proc: subprocess.Popen, rule: str, timeout: float = 300) -> str | None:
     """scancel the first job of `rule` seen RUNNING (a node failure, a preemption, an admin's
     scancel); returns its job id, or None if the run ended before one ran."""
@@ -221,9 +221,6 @@ def _cancel_one_running(proc: subprocess.Popen, rule: str, timeout: float = 300)
                     return job_id.strip()
         time.sleep(0.5)
     return None
-
-
-# ---- issue 15 ---- end
 
 
 @pytest.mark.skipif(
@@ -256,13 +253,13 @@ def test_align_grid_through_slurm_profile(reference_run, tmp_path):
     )
     # nothing upstream reruns: only the grid, its aggregate and the generator are left to make
     assert planned == {"train_heads": n_cells, "aggregate_align": 1, "train_generator": 1}, planned
-    local = tmp_path / "local"  # issue 15: the same grid run locally, for the edges' sake
+    local = tmp_path / "local"  # the same grid run locally, for the edges' sake
     shutil.copytree(work, local, symlinks=True)
 
     with single_node_slurm(tmp_path / "slurm") as state:
         cmd = [
             *SNAKEMAKE,
-            *targets,  # generate (issue 12): one train_generator job through SLURM
+            *targets,  # generate: one train_generator job through SLURM
             "--profile",
             "profiles/slurm",
             "--configfile",
@@ -274,7 +271,7 @@ def test_align_grid_through_slurm_profile(reference_run, tmp_path):
             "--slurm-keep-successful-logs",
         ]
         t0 = time.monotonic()
-        # ---- issue 15: a dying cluster job ---- begin
+        # a dying cluster job
         # scancel one running train_heads job mid-run: the profile's `retries` resubmit it
         run_log = tmp_path / "slurm_run.log"
         with run_log.open("w") as out:
@@ -294,7 +291,6 @@ def test_align_grid_through_slurm_profile(reference_run, tmp_path):
         print(f"alignment grid through SLURM in {elapsed:.0f} s (cancelled job {cancelled})")
         assert proc.returncode == 0, run_log.read_text()[-6000:]
         assert cancelled is not None, "no train_heads job was seen running to cancel"
-        # ---- issue 15 ---- end
         ctld_log = (state / "slurmctld.log").read_text()
         # finished jobs stay visible for MinJobAge: what each sbatch job asked for
         jobs = _run(["squeue", "-h", "-t", "all", "-o", "%k|%C|%m|%T"], timeout=10).stdout
@@ -323,7 +319,7 @@ def test_align_grid_through_slurm_profile(reference_run, tmp_path):
         edges.verify(work / "results/align" / cell / "metrics.parquet")
         edges.verify(work / "results/align" / cell / "heads.pt")
     assert (work / "results/report/align/seeds.html").stat().st_size > 500
-    # ---- issue 15: the same grid run locally gives the same edges ---- begin
+    # the same grid run locally gives the same edges
     # at the profile's thread counts: edges are bit-identical per thread count, and the
     # profile gives train_heads and train_generator 2 threads where a local run gives 1
     # (an option before the targets: right after smk's own --configfile they would be read as
@@ -347,11 +343,9 @@ def test_align_grid_through_slurm_profile(reference_run, tmp_path):
         for name in ("heads.pt", "metrics.parquet", "curve.parquet"):
             assert f"results/align/{cell}/{name}.sha256.json" in got, cell
     assert {k: v for k, v in got.items() if want.get(k) != v} == {}
-    # ---- issue 15 ---- end
-    # >>> generate (issue 12): the train_generator job ran as an sbatch job with its resources
+    # generate: the train_generator job ran as an sbatch job with its resources
     gen_logs = list((work / ".snakemake/slurm_logs/rule_train_generator").rglob("*.log"))
     assert len(gen_logs) == 1, gen_logs
     gen_jobs = [line.split("|") for line in jobs.splitlines() if "train_generator" in line]
     assert [(c, m, st) for _k, c, m, st in gen_jobs] == [("2", "3000M", "COMPLETED")], jobs
     edges.verify(work / GENERATOR_WEIGHTS)
-    # <<< generate

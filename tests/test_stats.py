@@ -51,9 +51,13 @@ def test_bootstrap_equals_scipy_percentile_ci_on_identical_resamples():
         )
 
     ref = scipy.stats.bootstrap(
-        (np.arange(y.size),), delta_r2, n_resamples=2000, vectorized=True,
-        method="percentile", rng=np.random.default_rng(5),
-    )  # fmt: skip
+        (np.arange(y.size),),
+        delta_r2,
+        n_resamples=2000,
+        vectorized=True,
+        method="percentile",
+        rng=np.random.default_rng(5),
+    )
     got = fixed_test_bootstrap(y, pv, pvt, "r2", n_resamples=2000, seed=5)
     idx = resample_indices(y.size, 2000, seed=5)
     assert np.array_equal(np.concatenate(seen), idx)  # same Generator call -> same resamples
@@ -131,12 +135,20 @@ def test_tactile_permutation_fast_path_equals_refit_loop(dims, solver):
     v_score = r2_score(y_te, FixedRidge(2.0).fit_predict(v_tr, y_tr, v_te))
     loop = []
     for a in p_tr:  # the paper's control: permuted training T, intact test T
-        pred = FixedRidge(2.0).fit_predict(fuse("concat", v_tr, t_tr[a]), y_tr,
-                                           fuse("concat", v_te, t_te))  # fmt: skip
+        pred = FixedRidge(2.0).fit_predict(
+            fuse("concat", v_tr, t_tr[a]), y_tr, fuse("concat", v_te, t_te)
+        )
         loop.append(r2_score(y_te, pred) - v_score)
     np.testing.assert_allclose(fast["deltas"], loop, rtol=1e-9, atol=1e-11)
-    real = r2_score(y_te, FixedRidge(2.0).fit_predict(fuse("concat", v_tr, t_tr), y_tr,
-                                                      fuse("concat", v_te, t_te))) - v_score  # fmt: skip
+    real = (
+        r2_score(
+            y_te,
+            FixedRidge(2.0).fit_predict(
+                fuse("concat", v_tr, t_tr), y_tr, fuse("concat", v_te, t_te)
+            ),
+        )
+        - v_score
+    )
     assert fast["delta_ctrl"] < real  # T carries signal only when paired
 
 
@@ -164,8 +176,9 @@ def test_tactile_permutation_keeps_test_tactile_intact(fusion):
     v_tr, t_tr, y_tr, v_te, t_te, y_te = control_data(dv=6, dt=6)
     spy = SpyProbe(FixedRidge(2.0))
     rows = PairedRows(v_tr, t_tr, y_tr, v_te, t_te, y_te, fusion=fusion)
-    tactile_permutation_control(rows, probe=spy, probe_v=FixedRidge(2.0), metric="r2",
-                                n_permutations=5, seed=3)  # fmt: skip
+    tactile_permutation_control(
+        rows, probe=spy, probe_v=FixedRidge(2.0), metric="r2", n_permutations=5, seed=3
+    )
     assert len(spy.calls) == 5
     x_te = fuse(fusion, v_te, t_te)
     moved = 0
@@ -245,9 +258,13 @@ def test_label_permutation_batched_equals_loop():
     v_tr, t_tr, y_tr, v_te, t_te, y_te = control_data()
     x_tr, x_te = fuse("concat", v_tr, t_tr), fuse("concat", v_te, t_te)
     out = label_permutation_control(
-        PairedRows(v_tr, t_tr, y_tr, v_te, t_te, y_te), probe_v=FixedRidge(1.0),
-        probe_vt=FixedRidge(3.0), metric="r2", n_permutations=10, seed=6,
-    )  # fmt: skip
+        PairedRows(v_tr, t_tr, y_tr, v_te, t_te, y_te),
+        probe_v=FixedRidge(1.0),
+        probe_vt=FixedRidge(3.0),
+        metric="r2",
+        n_permutations=10,
+        seed=6,
+    )
     perm = np.argsort(np.random.default_rng(6).random((10, 70)), axis=1, kind="stable")
     ref = [
         r2_score(y_te, FixedRidge(3.0).fit_predict(x_tr, y_tr[p], x_te))
@@ -277,9 +294,13 @@ def test_train_resample_diagnostic_equals_loop():
     v_tr, t_tr, y_tr, v_te, t_te, y_te = control_data()
     x_tr, x_te = fuse("concat", v_tr, t_tr), fuse("concat", v_te, t_te)
     out = train_resample_diagnostic(
-        PairedRows(v_tr, t_tr, y_tr, v_te, t_te, y_te), probe_v=FixedRidge(1.0),
-        probe_vt=FixedRidge(1.0), metric="r2", n_resamples=8, seed=3,
-    )  # fmt: skip
+        PairedRows(v_tr, t_tr, y_tr, v_te, t_te, y_te),
+        probe_v=FixedRidge(1.0),
+        probe_vt=FixedRidge(1.0),
+        metric="r2",
+        n_resamples=8,
+        seed=3,
+    )
     idx = resample_indices(70, 8, seed=3)
     ref = [
         r2_score(y_te, FixedRidge(1.0).fit_predict(x_tr[i], y_tr[i], x_te))
@@ -346,7 +367,7 @@ def test_logistic_tactile_permutation_batched_equals_refit_loop(n_classes):
         accuracy_score(
             y_te,
             TIGHT.fit_predict(fuse("concat", v_tr, t_tr[a]), y_tr, fuse("concat", v_te, t_te)),
-        )  # fmt: skip
+        )
         for a in p_tr
     ]
     np.testing.assert_array_equal(fast["vt_scores"], loop)
@@ -356,9 +377,13 @@ def test_logistic_label_permutation_batched_equals_refit_loop():
     v_tr, t_tr, y_tr, v_te, t_te, y_te = class_data(n_classes=3, seed=1)
     x_tr, x_te = fuse("concat", v_tr, t_tr), fuse("concat", v_te, t_te)
     out = label_permutation_control(
-        PairedRows(v_tr, t_tr, y_tr, v_te, t_te, y_te), probe_v=TIGHT, probe_vt=TIGHT,
-        metric="accuracy", n_permutations=6, seed=6,
-    )  # fmt: skip
+        PairedRows(v_tr, t_tr, y_tr, v_te, t_te, y_te),
+        probe_v=TIGHT,
+        probe_vt=TIGHT,
+        metric="accuracy",
+        n_permutations=6,
+        seed=6,
+    )
     perm = np.argsort(np.random.default_rng(6).random((6, 80)), axis=1, kind="stable")
     vt = [accuracy_score(y_te, TIGHT.fit_predict(x_tr, y_tr[p], x_te)) for p in perm]
     v = [accuracy_score(y_te, TIGHT.fit_predict(v_tr, y_tr[p], v_te)) for p in perm]
@@ -388,9 +413,13 @@ def test_logistic_train_resample_batched_equals_loop_with_missing_class_resample
     y_tr[:2] = 2  # a class of two rows: about one resample in eight misses it
     x_tr, x_te = fuse("concat", v_tr, t_tr), fuse("concat", v_te, t_te)
     out = train_resample_diagnostic(
-        PairedRows(v_tr, t_tr, y_tr, v_te, t_te, y_te), probe_v=TIGHT, probe_vt=TIGHT,
-        metric="accuracy", n_resamples=16, seed=3,
-    )  # fmt: skip
+        PairedRows(v_tr, t_tr, y_tr, v_te, t_te, y_te),
+        probe_v=TIGHT,
+        probe_vt=TIGHT,
+        metric="accuracy",
+        n_resamples=16,
+        seed=3,
+    )
     idx = resample_indices(30, 16, seed=3)
     missing = [len(np.unique(y_tr[i])) < 3 for i in idx]
     assert any(missing) and not all(missing)  # both paths are exercised
@@ -414,21 +443,35 @@ def test_logistic_controls_batch_only_where_the_shared_preconditioner_fits():
 
     rows = resample_indices(30, 4, seed=0)
     assert TIGHT.batches(refits(x31))  # shared unweighted design: any width
-    assert TIGHT.batches(Refits((DesignBlock(x31), DesignBlock(x31, perm)),
-                                (DesignBlock(x31[:5]), DesignBlock(x31[:5], perm[:, :5])), y))  # fmt: skip
+    assert TIGHT.batches(
+        Refits(
+            (DesignBlock(x31), DesignBlock(x31, perm)),
+            (DesignBlock(x31[:5]), DesignBlock(x31[:5], perm[:, :5])),
+            y,
+        )
+    )
     assert TIGHT.batches(refits(x30, rows=rows))
     assert not TIGHT.batches(refits(x31, rows=rows))
-    assert not TIGHT.batches(Refits((DesignBlock(x30), DesignBlock(x30, perm)),
-                                    (DesignBlock(x30[:5]), DesignBlock(x30[:5], perm[:, :5])),
-                                    y, fusion="mean"))  # fmt: skip
+    assert not TIGHT.batches(
+        Refits(
+            (DesignBlock(x30), DesignBlock(x30, perm)),
+            (DesignBlock(x30[:5]), DesignBlock(x30[:5], perm[:, :5])),
+            y,
+            fusion="mean",
+        )
+    )
     assert not FixedRidge(1.0).batches(refits(x30, rows=rows))  # ridge: its own paths only
     v_tr, t_tr, y_tr, v_te, t_te, y_te = class_data(n_tr=12, n_classes=3, seed=5)
     wide_tr, wide_te = np.hstack([v_tr, v_tr**2, t_tr]), np.hstack([v_te, v_te**2, t_te])
     # 13 columns > 12 rows: the train resamples take the refit loop and equal scikit-learn
     out = train_resample_diagnostic(
         PairedRows(v_tr, np.hstack([v_tr**2, t_tr]), y_tr, v_te, np.hstack([v_te**2, t_te]), y_te),
-        probe_v=TIGHT, probe_vt=TIGHT, metric="accuracy", n_resamples=4, seed=5,
-    )  # fmt: skip
+        probe_v=TIGHT,
+        probe_vt=TIGHT,
+        metric="accuracy",
+        n_resamples=4,
+        seed=5,
+    )
     idx = resample_indices(12, 4, seed=5)
     vt = [accuracy_score(y_te, TIGHT.fit_predict(wide_tr[i], y_tr[i], wide_te)) for i in idx]
     np.testing.assert_array_equal(out["vt_scores"], vt)

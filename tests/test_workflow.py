@@ -56,13 +56,12 @@ def test_dry_run_plans_the_whole_dag(cold_dry_run):
         "edge_manifest",
         "findings",
         "corpus_examples",
-        # >>> generate (issue 12)
+        # generate
         "train_generator",
         "sample_generator",
         "fit_generator_baselines",
         "evaluate_generator",
         "aggregate_generate",
-        # <<< generate
     ):
         assert rule in rules, rules
     assert rules["merge_corpus"] == 3
@@ -115,11 +114,11 @@ def test_changed_probe_param_reruns_only_the_probes(run_dir, tmp_path):
         cfg.read_text().replace("probes:\n  bootstrap: 200", "probes:\n  bootstrap: 150")
     )
     assert "probes:\n  bootstrap: 150" in cfg.read_text()
-    # the robustness rules (issue 16) read the same probes subtree, and the generator's
+    # the robustness rules read the same probes subtree, and the generator's
     # evaluation and its baselines use the probes' settings (same probe code): all downstream
     robustness = {"probe_training_size", "probe_within_scale", "aggregate_robustness"}
     generate = {"fit_generator_baselines", "evaluate_generator", "aggregate_generate"}
-    # the cost page's free generator knobs read the generation summary (issue 14); the
+    # the cost page's free generator knobs read the generation summary; the
     # findings page reads the probe summary
     cost = {"cost_generate_points", "cost_of_accuracy"}
     report = {"findings", "edge_manifest", "all"}
@@ -134,7 +133,7 @@ def test_changed_library_module_reruns_only_its_users(run_dir, tmp_path):
     shutil.copytree(run_dir / ".snakemake", work / ".snakemake")
     module = work / "tacgen_lib/features/pretrained_vs_random.py"
     module.write_text(module.read_text() + "\n# an edit that changes the module's content\n")
-    # the cost page reads knob points only (issue 14), not the pretrained-vs-random edge
+    # the cost page reads knob points only, not the pretrained-vs-random edge
     assert set(planned_rules(work)) == {
         "pretrained_vs_random",
         "edge_manifest",
@@ -155,7 +154,7 @@ def test_edit_to_an_indirectly_imported_module_reruns_exactly_its_users(run_dir,
         if ROOT / module in import_closure(p, ROOT / "tacgen_lib")
     }
     # evaluate_generator and fit_generator_baselines reach it through probes.protocol too
-    # (generate, issue 12)
+    # (generate)
     robustness = {"probe_training_size", "probe_within_scale", "aggregate_robustness"}
     assert direct == []
     generate = {"evaluate_generator", "fit_generator_baselines"}
@@ -164,7 +163,7 @@ def test_edit_to_an_indirectly_imported_module_reruns_exactly_its_users(run_dir,
     shutil.copytree(run_dir / "results", work / "results")
     shutil.copytree(run_dir / ".snakemake", work / ".snakemake")
     (work / module).write_text((work / module).read_text() + "\n# an edit\n")
-    # its users rerun, then only what reads their outputs: the generation summary (issue 12),
+    # its users rerun, then only what reads their outputs: the generation summary,
     # the findings page, the edge manifest and `all`
     # (the cost sweeps run only under config/cost.yaml: not planned here)
     assert set(planned_rules(work)) == users | {
@@ -263,7 +262,7 @@ def test_real_corpus_path_runs_on_fixtures(tmp_path):
     cfg["features"]["pretrain"]["corpus"] = "ssvtp"
     cfg["features"]["pretrained_vs_random"]["corpus"] = "ssvtp"
     cfg["align"]["corpora"] = ["ssvtp"]
-    cfg["generate"]["corpora"] = {"ssvtp": {"hardness": "logistic"}}  # generate (issue 12)
+    cfg["generate"]["corpora"] = {"ssvtp": {"hardness": "logistic"}}  # generate
     # the official-checkpoint path: a ViT-S/14 state dict in DINOv2's key format (random
     # weights, 518-px position grid as released), loaded and interpolated instead of pretraining
     import torch
@@ -343,8 +342,13 @@ def test_runs_as_a_module_from_another_directory(tmp_path, cold_dry_run):
     assert dry.returncode == 0, dry.stderr[-4000:]
     planned = plan_of(dry)
     assert planned == plan_of(cold_dry_run), planned  # a plain dry run of test.yaml
-    run = subprocess.run([*cmd, "results/corpus/splits.parquet"], cwd=user, capture_output=True,
-                         text=True, timeout=600)  # fmt: skip
+    run = subprocess.run(
+        [*cmd, "results/corpus/splits.parquet"],
+        cwd=user,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
     assert run.returncode == 0, run.stderr[-4000:]
     from tacgen_lib.io import edges
 

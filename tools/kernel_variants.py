@@ -45,8 +45,16 @@ ROOT = Path(__file__).resolve().parents[1]
 
 #: numpy's AVX-512 dispatch targets (x86-64-v4 and later); those this build and CPU have are
 #: disabled in the variants below
-NUMPY_AVX512 = ("X86_V4", "AVX512F", "AVX512CD", "AVX512_SKX", "AVX512_CLX", "AVX512_CNL",
-                "AVX512_ICL", "AVX512_SPR")  # fmt: skip
+NUMPY_AVX512 = (
+    "X86_V4",
+    "AVX512F",
+    "AVX512CD",
+    "AVX512_SKX",
+    "AVX512_CLX",
+    "AVX512_CNL",
+    "AVX512_ICL",
+    "AVX512_SPR",
+)
 
 #: name -> (environment, torch intra-op threads, what the variant stands for)
 VARIANTS: dict[str, tuple[dict[str, str], int, str]] = {
@@ -203,9 +211,20 @@ def run_variant(name: str, pytest_args: list[str]) -> tuple[int, tuple[int, int,
     # (it keeps 3), which would pull a concurrent session's files from under it
     with tempfile.TemporaryDirectory(prefix=f"tacgen-kernels-{name}-") as tmp:
         junit = Path(tmp) / "junit.xml"
-        cmd = [sys.executable, "-m", "pytest", "-m", "not workflow and not slurm",
-               "-p", "no:cacheprovider", "-q", f"--torch-threads={threads}",
-               f"--basetemp={tmp}/pytest", f"--junitxml={junit}", *pytest_args]  # fmt: skip
+        cmd = [
+            sys.executable,
+            "-m",
+            "pytest",
+            "-m",
+            "not workflow and not slurm",
+            "-p",
+            "no:cacheprovider",
+            "-q",
+            f"--torch-threads={threads}",
+            f"--basetemp={tmp}/pytest",
+            f"--junitxml={junit}",
+            *pytest_args,
+        ]
         t0 = time.monotonic()
         rc = subprocess.run(cmd, cwd=ROOT, env=env).returncode
         counts = _counts(junit)

@@ -1,4 +1,4 @@
-"""Continue an interrupted run with one command (`make resume`, issue 15).
+"""Continue an interrupted run with one command (`make resume`).
 
 A run killed hard (kill -9, a lost SSH session, an OOM kill) leaves Snakemake's lock in
 `.snakemake/locks` and incomplete markers for the jobs that were running; the next plain run

@@ -67,6 +67,7 @@ class AlignSettings:
     @classmethod
     def tiny(cls, **changes: Any) -> AlignSettings:
         """A budget of a few dozen steps on small batches, for tests; `changes` override."""
-        small = cls(budget="steps", epochs=1, steps=30, batch_size=64, lr=1e-3, patience=0,
-                    eval_every=10)  # fmt: skip
+        small = cls(
+            budget="steps", epochs=1, steps=30, batch_size=64, lr=1e-3, patience=0, eval_every=10
+        )
         return replace(small, **changes)

@@ -232,7 +232,7 @@ def _relative(path: Path, root: Path) -> str:
         return path.as_posix()
 
 
-# ---- issue 15: hostile dataset folders (paths that leave the dataset root) ---- begin
+# hostile dataset folders (paths that leave the dataset root)
 def _inside_root(path: Path, root: Path, *, where: str, sample_id: str, role: str) -> Path:
     """``path`` if the file it names, symlinks followed, lies inside the dataset ``root``.
 
@@ -249,9 +249,6 @@ def _inside_root(path: Path, root: Path, *, where: str, sample_id: str, role: st
             "symlinks out of it are refused: copy the file into the dataset folder"
         )
     return path
-
-
-# ---- issue 15 ---- end
 
 
 def _parsed_caption(caption: str, *, where: str, sample_id: str) -> list[str]:

@@ -87,8 +87,13 @@ def features_metric_ids(modality: str, target: str) -> tuple[str, str]:
 
 def metric_row(metric_id: str, value: float, lo: float, hi: float, uncertainty: str) -> dict:
     """One row of `METRIC_COLUMNS`."""
-    return {"metric_id": metric_id, "value": value, "ci_low": lo, "ci_high": hi,
-            "uncertainty": uncertainty}  # fmt: skip
+    return {
+        "metric_id": metric_id,
+        "value": value,
+        "ci_low": lo,
+        "ci_high": hi,
+        "uncertainty": uncertainty,
+    }
 
 
 def features_metrics(table: pd.DataFrame, *, pretraining: bool, n_resamples: int) -> list[dict]:
@@ -96,9 +101,19 @@ def features_metrics(table: pd.DataFrame, *, pretraining: bool, n_resamples: int
     "<modality> <target> Δaccuracy pretrained − random" and "<modality> <target> accuracy"
     of the backbone the config uses (the pretrained one when `pretraining`, else the
     random-init one), each with its fixed-test bootstrap CI."""
-    need = {"modality", "target", "delta", "ci_low", "ci_high", "pretrained_accuracy",
-            "pretrained_ci_low", "pretrained_ci_high", "random_accuracy", "random_ci_low",
-            "random_ci_high"}  # fmt: skip
+    need = {
+        "modality",
+        "target",
+        "delta",
+        "ci_low",
+        "ci_high",
+        "pretrained_accuracy",
+        "pretrained_ci_low",
+        "pretrained_ci_high",
+        "random_accuracy",
+        "random_ci_low",
+        "random_ci_high",
+    }
     missing = sorted(need - set(table.columns))
     if missing:
         raise ValueError(f"features_metrics: the pretrained-vs-random table lacks {missing}")
@@ -115,7 +130,7 @@ def features_metrics(table: pd.DataFrame, *, pretraining: bool, n_resamples: int
                 getattr(r, f"{used}_ci_low"),
                 getattr(r, f"{used}_ci_high"),
                 how,
-            )  # fmt: skip
+            )
         )
     return out
 

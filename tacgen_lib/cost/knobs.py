@@ -124,47 +124,109 @@ class Knob:
 KNOBS: dict[str, Knob] = {
     k.name: k
     for k in (
-        Knob("align_steps", "align", "align", keys=("align.steps",),
-             fixed={"align.budget": "steps"}, reruns=("train_heads",),
-             moves=("results/align/",), has_default=False),
-        Knob("align_n", "align", "align", keys=("probes.heads.n_train", "align.n_train[]"),
-             reruns=("train_heads",), moves=("results/align/",)),
-        Knob("probe_bootstrap", "probes", "probe_bootstrap", keys=("probes.bootstrap",),
-             reruns=("probe",), moves=("results/probes/",),
-             replicate_key="probes.resample_seed"),
-        Knob("probe_permutations", "probes", "probe_permutations",
-             keys=("probes.permutations",), reruns=("probe",), moves=("results/probes/",),
-             replicate_key="probes.resample_seed"),
-        Knob("presses", "corpus", "simulation", keys=("corpora.{sim}.presses",),
-             fixed={"corpora.{sim}.n": "{sim_n}", "corpora.{sim}.shards": 1},
-             reruns=_SIM_RERUNS, moves=_SIM_MOVES, bootstrap_key="probes.bootstrap",
-             metrics=("force band p05–p95 width (N)", "force_p50 ΔR² V+T − V")),
-        Knob("tactile_resolution", "corpus", "simulation", keys=("corpora.{sim}.tactile_size",),
-             fixed={"corpora.{sim}.n": "{sim_n}", "corpora.{sim}.shards": 1},
-             reruns=_SIM_RERUNS, moves=_SIM_MOVES, axis="height",
-             bootstrap_key="probes.bootstrap",
-             metrics=("force_p50 ΔR² V+T − V", "hardness Δaccuracy V+T − V",
-                      "frames/s (simulate job, one core)")),
-        Knob("image_size", "features", "features", keys=("features.image_size",),
-             reruns=_FEATURES_RERUNS, moves=("results/features/",),
-             bootstrap_key="features.pretrained_vs_random.bootstrap",
-             metrics=("vision {vision_target} accuracy", "tactile {tactile_target} accuracy")),
-        Knob("backbone_arch", "features", "features",
-             keys=("features.backbones.vision.arch", "features.backbones.tactile.arch"),
-             reruns=_FEATURES_RERUNS, moves=("results/features/",),
-             bootstrap_key="features.pretrained_vs_random.bootstrap", axis="width",
-             metrics=("vision {vision_target} accuracy", "tactile {tactile_target} accuracy")),
-        Knob("pretrain_epochs", "features", "features", keys=("features.pretrain.epochs",),
-             reruns=_FEATURES_RERUNS, moves=("results/features/",),
-             bootstrap_key="features.pretrained_vs_random.bootstrap",
-             metrics=("vision {vision_target} Δaccuracy pretrained − random",
-                      "tactile {tactile_target} Δaccuracy pretrained − random")),
-        Knob("generate_steps", "generate", "generate_steps", free=True),
-        Knob("generate_sampler", "generate", "generate_sampler", free=True),
-        Knob("policy_width", "policy", "policy_width", free=True),
-        Knob("policy_epochs", "policy", "policy_epochs", free=True),
+        Knob(
+            "align_steps",
+            stage="align",
+            reads="align",
+            keys=("align.steps",),
+            fixed={"align.budget": "steps"},
+            reruns=("train_heads",),
+            moves=("results/align/",),
+            has_default=False,
+        ),
+        Knob(
+            "align_n",
+            stage="align",
+            reads="align",
+            keys=("probes.heads.n_train", "align.n_train[]"),
+            reruns=("train_heads",),
+            moves=("results/align/",),
+        ),
+        Knob(
+            "probe_bootstrap",
+            stage="probes",
+            reads="probe_bootstrap",
+            keys=("probes.bootstrap",),
+            reruns=("probe",),
+            moves=("results/probes/",),
+            replicate_key="probes.resample_seed",
+        ),
+        Knob(
+            "probe_permutations",
+            stage="probes",
+            reads="probe_permutations",
+            keys=("probes.permutations",),
+            reruns=("probe",),
+            moves=("results/probes/",),
+            replicate_key="probes.resample_seed",
+        ),
+        Knob(
+            "presses",
+            stage="corpus",
+            reads="simulation",
+            keys=("corpora.{sim}.presses",),
+            fixed={"corpora.{sim}.n": "{sim_n}", "corpora.{sim}.shards": 1},
+            reruns=_SIM_RERUNS,
+            moves=_SIM_MOVES,
+            bootstrap_key="probes.bootstrap",
+            metrics=("force band p05–p95 width (N)", "force_p50 ΔR² V+T − V"),
+        ),
+        Knob(
+            "tactile_resolution",
+            stage="corpus",
+            reads="simulation",
+            keys=("corpora.{sim}.tactile_size",),
+            fixed={"corpora.{sim}.n": "{sim_n}", "corpora.{sim}.shards": 1},
+            reruns=_SIM_RERUNS,
+            moves=_SIM_MOVES,
+            axis="height",
+            bootstrap_key="probes.bootstrap",
+            metrics=(
+                "force_p50 ΔR² V+T − V",
+                "hardness Δaccuracy V+T − V",
+                "frames/s (simulate job, one core)",
+            ),
+        ),
+        Knob(
+            "image_size",
+            stage="features",
+            reads="features",
+            keys=("features.image_size",),
+            reruns=_FEATURES_RERUNS,
+            moves=("results/features/",),
+            bootstrap_key="features.pretrained_vs_random.bootstrap",
+            metrics=("vision {vision_target} accuracy", "tactile {tactile_target} accuracy"),
+        ),
+        Knob(
+            "backbone_arch",
+            stage="features",
+            reads="features",
+            keys=("features.backbones.vision.arch", "features.backbones.tactile.arch"),
+            reruns=_FEATURES_RERUNS,
+            moves=("results/features/",),
+            bootstrap_key="features.pretrained_vs_random.bootstrap",
+            axis="width",
+            metrics=("vision {vision_target} accuracy", "tactile {tactile_target} accuracy"),
+        ),
+        Knob(
+            "pretrain_epochs",
+            stage="features",
+            reads="features",
+            keys=("features.pretrain.epochs",),
+            reruns=_FEATURES_RERUNS,
+            moves=("results/features/",),
+            bootstrap_key="features.pretrained_vs_random.bootstrap",
+            metrics=(
+                "vision {vision_target} Δaccuracy pretrained − random",
+                "tactile {tactile_target} Δaccuracy pretrained − random",
+            ),
+        ),
+        Knob("generate_steps", stage="generate", reads="generate_steps", free=True),
+        Knob("generate_sampler", stage="generate", reads="generate_sampler", free=True),
+        Knob("policy_width", stage="policy", reads="policy_width", free=True),
+        Knob("policy_epochs", stage="policy", reads="policy_epochs", free=True),
     )
-}  # fmt: skip
+}
 
 
 class UnknownKnobError(ValueError):
@@ -279,8 +341,9 @@ def knob_settings(name: str, entry: Mapping[str, Any], config: Mapping[str, Any]
     or a swept knob without any.
     """
     if name not in KNOBS:
-        raise UnknownKnobError(f"config cost.knobs: {name!r} is not a knob of this workflow "
-                               f"(known: {sorted(KNOBS)})")  # fmt: skip
+        raise UnknownKnobError(
+            f"config cost.knobs: {name!r} is not a knob of this workflow (known: {sorted(KNOBS)})"
+        )
     knob = KNOBS[name]
     values = list(entry.get("values") or [])
     if knob.free:
@@ -319,11 +382,23 @@ def knob_settings(name: str, entry: Mapping[str, Any], config: Mapping[str, Any]
                 "grid_knobs": False,
                 "setting": {"knob": name, "label": label, "rep": rep, "module": module},
             }
-            moves = {m.format(**ctx): root + m.format(**ctx).removeprefix("results/")
-                     for m in knob.moves}  # fmt: skip
+            moves = {
+                m.format(**ctx): root + m.format(**ctx).removeprefix("results/") for m in knob.moves
+            }
             moves |= {"results/benchmarks/": root + "benchmarks/", "results/logs/": root + "logs/"}
-            out.append(Setting(name, label, _number(knob, value), all(_same(value, d) for d in defaults), rep,
-                               module, root, cfg, moves))  # fmt: skip
+            out.append(
+                Setting(
+                    name,
+                    label,
+                    _number(knob, value),
+                    all(_same(value, d) for d in defaults),
+                    rep,
+                    module,
+                    root,
+                    cfg,
+                    moves,
+                )
+            )
     return out
 
 
@@ -343,9 +418,18 @@ def shared_runs(runs: Sequence[Setting]) -> list[Setting]:
         out.append(
             run
             if owner is run
-            else Setting(run.knob, run.label, run.number, run.is_default, run.rep,
-                         owner.module, owner.root, owner.config, owner.replace_prefix)
-        )  # fmt: skip
+            else Setting(
+                run.knob,
+                run.label,
+                run.number,
+                run.is_default,
+                run.rep,
+                owner.module,
+                owner.root,
+                owner.config,
+                owner.replace_prefix,
+            )
+        )
     return out
 
 

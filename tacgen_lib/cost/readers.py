@@ -106,8 +106,15 @@ def read_align(knob: str, runs: Sequence[SettingRun], options: Mapping[str, Any]
         (int(r.edges["metrics"][0]["n_train_rows"].iloc[0]) for r in runs if r.label == "all"),
         None,
     )
-    return align_points(knob, ranks, _seconds(runs), _default_label(runs),
-                        n_resamples=int(options["bootstrap"]), seed=0, n_all=n_all)  # fmt: skip
+    return align_points(
+        knob,
+        ranks,
+        _seconds(runs),
+        _default_label(runs),
+        n_resamples=int(options["bootstrap"]),
+        seed=0,
+        n_all=n_all,
+    )
 
 
 def _replicates(runs: Sequence[SettingRun], heads_variant: str) -> pd.DataFrame:
@@ -116,10 +123,18 @@ def _replicates(runs: Sequence[SettingRun], heads_variant: str) -> pd.DataFrame:
         rows = r.edges["rows"][0]
         main = headline_row(rows, heads_variant)
         perm = headline_row(rows, heads_variant, "tactile_permutation")
-        out.append({"label": r.label, "rep": r.rep, "delta": main["delta"],
-                    "ci_low": main["ci_low"], "ci_high": main["ci_high"],
-                    "n_permutations": int(perm["n_resamples"]), "delta_ctrl": perm["delta"],
-                    "delta_ctrl_sd": perm["delta_sd"]})  # fmt: skip
+        out.append(
+            {
+                "label": r.label,
+                "rep": r.rep,
+                "delta": main["delta"],
+                "ci_low": main["ci_low"],
+                "ci_high": main["ci_high"],
+                "n_permutations": int(perm["n_resamples"]),
+                "delta_ctrl": perm["delta"],
+                "delta_ctrl_sd": perm["delta_sd"],
+            }
+        )
     return pd.DataFrame(out)
 
 
@@ -142,8 +157,11 @@ def _settings(knob: str, runs: Sequence[SettingRun], metrics: Callable[[SettingR
 
 def read_features(knob: str, runs: Sequence[SettingRun], options: Mapping[str, Any]):
     def metrics(r: SettingRun) -> list[dict]:
-        return features_metrics(r.edges["table"][0], pretraining=bool(r.options["pretraining"]),
-                                n_resamples=int(options["bootstrap"]))  # fmt: skip
+        return features_metrics(
+            r.edges["table"][0],
+            pretraining=bool(r.options["pretraining"]),
+            n_resamples=int(options["bootstrap"]),
+        )
 
     return knob_points(knob, "features", _settings(knob, runs, metrics), options["metrics"])
 
@@ -153,19 +171,38 @@ def read_simulation(knob: str, runs: Sequence[SettingRun], options: Mapping[str,
 
     def metrics(r: SettingRun) -> list[dict]:
         samples = r.edges["samples"][0]
-        width, lo, hi = force_band_width(samples["force_p05"].to_numpy(),
-                                         samples["force_p95"].to_numpy(), n_resamples=b,
-                                         seed=seed)  # fmt: skip
-        out = [metric_row(BAND_WIDTH, width, lo, hi,
-                          f"95 % bootstrap CI over the {len(samples)} samples")]  # fmt: skip
+        width, lo, hi = force_band_width(
+            samples["force_p05"].to_numpy(),
+            samples["force_p95"].to_numpy(),
+            n_resamples=b,
+            seed=seed,
+        )
+        out = [
+            metric_row(
+                BAND_WIDTH, width, lo, hi, f"95 % bootstrap CI over the {len(samples)} samples"
+            )
+        ]
         for rows in r.edges["rows"]:
             h = headline_row(rows, options["heads_variant"])
-            out.append(metric_row(probe_metric_ids(h["target"], h["metric"])[1], h["delta"],
-                                  h["ci_low"], h["ci_high"],
-                                  PERCENTILE_CI.format(b=int(h["n_resamples"]))))  # fmt: skip
+            out.append(
+                metric_row(
+                    probe_metric_ids(h["target"], h["metric"])[1],
+                    h["delta"],
+                    h["ci_low"],
+                    h["ci_high"],
+                    PERCENTILE_CI.format(b=int(h["n_resamples"])),
+                )
+            )
         simulate = r.benchmarks[0]  # the simulate job comes first
-        out.append(metric_row(FRAMES_PER_S, len(samples) / simulate.wall, math.nan, math.nan,
-                              "none: one job's wall time (benchmark file)"))  # fmt: skip
+        out.append(
+            metric_row(
+                FRAMES_PER_S,
+                len(samples) / simulate.wall,
+                math.nan,
+                math.nan,
+                "none: one job's wall time (benchmark file)",
+            )
+        )
         return out
 
     return knob_points(knob, "corpus", _settings(knob, runs, metrics), options["metrics"])

@@ -49,16 +49,40 @@ class Seconds:
 
 
 def point(
-    knob: str, stage: str, setting: float, label: str, is_default: bool, metric: str,
-    value: float, ci: tuple[float, float], uncertainty: str, seconds: Seconds,
+    knob: str,
+    stage: str,
+    setting: float,
+    label: str,
+    is_default: bool,
+    metric: str,
+    value: float,
+    ci: tuple[float, float],
+    uncertainty: str,
+    seconds: Seconds,
     direction: str = "higher",
-) -> dict:  # fmt: skip
+) -> dict:
     """One row of the points contract."""
-    return dict(zip(POINT_COLUMNS, (
-        knob, stage, float(setting), str(label), bool(is_default), metric, float(value),
-        float(ci[0]), float(ci[1]), uncertainty, float(seconds.wall), float(seconds.cpu),
-        int(seconds.n_jobs),
-    ), strict=True)) | {"direction": direction}  # fmt: skip
+    return dict(
+        zip(
+            POINT_COLUMNS,
+            (
+                knob,
+                stage,
+                float(setting),
+                str(label),
+                bool(is_default),
+                metric,
+                float(value),
+                float(ci[0]),
+                float(ci[1]),
+                uncertainty,
+                float(seconds.wall),
+                float(seconds.cpu),
+                int(seconds.n_jobs),
+            ),
+            strict=True,
+        )
+    ) | {"direction": direction}
 
 
 def _setting(label: str) -> float:
@@ -93,11 +117,27 @@ def align_points(
         what = f"95 % bootstrap CI over {r.shape[1]} test rows, mean of {r.shape[0]} seed(s)"
         setting = n_all if label == "all" and n_all is not None else _setting(label)
         common = (knob, "align", setting, label, label == default)
-        rows.append(point(*common, "top-1 V→T retrieval (test)", b["top1"],
-                          (b["top1_low"], b["top1_high"]), what, seconds[label]))  # fmt: skip
-        rows.append(point(*common, "median rank V→T (test)", b["median_rank"],
-                          (b["median_rank_low"], b["median_rank_high"]), what, seconds[label],
-                          "lower"))  # fmt: skip
+        rows.append(
+            point(
+                *common,
+                "top-1 V→T retrieval (test)",
+                b["top1"],
+                (b["top1_low"], b["top1_high"]),
+                what,
+                seconds[label],
+            )
+        )
+        rows.append(
+            point(
+                *common,
+                "median rank V→T (test)",
+                b["median_rank"],
+                (b["median_rank_low"], b["median_rank_high"]),
+                what,
+                seconds[label],
+                "lower",
+            )
+        )
     return _frame(rows)
 
 
@@ -111,9 +151,21 @@ def bootstrap_spread_points(
         what = f"sd over {len(g)} bootstrap seeds, 95 % chi-square CI"
         for end, col in (("lower", "ci_low"), ("upper", "ci_high")):
             sd, lo, hi = sd_interval(g[col].to_numpy())
-            rows.append(point(knob, "probes", _setting(label), label, label == default,
-                              f"Monte Carlo sd of the CI's {end} end", sd, (lo, hi), what,
-                              seconds[label], "lower"))  # fmt: skip
+            rows.append(
+                point(
+                    knob,
+                    "probes",
+                    _setting(label),
+                    label,
+                    label == default,
+                    f"Monte Carlo sd of the CI's {end} end",
+                    sd,
+                    (lo, hi),
+                    what,
+                    seconds[label],
+                    "lower",
+                )
+            )
     return _frame(rows)
 
 
@@ -126,12 +178,29 @@ def permutation_points(
     for label, g in reps.groupby("label", sort=False):
         b = int(g["n_permutations"].iloc[0])
         common = (knob, "probes", float(b), label, label == default)
-        rows.append(point(*common, "permutation p-value resolution 1/(B+1)", 1.0 / (b + 1),
-                          (math.nan, math.nan), "exact", seconds[label], "lower"))  # fmt: skip
+        rows.append(
+            point(
+                *common,
+                "permutation p-value resolution 1/(B+1)",
+                1.0 / (b + 1),
+                (math.nan, math.nan),
+                "exact",
+                seconds[label],
+                "lower",
+            )
+        )
         sd, lo, hi = sd_interval(g["delta_ctrl"].to_numpy())
-        rows.append(point(*common, "Monte Carlo sd of Δ_ctrl", sd, (lo, hi),
-                          f"sd over {len(g)} permutation seeds, 95 % chi-square CI",
-                          seconds[label], "lower"))  # fmt: skip
+        rows.append(
+            point(
+                *common,
+                "Monte Carlo sd of Δ_ctrl",
+                sd,
+                (lo, hi),
+                f"sd over {len(g)} permutation seeds, 95 % chi-square CI",
+                seconds[label],
+                "lower",
+            )
+        )
     return _frame(rows)
 
 
@@ -152,14 +221,28 @@ def generate_points(
         common = (knob, "generate", float(g["setting"].iloc[0]), label, label == default)
         d = float(g["delta"].mean())
         lo, hi = float(g["ci_low"].mean()), float(g["ci_high"].mean())
-        rows.append(point(*common, f"Δ_gen ({target}, test)", d, (min(lo, d), max(hi, d)),
-                          f"95 % fixed-test bootstrap CI, endpoints averaged over {n} "
-                          "generator seed(s)", seconds[label]))  # fmt: skip
+        rows.append(
+            point(
+                *common,
+                f"Δ_gen ({target}, test)",
+                d,
+                (min(lo, d), max(hi, d)),
+                f"95 % fixed-test bootstrap CI, endpoints averaged over {n} generator seed(s)",
+                seconds[label],
+            )
+        )
         fd = g["frechet"].to_numpy(dtype=np.float64)
-        rows.append(point(*common, "Fréchet distance generated–real (test)", float(fd.mean()),
-                          (float(fd.min()), float(fd.max())),
-                          f"range over {n} generator seed(s)", seconds[label],
-                          "lower"))  # fmt: skip
+        rows.append(
+            point(
+                *common,
+                "Fréchet distance generated–real (test)",
+                float(fd.mean()),
+                (float(fd.min()), float(fd.max())),
+                f"range over {n} generator seed(s)",
+                seconds[label],
+                "lower",
+            )
+        )
     return _frame(rows)
 
 
@@ -172,9 +255,19 @@ def policy_points(
     for label, g in cells.groupby("label", sort=False):
         s = float(g["success"].mean())
         lo, hi = float(g["ci_low"].mean()), float(g["ci_high"].mean())
-        rows.append(point(knob, "policy", float(g["setting"].iloc[0]), label, label == default,
-                          "V-only success rate (held-out episodes)", s,
-                          (min(lo, s), max(hi, s)),
-                          f"95 % bootstrap CI over {int(g['n_episodes'].iloc[0])} episodes, "
-                          f"mean of {len(g)} seed(s)", seconds[label]))  # fmt: skip
+        rows.append(
+            point(
+                knob,
+                "policy",
+                float(g["setting"].iloc[0]),
+                label,
+                label == default,
+                "V-only success rate (held-out episodes)",
+                s,
+                (min(lo, s), max(hi, s)),
+                f"95 % bootstrap CI over {int(g['n_episodes'].iloc[0])} episodes, "
+                f"mean of {len(g)} seed(s)",
+                seconds[label],
+            )
+        )
     return _frame(rows)

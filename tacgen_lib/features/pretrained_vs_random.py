@@ -5,7 +5,7 @@ scored on the fixed test rows; the difference in accuracy gets a fixed-test boot
 (tacgen_lib.probes.bootstrap.fixed_test_bootstrap), so "pretraining helps" is a statement with an interval;
 each accuracy gets its own CI on the same resamples (tacgen_lib.cost.scores.score_ci).
 
-With `features.pretrain.epochs: 0` (the embedded default since issue 14) no pretraining runs:
+With `features.pretrain.epochs: 0` (the embedded default) no pretraining runs:
 the "pretrained" backbone is the random-init one (`random_backbone`, same seed), Delta is 0 by
 construction and the table reports what the frozen random-init features attain.
 """

@@ -64,6 +64,13 @@ class DinoSettings:
     @classmethod
     def tiny(cls, **changes: Any) -> DinoSettings:
         """One epoch of a small head on small batches, for tests; `changes` override."""
-        small = cls(epochs=1, batch_size=4, lr=1e-3, n_local_crops=2, out_dim=64, hidden_dim=32,
-                    bottleneck_dim=16)  # fmt: skip
+        small = cls(
+            epochs=1,
+            batch_size=4,
+            lr=1e-3,
+            n_local_crops=2,
+            out_dim=64,
+            hidden_dim=32,
+            bottleneck_dim=16,
+        )
         return replace(small, **changes)

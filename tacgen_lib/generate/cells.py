@@ -12,7 +12,6 @@ __all__ = [
     "GENERATOR",
     "SAMPLE_CELL",
     "SAMPLE_CONSTRAINTS",
-    "cell_label",
     "guidance_passes",
     "guidance_text",
     "sample_cells",
@@ -52,11 +51,6 @@ def guidance_passes(guidance: float | str) -> tuple[bool, ...]:
     if w == 0.0:
         return (True,)
     return (False, True)
-
-
-def cell_label(sampler: str, guidance: float | str, steps: int | str) -> str:
-    """A sampling cell's short label, e.g. ``ddim|w=1.5|steps=25``."""
-    return f"{sampler}|w={guidance_text(guidance)}|steps={int(steps)}"
 
 
 def sample_cells(guidance: list, samplers: dict) -> list[tuple[str, str, str]]:

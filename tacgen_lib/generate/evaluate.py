@@ -87,8 +87,18 @@ __all__ = [
 INPUTS = ("t_real", "t_gen", "t_gen_shuffled", "v_nonlinear")
 FIDELITY_COLUMNS = ("cos_matched", "cos_offdiag", "pairing_p", "frechet", "frechet_real_ref")
 #: Columns of the permutation-draw table (one row per cell, target and permutation).
-PERMUTATION_COLUMNS = ("row_id", "corpus", "seed", "target", "sampler", "guidance", "steps",
-                       "permutation", "statistic", "observed")  # fmt: skip
+PERMUTATION_COLUMNS = (
+    "row_id",
+    "corpus",
+    "seed",
+    "target",
+    "sampler",
+    "guidance",
+    "steps",
+    "permutation",
+    "statistic",
+    "observed",
+)
 
 
 def frechet_distance(a: np.ndarray, b: np.ndarray) -> float:
@@ -221,8 +231,9 @@ def nonlinear_baseline(
         phi = Nystroem(kernel="rbf", gamma=gamma, n_components=k, random_state=seed).fit(z_tr)
         x_tr = np.hstack([v_train, phi.transform(z_tr)])
         x_te = np.hstack([v_test, phi.transform(z_te)])
-        fit = fit_probe(x_tr, rows.y_train, x_te, settings,
-                        train_ids=rows.train_ids, test_ids=rows.test_ids)  # fmt: skip
+        fit = fit_probe(
+            x_tr, rows.y_train, x_te, settings, train_ids=rows.train_ids, test_ids=rows.test_ids
+        )
         cv = float(np.nanmax(fit.cv_scores))
         if best is None or cv > best[0]:
             best = (cv, fit, gamma)
@@ -257,19 +268,36 @@ def target_specs(
     """
     out = []
     for target, kind in targets.items():
-        rows = family_rows(manifest, splits, corpus=corpus, target=target, kind=kind,
-                           strata=strata_for(corpus_config))  # fmt: skip
+        rows = family_rows(
+            manifest,
+            splits,
+            corpus=corpus,
+            target=target,
+            kind=kind,
+            strata=strata_for(corpus_config),
+        )
         assert_trainable(rows.train_ids, splits, rule=rule, allowed=("train", "val"))
-        out.append(TargetSpec(target, rows, ProbeSettings.from_config(probes_config, kind,
-                                                                      probe_seed)))  # fmt: skip
+        out.append(
+            TargetSpec(target, rows, ProbeSettings.from_config(probes_config, kind, probe_seed))
+        )
     return out
 
 
 #: The probes of the baselines edge, by what they fit: V alone, V + T_real, V + phi(V).
 BASELINE_INPUTS = ("v", "t_real", "v_nonlinear")
 #: Columns of the baselines edge (one row per target x baseline input x test row).
-BASELINE_COLUMNS = ("row_id", "corpus", "target", "kind", "input", "sample_id", "prediction",
-                    "label", "reg", "nonlinear_gamma")  # fmt: skip
+BASELINE_COLUMNS = (
+    "row_id",
+    "corpus",
+    "target",
+    "kind",
+    "input",
+    "sample_id",
+    "prediction",
+    "label",
+    "reg",
+    "nonlinear_gamma",
+)
 
 
 def _block(source: Mapping[str, np.ndarray], ids: np.ndarray) -> np.ndarray:
@@ -309,12 +337,14 @@ def fit_baselines(
     t_tr, t_te = _block(t_real, rows.train_ids), _block(t_real, rows.test_ids)
 
     def fit(x_tr: np.ndarray, x_te: np.ndarray) -> FittedProbe:
-        return fit_probe(x_tr, rows.y_train, x_te, ps,
-                         train_ids=rows.train_ids, test_ids=rows.test_ids)  # fmt: skip
+        return fit_probe(
+            x_tr, rows.y_train, x_te, ps, train_ids=rows.train_ids, test_ids=rows.test_ids
+        )
 
     v_fit, real_fit = fit(v_tr, v_te), fit(np.hstack([v_tr, t_tr]), np.hstack([v_te, t_te]))
-    nl, gamma = nonlinear_baseline(v_tr, v_te, rows, ps, gammas=gammas,
-                                   n_components=t_tr.shape[1], seed=ps.seed)  # fmt: skip
+    nl, gamma = nonlinear_baseline(
+        v_tr, v_te, rows, ps, gammas=gammas, n_components=t_tr.shape[1], seed=ps.seed
+    )
     fits = {"v": v_fit, "t_real": real_fit, "v_nonlinear": nl}
     return Baselines(
         spec.name,
@@ -340,14 +370,20 @@ def baselines_frame(
         for inp in BASELINE_INPUTS:
             pred = np.asarray(b.pred[inp])
             for sid, value in zip(spec.rows.test_ids, pred, strict=True):
-                out.append({
-                    "row_id": f"{spec.name}|{inp}|{sid}", "corpus": corpus,
-                    "target": spec.name, "kind": spec.settings.kind, "input": inp,
-                    "sample_id": str(sid),
-                    "prediction": np.nan if logistic else float(value),
-                    "label": str(value) if logistic else "",
-                    "reg": b.reg[inp], "nonlinear_gamma": b.gamma,
-                })  # fmt: skip
+                out.append(
+                    {
+                        "row_id": f"{spec.name}|{inp}|{sid}",
+                        "corpus": corpus,
+                        "target": spec.name,
+                        "kind": spec.settings.kind,
+                        "input": inp,
+                        "sample_id": str(sid),
+                        "prediction": np.nan if logistic else float(value),
+                        "label": str(value) if logistic else "",
+                        "reg": b.reg[inp],
+                        "nonlinear_gamma": b.gamma,
+                    }
+                )
     return pd.DataFrame(out, columns=list(BASELINE_COLUMNS))
 
 
@@ -469,14 +505,16 @@ def evaluate_generator(
         v_tr, v_te = _block(vision, rows.train_ids), _block(vision, rows.test_ids)
         t_tr, t_te = _block(t_real, rows.train_ids), _block(t_real, rows.test_ids)
         # one draw of the 5,000 test resamples, shared by every bootstrap of this target
-        resamples = resample_indices(len(rows.y_test), ps.bootstrap, ps.seed,
-                                     strata=rows.strata_test)  # fmt: skip
+        resamples = resample_indices(
+            len(rows.y_test), ps.bootstrap, ps.seed, strata=rows.strata_test
+        )
 
         def fit(
             x_tr: np.ndarray, x_te: np.ndarray, ps: ProbeSettings = ps, rows: FamilyRows = rows
         ) -> FittedProbe:
-            return fit_probe(x_tr, rows.y_train, x_te, ps,
-                             train_ids=rows.train_ids, test_ids=rows.test_ids)  # fmt: skip
+            return fit_probe(
+                x_tr, rows.y_train, x_te, ps, train_ids=rows.train_ids, test_ids=rows.test_ids
+            )
 
         def boot(
             pred_a: np.ndarray,
@@ -485,16 +523,27 @@ def evaluate_generator(
             rows: FamilyRows = rows,
             resamples: np.ndarray = resamples,
         ) -> dict:
-            return fixed_test_bootstrap(rows.y_test, pred_a, pred_b, ps.metric,
-                                        n_resamples=ps.bootstrap, seed=ps.seed,
-                                        indices=resamples, sample_ids=rows.test_ids)  # fmt: skip
+            return fixed_test_bootstrap(
+                rows.y_test,
+                pred_a,
+                pred_b,
+                ps.metric,
+                n_resamples=ps.bootstrap,
+                seed=ps.seed,
+                indices=resamples,
+                sample_ids=rows.test_ids,
+            )
 
         chosen: dict[str, float] = {}  # input kind -> C chosen on the reference cell
 
         def fit_cell(
-            inp: str, x_tr: np.ndarray, x_te: np.ndarray, ps: ProbeSettings = ps,
-            rows: FamilyRows = rows, chosen: dict[str, float] = chosen,
-        ) -> tuple[np.ndarray, float, str]:  # fmt: skip
+            inp: str,
+            x_tr: np.ndarray,
+            x_te: np.ndarray,
+            ps: ProbeSettings = ps,
+            rows: FamilyRows = rows,
+            chosen: dict[str, float] = chosen,
+        ) -> tuple[np.ndarray, float, str]:
             """(test predictions, regulariser, its source) of one cell's V + x probe."""
             if ps.kind == "logistic" and inp in chosen:
                 # lbfgs from max_iter = the cap at once: the iterates do not depend on max_iter,
@@ -514,46 +563,70 @@ def evaluate_generator(
         bl = baselines[spec.name]
         p_v, p_real, p_nl = (np.asarray(bl.pred[k]) for k in BASELINE_INPUTS)
         if not len(p_v) == len(p_real) == len(p_nl) == rows.n_test:
-            raise ValueError(f"evaluate_generator: {spec.name} baselines are not on its "
-                             f"{rows.n_test} test rows")  # fmt: skip
+            raise ValueError(
+                f"evaluate_generator: {spec.name} baselines are not on its {rows.n_test} test rows"
+            )
         gamma = bl.gamma
         base = {
-            "corpus": corpus, "target": spec.name, "kind": ps.kind, "metric": ps.metric,
-            "seed": int(seed), "probe_seed": ps.seed, "n_train": rows.n_train,
-            "n_test": rows.n_test, "nonlinear_gamma": gamma, **(labels or {}),
-        }  # fmt: skip
+            "corpus": corpus,
+            "target": spec.name,
+            "kind": ps.kind,
+            "metric": ps.metric,
+            "seed": int(seed),
+            "probe_seed": ps.seed,
+            "n_train": rows.n_train,
+            "n_test": rows.n_test,
+            "nonlinear_gamma": gamma,
+            **(labels or {}),
+        }
         # the rows every cell repeats (they do not depend on the cell): bootstrapped once
         real_row = _row({}, "t_real", boot(p_v, p_real), boot(p_nl, p_real))
         nl_row = _row({}, "v_nonlinear", boot(p_v, p_nl), None)
         real_row.update(reg=bl.reg["t_real"], reg_source=REG_CV)
         nl_row.update(reg=bl.reg["v_nonlinear"], reg_source=REG_CV)
-        say(f"{spec.name}: V {real_row['v_score']:.3f}, V+T_real delta {real_row['delta']:+.3f} "
+        say(
+            f"{spec.name}: V {real_row['v_score']:.3f}, V+T_real delta {real_row['delta']:+.3f} "
             f"[{real_row['ci_low']:+.3f}, {real_row['ci_high']:+.3f}], nonlinear V delta "
-            f"{nl_row['delta']:+.3f}")  # fmt: skip
+            f"{nl_row['delta']:+.3f}"
+        )
         for cell in cells:
             gen = t_gen[cell]
             sampler, guidance, steps = cell
-            cell_base = {**base, "sampler": sampler, "guidance": float(guidance),
-                         "steps": int(steps)}  # fmt: skip
+            cell_base = {
+                **base,
+                "sampler": sampler,
+                "guidance": float(guidance),
+                "steps": int(steps),
+            }
             g_tr, g_te = _block(gen, rows.train_ids), _block(gen, rows.test_ids)
             shuf = {i: gen[shuffled_of[i]] for i in vision}
             s_tr, s_te = _block(shuf, rows.train_ids), _block(shuf, rows.test_ids)
-            p_gen, reg_gen, src_gen = fit_cell("t_gen", np.hstack([v_tr, g_tr]),
-                                               np.hstack([v_te, g_te]))  # fmt: skip
-            p_shuf, reg_shuf, src_shuf = fit_cell("t_gen_shuffled", np.hstack([v_tr, s_tr]),
-                                                  np.hstack([v_te, s_te]))  # fmt: skip
+            p_gen, reg_gen, src_gen = fit_cell(
+                "t_gen", np.hstack([v_tr, g_tr]), np.hstack([v_te, g_te])
+            )
+            p_shuf, reg_shuf, src_shuf = fit_cell(
+                "t_gen_shuffled", np.hstack([v_tr, s_tr]), np.hstack([v_te, s_te])
+            )
             key = (cell, tuple(rows.test_ids))
             if key not in fid_cache:
                 fid, null = fidelity(g_te, t_te, t_tr, n_permutations=permutations, seed=seed)
                 fid_cache[key] = fid
                 label = f"{sampler}|w={guidance}|steps={steps}"
                 perm_rows += [
-                    {"row_id": f"{corpus}|seed~{seed}|{label}|{spec.name}|perm~{k}",
-                     "corpus": corpus, "seed": int(seed), "target": spec.name,
-                     "sampler": sampler, "guidance": float(guidance), "steps": int(steps),
-                     "permutation": k, "statistic": float(s), "observed": fid["cos_matched"]}
+                    {
+                        "row_id": f"{corpus}|seed~{seed}|{label}|{spec.name}|perm~{k}",
+                        "corpus": corpus,
+                        "seed": int(seed),
+                        "target": spec.name,
+                        "sampler": sampler,
+                        "guidance": float(guidance),
+                        "steps": int(steps),
+                        "permutation": k,
+                        "statistic": float(s),
+                        "observed": fid["cos_matched"],
+                    }
                     for k, s in enumerate(null)
-                ]  # fmt: skip
+                ]
             fid = fid_cache[key]
             gen_row = _row(cell_base, "t_gen", boot(p_v, p_gen), boot(p_nl, p_gen))
             shuf_row = _row(cell_base, "t_gen_shuffled", boot(p_v, p_shuf), boot(p_nl, p_shuf))
@@ -562,19 +635,33 @@ def evaluate_generator(
             rows_cell = [{**cell_base, **real_row}, gen_row, shuf_row, {**cell_base, **nl_row}]
             for r in rows_cell:
                 r.update(fid)
-                r["row_id"] = (f"{corpus}|{spec.name}|seed~{seed}|{sampler}|w={guidance}|"
-                               f"steps={steps}|{r['input']}")  # fmt: skip
+                r["row_id"] = (
+                    f"{corpus}|{spec.name}|seed~{seed}|{sampler}|w={guidance}|"
+                    f"steps={steps}|{r['input']}"
+                )
             out_rows += rows_cell
-            say(f"{spec.name} {sampler} w={guidance} steps={steps}: V+T_gen delta "
+            say(
+                f"{spec.name} {sampler} w={guidance} steps={steps}: V+T_gen delta "
                 f"{gen_row['delta']:+.3f} [{gen_row['ci_low']:+.3f}, {gen_row['ci_high']:+.3f}]"
                 f" (C/lambda {reg_gen:g}, {src_gen}), vs nonlinear V "
                 f"{gen_row['delta_vs_nonlinear']:+.3f}; shuffled {shuf_row['delta']:+.3f}; "
                 f"cos {fid['cos_matched']:.3f} vs {fid['cos_offdiag']:.3f} "
-                f"(p {fid['pairing_p']:.3f}), FD {fid['frechet']:.2f}")  # fmt: skip
+                f"(p {fid['pairing_p']:.3f}), FD {fid['frechet']:.2f}"
+            )
     perm_frame = pd.DataFrame(perm_rows, columns=list(PERMUTATION_COLUMNS))
     if perm_frame.empty:
-        perm_frame = perm_frame.astype({"row_id": "str", "corpus": "str", "target": "str",
-                                        "sampler": "str", "seed": "int64", "steps": "int64",
-                                        "permutation": "int64", "guidance": "float64",
-                                        "statistic": "float64", "observed": "float64"})  # fmt: skip
+        perm_frame = perm_frame.astype(
+            {
+                "row_id": "str",
+                "corpus": "str",
+                "target": "str",
+                "sampler": "str",
+                "seed": "int64",
+                "steps": "int64",
+                "permutation": "int64",
+                "guidance": "float64",
+                "statistic": "float64",
+                "observed": "float64",
+            }
+        )
     return pd.DataFrame(out_rows), perm_frame

@@ -201,13 +201,23 @@ class DenoiserArrays:
 
 
 def _state_names(blocks: int) -> list[str]:
-    names = ["inp.weight", "inp.bias", "null_condition", "out_norm.weight", "out_norm.bias",
-             "out.weight", "out.bias"]  # fmt: skip
+    names = [
+        "inp.weight",
+        "inp.bias",
+        "null_condition",
+        "out_norm.weight",
+        "out_norm.bias",
+        "out.weight",
+        "out.bias",
+    ]
     for mlp in ("time", "cond"):
         names += [f"{mlp}.{i}.{p}" for i in (0, 2) for p in ("weight", "bias")]
     for k in range(blocks):
-        names += [f"blocks.{k}.{layer}.{p}" for layer in ("norm", "emb", "fc1", "fc2")
-                  for p in ("weight", "bias")]  # fmt: skip
+        names += [
+            f"blocks.{k}.{layer}.{p}"
+            for layer in ("norm", "emb", "fc1", "fc2")
+            for p in ("weight", "bias")
+        ]
     return names
 
 
@@ -253,7 +263,7 @@ def encode_generator(weights: GeneratorWeights) -> bytes:
         "dims": dict(weights.denoiser.dims),
         "settings": {
             k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(weights.settings).items()
-        },  # fmt: skip
+        },
         "seed": int(weights.seed),
         "curve": [dict(c) for c in weights.curve],
         "best_step": int(weights.best_step),
@@ -268,7 +278,7 @@ def encode_generator(weights: GeneratorWeights) -> bytes:
             "shape": pa.array([list(arrays[n].shape) for n in names], pa.list_(pa.int64())),
             "data": pa.array(
                 [np.ascontiguousarray(arrays[n]).tobytes() for n in names], pa.binary()
-            ),  # fmt: skip
+            ),
         }
     ).replace_schema_metadata({_META_KEY: json.dumps(meta, sort_keys=True).encode()})
     sink = io.BytesIO()
@@ -303,7 +313,13 @@ def read_generator(path: str | os.PathLike[str], *, verify: bool = True) -> Gene
     s = dict(meta["settings"])
     s["nonlinear_gammas"] = tuple(s["nonlinear_gammas"])
     return GeneratorWeights(
-        std, GenerateSettings(**s), int(meta["seed"]), list(meta["curve"]),
-        int(meta["best_step"]), float(meta["best_val_loss"]), int(meta["steps_run"]),
-        bool(meta["stopped_early"]), denoiser=DenoiserArrays.from_state(arrays, meta["dims"]),
-    )  # fmt: skip
+        std,
+        GenerateSettings(**s),
+        int(meta["seed"]),
+        list(meta["curve"]),
+        int(meta["best_step"]),
+        float(meta["best_val_loss"]),
+        int(meta["steps_run"]),
+        bool(meta["stopped_early"]),
+        denoiser=DenoiserArrays.from_state(arrays, meta["dims"]),
+    )

@@ -56,8 +56,13 @@ class Denoiser(nn.Module):
 
     def __init__(self, dim_t: int, dim_v: int, hidden: int, blocks: int, time_dim: int = 128):
         super().__init__()
-        self.dims = {"dim_t": dim_t, "dim_v": dim_v, "hidden": hidden, "blocks": blocks,
-                     "time_dim": time_dim}  # fmt: skip
+        self.dims = {
+            "dim_t": dim_t,
+            "dim_v": dim_v,
+            "hidden": hidden,
+            "blocks": blocks,
+            "time_dim": time_dim,
+        }
         self.time_dim = time_dim
         self.inp = nn.Linear(dim_t, hidden)
         self.time = nn.Sequential(nn.Linear(time_dim, hidden), nn.SiLU(), nn.Linear(hidden, hidden))

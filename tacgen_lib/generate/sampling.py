@@ -49,8 +49,9 @@ def guided_output(
     """Classifier-free guidance: out_u + w (out_c - out_u), both passes in one batch of 2B."""
     b = x_t.shape[0]
     drop = np.concatenate([np.zeros(b, dtype=bool), np.ones(b, dtype=bool)])
-    out = model.forward(np.concatenate([x_t, x_t]), np.concatenate([t, t]),
-                        np.concatenate([cond, cond]), drop)  # fmt: skip
+    out = model.forward(
+        np.concatenate([x_t, x_t]), np.concatenate([t, t]), np.concatenate([cond, cond]), drop
+    )
     out_c, out_u = out[:b], out[b:]
     return out_u + guidance * (out_c - out_u)
 
@@ -203,6 +204,11 @@ def sample(
 def generate(weights: GeneratorWeights, cond: np.ndarray, **sample_kw: Any) -> np.ndarray:
     """Generated tactile features in the original (unstandardised) units, float32 (n, d_t):
     `sample` with the generator's denoiser, schedule and prediction, then un-standardised."""
-    z = sample(weights.denoiser, weights.schedule, cond, prediction=weights.settings.prediction,
-               **sample_kw)  # fmt: skip
+    z = sample(
+        weights.denoiser,
+        weights.schedule,
+        cond,
+        prediction=weights.settings.prediction,
+        **sample_kw,
+    )
     return weights.standardiser.inverse(z).astype(np.float32)

@@ -78,10 +78,15 @@ class Schedule:
         return int(self.betas.size)
 
     _NAMES = (
-        "betas", "alphas_cumprod", "alphas_cumprod_prev", "posterior_variance",
-        "posterior_log_variance", "posterior_mean_coef1", "posterior_mean_coef2",
+        "betas",
+        "alphas_cumprod",
+        "alphas_cumprod_prev",
+        "posterior_variance",
+        "posterior_log_variance",
+        "posterior_mean_coef1",
+        "posterior_mean_coef2",
         "one_minus_alphas_cumprod",
-    )  # fmt: skip
+    )
 
     def arrays(self, dtype: type = np.float32) -> dict[str, np.ndarray]:
         """Every coefficient as an array of `dtype` (cast from the float64 reference)."""
@@ -108,5 +113,6 @@ def make_schedule(name: str, n_steps: int) -> Schedule:
     )
     coef1 = betas * np.sqrt(abar_prev) / one_minus_abar
     coef2 = one_minus_abar_prev * np.sqrt(alphas) / one_minus_abar
-    return Schedule(name, betas, abar, abar_prev, post_var, post_log_var, coef1, coef2,
-                    one_minus_abar)  # fmt: skip
+    return Schedule(
+        name, betas, abar, abar_prev, post_var, post_log_var, coef1, coef2, one_minus_abar
+    )

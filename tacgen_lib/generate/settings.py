@@ -62,9 +62,18 @@ class GenerateSettings:
             )
         if self.prediction not in ("eps", "v"):
             raise ValueError(f"generate.prediction must be 'eps' or 'v', got {self.prediction!r}")
-        ints = (("train_steps", 2), ("hidden", 1), ("blocks", 0), ("time_dim", 2),
-                ("batch_size", 2), ("steps", 1), ("eval_every", 1), ("patience", 0),
-                ("batch", 1), ("permutations", 0))  # fmt: skip
+        ints = (
+            ("train_steps", 2),
+            ("hidden", 1),
+            ("blocks", 0),
+            ("time_dim", 2),
+            ("batch_size", 2),
+            ("steps", 1),
+            ("eval_every", 1),
+            ("patience", 0),
+            ("batch", 1),
+            ("permutations", 0),
+        )
         for name, low in ints:
             value = getattr(self, name)
             if int(value) != value or value < low:
@@ -98,8 +107,17 @@ class GenerateSettings:
     @classmethod
     def tiny(cls, **changes: Any) -> GenerateSettings:
         """A model and budget that train in about a second, for tests; `changes` override."""
-        small = cls(hidden=32, blocks=1, time_dim=16, batch_size=16, steps=60, eval_every=20,
-                    patience=0, permutations=50, train_steps=100)  # fmt: skip
+        small = cls(
+            hidden=32,
+            blocks=1,
+            time_dim=16,
+            batch_size=16,
+            steps=60,
+            eval_every=20,
+            patience=0,
+            permutations=50,
+            train_steps=100,
+        )
         return replace(small, **changes)
 
 

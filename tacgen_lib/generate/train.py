@@ -156,8 +156,9 @@ def fit_generator(
     T = schedule.n_steps
 
     torch.manual_seed(int(seed))
-    model = Denoiser(x_tr.shape[1], c_tr.shape[1], settings.hidden, settings.blocks,
-                     settings.time_dim)  # fmt: skip
+    model = Denoiser(
+        x_tr.shape[1], c_tr.shape[1], settings.hidden, settings.blocks, settings.time_dim
+    )
     ema = copy.deepcopy(model)
     ema.requires_grad_(False)
     params, ema_params = list(model.parameters()), list(ema.parameters())
@@ -175,10 +176,19 @@ def fit_generator(
         ema.eval()
         with torch.no_grad():
             losses = [
-                diffusion_loss(ema, x_va, c_va, val_t[r], val_noise[r], None, sqrt_abar, sqrt_1m,
-                               settings.prediction).item()
+                diffusion_loss(
+                    ema,
+                    x_va,
+                    c_va,
+                    val_t[r],
+                    val_noise[r],
+                    None,
+                    sqrt_abar,
+                    sqrt_1m,
+                    settings.prediction,
+                ).item()
                 for r in range(_VAL_REPEATS)
-            ]  # fmt: skip
+            ]
         return float(np.mean(losses))
 
     n = x_tr.shape[0]
@@ -192,15 +202,24 @@ def fit_generator(
         t = torch.randint(0, T, (bs,), generator=gen)
         noise = torch.randn(bs, x_tr.shape[1], generator=gen)
         drop = torch.rand(bs, generator=gen) < settings.p_uncond
-        loss = training_step(model, opt, ema_params, (x_tr[idx], c_tr[idx], t, noise, drop),
-                             sqrt_abar, sqrt_1m, settings)  # fmt: skip
+        loss = training_step(
+            model,
+            opt,
+            ema_params,
+            (x_tr[idx], c_tr[idx], t, noise, drop),
+            sqrt_abar,
+            sqrt_1m,
+            settings,
+        )
         running.append(loss.item())
         if step % settings.eval_every == 0 or step == settings.steps:
             vl = val_loss()
             curve.append({"step": step, "train_loss": float(np.mean(running)), "val_loss": vl})
             running = []
-            say(f"step {step}/{settings.steps}: train loss {curve[-1]['train_loss']:.4f} "
-                f"val loss {vl:.4f}")  # fmt: skip
+            say(
+                f"step {step}/{settings.steps}: train loss {curve[-1]['train_loss']:.4f} "
+                f"val loss {vl:.4f}"
+            )
             score = vl if np.isfinite(vl) else curve[-1]["train_loss"]
             if score < best[0]:
                 best, bad = (score, step, copy.deepcopy(ema.state_dict())), 0
@@ -226,7 +245,7 @@ def save_generator(fit: GeneratorFit, path: str | os.PathLike[str], *, producer:
         columns={
             "denoiser": f"residual mlp {d['dim_t']}+{d['dim_v']} -> "
             f"{d['blocks']} x {d['hidden']} -> {d['dim_t']}"
-        },  # fmt: skip
+        },
         vectors={},
         producer=producer,
     )

@@ -108,9 +108,14 @@ def palpate(task: GraspTask, ep: Episode, optics: PadOptics, *, noise_seed: int)
         d = task.data
         for pad, site in enumerate(sites):
             h = tactile.height_field_rays(
-                m, d, task.object_geom, d.site_xpos[site], d.site_xmat[site],
-                optics.optics, optics.directions,
-            )  # fmt: skip
+                m,
+                d,
+                task.object_geom,
+                d.site_xpos[site],
+                d.site_xmat[site],
+                optics.optics,
+                optics.directions,
+            )
             bg = pad_background(s.seed, pad, optics.optics.image_size)
             frames[f"tactile_{moment}_{PAD_NAMES[pad]}"] = tactile.tactile_shading(
                 h, bg, optics.optics, noise=rng

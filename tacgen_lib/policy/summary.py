@@ -30,9 +30,18 @@ __all__ = ["summarise", "deltas", "sweep"]
 CEILING_SEED = 7_000_019
 
 SUMMARY_COLUMNS = [
-    "cell", "condition", "hidden", "epochs", "seed", "n_episodes", "success", "ci_low", "ci_high",
-    *FAILURE_MODES[1:], "median_force",
-]  # fmt: skip
+    "cell",
+    "condition",
+    "hidden",
+    "epochs",
+    "seed",
+    "n_episodes",
+    "success",
+    "ci_low",
+    "ci_high",
+    *FAILURE_MODES[1:],
+    "median_force",
+]
 
 
 def _success(rollouts: Mapping[str, pd.DataFrame], cell: Cell) -> pd.Series:

@@ -23,9 +23,9 @@ Holding contact model (google-deepmind/mujoco#3328): elliptic friction cones, a 
 stays far below `slip_limit`; `creep_floor` measures it and the tests check the margin.
 
 Effects: the lift phase declares only physics (gravity, contact_compliance, friction_shear);
-the palpation phase (palpation.py) adds rgb/texture/tactile. Each phase compiles the scene with
-exactly the effects it declares (tacgen_lib.corpus.sim.scenes.compile_scene), so a lift never
-builds a renderer or a tactile sensor.
+the palpation phase (palpation.py) adds rgb/texture/tactile. Each phase builds the task's model
+(`task_xml`) with the physics of exactly the effects it declares disabled otherwise, so a lift
+never builds a renderer or a tactile sensor.
 """
 
 from __future__ import annotations

@@ -162,7 +162,7 @@ def tactile_permutation_control(
     lost, on the same test pairs as the main comparison). The V probe (``probe_v``, default
     ``probe``) is unaffected. ``delta_ctrl`` = mean Delta over permutations. Permutations of
     the training rows are drawn in one batch (B, n_train) from ``default_rng(seed)``; no
-    test permutation is drawn (before issue 17 a (B, n_test) batch followed, and the test
+    test permutation is drawn (an earlier version drew a (B, n_test) batch after it, and the test
     pairs were permuted too).
     The probe's ``refit_many`` solves them together where it can (ridge with ``concat`` and
     p >= n_train: the kernel path; logistic with ``concat``: the batched solver) and refits
@@ -182,9 +182,14 @@ def tactile_permutation_control(
         fusion=rows.fusion,
     )
     out = _t_replaced(
-        rows, refits, probe=probe, probe_v=probe_v or probe, metric=metric, v_train=v_train,
+        rows,
+        refits,
+        probe=probe,
+        probe_v=probe_v or probe,
+        metric=metric,
+        v_train=v_train,
         v_test=v_test,
-    )  # fmt: skip
+    )
     return {**out, "n_permutations": n_permutations}
 
 
@@ -255,9 +260,14 @@ def random_feature_control(
         fusion=rows.fusion,
     )
     out = _t_replaced(
-        rows, refits, probe=probe, probe_v=probe_v or probe, metric=metric,
-        v_train=rows.v_train, v_test=rows.v_test,
-    )  # fmt: skip
+        rows,
+        refits,
+        probe=probe,
+        probe_v=probe_v or probe,
+        metric=metric,
+        v_train=rows.v_train,
+        v_test=rows.v_test,
+    )
     return {**out, "n_draws": n_draws}
 
 

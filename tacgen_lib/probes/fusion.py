@@ -13,7 +13,7 @@ Variants
 - ``max``: element-wise maximum; same dimension.
 - ``weighted_75_25`` / ``weighted_25_75``: 0.75 v + 0.25 t and 0.25 v + 0.75 t; same dimension.
 
-No ``attention`` (dropped in issue 17). The parameter-free form that stood here, scaled
+No ``attention`` (dropped). The parameter-free form that stood here, scaled
 dot-product self-attention over the two tokens {v, t} of a sample, weights each modality by
 its norm and its agreement with the other; aligned projections have unit norm (and raw ViT
 CLS vectors all have norm ~13.9), so its weight on V was 0.5 to six digits on every test row

@@ -171,8 +171,9 @@ def fit_logistic(
         worst = 0
         for f, ho in enumerate(folds):
             for c, cval in enumerate(C):
-                scores[f, c], conv, n_iter = _fold_score(X, y, ho, float(cval), max_iter,
-                                                         max_iter_cap, tol)  # fmt: skip
+                scores[f, c], conv, n_iter = _fold_score(
+                    X, y, ho, float(cval), max_iter, max_iter_cap, tol
+                )
                 all_conv &= conv
                 worst = max(worst, n_iter)
     cv = scores.mean(axis=0)
@@ -204,9 +205,15 @@ CV_BATCH_BUDGET = 200
 
 
 def _cv_scores_batched(
-    X: np.ndarray, y: np.ndarray, folds: Sequence[np.ndarray], C: np.ndarray,
-    max_iter: int, max_iter_cap: int, tol: float, budget: int = CV_BATCH_BUDGET,
-) -> tuple[np.ndarray, bool, int]:  # fmt: skip
+    X: np.ndarray,
+    y: np.ndarray,
+    folds: Sequence[np.ndarray],
+    C: np.ndarray,
+    max_iter: int,
+    max_iter_cap: int,
+    tol: float,
+    budget: int = CV_BATCH_BUDGET,
+) -> tuple[np.ndarray, bool, int]:
     """(folds x C held-out accuracies, every fit converged, most iterations) of the CV, the
     K folds of each C solved together by `batched.fit_logistic_batch`.
 
@@ -232,25 +239,38 @@ def _cv_scores_batched(
     scores = np.zeros((len(folds), C.size))
     all_conv, worst = True, 0
     for c, cval in enumerate(C):
-        batch = fit_logistic_batch([block], y, float(cval), sample_weight=weights,
-                                   classes=classes, tol=tol, max_iter=min(budget, max_iter_cap))  # fmt: skip
+        batch = fit_logistic_batch(
+            [block],
+            y,
+            float(cval),
+            sample_weight=weights,
+            classes=classes,
+            tol=tol,
+            max_iter=min(budget, max_iter_cap),
+        )
         pred = batch.predict([block])  # (folds, n): every row under each fold's fit
         for f, ho in enumerate(folds):
             if batch.converged[f]:
                 scores[f, c] = accuracy(y[ho], pred[f, ho])
                 worst = max(worst, int(batch.n_iter[f]))
                 continue
-            scores[f, c], conv, n_iter = _fold_score(X, y, ho, float(cval), max_iter,
-                                                     max_iter_cap, tol)  # fmt: skip
+            scores[f, c], conv, n_iter = _fold_score(
+                X, y, ho, float(cval), max_iter, max_iter_cap, tol
+            )
             all_conv &= conv
             worst = max(worst, n_iter)
     return scores, all_conv, worst
 
 
 def _fold_score(
-    X: np.ndarray, y: np.ndarray, ho: np.ndarray, C: float,
-    max_iter: int, max_iter_cap: int, tol: float,
-) -> tuple[float, bool, int]:  # fmt: skip
+    X: np.ndarray,
+    y: np.ndarray,
+    ho: np.ndarray,
+    C: float,
+    max_iter: int,
+    max_iter_cap: int,
+    tol: float,
+) -> tuple[float, bool, int]:
     """(held-out accuracy, converged, iterations) of one scikit-learn fit on every row outside
     the fold `ho`: one fold and C of the CV's loop, and the batched CV's fallback."""
     tr = np.setdiff1d(np.arange(X.shape[0]), ho, assume_unique=True)

@@ -227,7 +227,9 @@ class LogisticObjective:
     def gradient(self, w: np.ndarray, m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(gradient wrt the coefficients (B, p, K'), wrt the intercepts (B, K'))."""
         dm = self.dloss(m)
-        gw = np.concatenate([blk.gradient(x) for blk, x in zip(self.blocks, [dm] * len(self.blocks),
-                                                                 strict=True)], axis=1)  # fmt: skip
+        gw = np.concatenate(
+            [blk.gradient(x) for blk, x in zip(self.blocks, [dm] * len(self.blocks), strict=True)],
+            axis=1,
+        )
         gw += self.penalty[:, None, None] * w
         return gw, dm.sum(axis=1)

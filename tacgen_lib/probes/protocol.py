@@ -45,7 +45,7 @@ Protocol (paper, "Probes")
   one-hot(shape) x scale^3, of log-mass in one-hot(shape) and log(scale)); NaN where the
   manifest has no shape and scale.
 
-Protocol variants (issue 16; `variants.PROTOCOLS`): ``settings.protocol`` picks the probe
+Protocol variants (`variants.PROTOCOLS`): ``settings.protocol`` picks the probe
 `fit_probe` fits -- ``raw`` (the above), ``standardised`` (`scaling`) or ``mlp2`` (`mlp`) --
 and every row carries a ``protocol`` column. `run_family` can restrict a variant to the
 headline comparisons (``concat`` with the heads' variant, raw and aligned) and leave its
@@ -494,28 +494,44 @@ def fit_probe(
     class count (logistic, inside `probes.fit_logistic`).
     """
     if settings.protocol == "mlp2":
-        mlp = fit_mlp_probe(X_train, y_train, settings.kind, settings.mlp, settings.seed,
-                            sample_ids=train_ids)  # fmt: skip
+        mlp = fit_mlp_probe(
+            X_train, y_train, settings.kind, settings.mlp, settings.seed, sample_ids=train_ids
+        )
         pred = mlp.predict(X_test, sample_ids=test_ids)
         if settings.kind == "logistic":
             pred = np.asarray(pred, dtype=object)
         return FittedProbe(
-            pred, mlp.weight_decay, np.asarray(settings.mlp.weight_decays, dtype=np.float64),
-            np.full(len(settings.mlp.weight_decays), np.nan), mlp.converged, mlp.n_iter,
-            fixed_probe=FixedMLP(settings.kind, mlp.width, mlp.weight_decay, settings.seed,
-                                 settings.mlp.max_iter),
+            pred,
+            mlp.weight_decay,
+            np.asarray(settings.mlp.weight_decays, dtype=np.float64),
+            np.full(len(settings.mlp.weight_decays), np.nan),
+            mlp.converged,
+            mlp.n_iter,
+            fixed_probe=FixedMLP(
+                settings.kind, mlp.width, mlp.weight_decay, settings.seed, settings.mlp.max_iter
+            ),
             notes=f"width {mlp.width}, weight decay {mlp.weight_decay:g}",
-        )  # fmt: skip
+        )
     if settings.kind == "ridge" and settings.protocol == "standardised":
         sp = fit_standardised_ridge(
-            X_train, y_train, settings.lambdas, n_folds=min(settings.folds, len(y_train)),
-            seed=settings.seed, sample_ids=train_ids,
-        )  # fmt: skip
+            X_train,
+            y_train,
+            settings.lambdas,
+            n_folds=min(settings.folds, len(y_train)),
+            seed=settings.seed,
+            sample_ids=train_ids,
+        )
         grid = sp.predict_grid(X_test, sample_ids=test_ids)
         return FittedProbe(
-            grid[sp.best], sp.lam, sp.lambdas, sp.cv_scores, True, None, grid,
+            grid[sp.best],
+            sp.lam,
+            sp.lambdas,
+            sp.cv_scores,
+            True,
+            None,
+            grid,
             fixed_probe=FixedStandardisedRidge(sp.lam),
-        )  # fmt: skip
+        )
     if settings.kind == "ridge":
         probe = fit_ridge_probe(
             X_train,
@@ -756,30 +772,60 @@ def compare(
         )
     if not controls:
         main["notes"] = "; ".join(
-            x for x in ("controls not run (see the plan: concat comparisons only, and none "
-                        "under a protocol variant in the default budget)", chosen) if x
-        )  # fmt: skip
+            x
+            for x in (
+                "controls not run (see the plan: concat comparisons only, and none "
+                "under a protocol variant in the default budget)",
+                chosen,
+            )
+            if x
+        )
         return result
     fixed_v, fixed_vt = v_probe.fixed(kind), vt_probe.fixed(kind)
     common = {"metric": metric, "seed": settings.draw_seed}
     paired = PairedRows(v_train, t_train, y_tr, v_test, t_test, y_te, fusion)
     runs = {
-        "train_resample": (settings.train_resamples, lambda: train_resample_diagnostic(
-            paired, probe_v=fixed_v, probe_vt=fixed_vt, n_resamples=settings.train_resamples,
-            **common,
-        )),
-        "tactile_permutation": (settings.permutations, lambda: tactile_permutation_control(
-            paired, probe=fixed_vt, probe_v=fixed_v, n_permutations=settings.permutations,
-            **common,
-        )),
-        "label_permutation": (settings.label_permutations, lambda: label_permutation_control(
-            paired, probe_v=fixed_v, probe_vt=fixed_vt,
-            n_permutations=settings.label_permutations, **common,
-        )),
-        "random_features": (settings.random_draws, lambda: random_feature_control(
-            paired, probe=fixed_vt, probe_v=fixed_v, n_draws=settings.random_draws, **common,
-        )),
-    }  # fmt: skip
+        "train_resample": (
+            settings.train_resamples,
+            lambda: train_resample_diagnostic(
+                paired,
+                probe_v=fixed_v,
+                probe_vt=fixed_vt,
+                n_resamples=settings.train_resamples,
+                **common,
+            ),
+        ),
+        "tactile_permutation": (
+            settings.permutations,
+            lambda: tactile_permutation_control(
+                paired,
+                probe=fixed_vt,
+                probe_v=fixed_v,
+                n_permutations=settings.permutations,
+                **common,
+            ),
+        ),
+        "label_permutation": (
+            settings.label_permutations,
+            lambda: label_permutation_control(
+                paired,
+                probe_v=fixed_v,
+                probe_vt=fixed_vt,
+                n_permutations=settings.label_permutations,
+                **common,
+            ),
+        ),
+        "random_features": (
+            settings.random_draws,
+            lambda: random_feature_control(
+                paired,
+                probe=fixed_vt,
+                probe_v=fixed_v,
+                n_draws=settings.random_draws,
+                **common,
+            ),
+        ),
+    }
     for name in CONTROLS:
         count, call = runs[name]
         if count <= 0:
@@ -908,9 +954,16 @@ def run_family(
         key = row_id(family, spec, settings.seed, protocol=settings.protocol)
         if spec.skip_reason is not None:
             out_rows.append(
-                {"row_id": key, **base, **ident, "control": "none", "status": "skipped",
-                 "controls": "not run", "notes": spec.skip_reason}
-            )  # fmt: skip
+                {
+                    "row_id": key,
+                    **base,
+                    **ident,
+                    "control": "none",
+                    "status": "skipped",
+                    "controls": "not run",
+                    "notes": spec.skip_reason,
+                }
+            )
             continue
         if spec.input == "raw":
             vv_tr, vv_te = v_tr, v_te
@@ -922,45 +975,86 @@ def run_family(
         try:
             if cache_key not in v_cache:
                 v_cache[cache_key] = fit_probe(
-                    vv_tr, rows.y_train, vv_te, settings,
-                    train_ids=rows.train_ids, test_ids=rows.test_ids,
-                )  # fmt: skip
+                    vv_tr,
+                    rows.y_train,
+                    vv_te,
+                    settings,
+                    train_ids=rows.train_ids,
+                    test_ids=rows.test_ids,
+                )
             res = compare(
-                vv_tr, vv_te, tt_tr, tt_te, rows, spec.fusion, settings,
-                controls=spec.controls, v_probe=v_cache[cache_key],
-            )  # fmt: skip
+                vv_tr,
+                vv_te,
+                tt_tr,
+                tt_te,
+                rows,
+                spec.fusion,
+                settings,
+                controls=spec.controls,
+                v_probe=v_cache[cache_key],
+            )
         except ValueError as exc:
             out_rows.append(
-                {"row_id": key, **base, **ident, "control": "none", "status": "failed",
-                 "controls": "not run", "notes": f"probe could not be fitted: {exc}"}
-            )  # fmt: skip
+                {
+                    "row_id": key,
+                    **base,
+                    **ident,
+                    "control": "none",
+                    "status": "failed",
+                    "controls": "not run",
+                    "notes": f"probe could not be fitted: {exc}",
+                }
+            )
             say(f"[{i + 1}/{len(plan)}] {key}: failed ({exc})")
             continue
         out_rows.append({"row_id": key, **base, **ident, **res.main})
         for c in res.controls:
             out_rows.append(
-                {"row_id": row_id(family, spec, settings.seed, c["control"], settings.protocol),
-                 **base, **ident,
-                 "controls": "run", **c}
-            )  # fmt: skip
+                {
+                    "row_id": row_id(family, spec, settings.seed, c["control"], settings.protocol),
+                    **base,
+                    **ident,
+                    "controls": "run",
+                    **c,
+                }
+            )
         for s in res.sweep:
             sweep_rows.append(
-                {"row_id": f"{key}|{settings.reg_name}={s['reg']:g}", "comparison": key,
-                 "family": family, "corpus": rows.corpus, "target": rows.target,
-                 "metric": settings.metric, **ident, "probe_seed": settings.seed,
-                 "protocol": settings.protocol, "heads_variant": heads_variant, "reg_name": settings.reg_name, **s}
-            )  # fmt: skip
+                {
+                    "row_id": f"{key}|{settings.reg_name}={s['reg']:g}",
+                    "comparison": key,
+                    "family": family,
+                    "corpus": rows.corpus,
+                    "target": rows.target,
+                    "metric": settings.metric,
+                    **ident,
+                    "probe_seed": settings.seed,
+                    "protocol": settings.protocol,
+                    "heads_variant": heads_variant,
+                    "reg_name": settings.reg_name,
+                    **s,
+                }
+            )
         if settings.kind == "logistic":
             for model, pred in (("V", res.pred_v), ("V+T", res.pred_vt)):
                 for a, b, n in confusion_counts(rows.y_test, pred, classes):
                     conf_rows.append(
-                        {"row_id": f"{key}|{model}|{a}|{b}", "comparison": key,
-                         "family": family, "corpus": rows.corpus, "target": rows.target,
-                         **ident, "probe_seed": settings.seed, "protocol": settings.protocol,
-                         "heads_variant": heads_variant,
-                         "model": model,
-                         "true": a, "pred": b, "count": n}
-                    )  # fmt: skip
+                        {
+                            "row_id": f"{key}|{model}|{a}|{b}",
+                            "comparison": key,
+                            "family": family,
+                            "corpus": rows.corpus,
+                            "target": rows.target,
+                            **ident,
+                            "probe_seed": settings.seed,
+                            "protocol": settings.protocol,
+                            "heads_variant": heads_variant,
+                            "model": model,
+                            "true": a,
+                            "pred": b,
+                            "count": n,
+                        }
+                    )
         say(
             f"[{i + 1}/{len(plan)}] {key}: V {res.main['v_score']:.3f} V+T "
             f"{res.main['vt_score']:.3f} delta {res.main['delta']:+.3f} "
@@ -974,16 +1068,33 @@ def run_family(
 
 
 _IDENT = {
-    "row_id": "str", "comparison": "str", "family": "str", "corpus": "str", "target": "str",
-    "input": "str", "t_variant": "str", "fusion": "str", "align_seed": "Int64",
-    "probe_seed": "int64", "protocol": "str", "heads_variant": "str",
-}  # fmt: skip
+    "row_id": "str",
+    "comparison": "str",
+    "family": "str",
+    "corpus": "str",
+    "target": "str",
+    "input": "str",
+    "t_variant": "str",
+    "fusion": "str",
+    "align_seed": "Int64",
+    "probe_seed": "int64",
+    "protocol": "str",
+    "heads_variant": "str",
+}
 #: Columns of the lambda/C sweep table (one row per comparison and regulariser value).
 SWEEP_COLUMNS = {
-    **_IDENT, "metric": "str", "reg_name": "str", "reg": "float64", "cv_v": "float64",
-    "cv_vt": "float64", "test_v": "float64", "test_vt": "float64", "delta_test": "float64",
-    "selected_v": "bool", "selected_vt": "bool",
-}  # fmt: skip
+    **_IDENT,
+    "metric": "str",
+    "reg_name": "str",
+    "reg": "float64",
+    "cv_v": "float64",
+    "cv_vt": "float64",
+    "test_v": "float64",
+    "test_vt": "float64",
+    "delta_test": "float64",
+    "selected_v": "bool",
+    "selected_vt": "bool",
+}
 #: Columns of the confusion-count table (logistic families; empty for ridge families).
 CONFUSION_COLUMNS = {**_IDENT, "model": "str", "true": "str", "pred": "str", "count": "int64"}
 
@@ -997,9 +1108,14 @@ def _frame(rows: list[dict], columns: Mapping[str, str]) -> pd.DataFrame:
 
 
 _INT_COLUMNS = (
-    "align_seed", "n_iter_v", "n_iter_vt", "n_resamples", "n_constant_resamples", "dim_v",
+    "align_seed",
+    "n_iter_v",
+    "n_iter_vt",
+    "n_resamples",
+    "n_constant_resamples",
+    "dim_v",
     "dim_vt",
-)  # fmt: skip
+)
 
 
 def tidy(frame: pd.DataFrame) -> pd.DataFrame:

@@ -440,9 +440,16 @@ class FixedRidge:
         if batched is not False and self._permuted_tactile(refits):
             (v, t), (v_te, t_te) = refits.train, refits.test
             preds, info = concat_ridge_permuted(
-                v.data, t.data, refits.y.astype(np.float64), v_te.data, t_te.data, self.lam,
-                t.perm, t_te.perm, solver=self.solver,
-            )  # fmt: skip
+                v.data,
+                t.data,
+                refits.y.astype(np.float64),
+                v_te.data,
+                t_te.data,
+                self.lam,
+                t.perm,
+                t_te.perm,
+                solver=self.solver,
+            )
             return Refitted(preds, info)
         return Refitted(refits.loop(self.fit_predict), {"refits": refits.n_problems})
 

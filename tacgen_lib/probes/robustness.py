@@ -44,10 +44,26 @@ def _subset(rows: FamilyRows, idx: np.ndarray) -> FamilyRows:
 
 #: Columns of the training-size edge (one row per family, subset seed and n).
 SIZE_COLUMNS = (
-    "row_id", "family", "corpus", "target", "metric", "protocol", "subset_seed", "n_requested",
-    "n_train", "n_test", "status", "v_score", "vt_score", "delta", "ci_low", "ci_high",
-    "p_gt0", "n_resamples", "notes",
-)  # fmt: skip
+    "row_id",
+    "family",
+    "corpus",
+    "target",
+    "metric",
+    "protocol",
+    "subset_seed",
+    "n_requested",
+    "n_train",
+    "n_test",
+    "status",
+    "v_score",
+    "vt_score",
+    "delta",
+    "ci_low",
+    "ci_high",
+    "p_gt0",
+    "n_resamples",
+    "notes",
+)
 
 
 def training_size_sweep(
@@ -76,16 +92,28 @@ def training_size_sweep(
             s = replace(settings, seed=int(seed))
             key = f"{family}|n~{size}|s~{seed}"
             base = {
-                "row_id": key, "family": family, "corpus": rows.corpus, "target": rows.target,
-                "metric": settings.metric, "protocol": settings.protocol,
-                "subset_seed": int(seed), "n_requested": str(size), "n_train": int(idx.size),
+                "row_id": key,
+                "family": family,
+                "corpus": rows.corpus,
+                "target": rows.target,
+                "metric": settings.metric,
+                "protocol": settings.protocol,
+                "subset_seed": int(seed),
+                "n_requested": str(size),
+                "n_train": int(idx.size),
                 "n_test": rows.n_test,
-            }  # fmt: skip
+            }
             try:
                 res = compare(
-                    vision[0][idx], vision[1], tactile[0][idx], tactile[1], sub, "concat", s,
+                    vision[0][idx],
+                    vision[1],
+                    tactile[0][idx],
+                    tactile[1],
+                    sub,
+                    "concat",
+                    s,
                     controls=False,
-                )  # fmt: skip
+                )
             except ValueError as exc:
                 out.append(
                     {**base, "status": "failed", "notes": f"probe could not be fitted: {exc}"}
@@ -94,10 +122,24 @@ def training_size_sweep(
                 continue
             m = res.main
             out.append(
-                {**base, "status": "ok", **{c: m[c] for c in (
-                    "v_score", "vt_score", "delta", "ci_low", "ci_high", "p_gt0", "n_resamples")},
-                 "notes": ""}
-            )  # fmt: skip
+                {
+                    **base,
+                    "status": "ok",
+                    **{
+                        c: m[c]
+                        for c in (
+                            "v_score",
+                            "vt_score",
+                            "delta",
+                            "ci_low",
+                            "ci_high",
+                            "p_gt0",
+                            "n_resamples",
+                        )
+                    },
+                    "notes": "",
+                }
+            )
             say(f"{key}: delta {m['delta']:+.3f} [{m['ci_low']:+.3f}, {m['ci_high']:+.3f}]")
     frame = pd.DataFrame(out, columns=list(SIZE_COLUMNS))
     frame["notes"] = frame["notes"].fillna("").astype(str)

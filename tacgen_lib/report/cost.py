@@ -128,10 +128,14 @@ def _offsets(x: np.ndarray) -> list[tuple[int, int, str]]:
     order = np.argsort(x, kind="stable")
     out: list[tuple[int, int, str]] = [(4, 7, "left")] * len(x)
     for rank, i in enumerate(order):
-        crowded = any(
-            j != i and np.isfinite(x[j]) and abs(np.log(x[j] / x[i])) < np.log(1.15)
-            for j in range(len(x))
-        ) if np.isfinite(x[i]) and x[i] > 0 else False  # fmt: skip
+        crowded = (
+            any(
+                j != i and np.isfinite(x[j]) and abs(np.log(x[j] / x[i])) < np.log(1.15)
+                for j in range(len(x))
+            )
+            if np.isfinite(x[i]) and x[i] > 0
+            else False
+        )
         if crowded:
             out[i] = (7, -3, "left") if rank % 2 == 0 else (-7, -3, "right")
         else:
@@ -161,18 +165,51 @@ def cost_figures(
             err = np.vstack(
                 [np.where(np.isfinite(lo), y - lo, 0), np.where(np.isfinite(hi), hi - y, 0)]
             )
-            ax.errorbar(x, y, yerr=err, fmt="o", ms=4, color=PALETTE["blue"], ecolor=PALETTE["blue"],
-                        elinewidth=1, capsize=2, zorder=3)  # fmt: skip
+            ax.errorbar(
+                x,
+                y,
+                yerr=err,
+                fmt="o",
+                ms=4,
+                color=PALETTE["blue"],
+                ecolor=PALETTE["blue"],
+                elinewidth=1,
+                capsize=2,
+                zorder=3,
+            )
             front = pareto_front(x, y, direction)
-            ax.plot(x[front], y[front], "-", color=PALETTE["green"], lw=1.2, alpha=0.8,
-                    label="Pareto front", zorder=2)  # fmt: skip
+            ax.plot(
+                x[front],
+                y[front],
+                "-",
+                color=PALETTE["green"],
+                lw=1.2,
+                alpha=0.8,
+                label="Pareto front",
+                zorder=2,
+            )
             d = g["is_default"].to_numpy(bool)
             if d.any():
-                ax.scatter(x[d], y[d], s=110, facecolors="none", edgecolors=PALETTE["vermillion"], lw=1.6,
-                           label="default", zorder=4)  # fmt: skip
+                ax.scatter(
+                    x[d],
+                    y[d],
+                    s=110,
+                    facecolors="none",
+                    edgecolors=PALETTE["vermillion"],
+                    lw=1.6,
+                    label="default",
+                    zorder=4,
+                )
             for (dx, dy, ha), lab, xi, yi in zip(_offsets(x), g["label"], x, y, strict=True):
-                ax.annotate(_label(str(lab)), (xi, yi), xytext=(dx, dy), textcoords="offset points",
-                            ha=ha, fontsize=8, zorder=5)  # fmt: skip
+                ax.annotate(
+                    _label(str(lab)),
+                    (xi, yi),
+                    xytext=(dx, dy),
+                    textcoords="offset points",
+                    ha=ha,
+                    fontsize=8,
+                    zorder=5,
+                )
             ax.set_xscale("log")
             plain = FuncFormatter(lambda v, _: f"{v:g}")
             ax.xaxis.set_major_formatter(plain)

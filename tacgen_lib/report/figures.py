@@ -151,8 +151,15 @@ def label_distribution_figure(samples: pd.DataFrame, *, title: str) -> plt.Figur
         if kind == "counts":
             counts = samples[col].value_counts()
             counts = counts.reindex(numeric_order(counts.index))  # 500, 2000, 5000: by value
-            ax.bar([fmt.cell(x, integral=True) if isinstance(x, float) and float(x).is_integer()
-                    else str(x) for x in counts.index], counts.to_numpy())  # fmt: skip
+            ax.bar(
+                [
+                    fmt.cell(x, integral=True)
+                    if isinstance(x, float) and float(x).is_integer()
+                    else str(x)
+                    for x in counts.index
+                ],
+                counts.to_numpy(),
+            )
             ax.tick_params(axis="x", labelrotation=45, labelsize=8)
             ax.set_title(f"{col} (samples)", fontsize=9)
         elif kind == "hist":

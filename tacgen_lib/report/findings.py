@@ -33,9 +33,13 @@ def _input_label(r: Mapping) -> str:
 
 def _flag(r: Mapping) -> str:
     flag = claims.extreme_flag(
-        r["metric"], r["v_score"], r["vt_score"], r["ci_low"], r["ci_high"],
+        r["metric"],
+        r["v_score"],
+        r["vt_score"],
+        r["ci_low"],
+        r["ci_high"],
         r.get("baseline_score", np.nan),
-    )  # fmt: skip
+    )
     return f" ⚠ {flag}." if flag else ""
 
 

@@ -45,10 +45,11 @@ def generation_summary(
     ``train_seconds`` (corpus, seed) from the benchmark files."""
     out = rows.copy()
     out["sample_seconds"] = [
-        sample_seconds.get((r.corpus, int(r.seed), r.sampler, float(r.guidance), int(r.steps)),
-                           math.nan)
+        sample_seconds.get(
+            (r.corpus, int(r.seed), r.sampler, float(r.guidance), int(r.steps)), math.nan
+        )
         for r in out.itertuples()
-    ]  # fmt: skip
+    ]
     out["train_seconds"] = [
         train_seconds.get((r.corpus, int(r.seed)), math.nan) for r in out.itertuples()
     ]
@@ -73,8 +74,11 @@ def _ci(d: float, lo: float, hi: float) -> str:
 
 
 def reference_cell_rows(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
-    return summary[(summary["sampler"] == ref["sampler"]) & (summary["steps"] == int(ref["steps"]))
-                   & np.isclose(summary["guidance"], float(ref["guidance"]))]  # fmt: skip
+    return summary[
+        (summary["sampler"] == ref["sampler"])
+        & (summary["steps"] == int(ref["steps"]))
+        & np.isclose(summary["guidance"], float(ref["guidance"]))
+    ]
 
 
 def headline_table(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
@@ -97,17 +101,21 @@ def headline_table(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
             return _ci(r[col], r[lo], r[hi])
 
         m, lo, hi = cross_seed_interval(by["t_gen"]["delta"].to_numpy())
-        out.append({
-            "corpus": corpus, "target": target, "metric": g["metric"].iloc[0],
-            "V score": f"{by['t_gen']['v_score'].iloc[0]:.3f}",
-            f"Δ_gen seed {first} [bootstrap CI]": one("t_gen"),
-            f"Δ_gen mean over {g['seed'].nunique()} seeds [95% t]": _ci(m, lo, hi),
-            "Δ_real (protocol-matched)": one("t_real"),
-            "Δ nonlinear V only": one("v_nonlinear"),
-            "Δ_gen − nonlinear V": one("t_gen", "delta_vs_nonlinear"),
-            "Δ_real − nonlinear V": one("t_real", "delta_vs_nonlinear"),
-            "Δ_gen shuffled V rows": one("t_gen_shuffled"),
-        })  # fmt: skip
+        out.append(
+            {
+                "corpus": corpus,
+                "target": target,
+                "metric": g["metric"].iloc[0],
+                "V score": f"{by['t_gen']['v_score'].iloc[0]:.3f}",
+                f"Δ_gen seed {first} [bootstrap CI]": one("t_gen"),
+                f"Δ_gen mean over {g['seed'].nunique()} seeds [95% t]": _ci(m, lo, hi),
+                "Δ_real (protocol-matched)": one("t_real"),
+                "Δ nonlinear V only": one("v_nonlinear"),
+                "Δ_gen − nonlinear V": one("t_gen", "delta_vs_nonlinear"),
+                "Δ_real − nonlinear V": one("t_real", "delta_vs_nonlinear"),
+                "Δ_gen shuffled V rows": one("t_gen_shuffled"),
+            }
+        )
     return pd.DataFrame(out)
 
 
@@ -129,26 +137,37 @@ def honesty_table(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
             expect, ok = "no gain (null corpus)", r.ci_low <= 0
         else:
             continue
-        out.append({"corpus": r.corpus, "target": r.target, "seed": r.seed, "input": r.input,
-                    "Δ [CI]": _ci(r.delta, r.ci_low, r.ci_high), "expected": expect,
-                    "as expected": "yes" if ok else "NO"})  # fmt: skip
-    return pd.DataFrame(out, columns=["corpus", "target", "seed", "input", "Δ [CI]", "expected",
-                                      "as expected"])  # fmt: skip
+        out.append(
+            {
+                "corpus": r.corpus,
+                "target": r.target,
+                "seed": r.seed,
+                "input": r.input,
+                "Δ [CI]": _ci(r.delta, r.ci_low, r.ci_high),
+                "expected": expect,
+                "as expected": "yes" if ok else "NO",
+            }
+        )
+    return pd.DataFrame(
+        out, columns=["corpus", "target", "seed", "input", "Δ [CI]", "expected", "as expected"]
+    )
 
 
 def fidelity_table(summary: pd.DataFrame) -> pd.DataFrame:
     """Per generator and sampling cell: matched vs off-diagonal cosine, pairing p, Frechet."""
     cols = ["corpus", "seed", "sampler", "guidance", "steps"]
     s = summary[summary["input"] == "t_gen"].drop_duplicates(cols).sort_values(cols)
-    return pd.DataFrame({
-        **{c: s[c].to_numpy() for c in cols},
-        "cos matched": s["cos_matched"].map("{:.3f}".format).to_numpy(),
-        "cos off-diagonal": s["cos_offdiag"].map("{:.3f}".format).to_numpy(),
-        "pairing p": s["pairing_p"].map("{:.3f}".format).to_numpy(),
-        "Fréchet gen–real": s["frechet"].map("{:.2f}".format).to_numpy(),
-        "Fréchet real train–test": s["frechet_real_ref"].map("{:.2f}".format).to_numpy(),
-        "sample s": s["sample_seconds"].map("{:.1f}".format).to_numpy(),
-    })  # fmt: skip
+    return pd.DataFrame(
+        {
+            **{c: s[c].to_numpy() for c in cols},
+            "cos matched": s["cos_matched"].map("{:.3f}".format).to_numpy(),
+            "cos off-diagonal": s["cos_offdiag"].map("{:.3f}".format).to_numpy(),
+            "pairing p": s["pairing_p"].map("{:.3f}".format).to_numpy(),
+            "Fréchet gen–real": s["frechet"].map("{:.2f}".format).to_numpy(),
+            "Fréchet real train–test": s["frechet_real_ref"].map("{:.2f}".format).to_numpy(),
+            "sample s": s["sample_seconds"].map("{:.1f}".format).to_numpy(),
+        }
+    )
 
 
 def _panels(n: int, ncols: int = 3, size: tuple[float, float] = (3.1, 3.0)):
@@ -174,8 +193,11 @@ def text_colour(rgba: Sequence[float]) -> str:
 def guidance_seed_figure(summary: pd.DataFrame, sampler: str, steps: int) -> plt.Figure:
     """Heatmap of Delta_gen per guidance w (rows) x seed (columns), one panel per target,
     each cell annotated with Delta and its bootstrap CI."""
-    s = summary[(summary["input"] == "t_gen") & (summary["sampler"] == sampler)
-                & (summary["steps"] == int(steps))]  # fmt: skip
+    s = summary[
+        (summary["input"] == "t_gen")
+        & (summary["sampler"] == sampler)
+        & (summary["steps"] == int(steps))
+    ]
     groups = list(s.groupby(["corpus", "target"], sort=True))
     fig, axes = _panels(len(groups), size=(3.0, 3.0))
     # one colour scale for every panel, symmetric about 0, with its colour bar
@@ -191,10 +213,15 @@ def guidance_seed_figure(summary: pd.DataFrame, sampler: str, steps: int) -> plt
         image = ax.imshow(grid, cmap="RdBu_r", vmin=-lim, vmax=lim, aspect="auto")
         for r in g.itertuples():
             i, j = ws.index(r.guidance), seeds.index(r.seed)
-            ax.text(j, i, f"{fmt.signed(r.delta)}\n[{fmt.signed(r.ci_low, 2)}, "
-                    f"{fmt.signed(r.ci_high, 2)}]", ha="center",
-                    va="center", fontsize=8,
-                    color=text_colour(image.cmap(image.norm(r.delta))))  # fmt: skip
+            ax.text(
+                j,
+                i,
+                f"{fmt.signed(r.delta)}\n[{fmt.signed(r.ci_low, 2)}, {fmt.signed(r.ci_high, 2)}]",
+                ha="center",
+                va="center",
+                fontsize=8,
+                color=text_colour(image.cmap(image.norm(r.delta))),
+            )
         ax.set_xticks(range(len(seeds)), [str(x) for x in seeds])
         ax.set_yticks(range(len(ws)), [f"{w:g}" for w in ws])
         ax.set_xlabel("generator seed")
@@ -213,16 +240,21 @@ def steps_seconds_figure(summary: pd.DataFrame) -> plt.Figure:
     s = summary[summary["input"] == "t_gen"]
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(9.5, 4))
     for (corpus, target, sampler), g in s.groupby(["corpus", "target", "sampler"], sort=True):
-        agg = g.groupby("steps").agg(sec=("sample_seconds", "mean"), d=("delta", "mean"),
-                                      fd=("frechet", "mean")).reset_index()  # fmt: skip
+        agg = (
+            g.groupby("steps")
+            .agg(sec=("sample_seconds", "mean"), d=("delta", "mean"), fd=("frechet", "mean"))
+            .reset_index()
+        )
         line = ax1.plot(agg["sec"], agg["d"], "o-", label=f"{corpus}:{target} ({sampler})")[0]
         for r in agg.itertuples():
-            ax1.annotate(str(r.steps), (r.sec, r.d), fontsize=8, xytext=(3, 3),
-                         textcoords="offset points")  # fmt: skip
+            ax1.annotate(
+                str(r.steps), (r.sec, r.d), fontsize=8, xytext=(3, 3), textcoords="offset points"
+            )
         ax2.plot(agg["sec"], agg["fd"], "o-", color=line.get_color())
         for r in agg.itertuples():
-            ax2.annotate(str(r.steps), (r.sec, r.fd), fontsize=8, xytext=(3, 3),
-                         textcoords="offset points")  # fmt: skip
+            ax2.annotate(
+                str(r.steps), (r.sec, r.fd), fontsize=8, xytext=(3, 3), textcoords="offset points"
+            )
     ax1.axhline(0, color="grey", lw=0.8)
     ax1.set_xlabel("sampling job seconds (benchmark file)")
     ax1.set_ylabel("Δ_gen (mean over seeds and w)")
@@ -238,8 +270,17 @@ def _ellipse(ax: plt.Axes, pts: np.ndarray, color: str) -> None:
     w, v = np.linalg.eigh(cov)
     w = np.clip(w, 0, None)
     angle = math.degrees(math.atan2(v[1, 1], v[0, 1]))
-    ax.add_patch(Ellipse(pts.mean(0), 4 * math.sqrt(w[1]), 4 * math.sqrt(w[0]), angle=angle,
-                         fill=False, color=color, lw=1.5))  # fmt: skip
+    ax.add_patch(
+        Ellipse(
+            pts.mean(0),
+            4 * math.sqrt(w[1]),
+            4 * math.sqrt(w[0]),
+            angle=angle,
+            fill=False,
+            color=color,
+            lw=1.5,
+        )
+    )
 
 
 def pca_figure(real: np.ndarray, gen: np.ndarray, *, title: str) -> plt.Figure:
@@ -264,8 +305,11 @@ def pca_figure(real: np.ndarray, gen: np.ndarray, *, title: str) -> plt.Figure:
 
 def permutation_figure(perms: pd.DataFrame, ref: Mapping) -> plt.Figure:
     """Pairing-permutation histograms (re-paired matched cosine) with the observed value."""
-    p = perms[(perms["sampler"] == ref["sampler"]) & (perms["steps"] == int(ref["steps"]))
-              & np.isclose(perms["guidance"], float(ref["guidance"]))]  # fmt: skip
+    p = perms[
+        (perms["sampler"] == ref["sampler"])
+        & (perms["steps"] == int(ref["steps"]))
+        & np.isclose(perms["guidance"], float(ref["guidance"]))
+    ]
     p = p[p["seed"] == p["seed"].min()] if len(p) else p
     groups = list(p.groupby(["corpus", "target"], sort=True))
     fig, axes = _panels(max(len(groups), 1))
@@ -290,8 +334,9 @@ def curve_figure(curves: pd.DataFrame) -> plt.Figure:
         falling = []
         for seed, c in g.groupby("seed"):
             line = ax.plot(c["step"], c["train_loss"], "-", label=f"seed {seed} train")[0]
-            ax.plot(c["step"], c["val_loss"], "--", color=line.get_color(),
-                    label=f"seed {seed} val")  # fmt: skip
+            ax.plot(
+                c["step"], c["val_loss"], "--", color=line.get_color(), label=f"seed {seed} val"
+            )
             if claims.still_falling(c["step"], c["val_loss"]):
                 falling.append(str(seed))
         note = f"\nval loss still falling at the end (seed {', '.join(falling)})" if falling else ""

@@ -1,7 +1,7 @@
 """Tables and figures of the probes stage, built from the probe summary (pure functions).
 
 Input is the tidy summary written by rule ``aggregate_probes`` (one row per family, input,
-tactile variant, fusion, alignment seed, probe seed and control; see `probe_suite`), plus its
+tactile variant, fusion, alignment seed, probe seed and control; see `tacgen_lib.probes.protocol`), plus its
 lambda/C sweep and confusion-count tables. Every function returns a DataFrame (rendered to
 HTML with `report_tables.to_html`) or a matplotlib Figure; none reads or writes files.
 
@@ -134,7 +134,7 @@ def _comparison_columns(rows: pd.DataFrame) -> pd.DataFrame:
                     r.ci_low,
                     r.ci_high,
                     getattr(r, "baseline_score", math.nan),
-                )  # fmt: skip
+                )
                 for r in rows.itertuples()
             ],
             "notes": rows["notes"],
@@ -352,8 +352,9 @@ def forest_plot(summary: pd.DataFrame, family: str, *, min_delta: float = 0.03) 
         shape = r.get("visible_score", math.nan)
         if shape is not None and np.isfinite(shape):
             ax.plot([shape - r["v_score"]], [yi], marker="|", color="#999999", ms=9)
-        ax.text(1.02, yi, _baselines(r), transform=ax.get_yaxis_transform(), fontsize=8,
-                va="center")  # fmt: skip
+        ax.text(
+            1.02, yi, _baselines(r), transform=ax.get_yaxis_transform(), fontsize=8, va="center"
+        )
     labels = [
         f"{r['input']} / {r['fusion']}  a~{_seed(r['align_seed'])} s~{_seed(r['probe_seed'])}"
         for _, r in part.iterrows()

@@ -16,7 +16,7 @@ frames or a Figure out.
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -31,7 +31,6 @@ from tacgen_lib.report.write import panel_grid
 __all__ = [
     "headline_long",
     "multiplicity_table",
-    "null_family_names",
     "robustness_table",
     "survival_sentence",
     "training_size_figure",
@@ -40,10 +39,26 @@ __all__ = [
 ]
 
 LONG_COLUMNS = (
-    "row_id", "family", "corpus", "target", "metric", "null_corpus", "input", "align_seed",
-    "probe_seed", "protocol", "same_as_raw", "v_score", "vt_score", "delta", "ci_low",
-    "ci_high", "p_boot", "status", "notes",
-)  # fmt: skip
+    "row_id",
+    "family",
+    "corpus",
+    "target",
+    "metric",
+    "null_corpus",
+    "input",
+    "align_seed",
+    "probe_seed",
+    "protocol",
+    "same_as_raw",
+    "v_score",
+    "vt_score",
+    "delta",
+    "ci_low",
+    "ci_high",
+    "p_boot",
+    "status",
+    "notes",
+)
 
 
 def _fmt(x: object, spec: str = "{:+.3f}") -> str:
@@ -81,9 +96,13 @@ def headline_long(
             for p in protocols:
                 if same_as_raw(p, r["kind"]):
                     out.append(
-                        {**r.to_dict(), "protocol": p, "same_as_raw": True,
-                         "row_id": r["row_id"].replace("|none", f"|p~{p}|none")}
-                    )  # fmt: skip
+                        {
+                            **r.to_dict(),
+                            "protocol": p,
+                            "same_as_raw": True,
+                            "row_id": r["row_id"].replace("|none", f"|p~{p}|none"),
+                        }
+                    )
     frame = pd.DataFrame(out)
     if frame.empty:
         return pd.DataFrame(columns=list(LONG_COLUMNS))
@@ -101,9 +120,10 @@ def _order(frame: pd.DataFrame, families: Sequence[str]) -> pd.DataFrame:
     """Families in config order, raw input before aligned, then alignment and probe seed."""
     rank = {f: i for i, f in enumerate(families)}
     return frame.assign(
-        _f=frame["family"].map(rank), _r=frame["_input"] != "raw",
+        _f=frame["family"].map(rank),
+        _r=frame["_input"] != "raw",
         _a=frame["align_seed"].fillna(-1),
-    ).sort_values(["_f", "_r", "_a", "probe seed"], kind="stable")  # fmt: skip
+    ).sort_values(["_f", "_r", "_a", "probe seed"], kind="stable")
 
 
 def robustness_table(
@@ -227,24 +247,27 @@ def within_scale_table(long: pd.DataFrame, within: pd.DataFrame) -> pd.DataFrame
     main = within.loc[(within["control"] == "none")]
     for _, w in main.sort_values(["family", "protocol"], kind="stable").iterrows():
         held = long.loc[
-            (long["family"] == w["family"]) & (long["protocol"] == w["protocol"])
+            (long["family"] == w["family"])
+            & (long["protocol"] == w["protocol"])
             & (long["input"] == "raw")
-        ]  # fmt: skip
+        ]
         h = held.iloc[0] if len(held) else None
         out.append(
             {
                 "family": w["family"],
                 "protocol": w["protocol"],
-                "held-out scale: V / V+T": "" if h is None else
-                f"{_fmt(h['v_score'], '{:.3f}')} / {_fmt(h['vt_score'], '{:.3f}')}",
-                "held-out scale: Δ [95% CI]": "(not run)" if h is None else
-                _ci(h["delta"], h["ci_low"], h["ci_high"]),
+                "held-out scale: V / V+T": ""
+                if h is None
+                else f"{_fmt(h['v_score'], '{:.3f}')} / {_fmt(h['vt_score'], '{:.3f}')}",
+                "held-out scale: Δ [95% CI]": "(not run)"
+                if h is None
+                else _ci(h["delta"], h["ci_low"], h["ci_high"]),
                 "within scale: V / V+T": f"{_fmt(w['v_score'], '{:.3f}')} / "
                 f"{_fmt(w['vt_score'], '{:.3f}')}",
                 "within scale: Δ [95% CI]": _ci(w["delta"], w["ci_low"], w["ci_high"]),
                 "n train/test (within scale)": f"{w['n_train']}/{w['n_test']}",
             }
-        )  # fmt: skip
+        )
     return pd.DataFrame(out)
 
 
@@ -271,7 +294,7 @@ def training_size_table(size: pd.DataFrame) -> pd.DataFrame:
                         else f"({r['status']})"
                     )
                     for _, r in g.iterrows()
-                ),  # fmt: skip
+                ),
             }
         )
     return pd.DataFrame(out)
@@ -297,9 +320,15 @@ def training_size_figure(size: pd.DataFrame, *, ncols: int = 3) -> plt.Figure:
             g = part.loc[part["subset_seed"] == s].sort_values("n_train")
             x = g["n_train"].to_numpy(dtype=float) * (1.0 + 0.03 * (i - (len(seeds) - 1) / 2))
             ax.errorbar(
-                x, g["delta"], yerr=[g["delta"] - g["ci_low"], g["ci_high"] - g["delta"]],
-                marker="o", ms=3, lw=1, capsize=2, label=f"seed {s}",
-            )  # fmt: skip
+                x,
+                g["delta"],
+                yerr=[g["delta"] - g["ci_low"], g["ci_high"] - g["delta"]],
+                marker="o",
+                ms=3,
+                lw=1,
+                capsize=2,
+                label=f"seed {s}",
+            )
         ax.axhline(0.0, color="black", lw=0.8)
         ax.set_xscale("log")
         sizes = sorted(set(part["n_train"].astype(int)))
@@ -317,8 +346,3 @@ def training_size_figure(size: pd.DataFrame, *, ncols: int = 3) -> plt.Figure:
     )
     fig.tight_layout()
     return fig
-
-
-def null_family_names(families: Mapping[str, Mapping], corpora: Mapping[str, Mapping]) -> list[str]:
-    """Families whose corpus is a null corpus."""
-    return sorted(f for f, spec in families.items() if corpora.get(spec["corpus"], {}).get("null"))

@@ -71,11 +71,13 @@ gen = edges.read(inp.pca_gen, columns=["t_gen"]).subset(test_ids).vectors["t_gen
 write_figure(
     gen_report.pca_figure(
         real, gen, title=f"{params.pca_corpus} test rows, seed {params.pca_seed}, {label}"
-    ),  # fmt: skip
+    ),
     out.pca,
 )
 logger.info(
     "%d evaluation rows, %d generators, %d sampling cells; mean Δ_gen %.3f",
-    len(rows), len(train_seconds), len(sample_seconds),
+    len(rows),
+    len(train_seconds),
+    len(sample_seconds),
     float(np.nanmean(rows.loc[rows["input"] == "t_gen", "delta"])),
-)  # fmt: skip
+)

@@ -8,7 +8,7 @@ import pandas as pd
 from tacgen_lib.io import edges, log
 from tacgen_lib.probes.multiplicity import adjust
 from tacgen_lib.probes.protocol import tidy
-from tacgen_lib.report import probes as probe_report
+from tacgen_lib.report import probes as report_probes
 from tacgen_lib.report.write import write_figure, write_table
 
 logger = log.for_rule(snakemake)
@@ -33,51 +33,53 @@ confusion = confusion.loc[confusion["protocol"] == "raw"].reset_index(drop=True)
 
 tables = {
     "controlled": (
-        probe_report.controlled_table(summary),
+        report_probes.controlled_table(summary),
         "Probes on the appearance-controlled corpus (pixel-V headline, ViT-V sensitivity)",
     ),
     "paired": (
-        probe_report.paired_table(summary),
+        report_probes.paired_table(summary),
         "Probes on the paired corpus, with the null corpus beside",
     ),
     "sweep_html": (
-        probe_report.sweep_table(sweep, summary),
+        report_probes.sweep_table(sweep, summary),
         "Δ across the regulariser grid for every fusion variant (* = chosen by CV for V+T)",
     ),
     "align_seeds": (
-        probe_report.align_seed_table(summary),
+        report_probes.align_seed_table(summary),
         "Aligned-feature probes over alignment seeds (mean ± sd)",
     ),
     "variants": (
-        probe_report.variant_table(summary),
+        report_probes.variant_table(summary),
         "Tactile preprocessing variants: raw V + raw T (concat)",
     ),
     "controls": (
-        probe_report.controls_table(summary),
+        report_probes.controls_table(summary),
         "Controls: Δ under broken pairings, permuted labels, random features, resampled training rows",
     ),
-    "fusions": (probe_report.fusions_frame(), "Fusion variants of V and T features"),
+    "fusions": (report_probes.fusions_frame(), "Fusion variants of V and T features"),
 }
 notes = {
-    "controlled": probe_report.skipped_note(summary, controlled=True),
-    "paired": probe_report.skipped_note(summary, controlled=False),
+    "controlled": report_probes.skipped_note(summary, controlled=True),
+    "paired": report_probes.skipped_note(summary, controlled=False),
 }
 for name, (table, title) in tables.items():
     write_table(table, snakemake.output[name], title=title, mono=(), notes=notes.get(name, ()))
     logger.info("table %s: %d rows", name, len(table))
 # one figure per family: forest plots and confusion matrices (report directories)
 Path(snakemake.output.forest).mkdir(parents=True, exist_ok=True)
-for fam in probe_report.forest_families(summary):
-    write_figure(probe_report.forest_plot(summary, fam), f"{snakemake.output.forest}/{fam}.png")
+for fam in report_probes.forest_families(summary):
+    write_figure(report_probes.forest_plot(summary, fam), f"{snakemake.output.forest}/{fam}.png")
 Path(snakemake.output.confusion_png).mkdir(parents=True, exist_ok=True)
-for fam, fig in probe_report.confusion_figures(confusion).items():
+for fam, fig in report_probes.confusion_figures(confusion).items():
     write_figure(fig, f"{snakemake.output.confusion_png}/{fam}.png")
 main = summary.loc[summary["control"] == "none"]
 logger.info(
     "%d raw-protocol summary rows; %d comparisons (%s); criterion met in %d of %d evaluated "
     "(%d with Holm-adjusted p)",
-    len(summary), len(main), main["status"].value_counts().to_dict(),
+    len(summary),
+    len(main),
+    main["status"].value_counts().to_dict(),
     int(main["criterion_met"].fillna(False).astype(bool).sum()),
     int(main["criterion_met"].notna().sum()),
     int(main["criterion_adjusted"].fillna(False).astype(bool).sum()),
-)  # fmt: skip
+)

@@ -68,6 +68,11 @@ write_figure(report.training_size_figure(size), snakemake.output.training_size_p
 for _, r in counts.iterrows():
     logger.info(
         "%s %s: %d comparisons, %d CIs exclude 0 (%.1f by chance), Holm %d, BH %d",
-        r["protocol"], r["family"], r["comparisons"], r["ci_excludes_0"],
-        r["expected_by_chance"], r["holm_rejections"], r["bh_rejections"],
-    )  # fmt: skip
+        r["protocol"],
+        r["family"],
+        r["comparisons"],
+        r["ci_excludes_0"],
+        r["expected_by_chance"],
+        r["holm_rejections"],
+        r["bh_rejections"],
+    )

@@ -23,11 +23,29 @@ for p in params.plan:
             options=p["options"],
         )
     )
-    logger.info("%s = %s (replicate %d): %d edges, %d jobs", knob, p["label"], p["rep"],
-                sum(len(f) for f in p["edges"].values()), len(p["benchmarks"]))  # fmt: skip
-table = write_points(read_knob(knob, params.reads, runs, params.options), snakemake.output.points,
-                     snakemake.output.points)  # fmt: skip
+    logger.info(
+        "%s = %s (replicate %d): %d edges, %d jobs",
+        knob,
+        p["label"],
+        p["rep"],
+        sum(len(f) for f in p["edges"].values()),
+        len(p["benchmarks"]),
+    )
+table = write_points(
+    read_knob(knob, params.reads, runs, params.options),
+    snakemake.output.points,
+    snakemake.output.points,
+)
 for r in table.itertuples(index=False):
-    logger.info("%s = %s: %s %.4g [%.4g, %.4g] in %.1f s wall, %.1f s CPU (%d jobs)", r.knob,
-                r.label, r.metric, r.value, r.ci_low, r.ci_high, r.wall_s, r.cpu_s,
-                r.n_jobs)  # fmt: skip
+    logger.info(
+        "%s = %s: %s %.4g [%.4g, %.4g] in %.1f s wall, %.1f s CPU (%d jobs)",
+        r.knob,
+        r.label,
+        r.metric,
+        r.value,
+        r.ci_low,
+        r.ci_high,
+        r.wall_s,
+        r.cpu_s,
+        r.n_jobs,
+    )

@@ -33,5 +33,14 @@ seconds = {
 table = policy_points(snakemake.wildcards.knob, rows, seconds, params.default)
 table = write_points(table, snakemake.output.points, snakemake.output.points)
 for r in table.itertuples(index=False):
-    logger.info("%s = %s: %s %.3f [%.3f, %.3f] in %.1f s (%d jobs)", r.knob, r.label, r.metric,
-                r.value, r.ci_low, r.ci_high, r.wall_s, r.n_jobs)  # fmt: skip
+    logger.info(
+        "%s = %s: %s %.3f [%.3f, %.3f] in %.1f s (%d jobs)",
+        r.knob,
+        r.label,
+        r.metric,
+        r.value,
+        r.ci_low,
+        r.ci_high,
+        r.wall_s,
+        r.n_jobs,
+    )

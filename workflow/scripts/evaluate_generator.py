@@ -22,8 +22,13 @@ targets = target_specs(
     rule=snakemake.rule,
 )
 for spec in targets:
-    logger.info("%s (%s): %d train/val, %d test rows", spec.name, spec.settings.kind,
-                spec.rows.n_train, spec.rows.n_test)  # fmt: skip
+    logger.info(
+        "%s (%s): %d train/val, %d test rows",
+        spec.name,
+        spec.settings.kind,
+        spec.rows.n_train,
+        spec.rows.n_test,
+    )
 baselines = baselines_from_frame(
     edges.read(snakemake.input.baselines).frame, targets, source=snakemake.input.baselines
 )

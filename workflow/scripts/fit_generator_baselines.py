@@ -32,12 +32,21 @@ vision, t_real = vectors(snakemake.input.v), vectors(snakemake.input.t)
 fits = []
 with threadpool_limits(snakemake.threads):
     for spec in specs:
-        logger.info("%s (%s): %d train/val, %d test rows; fitting V, V+T_real, nonlinear V",
-                    spec.name, spec.settings.kind, spec.rows.n_train, spec.rows.n_test)  # fmt: skip
+        logger.info(
+            "%s (%s): %d train/val, %d test rows; fitting V, V+T_real, nonlinear V",
+            spec.name,
+            spec.settings.kind,
+            spec.rows.n_train,
+            spec.rows.n_test,
+        )
         fit = fit_baselines(spec, vision, t_real, gammas=gammas)
         fits.append(fit)
-        logger.info("%s: regularisers %s, nonlinear gamma %.4g", spec.name,
-                    {k: f"{v:g}" for k, v in fit.reg.items()}, fit.gamma)  # fmt: skip
+        logger.info(
+            "%s: regularisers %s, nonlinear gamma %.4g",
+            spec.name,
+            {k: f"{v:g}" for k, v in fit.reg.items()},
+            fit.gamma,
+        )
 frame = baselines_frame(w.corpus, specs, fits)
 edges.write(snakemake.output.baselines, frame, key="row_id", producer=snakemake.rule)
 logger.info("%d baseline predictions", len(frame))

@@ -45,8 +45,20 @@ out = palpation_features(
     pool=feat["pool"],
 )
 labels = episodes[
-    ["episode_id", "split", "size", "mass", "friction", "stiffness", "window_lo", "window_hi",
-     "oracle_force", "ceiling_force", "held_0", "held_1"]
-]  # fmt: skip
+    [
+        "episode_id",
+        "split",
+        "size",
+        "mass",
+        "friction",
+        "stiffness",
+        "window_lo",
+        "window_hi",
+        "oracle_force",
+        "ceiling_force",
+        "held_0",
+        "held_1",
+    ]
+]
 edges.write(snakemake.output[0], labels, out, key="episode_id", producer=snakemake.rule)
 logger.info("features: %s", {k: v.shape[1] for k, v in out.items()})

@@ -33,9 +33,17 @@ assert_trainable(rows.train_ids, splits, rule=snakemake.rule, allowed=("train", 
 logger.info(
     "%s (protocol %s): %s probe of %s on %s: %d train/val rows, %d test rows (%d unlabelled "
     "dropped); headline only: %s, controls: %s",
-    family["name"], settings.protocol, family["kind"], family["target"], family["corpus"],
-    rows.n_train, rows.n_test, rows.n_unlabelled, run["headline_only"], run["controls"],
-)  # fmt: skip
+    family["name"],
+    settings.protocol,
+    family["kind"],
+    family["target"],
+    family["corpus"],
+    rows.n_train,
+    rows.n_test,
+    rows.n_unlabelled,
+    run["headline_only"],
+    run["controls"],
+)
 
 
 vision = rows.train_test(

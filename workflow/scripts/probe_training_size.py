@@ -25,8 +25,12 @@ rows = family_rows(
 assert_trainable(rows.train_ids, splits, rule=snakemake.rule, allowed=("train", "val"))
 logger.info(
     "%s: training sizes %s of %d train/val rows, subset seeds %s, %d test rows",
-    family["name"], list(robust.size_n_train), rows.n_train, list(robust.size_seeds), rows.n_test,
-)  # fmt: skip
+    family["name"],
+    list(robust.size_n_train),
+    rows.n_train,
+    list(robust.size_seeds),
+    rows.n_test,
+)
 
 
 vision = rows.train_test(

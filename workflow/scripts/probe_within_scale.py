@@ -35,8 +35,12 @@ assert_trainable(rows.train_ids, splits, rule=snakemake.rule, allowed=("train", 
 assert_trainable(rows.test_ids, splits, rule=snakemake.rule, allowed=("train", "val"))
 logger.info(
     "%s: within-scale split of the train/val rows: %d train, %d test (fraction %.2f, seed %d)",
-    family["name"], rows.n_train, rows.n_test, robust.within_test_fraction, robust.within_seed,
-)  # fmt: skip
+    family["name"],
+    rows.n_train,
+    rows.n_test,
+    robust.within_test_fraction,
+    robust.within_seed,
+)
 
 
 vision = rows.train_test(

@@ -19,13 +19,23 @@ ids, cond = ids[order], vit[order]
 # Sampling noise: seeded by the generator seed and the cell, so each cell is reproducible.
 seed = int(w.seed) * 1_000_003 + int(w.steps) * 101 + int(round(float(w.guidance) * 1000))
 logger.info(
-    "%d rows, %s with %s steps, guidance w=%s, eta=%s", len(ids), w.sampler, w.steps,
-    w.guidance, weights.settings.eta,
-)  # fmt: skip
+    "%d rows, %s with %s steps, guidance w=%s, eta=%s",
+    len(ids),
+    w.sampler,
+    w.steps,
+    w.guidance,
+    weights.settings.eta,
+)
 with threadpool_limits(snakemake.threads):
     t_gen = generate(
-        weights, cond, sampler=w.sampler, steps=int(w.steps), guidance=float(w.guidance),
-        seed=seed, eta=weights.settings.eta, batch=weights.settings.batch,
-    )  # fmt: skip
+        weights,
+        cond,
+        sampler=w.sampler,
+        steps=int(w.steps),
+        guidance=float(w.guidance),
+        seed=seed,
+        eta=weights.settings.eta,
+        batch=weights.settings.batch,
+    )
 edges.write_vectors(snakemake.output.t_gen, ids, {"t_gen": t_gen}, producer=snakemake.rule)
 logger.info("wrote %d x %d generated vectors", *t_gen.shape)

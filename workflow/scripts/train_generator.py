@@ -33,9 +33,18 @@ t_va, v_va = pairs(val_ids)
 logger.info(
     "%s seed %d: %d train / %d val pairs, V[%d] -> T[%d]; %d x %d residual MLP, %s-prediction, "
     "%s schedule T=%d",
-    w.corpus, seed, len(train_ids), len(val_ids), v_tr.shape[1], t_tr.shape[1],
-    settings.blocks, settings.hidden, settings.prediction, settings.schedule, settings.train_steps,
-)  # fmt: skip
+    w.corpus,
+    seed,
+    len(train_ids),
+    len(val_ids),
+    v_tr.shape[1],
+    t_tr.shape[1],
+    settings.blocks,
+    settings.hidden,
+    settings.prediction,
+    settings.schedule,
+    settings.train_steps,
+)
 with threadpool_limits(snakemake.threads):
     fit = fit_generator(t_tr, v_tr, t_va, v_va, settings, seed=seed, progress=logger.info)
 save_generator(fit, snakemake.output.weights, producer=snakemake.rule)
@@ -45,5 +54,8 @@ curve["corpus"], curve["seed"] = w.corpus, seed
 edges.write(snakemake.output.curve, curve, key="eval", producer=snakemake.rule)
 logger.info(
     "best step %d of %d (early stop: %s), val loss %.4f",
-    fit.best_step, fit.steps_run, fit.stopped_early, fit.best_val_loss,
-)  # fmt: skip
+    fit.best_step,
+    fit.steps_run,
+    fit.stopped_early,
+    fit.best_val_loss,
+)

@@ -2,7 +2,8 @@
 
 Modules: `scenes` (effect vocabulary, validation, MJCF compilation), `physics` (objects and
 the MuJoCo press), `tactile` (DIGIT-like frames from gel indentation), `corpus` (paired,
-appearance-controlled and null corpora, sharded), `grasp` (the grasp_lift policy scene).
+appearance-controlled and null corpora, sharded). The grasp_lift scene is the policy
+stage's (tacgen_lib.policy.task).
 
 Offscreen RGB rendering needs an OpenGL platform chosen before `mujoco` is first imported;
 we default to headless EGL (Mesa llvmpipe on CPU machines) unless MUJOCO_GL is already set.

@@ -54,11 +54,32 @@ __all__ = [
 ]
 
 COLUMNS = [
-    "sample_id", "corpus", "rgb", "tactile", "sensor_id", "caption", "adjectives", "shape",
-    "scale", "density", "mass", "hardness", "stiffness", "friction", "force_normal",
-    "force_p05", "force_p50", "force_p95", "appearance_id", "scene_seed", "stratum",
-    "null_source", "mass_source", "force_source", "hardness_source",
-]  # fmt: skip
+    "sample_id",
+    "corpus",
+    "rgb",
+    "tactile",
+    "sensor_id",
+    "caption",
+    "adjectives",
+    "shape",
+    "scale",
+    "density",
+    "mass",
+    "hardness",
+    "stiffness",
+    "friction",
+    "force_normal",
+    "force_p05",
+    "force_p50",
+    "force_p95",
+    "appearance_id",
+    "scene_seed",
+    "stratum",
+    "null_source",
+    "mass_source",
+    "force_source",
+    "hardness_source",
+]
 
 PALETTE: dict[str, tuple[float, float, float]] = {
     "red": (0.85, 0.15, 0.12),
@@ -70,8 +91,12 @@ PALETTE: dict[str, tuple[float, float, float]] = {
     "white": (0.92, 0.92, 0.9),
     "black": (0.12, 0.12, 0.13),
 }
-TEXTURE_WORDS = {"plain": "plain", "checkered": "checkered", "striped": "striped",
-                 "speckled": "speckled"}  # fmt: skip
+TEXTURE_WORDS = {
+    "plain": "plain",
+    "checkered": "checkered",
+    "striped": "striped",
+    "speckled": "speckled",
+}
 SOFT_RANGE = (600.0, 2000.0)  # N/m, contact stiffness of soft objects (log-uniform)
 HARD_RANGE = (8000.0, 25000.0)  # N/m, hard objects
 FRICTION_RANGE = (0.3, 1.2)
@@ -154,8 +179,17 @@ class CorpusSettings:
     @classmethod
     def tiny(cls, **changes: Any) -> CorpusSettings:
         """A six-sample paired corpus of small frames with two presses, for tests."""
-        small = cls(name="tiny", design="paired", n=6, seed=0, scene="paired_press", sensors=2,
-                    presses=2, image_size=(56, 56), tactile_size=(48, 64))  # fmt: skip
+        small = cls(
+            name="tiny",
+            design="paired",
+            n=6,
+            seed=0,
+            scene="paired_press",
+            sensors=2,
+            presses=2,
+            image_size=(56, 56),
+            tactile_size=(48, 64),
+        )
         return replace(small, **changes)
 
 
@@ -217,8 +251,9 @@ def sample_spec(cfg: CorpusSettings, scene: Scene, i: int) -> SampleSpec:
     sensor = int(pix.integers(int(cfg.sensors)))
     pixel_seed = int(pix.integers(2**63 - 1))
     obj = physics.ObjectPhysics(shape, size, density, stiffness, friction, yaw)
-    return SampleSpec(i, ss, obj, scale, hardness, colour, texture, appearance_id, sensor,
-                      jitter, pixel_seed)  # fmt: skip
+    return SampleSpec(
+        i, ss, obj, scale, hardness, colour, texture, appearance_id, sensor, jitter, pixel_seed
+    )
 
 
 def null_sources(seed: int, n: int) -> np.ndarray:
@@ -318,15 +353,23 @@ def _tactile_frame(state, spec_phys: SampleSpec, spec_pix: SampleSpec, cfg, pres
     res = physics.press_object(rt, press_force)
     frame_id = mujoco.mj_name2id(rt.model, mujoco.mjtObj.mjOBJ_SITE, "gel_frame")
     raw = tactile.height_field_rays(
-        rt.model, rt.data, rt.active_geom, rt.data.site_xpos[frame_id],
-        rt.data.site_xmat[frame_id], state["optics"], state["directions"],
-    )  # fmt: skip
+        rt.model,
+        rt.data,
+        rt.active_geom,
+        rt.data.site_xpos[frame_id],
+        rt.data.site_xmat[frame_id],
+        state["optics"],
+        state["directions"],
+    )
     height = np.minimum(raw, max(res.gel_depth, 0.0))
     noise = np.random.default_rng(spec_pix.pixel_seed) if scene.has("sensor_noise") else None
     img = tactile.tactile_shading(
-        height, _background(cfg, spec_pix.sensor), state["optics"], noise=noise,
+        height,
+        _background(cfg, spec_pix.sensor),
+        state["optics"],
+        noise=noise,
         markers=state["markers"],
-    )  # fmt: skip
+    )
     return encode_png(img, compression=int(cfg.png_compression)), res
 
 
@@ -381,8 +424,9 @@ def simulate_shard(
         rgb = None
         if scene.has("rgb"):
             physics.presentation_pose(rt)
-            rgb = encode_png(render_rgb(state, cfg.image_size),
-                             compression=int(cfg.png_compression))  # fmt: skip
+            rgb = encode_png(
+                render_rgb(state, cfg.image_size), compression=int(cfg.png_compression)
+            )
         tac, null_source = None, None
         if scene.has("tactile") and perm is None:
             tac, res = _tactile_frame(state, spec, spec, cfg, press_force)
@@ -391,12 +435,14 @@ def simulate_shard(
         forces = np.array([res.force_normal])
         if scene.has("press_jitter"):
             short = max(scene.settle_steps // 2, scene.measure_steps)
-            forces = np.array([
-                physics.press_object(
-                    rt, press_force * jf, offset_xy=(dx, dy), dyaw=dyaw, settle_steps=short
-                ).force_normal
-                for jf, dx, dy, dyaw in spec.jitter
-            ])  # fmt: skip
+            forces = np.array(
+                [
+                    physics.press_object(
+                        rt, press_force * jf, offset_xy=(dx, dy), dyaw=dyaw, settle_steps=short
+                    ).force_normal
+                    for jf, dx, dy, dyaw in spec.jitter
+                ]
+            )
         if perm is not None and scene.has("tactile"):
             j = int(perm[i])
             other = sample_spec(cfg, scene, j)
@@ -446,11 +492,22 @@ def simulate_shard(
         )
         if progress is not None and (count + 1) % 50 == 0:
             dt = time.perf_counter() - t0
-            progress(f"{name} shard {shard}/{n_shards}: {count + 1} samples, "
-                     f"{1e3 * dt / (count + 1):.1f} ms/sample")  # fmt: skip
+            progress(
+                f"{name} shard {shard}/{n_shards}: {count + 1} samples, "
+                f"{1e3 * dt / (count + 1):.1f} ms/sample"
+            )
     df = pd.DataFrame(rows, columns=COLUMNS)
-    for col in ("scale", "density", "mass", "stiffness", "friction", "force_normal",
-                "force_p05", "force_p50", "force_p95"):  # fmt: skip
+    for col in (
+        "scale",
+        "density",
+        "mass",
+        "stiffness",
+        "friction",
+        "force_normal",
+        "force_p05",
+        "force_p50",
+        "force_p95",
+    ):
         df[col] = df[col].astype("float64")
     for col in ("appearance_id", "scene_seed"):
         df[col] = df[col].astype("int64")

@@ -316,69 +316,15 @@ def _press_xml(scene: Scene) -> str:
 </mujoco>"""
 
 
-def _grasp_xml(scene: Scene) -> str:
-    """A 2-finger parallel gripper (slide joints, position actuators) with tactile pads."""
-    cast = "true" if scene.has("shadows") else "false"
-    tactile = scene.has("tactile")
-    s = scene.object.get("size", 0.04)
-    pads = []
-    for side, sign in (("left", -1.0), ("right", 1.0)):
-        site = (
-            f'<site name="{side}_pad" type="box" size="0.006 0.012 0.012" '
-            f'pos="{-sign * 0.005} 0 0" euler="0 {-sign * 1.5707963267948966} 0" group="4"/>'
-            if tactile
-            else ""
-        )
-        pads.append(
-            f'<body name="{side}_finger" pos="{sign * (s / 2 + 0.02)} 0 0" gravcomp="1">'
-            f'<joint name="{side}_slide" type="slide" axis="{-sign} 0 0" range="-0.01 0.06" '
-            'damping="5"/>'
-            '<geom type="box" size="0.004 0.012 0.03" pos="0 0 0.02" mass="0.03" '
-            'rgba="0.3 0.3 0.32 1" contype="2" conaffinity="1"/>'
-            f'<geom name="{side}_pad_geom" type="box" size="0.004 0.012 0.012" '
-            f'pos="{-sign * 0.001} 0 0" mass="0.01" rgba="0.55 0.6 0.62 1" condim="4" '
-            'friction="1.0 0.005 0.0001" contype="2" conaffinity="1"/>'
-            f"{site}</body>"
-        )
-    sensors = (
-        '<sensor><touch name="left_pad" site="left_pad"/><touch name="right_pad" site="right_pad"/>'
-        "</sensor>"
-        if tactile
-        else ""
-    )
-    return f"""
-<mujoco model="{scene.name}">
-  <compiler angle="radian" autolimits="true"/>
-  <option timestep="{scene.timestep}" cone="elliptic" integrator="implicitfast"/>
-  {_visual_xml(scene)}
-  {_assets_xml(scene)}
-  <worldbody>
-    <light name="key" pos="0.1 -0.1 0.5" dir="-0.2 0.2 -1" castshadow="{cast}"/>
-    <geom name="floor" type="plane" size="0.3 0.3 0.01" rgba="0.82 0.8 0.76 1" condim="3"/>
-    <body name="cam_target" pos="0 0 {s / 2}"/>
-    {_camera_xml(scene, (0.0, 0.0, s / 2))}
-    <body name="gripper" pos="0 0 {s / 2}" gravcomp="1">
-      <joint name="lift" type="slide" axis="0 0 1" range="-0.01 0.2" damping="20"/>
-      <geom type="box" size="{s / 2 + 0.03} 0.015 0.008" pos="0 0 0.06" mass="0.3"
-            rgba="0.2 0.2 0.22 1" contype="2" conaffinity="0"/>
-      {"".join(pads)}
-    </body>
-    {_object_body_xml(scene, f"0 0 {s / 2}", s)}
-  </worldbody>
-  <contact><exclude body1="world" body2="left_finger"/><exclude body1="world" body2="right_finger"/>
-    <exclude body1="world" body2="gripper"/></contact>
-  <actuator>
-    <position name="lift" joint="lift" kp="400" kv="40" ctrlrange="-0.01 0.2"/>
-    <position name="left" joint="left_slide" kp="600" kv="8" forcerange="-8 8" ctrlrange="-0.01 0.06"/>
-    <position name="right" joint="right_slide" kp="600" kv="8" forcerange="-8 8" ctrlrange="-0.01 0.06"/>
-  </actuator>
-  {sensors}
-</mujoco>"""
-
-
 def scene_xml(scene: Scene) -> str:
-    """The MJCF text of a validated scene (only declared effects appear in it)."""
-    return _press_xml(scene) if scene.kind == "press" else _grasp_xml(scene)
+    """The MJCF text of a validated press scene (only declared effects appear in it). The
+    `grasp_lift` scene is the policy's: `tacgen_lib.policy.task.task_xml` builds its model."""
+    if scene.kind != "press":
+        raise ValueError(
+            f"scene {scene.name!r}: kind {scene.kind!r} is built by the policy stage "
+            "(tacgen_lib.policy.task.task_xml), not by compile_scene"
+        )
+    return _press_xml(scene)
 
 
 def compile_scene(scene: Scene) -> mujoco.MjModel:

@@ -1,4 +1,4 @@
-"""Probe-family orchestration (probe_suite) and its report tables (probe_report), on synthetic data.
+"""Probe-family orchestration (tacgen_lib.probes.protocol) and its report tables (tacgen_lib.report.probes), on synthetic data.
 
 Two worlds: T carries the target (V+T must beat V, the controls must not), and T is unrelated to
 the target (the null corpus: Delta must not be significantly > 0). References: scikit-learn
@@ -18,7 +18,7 @@ from sklearn.linear_model import Ridge
 from sklearn.metrics import r2_score
 
 from tacgen_lib.probes import protocol as ps
-from tacgen_lib.report import probes as probe_report
+from tacgen_lib.report import probes as report_probes
 from tacgen_lib.report.write import figure_problems
 
 VARIANTS = ["clip128", "histmatch"]
@@ -27,9 +27,17 @@ FUSIONS = ["concat", "mean"]
 
 def settings(kind, seed=42, **kw):
     base = dict(
-        kind=kind, lambdas=(0.1, 1.0, 10.0, 100.0), C=(0.1, 1.0), folds=3, bootstrap=400,
-        train_resamples=8, permutations=16, label_permutations=8, random_draws=4, seed=seed,
-    )  # fmt: skip
+        kind=kind,
+        lambdas=(0.1, 1.0, 10.0, 100.0),
+        C=(0.1, 1.0),
+        folds=3,
+        bootstrap=400,
+        train_resamples=8,
+        permutations=16,
+        label_permutations=8,
+        random_draws=4,
+        seed=seed,
+    )
     return ps.ProbeSettings(**{**base, **kw})
 
 
@@ -48,10 +56,17 @@ def world(kind, *, carries, n_train=120, n_test=60, d_v=12, d_t=8, seed=0):
         y = np.where(z > 0, "hard", "soft").astype(object)
     ids = np.array([f"s-{i:04d}" for i in range(n)], dtype=object)
     rows = ps.FamilyRows(
-        corpus="sim", target="t", kind=kind, train_ids=ids[:n_train], test_ids=ids[n_train:],
-        y_train=y[:n_train], y_test=y[n_train:], strata_test=None, bands_test=None,
+        corpus="sim",
+        target="t",
+        kind=kind,
+        train_ids=ids[:n_train],
+        test_ids=ids[n_train:],
+        y_train=y[:n_train],
+        y_test=y[n_train:],
+        strata_test=None,
+        bands_test=None,
         n_unlabelled=0,
-    )  # fmt: skip
+    )
 
     def split(x):
         return x[:n_train], x[n_train:]
@@ -70,10 +85,16 @@ def world(kind, *, carries, n_train=120, n_test=60, d_v=12, d_t=8, seed=0):
 def run(kind, *, carries, seed=42, **kw):
     rows, vision, tactile, aligned = world(kind, carries=carries, **kw)
     return ps.run_family(
-        "fam", rows, vision=vision, tactile=tactile, aligned=aligned, fusions=FUSIONS,
-        heads_variant="clip128", settings=settings(kind, seed=seed),
+        "fam",
+        rows,
+        vision=vision,
+        tactile=tactile,
+        aligned=aligned,
+        fusions=FUSIONS,
+        heads_variant="clip128",
+        settings=settings(kind, seed=seed),
         labels={"design": "paired", "null_corpus": not carries, "vision": "vit"},
-    )  # fmt: skip
+    )
 
 
 @pytest.fixture(scope="module")
@@ -96,12 +117,25 @@ def manifest_and_splits():
             "sample_id": ids,
             "corpus": ["ctrl"] * 10 + ["other"] * 2,
             "mass": [0.5, 1.0, 2.0, 4.0, 0.5, 1.0, 2.0, np.nan, 1.0, 2.0, 3.0, 3.0],
-            "hardness": ["soft", "hard", None, "hard", "soft", "hard", "soft", "hard", "soft", "hard", "soft", "hard"],
+            "hardness": [
+                "soft",
+                "hard",
+                None,
+                "hard",
+                "soft",
+                "hard",
+                "soft",
+                "hard",
+                "soft",
+                "hard",
+                "soft",
+                "hard",
+            ],
             "shape": ["box", "ball"] * 6,
             "density": [600.0, 1200.0, 2400.0] * 4,
             "scale": [0.15] * 4 + [0.2] * 2 + [0.25] * 6,
         }
-    )  # fmt: skip
+    )
     split = ["train", "val", "train", "train", "val", "train"] + ["test"] * 6
     return manifest, pd.DataFrame({"sample_id": ids, "corpus": manifest["corpus"], "split": split})
 
@@ -183,9 +217,13 @@ def test_force_bands_travel_with_the_results():
 
 def test_plan_skips_same_dim_fusions_on_unequal_raw_dims_with_a_reason():
     plan = ps.plan_comparisons(
-        ["mean", "concat", "max"], heads_variant="a", variants=["a", "b"], align_seeds=[43, 42],
-        dim_v_raw=768, dim_t_raw=192,
-    )  # fmt: skip
+        ["mean", "concat", "max"],
+        heads_variant="a",
+        variants=["a", "b"],
+        align_seeds=[43, 42],
+        dim_v_raw=768,
+        dim_t_raw=192,
+    )
     raw = [p for p in plan if p.input == "raw" and p.t_variant == "a"]
     assert [p.fusion for p in raw] == ["concat", "mean", "max"]
     assert raw[0].skip_reason is None and raw[0].controls
@@ -201,17 +239,26 @@ def test_plan_skips_same_dim_fusions_on_unequal_raw_dims_with_a_reason():
     assert [p.fusion for p in aligned if p.controls] == ["concat", "concat"]
     assert all(p.skip_reason is None for p in aligned)
     capped = ps.plan_comparisons(
-        ["concat"], heads_variant="a", variants=["a"], align_seeds=[43, 42], dim_v_raw=8,
-        dim_t_raw=8, control_align_seeds=1,
-    )  # fmt: skip
+        ["concat"],
+        heads_variant="a",
+        variants=["a"],
+        align_seeds=[43, 42],
+        dim_v_raw=8,
+        dim_t_raw=8,
+        control_align_seeds=1,
+    )
     assert [(p.input, p.align_seed) for p in capped if p.controls] == [
         ("raw", None),
         ("aligned", 42),
     ]
     equal = ps.plan_comparisons(
-        ["concat", "mean"], heads_variant="a", variants=["a"], align_seeds=[], dim_v_raw=8,
+        ["concat", "mean"],
+        heads_variant="a",
+        variants=["a"],
+        align_seeds=[],
+        dim_v_raw=8,
         dim_t_raw=8,
-    )  # fmt: skip
+    )
     assert all(p.skip_reason is None for p in equal)
 
 
@@ -267,10 +314,16 @@ def test_visible_ceiling_recovers_mass_from_shape_and_scale_when_density_is_cons
         (np.full(n, 1000.0), 0.999, 1.0),
         (rng.choice([500.0, 5000.0], n), -1, 0.9),
     ):
-        manifest = pd.DataFrame({
-            "sample_id": [f"s{i:03d}" for i in range(n)], "corpus": "ctrl", "shape": shape,
-            "scale": scale, "density": density, "mass": density * c * scale**3,
-        })  # fmt: skip
+        manifest = pd.DataFrame(
+            {
+                "sample_id": [f"s{i:03d}" for i in range(n)],
+                "corpus": "ctrl",
+                "shape": shape,
+                "scale": scale,
+                "density": density,
+                "mass": density * c * scale**3,
+            }
+        )
         splits = manifest[["sample_id", "corpus"]].assign(
             split=np.where(scale == 0.25, "test", "train")
         )
@@ -345,9 +398,15 @@ def test_unfittable_logistic_comparison_is_a_failed_row_not_a_crash():
     y[0] = "hard"  # one training row of class "hard": stratified CV is impossible
     rows = ps.FamilyRows(**{**rows.__dict__, "y_train": y})
     res = ps.run_family(
-        "fam", rows, vision=vision, tactile=tactile, aligned=aligned, fusions=["concat"],
-        heads_variant="clip128", settings=settings("logistic"),
-    )  # fmt: skip
+        "fam",
+        rows,
+        vision=vision,
+        tactile=tactile,
+        aligned=aligned,
+        fusions=["concat"],
+        heads_variant="clip128",
+        settings=settings("logistic"),
+    )
     assert set(res.rows["status"]) == {"failed"}
     assert res.rows["notes"].str.contains("has 1 training row").all()
     assert res.confusion.empty and list(res.confusion.columns) == list(ps.CONFUSION_COLUMNS)
@@ -359,14 +418,20 @@ def test_a_failing_control_is_its_own_failed_row():
     y = np.array(["soft"] * 5 + ["hard"] * 3, dtype=object)
     rows = ps.FamilyRows(**{**rows.__dict__, "y_train": y})
     res = ps.compare(
-        *vision, *tactile["clip128"], rows, "concat",
-        settings("logistic", folds=2, train_resamples=40), controls=True,
-    )  # fmt: skip
+        *vision,
+        *tactile["clip128"],
+        rows,
+        "concat",
+        settings("logistic", folds=2, train_resamples=40),
+        controls=True,
+    )
     status = {c["control"]: c["status"] for c in res.controls}
     assert status == {
-        "train_resample": "failed", "tactile_permutation": "ok", "label_permutation": "ok",
+        "train_resample": "failed",
+        "tactile_permutation": "ok",
+        "label_permutation": "ok",
         "random_features": "ok",
-    }  # fmt: skip
+    }
     failed = res.controls[0]
     assert "at least 2 classes" in failed["notes"] or "one class" in failed["notes"]
     assert res.main["status"] == "ok" and res.main["criterion_met"] is not None
@@ -408,39 +473,44 @@ def test_report_tables_and_figures_from_a_summary(ridge_signal, logistic_signal)
         family="fam_null", row_id=null.rows["row_id"].str.replace("fam|", "fam_null|")
     )
     logistic = logistic_signal.rows.assign(
-        family="hard", design="controlled", vision="pixel",
+        family="hard",
+        design="controlled",
+        vision="pixel",
         row_id=logistic_signal.rows["row_id"].str.replace("fam|", "hard|"),
-    )  # fmt: skip
+    )
     summary = pd.concat([ridge_signal.rows, null_rows, logistic], ignore_index=True)
-    paired = probe_report.paired_table(summary)
+    paired = report_probes.paired_table(summary)
     assert set(paired["family"]) == {"fam"}  # the null sibling sits beside, not below
     first = paired.iloc[0]
     assert first["input"] == "aligned" or first["input"] == "raw"
     assert paired["null: Δ [95% CI]"].str.len().gt(0).all()
-    controlled = probe_report.controlled_table(summary)
+    controlled = report_probes.controlled_table(summary)
     # the raw same-dimension fusions planned as skipped are left out, and said once below
     assert set(controlled["family"]) == {"hard"} and len(controlled) == 5
-    (note,) = probe_report.skipped_note(summary, controlled=True)
+    (note,) = report_probes.skipped_note(summary, controlled=True)
     assert note.startswith("1 comparison not run and not listed")
-    seeds = probe_report.align_seed_table(summary)
+    seeds = report_probes.align_seed_table(summary)
     row = seeds.loc[(seeds["family"] == "fam") & (seeds["fusion"] == "concat")].iloc[0]
     assert row["align seeds"] == "42, 43" and row["criterion met"] == "2/2"
-    variants = probe_report.variant_table(summary)
+    variants = report_probes.variant_table(summary)
     assert {"V alone", "clip128", "histmatch"} <= set(variants.columns)
-    controls = probe_report.controls_table(summary)
+    controls = report_probes.controls_table(summary)
     assert set(controls["control"]) == set(ps.CONTROLS)
-    sweep = probe_report.sweep_table(
+    sweep = report_probes.sweep_table(
         pd.concat([ridge_signal.sweep, logistic_signal.sweep.assign(family="hard")]), summary
     )
     assert {"lambda=0.1", "lambda=100", "C=0.1", "C=1"} <= set(sweep.columns)
     assert sweep.filter(like="lambda=").apply(lambda c: c.str.endswith("*")).to_numpy().any()
-    assert len(probe_report.fusions_frame()) == 5  # concat, mean, max, two weighted sums
-    shown = summary.loc[(summary["control"] == "none") & (summary["status"] == "ok")
-                        & (summary["t_variant"] == summary["heads_variant"])]  # fmt: skip
-    families = probe_report.forest_families(summary)
+    assert len(report_probes.fusions_frame()) == 5  # concat, mean, max, two weighted sums
+    shown = summary.loc[
+        (summary["control"] == "none")
+        & (summary["status"] == "ok")
+        & (summary["t_variant"] == summary["heads_variant"])
+    ]
+    families = report_probes.forest_families(summary)
     assert set(families) == set(shown["family"])  # one figure per family
     for fam in families:
-        fig = probe_report.forest_plot(summary, fam)
+        fig = report_probes.forest_plot(summary, fam)
         assert not figure_problems(fig)  # fits the viewer, text >= 8 pt
         (ax,) = fig.axes
         assert ax.get_title().startswith(f"{fam} (")
@@ -450,7 +520,7 @@ def test_report_tables_and_figures_from_a_summary(ridge_signal, logistic_signal)
             assert "raw / concat  a~- s~42" in labels
         plt.close(fig)
     conf = logistic_signal.confusion.assign(family="hard")
-    figs = probe_report.confusion_figures(conf)
+    figs = report_probes.confusion_figures(conf)
     assert list(figs) == ["hard"]
     assert sum(ax.has_data() for ax in figs["hard"].axes) == 2 * 3  # raw + two seeds, V and V+T
     assert not figure_problems(figs["hard"])
