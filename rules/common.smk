@@ -26,6 +26,11 @@ SCENES = (
     load_yaml(config["scenes_file"]) if os.path.exists(config["scenes_file"]) else {}
 )
 CORPORA = config["corpora"]
+#: config probes without the families and seeds the rules expand: what every rule that fits
+#: probes passes on (tacgen_lib.probes.protocol.ProbeSettings.from_config reads it)
+PROBE_SETTINGS = {
+    k: v for k, v in config["probes"].items() if k not in ("families", "seeds")
+}
 SIM_CORPORA = sorted(n for n, c in CORPORA.items() if c["kind"] == "simulated")
 REAL_CORPORA = sorted(n for n, c in CORPORA.items() if c["kind"] != "simulated")
 NOTHING = "(?!x)x"  # a regex matching no name (no corpus of that kind)

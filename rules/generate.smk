@@ -112,9 +112,7 @@ rule fit_generator_baselines:
         gammas=GENERATE["nonlinear_gammas"],
         targets=lambda w: GENERATE["corpora"][w.corpus],
         corpus=lambda w: CORPORA[w.corpus],
-        probes={
-            k: v for k, v in config["probes"].items() if k not in ("families", "seeds")
-        },
+        probes=PROBE_SETTINGS,
         probe_seed=config["probes"]["seeds"][0],
     script:
         "../workflow/scripts/fit_generator_baselines.py"
@@ -152,9 +150,7 @@ rule evaluate_generator:
         settings=GENERATE,
         targets=lambda w: GENERATE["corpora"][w.corpus],
         corpus=lambda w: CORPORA[w.corpus],
-        probes={
-            k: v for k, v in config["probes"].items() if k not in ("families", "seeds")
-        },
+        probes=PROBE_SETTINGS,
         probe_seed=config["probes"]["seeds"][0],
         cells=GENERATE_CELLS,  # the order of the t_gen inputs
         reference=generate_ref_cell(),  # its CV chooses the logistic C of every cell

@@ -45,7 +45,7 @@ rule probe:
     params:
         family=lambda w: probe_family(w.family),
         corpus=lambda w: CORPORA[probe_family(w.family)["corpus"]],
-        settings={k: v for k, v in PROBES.items() if k not in ("families", "seeds")},
+        settings=PROBE_SETTINGS,
         fusions=PROBES["fusions"],
         heads_variant=PROBES["heads"]["variant"],
         variants=config["preprocess"]["variants"],
@@ -129,7 +129,7 @@ rule probe_training_size:
     params:
         family=lambda w: probe_family(w.family),
         corpus=lambda w: CORPORA[probe_family(w.family)["corpus"]],
-        settings={k: v for k, v in PROBES.items() if k not in ("families", "seeds")},
+        settings=PROBE_SETTINGS,
         heads_variant=PROBES["heads"]["variant"],
         variants=config["preprocess"]["variants"],
     script:
@@ -159,7 +159,7 @@ rule probe_within_scale:
     params:
         family=lambda w: probe_family(w.family),
         corpus=lambda w: CORPORA[probe_family(w.family)["corpus"]],
-        settings={k: v for k, v in PROBES.items() if k not in ("families", "seeds")},
+        settings=PROBE_SETTINGS,
         heads_variant=PROBES["heads"]["variant"],
         variants=config["preprocess"]["variants"],
     script:
@@ -221,5 +221,3 @@ rule aggregate_robustness:
         families=PROBES["families"],
     script:
         "../workflow/scripts/aggregate_robustness.py"
-
-

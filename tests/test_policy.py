@@ -36,7 +36,7 @@ def test_policy_fields_are_schema_keys_with_equal_defaults():
 
 
 def test_policy_settings_refuse_bad_values():
-    with pytest.raises(ValueError, match="unknown key 'colour'"):
+    with pytest.raises(ValueError, match="policy.colour: unknown key"):
         PolicySettings.from_config({"colour": 1})
     with pytest.raises(ValueError, match="palpation_forces"):
         PolicySettings.from_config({"palpation_forces": [0.15, 5.0]})

@@ -11,8 +11,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 from typing import Any, Literal
+
+from tacgen_lib.io.config import settings_from
 
 __all__ = ["AlignSettings"]
 
@@ -57,12 +59,15 @@ class AlignSettings:
 
     @classmethod
     def from_config(cls, align: Mapping[str, Any]) -> AlignSettings:
-        """Settings from config ``align`` (the config key of `feature` is ``features``)."""
-        keys = {f.name: f.name for f in fields(cls)} | {"feature": "features"}
-        missing = sorted(v for v in keys.values() if v not in align)
-        if missing:
-            raise KeyError(f"config align: missing key(s) {missing}")
-        return cls(**{name: align[key] for name, key in keys.items()})
+        """Settings from config ``align`` (the config key of `feature` is ``features``; the grid
+        keys are the rules')."""
+        return settings_from(
+            cls,
+            align,
+            where="align",
+            rename={"feature": "features"},
+            ignore=("corpora", "variants", "seeds", "taus", "n_train"),
+        )
 
     @classmethod
     def tiny(cls, **changes: Any) -> AlignSettings:

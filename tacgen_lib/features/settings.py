@@ -10,8 +10,10 @@ seconds-long run for tests.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 from typing import Any, Literal
+
+from tacgen_lib.io.config import settings_from
 
 __all__ = ["DinoSettings"]
 
@@ -57,9 +59,8 @@ class DinoSettings:
 
     @classmethod
     def from_config(cls, pretrain: Mapping[str, Any]) -> DinoSettings:
-        """Settings from config ``features.pretrain`` (defaults already filled by the schema;
-        a key missing here keeps the field's default). Unknown keys are refused by the schema."""
-        return cls(**{f.name: pretrain[f.name] for f in fields(cls) if f.name in pretrain})
+        """Settings from config ``features.pretrain`` (its corpus and variant are the rules')."""
+        return settings_from(cls, pretrain, where="features.pretrain", ignore=("corpus", "variant"))
 
     @classmethod
     def tiny(cls, **changes: Any) -> DinoSettings:

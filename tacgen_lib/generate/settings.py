@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 from typing import Any, Literal
+
+from tacgen_lib.io.config import settings_from
 
 __all__ = ["GenerateSettings", "SAMPLERS", "check_grid"]
 
@@ -93,16 +95,13 @@ class GenerateSettings:
 
     @classmethod
     def from_config(cls, generate: Mapping[str, Any]) -> GenerateSettings:
-        """Settings from config ``generate`` (grid keys are ignored: the rules expand them)."""
-        names = [f.name for f in fields(cls)]
-        missing = sorted(n for n in names if n not in generate)
-        if missing:
-            raise KeyError(f"config generate: missing key(s) {missing}")
-        values = {n: generate[n] for n in names}
-        values["nonlinear_gammas"] = tuple(float(g) for g in values["nonlinear_gammas"])
-        for name in ("lr", "weight_decay", "clip_grad", "p_uncond", "ema_decay", "eta"):
-            values[name] = float(values[name])
-        return cls(**values)
+        """Settings from config ``generate`` (its grid keys are the rules': they expand them)."""
+        return settings_from(
+            cls,
+            generate,
+            where="generate",
+            ignore=("corpora", "guidance", "samplers", "seeds", "variant"),
+        )
 
     @classmethod
     def tiny(cls, **changes: Any) -> GenerateSettings:

@@ -6,15 +6,20 @@ run before any job starts with a message that says what to fix.
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Mapping
+import types
+import typing
+from collections.abc import Iterable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import jsonschema
 import yaml
 
-__all__ = ["ConfigError", "validate_config", "load_yaml"]
+__all__ = ["ConfigError", "validate_config", "load_yaml", "settings_from"]
+
+T = TypeVar("T")
 
 
 class ConfigError(ValueError):
@@ -156,3 +161,98 @@ def validate_config(config: dict, schema_path: str | Path, *, source: str = "con
     if abs(sum(fr.values()) - 1.0) > 1e-9:
         raise ConfigError(f"{source}: splits.fractions: must sum to 1, got {sum(fr.values()):g}")
     return config
+
+
+# --------------------------------------------------------------------------- settings reader
+
+
+def settings_from(
+    cls: type[T],
+    section: Mapping[str, Any] | None,
+    *,
+    where: str,
+    rename: Mapping[str, str] | None = None,
+    ignore: Iterable[str] = (),
+    **given: Any,
+) -> T:
+    """A settings dataclass from a config section: the one reader every settings object uses.
+
+    Each field is read from its key (`rename`: field -> config key where the two differ) or
+    taken from `given` (what the caller knows that is not config: a family's kind, a seed).
+    One rule for a missing key: the field keeps its default; a field without a default raises
+    ConfigError naming `where.key`. A key that is neither a field's nor in `ignore` (keys of
+    the section the rules read themselves, such as grids) raises ConfigError naming it. Values
+    are coerced to the field's annotated type: int, float, str, bool, `tuple[X, ...]`,
+    `tuple[X, Y]` and unions of those (the first member that fits: `int | str` reads 10 and
+    "all"; a whole number given as 2.0 becomes 2; a bool is never a number). The schema stays the validator at start-up; this reader is what turns
+    its checked sections into typed settings.
+    """
+    section = dict(section or {})
+    rename = dict(rename or {})
+    hints = typing.get_type_hints(cls)
+    names = [f.name for f in dataclasses.fields(cls)]
+    keys = {rename.get(n, n): n for n in names if n not in given}
+    unknown = sorted(set(section) - set(keys) - set(ignore))
+    if unknown:
+        raise ConfigError(
+            f"config {where}.{unknown[0]}: unknown key (known: {sorted(set(keys) | set(ignore))})"
+        )
+    values = dict(given)
+    for f in dataclasses.fields(cls):
+        if f.name in given:
+            continue
+        key = rename.get(f.name, f.name)
+        if key in section:
+            values[f.name] = _coerce(hints[f.name], section[key], f"{where}.{key}")
+        elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+            raise ConfigError(f"config {where}.{key}: missing (this setting has no default)")
+    return cls(**values)
+
+
+def _coerce(tp: Any, value: Any, where: str) -> Any:
+    """`value` as the annotated type `tp` (see `settings_from`); other types pass unchanged."""
+    origin, args = typing.get_origin(tp), typing.get_args(tp)
+    if origin in (typing.Union, types.UnionType):
+        if value is None and type(None) in args:
+            return None
+        errors = []
+        for inner in [a for a in args if a is not type(None)]:  # the first type that fits
+            try:
+                return _coerce(inner, value, where)
+            except ConfigError as exc:
+                errors.append(str(exc))
+        raise ConfigError(
+            errors[0] if len(errors) == 1 else f"config {where}: {value!r} fits none of {args}"
+        )
+    if origin is tuple:
+        if not isinstance(value, list | tuple):
+            raise ConfigError(f"config {where}: {value!r} is not a list")
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(_coerce(args[0], v, f"{where}[{i}]") for i, v in enumerate(value))
+        if args and len(args) != len(value):
+            raise ConfigError(f"config {where}: {value!r} needs {len(args)} items")
+        return (
+            tuple(
+                _coerce(a, v, f"{where}[{i}]")
+                for i, (a, v) in enumerate(zip(args, value, strict=False))
+            )
+            if args
+            else tuple(value)
+        )
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"config {where}: {value!r} is not true or false")
+        return value
+    if tp in (int, float):
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ConfigError(f"config {where}: {value!r} is not a number")
+        if tp is int:
+            if float(value) != int(value):
+                raise ConfigError(f"config {where}: {value!r} is not a whole number")
+            return int(value)
+        return float(value)
+    if tp is str:
+        if isinstance(value, Mapping | list | tuple):
+            raise ConfigError(f"config {where}: {value!r} is not a text")
+        return str(value)
+    return value

@@ -3,8 +3,10 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import Any
+
+from tacgen_lib.io.config import settings_from
 
 __all__ = ["PolicySettings", "CONDITIONS", "LEARNED_CONDITIONS"]
 
@@ -90,22 +92,7 @@ class PolicySettings:
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any] | None) -> PolicySettings:
         """Build from config `policy:`; unknown keys and bad values are named."""
-        cfg = dict(cfg or {})
-        names = {f.name for f in fields(cls)}
-        bad = sorted(set(cfg) - names)
-        if bad:
-            raise ValueError(f"config policy: unknown key {bad[0]!r} (allowed: {sorted(names)})")
-        kw: dict[str, Any] = {}
-        for f in fields(cls):
-            if f.name not in cfg:
-                continue
-            v = cfg[f.name]
-            if f.name == "heads_n_train":
-                v = str(v)
-            if isinstance(getattr(cls, f.name, None), tuple) or f.name in _PAIRS:
-                v = tuple(v)
-            kw[f.name] = v
-        out = cls(**kw)
+        out = settings_from(cls, cfg, where="policy")
         out.validate()
         return out
 

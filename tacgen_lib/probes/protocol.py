@@ -67,6 +67,7 @@ import numpy as np
 import pandas as pd
 from sklearn.exceptions import ConvergenceWarning
 
+from tacgen_lib.io.config import settings_from
 from tacgen_lib.probes.bootstrap import fixed_test_bootstrap
 from tacgen_lib.probes.controls import (
     PairedRows,
@@ -183,32 +184,15 @@ class ProbeSettings:
     ) -> ProbeSettings:
         """Settings from the config section ``probes`` (validated by the schema); the ``mlp2``
         grid from ``probes.robustness.mlp`` when present."""
-        mlp = (probes_cfg.get("robustness") or {}).get("mlp")
-        return cls(
-            protocol=check_protocol(protocol),
-            mlp=MLPGrid(
-                widths=tuple(int(w) for w in mlp["widths"]),
-                weight_decays=tuple(float(a) for a in mlp["weight_decays"]),
-                folds=int(mlp["folds"]),
-                max_iter=int(mlp["max_iter"]),
-            )
-            if mlp
-            else MLPGrid(),
+        return settings_from(
+            cls,
+            probes_cfg,
+            where="probes",
+            ignore=("families", "seeds", "fusions", "heads", "robustness"),
             kind=kind,
-            lambdas=tuple(float(x) for x in probes_cfg["lambdas"]),
-            C=tuple(float(x) for x in probes_cfg["C"]),
-            folds=int(probes_cfg["folds"]),
-            bootstrap=int(probes_cfg["bootstrap"]),
-            train_resamples=int(probes_cfg["train_resamples"]),
-            permutations=int(probes_cfg["permutations"]),
-            label_permutations=int(probes_cfg["label_permutations"]),
-            random_draws=int(probes_cfg["random_draws"]),
             seed=int(seed),
-            resample_seed=(
-                None
-                if probes_cfg.get("resample_seed") is None
-                else int(probes_cfg["resample_seed"])
-            ),
+            protocol=check_protocol(protocol),
+            mlp=MLPGrid.from_config((probes_cfg.get("robustness") or {}).get("mlp")),
         )
 
 

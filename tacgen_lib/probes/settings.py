@@ -14,6 +14,7 @@ import itertools
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 
+from tacgen_lib.io.config import settings_from
 from tacgen_lib.probes.variants import PROTOCOLS, same_as_raw
 
 __all__ = ["ALIGNED_VISION", "MLPGrid", "RobustnessSettings", "check_families", "has_aligned_rows"]
@@ -62,6 +63,11 @@ class MLPGrid:
     weight_decays: tuple[float, ...] = (0.01, 1.0)
     folds: int = 3
     max_iter: int = 200
+
+    @classmethod
+    def from_config(cls, mlp: Mapping | None) -> MLPGrid:
+        """From ``probes.robustness.mlp`` (None: the defaults)."""
+        return settings_from(cls, mlp, where="probes.robustness.mlp")
 
     def __post_init__(self) -> None:
         if not self.widths or min(self.widths) < 1:
@@ -125,24 +131,12 @@ class RobustnessSettings:
     @classmethod
     def from_config(cls, cfg: Mapping, families: Mapping[str, Mapping] | None = None):
         """From ``probes.robustness``; `families` (``probes.families``) checks the names."""
-        size, within, mlp = cfg["training_size"], cfg["within_scale"], cfg["mlp"]
-        out = cls(
-            protocols=tuple(cfg["protocols"]),
-            families=tuple(cfg["families"]),
-            comparisons=str(cfg["comparisons"]),
-            controls=bool(cfg["controls"]),
-            mlp=MLPGrid(
-                widths=tuple(int(w) for w in mlp["widths"]),
-                weight_decays=tuple(float(a) for a in mlp["weight_decays"]),
-                folds=int(mlp["folds"]),
-                max_iter=int(mlp["max_iter"]),
-            ),
-            size_families=tuple(size["families"]),
-            size_n_train=tuple(n if n == "all" else int(n) for n in size["n_train"]),
-            size_seeds=tuple(int(s) for s in size["seeds"]),
-            within_families=tuple(within["families"]),
-            within_test_fraction=float(within["test_fraction"]),
-            within_seed=int(within["seed"]),
+        # the two nested sections are read as the fields' prefixed names
+        flat = {k: v for k, v in cfg.items() if k not in ("mlp", "training_size", "within_scale")}
+        flat |= {f"size_{k}": v for k, v in cfg["training_size"].items()}
+        flat |= {f"within_{k}": v for k, v in cfg["within_scale"].items()}
+        out = settings_from(
+            cls, flat, where="probes.robustness", mlp=MLPGrid.from_config(cfg.get("mlp"))
         )
         if families is not None:
             for key, names in (

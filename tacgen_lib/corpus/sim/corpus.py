@@ -29,7 +29,7 @@ import functools
 import os
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, replace
 from typing import Any, Literal
 
 import mujoco
@@ -38,6 +38,7 @@ import pandas as pd
 
 from tacgen_lib.corpus.sim import physics, tactile
 from tacgen_lib.corpus.sim.scenes import Scene, compile_scene, validate_scene
+from tacgen_lib.io.config import settings_from
 from tacgen_lib.io.images import encode_png
 
 __all__ = [
@@ -166,15 +167,7 @@ class CorpusSettings:
     @classmethod
     def from_config(cls, corpus: Mapping[str, Any]) -> CorpusSettings:
         """Settings of one corpus from its config mapping (which must include ``name``)."""
-        name = corpus.get("name", "<unnamed>")
-        for key in ("name", "design", "n", "seed", "scene"):
-            if key not in corpus:
-                raise ValueError(f"corpus {name!r}: missing key {key!r}")
-        known = {f.name for f in fields(cls)}
-        bad = sorted(set(corpus) - known)
-        if bad:
-            raise ValueError(f"corpus {name!r}: unknown key {bad[0]!r} (known: {sorted(known)})")
-        return cls(**corpus)
+        return settings_from(cls, corpus, where=f"corpora.{corpus.get('name', '<unnamed>')}")
 
     @classmethod
     def tiny(cls, **changes: Any) -> CorpusSettings:
