@@ -27,7 +27,7 @@ SCENES = (
 )
 CORPORA = config["corpora"]
 #: config probes without the families and seeds the rules expand: what every rule that fits
-#: probes passes on (tacgen_lib.probes.protocol.ProbeSettings.from_config reads it)
+#: probes passes on (tacgen_lib.probes.settings.ProbeSettings.from_config reads it)
 PROBE_SETTINGS = {
     k: v for k, v in config["probes"].items() if k not in ("families", "seeds")
 }

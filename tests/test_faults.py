@@ -472,7 +472,7 @@ def _build_every_settings_object(cfg: dict) -> None:
     from tacgen_lib.align.settings import AlignSettings
     from tacgen_lib.corpus.sim.corpus import CorpusSettings
     from tacgen_lib.features.settings import DinoSettings
-    from tacgen_lib.probes.protocol import ProbeSettings
+    from tacgen_lib.probes.settings import ProbeSettings
 
     AlignSettings.from_config(cfg["align"])
     DinoSettings.from_config(cfg["features"]["pretrain"])

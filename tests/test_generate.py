@@ -57,8 +57,10 @@ from tacgen_lib.generate.train import (
     training_step,
 )
 from tacgen_lib.io.config import validate_config
+from tacgen_lib.probes.fit import fit_probe
 from tacgen_lib.probes.logistic import FixedLogistic
-from tacgen_lib.probes.protocol import ProbeSettings, family_rows, fit_probe
+from tacgen_lib.probes.rows import family_rows
+from tacgen_lib.probes.settings import ProbeSettings
 
 SCHEMA = ROOT / "config" / "config.schema.yaml"
 

@@ -17,7 +17,11 @@ import yaml
 from sklearn.linear_model import Ridge
 from sklearn.metrics import r2_score
 
-from tacgen_lib.probes import protocol as ps
+from tacgen_lib.probes import compare as ps_compare
+from tacgen_lib.probes import plan as ps_plan
+from tacgen_lib.probes import protocol as ps_protocol
+from tacgen_lib.probes import rows as ps_rows
+from tacgen_lib.probes import settings as ps_settings
 from tacgen_lib.report import probes as report_probes
 from tacgen_lib.report.write import figure_problems
 
@@ -38,7 +42,7 @@ def settings(kind, seed=42, **kw):
         random_draws=4,
         seed=seed,
     )
-    return ps.ProbeSettings(**{**base, **kw})
+    return ps_settings.ProbeSettings(**{**base, **kw})
 
 
 def world(kind, *, carries, n_train=120, n_test=60, d_v=12, d_t=8, seed=0):
@@ -55,7 +59,7 @@ def world(kind, *, carries, n_train=120, n_test=60, d_v=12, d_t=8, seed=0):
     else:
         y = np.where(z > 0, "hard", "soft").astype(object)
     ids = np.array([f"s-{i:04d}" for i in range(n)], dtype=object)
-    rows = ps.FamilyRows(
+    rows = ps_rows.FamilyRows(
         corpus="sim",
         target="t",
         kind=kind,
@@ -84,7 +88,7 @@ def world(kind, *, carries, n_train=120, n_test=60, d_v=12, d_t=8, seed=0):
 
 def run(kind, *, carries, seed=42, **kw):
     rows, vision, tactile, aligned = world(kind, carries=carries, **kw)
-    return ps.run_family(
+    return ps_protocol.run_family(
         "fam",
         rows,
         vision=vision,
@@ -143,27 +147,32 @@ def manifest_and_splits():
 def test_target_values_log_mass_classes_and_missing():
     manifest, _ = manifest_and_splits()
     np.testing.assert_allclose(
-        ps.target_values(manifest, "log_mass", "ridge")[:4], np.log([0.5, 1.0, 2.0, 4.0])
+        ps_rows.target_values(manifest, "log_mass", "ridge")[:4], np.log([0.5, 1.0, 2.0, 4.0])
     )
-    assert np.isnan(ps.target_values(manifest, "mass", "ridge")[7])
-    hard = ps.target_values(manifest, "hardness", "logistic")
+    assert np.isnan(ps_rows.target_values(manifest, "mass", "ridge")[7])
+    hard = ps_rows.target_values(manifest, "hardness", "logistic")
     assert hard[0] == "soft" and hard[2] is None
-    assert list(ps.target_values(manifest, "density", "logistic")[:3]) == [
+    assert list(ps_rows.target_values(manifest, "density", "logistic")[:3]) == [
         "600.0",
         "1200.0",
         "2400.0",
     ]
     bad = manifest.assign(mass=manifest["mass"].where(manifest.index != 3, 0.0))
     with pytest.raises(ValueError, match="sample_id 'c-003' has mass <= 0"):
-        ps.target_values(bad, "log_mass", "ridge")
+        ps_rows.target_values(bad, "log_mass", "ridge")
     with pytest.raises(ValueError, match="no column 'stiffness'"):
-        ps.target_values(manifest, "stiffness", "ridge")
+        ps_rows.target_values(manifest, "stiffness", "ridge")
 
 
 def test_family_rows_train_includes_val_drops_unlabelled_and_builds_strata():
     manifest, splits = manifest_and_splits()
-    rows = ps.family_rows(
-        manifest, splits, corpus="ctrl", target="mass", kind="ridge", strata=ps.CONTROLLED_STRATA
+    rows = ps_rows.family_rows(
+        manifest,
+        splits,
+        corpus="ctrl",
+        target="mass",
+        kind="ridge",
+        strata=ps_rows.CONTROLLED_STRATA,
     )
     assert list(rows.train_ids) == ["c-000", "c-001", "c-002", "c-003", "c-004", "c-005"]
     assert list(rows.test_ids) == ["c-006", "c-008", "c-009"]  # c-007 has no mass
@@ -174,37 +183,41 @@ def test_family_rows_train_includes_val_drops_unlabelled_and_builds_strata():
         rows.strata_note
         == "shape x density x scale: 1 strata (3 test rows of cells with < 2 rows pooled)"
     )
-    hard = ps.family_rows(manifest, splits, corpus="ctrl", target="hardness", kind="logistic")
+    hard = ps_rows.family_rows(manifest, splits, corpus="ctrl", target="hardness", kind="logistic")
     assert "c-002" not in set(hard.train_ids) and hard.strata_test is None
 
 
 def test_pool_strata_pools_cells_too_small_to_resample():
     labels = np.array(["a", "a", "a", "b", "b", "c", "d"], dtype=object)
-    pooled, n = ps.pool_strata(labels)
+    pooled, n = ps_rows.pool_strata(labels)
     assert list(pooled) == ["a", "a", "a", "b", "b", "pooled", "pooled"] and n == 2
-    lone, n = ps.pool_strata(np.array(["a", "a", "a", "b", "b", "c"], dtype=object))
+    lone, n = ps_rows.pool_strata(np.array(["a", "a", "a", "b", "b", "c"], dtype=object))
     assert list(lone) == ["a", "a", "a", "pooled", "pooled", "pooled"] and n == 3
-    same, n = ps.pool_strata(np.array(["a", "a", "b", "b"], dtype=object))
+    same, n = ps_rows.pool_strata(np.array(["a", "a", "b", "b"], dtype=object))
     assert list(same) == ["a", "a", "b", "b"] and n == 0
 
 
 def test_class_order_is_numeric_for_numbers():
-    assert ps.class_order(["5000.0", "500.0", "2000.0", "500.0"]) == ["500.0", "2000.0", "5000.0"]
-    assert ps.class_order(["soft", "hard"]) == ["hard", "soft"]
+    assert ps_rows.class_order(["5000.0", "500.0", "2000.0", "500.0"]) == [
+        "500.0",
+        "2000.0",
+        "5000.0",
+    ]
+    assert ps_rows.class_order(["soft", "hard"]) == ["hard", "soft"]
 
 
 def test_family_rows_refuses_unsplit_rows():
     manifest, splits = manifest_and_splits()
     with pytest.raises(ValueError, match="sample_id 'c-011' is not in the split edge"):
-        ps.family_rows(manifest, splits.iloc[:-1], corpus="other", target="mass", kind="ridge")
+        ps_rows.family_rows(manifest, splits.iloc[:-1], corpus="other", target="mass", kind="ridge")
 
 
 def test_force_bands_travel_with_the_results():
     rows, vision, tactile, aligned = world("ridge", carries=True)
     y = rows.y_test
     bands = pd.DataFrame({"force_p05": y - 0.5, "force_p95": y + 0.5})
-    rows = ps.FamilyRows(**{**rows.__dict__, "target": "force_p50", "bands_test": bands})
-    res = ps.compare(
+    rows = ps_rows.FamilyRows(**{**rows.__dict__, "target": "force_p50", "bands_test": bands})
+    res = ps_compare.compare(
         *vision, *tactile["clip128"], rows, "concat", settings("ridge"), controls=False
     )
     inside = (res.pred_vt >= y - 0.5) & (res.pred_vt <= y + 0.5)
@@ -216,7 +229,7 @@ def test_force_bands_travel_with_the_results():
 
 
 def test_plan_skips_same_dim_fusions_on_unequal_raw_dims_with_a_reason():
-    plan = ps.plan_comparisons(
+    plan = ps_plan.plan_comparisons(
         ["mean", "concat", "max"],
         heads_variant="a",
         variants=["a", "b"],
@@ -238,7 +251,7 @@ def test_plan_skips_same_dim_fusions_on_unequal_raw_dims_with_a_reason():
     ]
     assert [p.fusion for p in aligned if p.controls] == ["concat", "concat"]
     assert all(p.skip_reason is None for p in aligned)
-    capped = ps.plan_comparisons(
+    capped = ps_plan.plan_comparisons(
         ["concat"],
         heads_variant="a",
         variants=["a"],
@@ -251,7 +264,7 @@ def test_plan_skips_same_dim_fusions_on_unequal_raw_dims_with_a_reason():
         ("raw", None),
         ("aligned", 42),
     ]
-    equal = ps.plan_comparisons(
+    equal = ps_plan.plan_comparisons(
         ["concat", "mean"],
         heads_variant="a",
         variants=["a"],
@@ -265,17 +278,19 @@ def test_plan_skips_same_dim_fusions_on_unequal_raw_dims_with_a_reason():
 def test_families_compare_like_with_like_and_repeat_no_rows():
     """Aligned rows only where V is ViT (the heads' input); two families whose rows would be
     identical are refused; the default config passes."""
-    assert ps.has_aligned_rows("vit") and not ps.has_aligned_rows("pixel")
+    assert ps_settings.has_aligned_rows("vit") and not ps_settings.has_aligned_rows("pixel")
     fam = {"corpus": "c", "heads_from": "p", "target": "mass", "kind": "ridge"}
-    ps.check_families({"mass": {**fam, "vision": "pixel"}, "mass_vit": {**fam, "vision": "vit"}})
+    ps_settings.check_families(
+        {"mass": {**fam, "vision": "pixel"}, "mass_vit": {**fam, "vision": "vit"}}
+    )
     with pytest.raises(ValueError, match="'b' and 'a' would produce identical raw rows"):
-        ps.check_families({"b": {**fam, "vision": "vit"}, "a": {**fam, "vision": "vit"}})
+        ps_settings.check_families({"b": {**fam, "vision": "vit"}, "a": {**fam, "vision": "vit"}})
     heads = {**fam, "heads_from": "q", "vision": "vit"}  # other heads: same raw rows
     with pytest.raises(ValueError, match="identical raw rows"):
-        ps.check_families({"a": {**fam, "vision": "vit"}, "b": heads})
+        ps_settings.check_families({"a": {**fam, "vision": "vit"}, "b": heads})
     root = Path(__file__).resolve().parents[1]
     families = yaml.safe_load((root / "config/config.yaml").read_text())["probes"]["families"]
-    ps.check_families(families)
+    ps_settings.check_families(families)
     pixel = [f for f, spec in families.items() if spec["vision"] == "pixel"]
     assert pixel and all(
         any(
@@ -291,13 +306,13 @@ def test_baseline_score_is_the_train_mean_or_majority_class():
     rng = np.random.default_rng(0)
     y_tr, y_te = rng.normal(3.0, 1.0, 40), rng.normal(2.0, 1.0, 20)
     ref = r2_score(y_te, DummyRegressor().fit(np.zeros((40, 1)), y_tr).predict(np.zeros((20, 1))))
-    assert ps.baseline_score(y_tr, y_te, "r2") == pytest.approx(ref)
-    assert ps.baseline_score(y_tr, y_te, "r2") < 0  # a shifted test mean: below zero
+    assert ps_rows.baseline_score(y_tr, y_te, "r2") == pytest.approx(ref)
+    assert ps_rows.baseline_score(y_tr, y_te, "r2") < 0  # a shifted test mean: below zero
     c_tr = np.array(["soft"] * 7 + ["hard"] * 5, dtype=object)
     c_te = np.array(["soft", "hard", "hard", "soft", "soft"], dtype=object)
     dummy = DummyClassifier(strategy="most_frequent").fit(np.zeros((12, 1)), c_tr)
     assert (
-        ps.baseline_score(c_tr, c_te, "accuracy")
+        ps_rows.baseline_score(c_tr, c_te, "accuracy")
         == (dummy.predict(np.zeros((5, 1))) == c_te).mean()
     )
 
@@ -327,8 +342,8 @@ def test_visible_ceiling_recovers_mass_from_shape_and_scale_when_density_is_cons
         splits = manifest[["sample_id", "corpus"]].assign(
             split=np.where(scale == 0.25, "test", "train")
         )
-        rows = ps.family_rows(manifest, splits, corpus="ctrl", target="mass", kind="ridge")
-        got = ps.visible_score(rows, settings("ridge"))
+        rows = ps_rows.family_rows(manifest, splits, corpus="ctrl", target="mass", kind="ridge")
+        got = ps_rows.visible_score(rows, settings("ridge"))
         assert lo <= got <= hi, got
 
 
@@ -396,8 +411,8 @@ def test_unfittable_logistic_comparison_is_a_failed_row_not_a_crash():
     y = rows.y_train.copy()
     y[:] = "soft"
     y[0] = "hard"  # one training row of class "hard": stratified CV is impossible
-    rows = ps.FamilyRows(**{**rows.__dict__, "y_train": y})
-    res = ps.run_family(
+    rows = ps_rows.FamilyRows(**{**rows.__dict__, "y_train": y})
+    res = ps_protocol.run_family(
         "fam",
         rows,
         vision=vision,
@@ -409,15 +424,17 @@ def test_unfittable_logistic_comparison_is_a_failed_row_not_a_crash():
     )
     assert set(res.rows["status"]) == {"failed"}
     assert res.rows["notes"].str.contains("has 1 training row").all()
-    assert res.confusion.empty and list(res.confusion.columns) == list(ps.CONFUSION_COLUMNS)
+    assert res.confusion.empty and list(res.confusion.columns) == list(
+        ps_protocol.CONFUSION_COLUMNS
+    )
 
 
 def test_a_failing_control_is_its_own_failed_row():
     """Bootstrap resamples of 8 training rows often hold one class: that control fails alone."""
     rows, vision, tactile, _ = world("logistic", carries=True, n_train=8, n_test=20)
     y = np.array(["soft"] * 5 + ["hard"] * 3, dtype=object)
-    rows = ps.FamilyRows(**{**rows.__dict__, "y_train": y})
-    res = ps.compare(
+    rows = ps_rows.FamilyRows(**{**rows.__dict__, "y_train": y})
+    res = ps_compare.compare(
         *vision,
         *tactile["clip128"],
         rows,
@@ -495,7 +512,7 @@ def test_report_tables_and_figures_from_a_summary(ridge_signal, logistic_signal)
     variants = report_probes.variant_table(summary)
     assert {"V alone", "clip128", "histmatch"} <= set(variants.columns)
     controls = report_probes.controls_table(summary)
-    assert set(controls["control"]) == set(ps.CONTROLS)
+    assert set(controls["control"]) == set(ps_compare.CONTROLS)
     sweep = report_probes.sweep_table(
         pd.concat([ridge_signal.sweep, logistic_signal.sweep.assign(family="hard")]), summary
     )

@@ -17,7 +17,8 @@ import pytest
 from snakemake_run import copy_tree, merged_config, smk
 
 from tacgen_lib.io import edges  # noqa: E402
-from tacgen_lib.probes import protocol as probe_protocol  # noqa: E402
+from tacgen_lib.probes.compare import CONTROLS  # noqa: E402
+from tacgen_lib.probes.protocol import tidy  # noqa: E402
 from tacgen_lib.report import probes as report_probes  # noqa: E402
 
 pytestmark = pytest.mark.workflow
@@ -168,7 +169,7 @@ def probes_run(tmp_path_factory, cfg) -> Path:
 
 @pytest.fixture(scope="module")
 def full_summary(probes_run) -> pd.DataFrame:
-    return probe_protocol.tidy(edges.read(probes_run / "results/probes/summary.parquet").frame)
+    return tidy(edges.read(probes_run / "results/probes/summary.parquet").frame)
 
 
 @pytest.fixture(scope="module")
@@ -183,7 +184,7 @@ def test_summary_edge_has_the_documented_columns_and_one_row_per_comparison(summ
     assert set(summary["family"]) == set(cfg["probes"]["families"])
     ident = ["family", "input", "t_variant", "fusion", "align_seed", "probe_seed", "control"]
     assert not summary[ident].astype(str).duplicated().any()
-    assert set(summary["control"]) == {"none", *probe_protocol.CONTROLS}
+    assert set(summary["control"]) == {"none", *CONTROLS}
     main = summary.loc[summary["control"] == "none"]
     assert set(main["status"]) <= {"ok", "skipped"}
     # every configured fusion on aligned features, for every alignment seed

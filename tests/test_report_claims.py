@@ -358,7 +358,7 @@ def test_panel_grid_fits_the_viewer_or_says_to_split(n, w, h):
 # skipped, with the reason, where they do not
 def test_fusion_table_states_the_planning_rule():
     from tacgen_lib.probes.fusion import FUSIONS
-    from tacgen_lib.probes.protocol import plan_comparisons
+    from tacgen_lib.probes.plan import plan_comparisons
 
     def raw(dim_t):
         plan = plan_comparisons(

@@ -142,7 +142,7 @@ def test_changed_library_module_reruns_only_its_users(run_dir, tmp_path):
 
 
 def test_edit_to_an_indirectly_imported_module_reruns_exactly_its_users(run_dir, tmp_path):
-    """controls.py is imported by no script, only through probes.protocol."""
+    """controls.py is imported by no script, only through probes.compare."""
     from tacgen_lib.io.imports import import_closure
 
     module = "tacgen_lib/probes/controls.py"
@@ -153,7 +153,7 @@ def test_edit_to_an_indirectly_imported_module_reruns_exactly_its_users(run_dir,
         for p in scripts.glob("*.py")
         if ROOT / module in import_closure(p, ROOT / "tacgen_lib")
     }
-    # evaluate_generator and fit_generator_baselines reach it through probes.protocol too
+    # evaluate_generator and fit_generator_baselines reach it through probes.compare too
     # (generate)
     robustness = {"probe_training_size", "probe_within_scale", "aggregate_robustness"}
     assert direct == []

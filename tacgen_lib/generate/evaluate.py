@@ -4,7 +4,7 @@ This module owns the evaluation of one generator (corpus x seed) over all its sa
 (`evaluate_generator`), and the probes no generator changes (`fit_baselines`: V alone, V +
 T_real and the nonlinear V baseline, fitted once per corpus and shared by every seed through
 the baselines edge, `baselines_frame` / `baselines_from_frame`). The probes are the probes
-stage's own (`tacgen_lib.probes.protocol.fit_probe` on the same `family_rows` train/test rows,
+stage's own (`tacgen_lib.probes.fit.fit_probe` on the same `family_rows` train/test rows,
 `fixed_test_bootstrap` for the CIs), not a fork. Per target:
 
 - ``v``: V alone (the reference of every Delta); fitted once per corpus (`fit_baselines`);
@@ -53,15 +53,10 @@ from sklearn.kernel_approximation import Nystroem
 
 from tacgen_lib.corpus.splits import assert_trainable
 from tacgen_lib.probes.bootstrap import fixed_test_bootstrap, resample_indices
+from tacgen_lib.probes.fit import FittedProbe, fit_probe
 from tacgen_lib.probes.logistic import FixedLogistic
-from tacgen_lib.probes.protocol import (
-    FamilyRows,
-    FittedProbe,
-    ProbeSettings,
-    family_rows,
-    fit_probe,
-    strata_for,
-)
+from tacgen_lib.probes.rows import FamilyRows, family_rows, strata_for
+from tacgen_lib.probes.settings import ProbeSettings
 
 __all__ = [
     "INPUTS",

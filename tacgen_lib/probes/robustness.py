@@ -9,7 +9,7 @@ settings, `RobustnessSettings` of config ``probes.robustness``, live in the impo
   grid, for several subset seeds; each point has its fixed-test bootstrap CI on the full test
   rows. Subsets are nested (a smaller n is a prefix of a larger one for the same seed) and,
   for class targets, stratified at every prefix (`subsets.nested_subsets`).
-- the held-out-scale diagnosis (`protocol.family_rows` with ``within_scale``,
+- the held-out-scale diagnosis (`rows.family_rows` with ``within_scale``,
   `subsets.within_scale_split`). The appearance-controlled corpus is split
   by scale (train 0.15/0.20, test 0.25), so its mass probe extrapolates to an unseen scale.
   This re-splits the TRAINING rows only (train + val; the held-out test rows are never used)
@@ -25,8 +25,9 @@ from dataclasses import replace
 import numpy as np
 import pandas as pd
 
-from tacgen_lib.probes.protocol import FamilyRows, ProbeSettings, compare
-from tacgen_lib.probes.settings import RobustnessSettings
+from tacgen_lib.probes.compare import compare
+from tacgen_lib.probes.rows import FamilyRows
+from tacgen_lib.probes.settings import ProbeSettings, RobustnessSettings
 from tacgen_lib.probes.subsets import nested_subsets
 
 __all__ = ["SIZE_COLUMNS", "RobustnessSettings", "training_size_sweep"]

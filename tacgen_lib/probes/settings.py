@@ -15,7 +15,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 
 from tacgen_lib.io.config import settings_from
-from tacgen_lib.probes.variants import PROTOCOLS, same_as_raw
+from tacgen_lib.probes.variants import PROTOCOLS, check_protocol, same_as_raw
 
 __all__ = ["ALIGNED_VISION", "MLPGrid", "RobustnessSettings", "check_families", "has_aligned_rows"]
 
@@ -179,3 +179,62 @@ class RobustnessSettings:
 
     def run_controls(self, protocol: str) -> bool:
         return protocol == "raw" or self.controls
+
+
+@dataclass(frozen=True)
+class ProbeSettings:
+    """Everything a comparison needs from config ``probes`` for one family and probe seed."""
+
+    kind: str  # "ridge" | "logistic"
+    lambdas: tuple[float, ...]
+    C: tuple[float, ...]
+    folds: int
+    bootstrap: int
+    train_resamples: int
+    permutations: int
+    label_permutations: int
+    random_draws: int
+    seed: int
+    min_delta: float = 0.03
+    protocol: str = "raw"  # a name of `variants.PROTOCOLS`
+    #: seed of the bootstrap resamples and control draws; None: `seed` (which also draws the
+    #: CV folds). The cost sweep's probe knobs vary it alone to measure Monte Carlo error.
+    resample_seed: int | None = None
+    mlp: MLPGrid = field(default_factory=MLPGrid)  # the ``mlp2`` probe's grid
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("ridge", "logistic"):
+            raise ValueError(f"ProbeSettings.kind must be 'ridge' or 'logistic', got {self.kind!r}")
+        check_protocol(self.protocol)
+
+    @property
+    def metric(self) -> str:
+        return "r2" if self.kind == "ridge" else "accuracy"
+
+    @property
+    def draw_seed(self) -> int:
+        """The seed of the bootstrap resamples and the controls' draws."""
+        return self.seed if self.resample_seed is None else self.resample_seed
+
+    @property
+    def reg_name(self) -> str:
+        if self.protocol == "mlp2":
+            return "weight_decay"
+        return "lambda" if self.kind == "ridge" else "C"
+
+    @classmethod
+    def from_config(
+        cls, probes_cfg: Mapping, kind: str, seed: int, protocol: str = "raw"
+    ) -> ProbeSettings:
+        """Settings from the config section ``probes`` (validated by the schema); the ``mlp2``
+        grid from ``probes.robustness.mlp`` when present."""
+        return settings_from(
+            cls,
+            probes_cfg,
+            where="probes",
+            ignore=("families", "seeds", "fusions", "heads", "robustness"),
+            kind=kind,
+            seed=int(seed),
+            protocol=check_protocol(protocol),
+            mlp=MLPGrid.from_config((probes_cfg.get("robustness") or {}).get("mlp")),
+        )

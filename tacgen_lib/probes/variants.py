@@ -1,8 +1,8 @@
 """Probe protocol variants: which probe a comparison fits (the ``{protocol}`` wildcard).
 
 A reader should see which V vs V+T results survive a reasonable change of protocol. Each
-variant is a name in `PROTOCOLS`, threaded through `protocol.ProbeSettings` into
-`protocol.fit_probe`, so every variant runs the same family code (rows, comparisons,
+variant is a name in `PROTOCOLS`, threaded through `settings.ProbeSettings` into
+`fit.fit_probe`, so every variant runs the same family code (rows, comparisons,
 bootstrap, controls, criterion):
 
 - ``raw``: the paper's probes, unchanged (ridge on raw features; logistic with its scaler).

@@ -28,7 +28,7 @@ import numpy as np
 import pandas as pd
 
 from tacgen_lib.probes.fusion import fusion_table
-from tacgen_lib.probes.protocol import class_order
+from tacgen_lib.probes.rows import class_order
 from tacgen_lib.report import PALETTE, claims
 from tacgen_lib.report import format as fmt
 

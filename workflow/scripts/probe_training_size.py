@@ -5,8 +5,9 @@ from threadpoolctl import threadpool_limits
 
 from tacgen_lib.corpus.splits import assert_trainable
 from tacgen_lib.io import edges, log
-from tacgen_lib.probes.protocol import ProbeSettings, family_rows, strata_for
 from tacgen_lib.probes.robustness import RobustnessSettings, training_size_sweep
+from tacgen_lib.probes.rows import family_rows, strata_for
+from tacgen_lib.probes.settings import ProbeSettings
 
 logger = log.for_rule(snakemake)
 family = snakemake.params.family
