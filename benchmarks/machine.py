@@ -10,7 +10,7 @@ import time
 from collections.abc import Callable
 from typing import NamedTuple
 
-from tacgen_lib.cost.benchmarks import cpu_label
+from tacgen_lib.runtime.benchmarks import cpu_label
 
 
 class Timing(NamedTuple):

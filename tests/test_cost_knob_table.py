@@ -12,7 +12,6 @@ from snakemake.path_modifier import PathModifier
 from tacgen_lib.cost.knobs import (
     KNOBS,
     UnknownKnobError,
-    base_rule,
     knob_bootstrap,
     knob_metrics,
     knob_settings,
@@ -22,6 +21,7 @@ from tacgen_lib.cost.knobs import (
 )
 from tacgen_lib.cost.readers import READERS, headline_row
 from tacgen_lib.io.config import load_yaml
+from tacgen_lib.runtime.dag import base_rule
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = load_yaml(ROOT / "config" / "config.yaml")

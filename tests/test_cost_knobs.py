@@ -6,7 +6,6 @@ import pandas as pd
 import pytest
 from sklearn.metrics import accuracy_score, r2_score
 
-from tacgen_lib.cost.benchmarks import Benchmark
 from tacgen_lib.cost.knob_metrics import (
     KnobSetting,
     features_metric_ids,
@@ -18,6 +17,7 @@ from tacgen_lib.cost.knob_metrics import (
 from tacgen_lib.cost.points import POINT_COLUMNS
 from tacgen_lib.cost.scores import score_ci
 from tacgen_lib.probes.bootstrap import fixed_test_bootstrap, resample_indices
+from tacgen_lib.runtime.benchmarks import Benchmark
 
 
 @pytest.mark.parametrize("metric", ["r2", "accuracy"])

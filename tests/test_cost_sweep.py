@@ -10,7 +10,6 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from tacgen_lib.cost.benchmarks import Benchmark
 from tacgen_lib.cost.pareto import improvement, knob_sentence, marginal_table, pareto_front
 from tacgen_lib.cost.points import POINT_COLUMNS, check_points
 from tacgen_lib.cost.spread import replicate_seconds, retrieval_bootstrap, sd_interval
@@ -22,6 +21,7 @@ from tacgen_lib.cost.sweeps import (
     permutation_points,
     policy_points,
 )
+from tacgen_lib.runtime.benchmarks import Benchmark
 
 
 def points(knob, metric, rows, direction="higher"):

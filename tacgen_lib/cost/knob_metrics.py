@@ -20,10 +20,10 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from tacgen_lib.cost.benchmarks import Benchmark
 from tacgen_lib.cost.points import POINT_COLUMNS, check_points
 from tacgen_lib.probes.bootstrap import resample_indices
 from tacgen_lib.probes.metrics import Metric
+from tacgen_lib.runtime.benchmarks import Benchmark
 
 __all__ = [
     "BAND_WIDTH",

@@ -42,7 +42,6 @@ __all__ = [
     "Knob",
     "Setting",
     "UnknownKnobError",
-    "base_rule",
     "knob_bootstrap",
     "knob_metrics",
     "knob_settings",
@@ -448,12 +447,3 @@ def moved_path(path: str, replace_prefix: Mapping[str, str]) -> str:
     if len(hits) > 1:
         raise ValueError(f"{path}: prefixes {hits} all match (ambiguous replace_prefix)")
     return replace_prefix[hits[0]] + path[len(hits[0]) :] if hits else path
-
-
-def base_rule(rule: str, config: Mapping[str, Any]) -> str:
-    """The main rule a job of a setting's module runs: its name without the module prefix
-    (`config` is the job's own config; a main-run job's rule is returned as it is)."""
-    setting = (config.get("cost") or {}).get("setting")
-    if not setting:
-        return rule
-    return rule.removeprefix(f"{setting['module']}_")

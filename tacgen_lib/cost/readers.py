@@ -25,7 +25,6 @@ from typing import Any
 
 import pandas as pd
 
-from tacgen_lib.cost.benchmarks import Benchmark
 from tacgen_lib.cost.knob_metrics import (
     BAND_WIDTH,
     FRAMES_PER_S,
@@ -44,6 +43,7 @@ from tacgen_lib.cost.sweeps import (
     bootstrap_spread_points,
     permutation_points,
 )
+from tacgen_lib.runtime.benchmarks import Benchmark
 
 __all__ = ["READERS", "SettingRun", "headline_row", "read_knob"]
 

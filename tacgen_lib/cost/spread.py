@@ -19,8 +19,8 @@ from collections.abc import Sequence
 import numpy as np
 from scipy import stats
 
-from tacgen_lib.cost.benchmarks import Benchmark
 from tacgen_lib.probes.bootstrap import resample_indices
+from tacgen_lib.runtime.benchmarks import Benchmark
 
 __all__ = ["replicate_seconds", "retrieval_bootstrap", "sd_interval"]
 

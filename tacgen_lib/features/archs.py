@@ -1,7 +1,7 @@
 """The ViT architectures by name (`ARCHS`) and the patch size: plain numbers, no torch.
 
 The backbone (`tacgen_lib.features.vit`, which imports torch) builds its networks from these;
-the run-time estimate (`tacgen_lib.cost.units`: FLOPs of a forward) and the Snakefile's cost
+the run-time estimate (`tacgen_lib.runtime.units`: FLOPs of a forward) and the Snakefile's cost
 plans (a knob's embed width) read them without importing torch (~1 s).
 """
 

@@ -5,7 +5,7 @@ n_train, budget, retrieval on the held-out test split, chance levels, and the tr
 time read from the job's Snakemake benchmark file) and the report items made from it: the τ
 ablation, the N-scaling table, the seed table (mean ± sd over seeds) and the training-curve
 figure. Everything here is a pure function of its arguments (benchmark files are read by
-`tacgen_lib.cost.benchmarks`).
+`tacgen_lib.runtime.benchmarks`).
 """
 
 from __future__ import annotations

@@ -7,10 +7,10 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from tacgen_lib.align.cells import CELL_COLUMNS
-from tacgen_lib.cost.benchmarks import benchmark_seconds
 from tacgen_lib.io import edges, log
 from tacgen_lib.report import align as align_report
 from tacgen_lib.report.write import write_figure, write_table
+from tacgen_lib.runtime.benchmarks import benchmark_seconds
 
 logger = log.for_rule(snakemake)
 out, params = snakemake.output, snakemake.params

@@ -8,10 +8,10 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from tacgen_lib.corpus.splits import ids_in_split
-from tacgen_lib.cost.benchmarks import benchmark_seconds
 from tacgen_lib.io import edges, log
 from tacgen_lib.report import generate as gen_report
 from tacgen_lib.report.write import write_figure, write_table
+from tacgen_lib.runtime.benchmarks import benchmark_seconds
 
 logger = log.for_rule(snakemake)
 inp, out, params = snakemake.input, snakemake.output, snakemake.params

@@ -6,7 +6,6 @@ from pathlib import Path
 
 import pandas as pd
 
-from tacgen_lib.cost.benchmarks import benchmark_seconds
 from tacgen_lib.io import edges, log
 from tacgen_lib.policy import summary as policy_summary
 from tacgen_lib.policy.cells import all_cells, cell_name, main_cells
@@ -14,6 +13,7 @@ from tacgen_lib.policy.palpation import frame_names
 from tacgen_lib.policy.settings import PolicySettings
 from tacgen_lib.report import policy as report_policy
 from tacgen_lib.report.write import write_figure, write_table
+from tacgen_lib.runtime.benchmarks import benchmark_seconds
 
 logger = log.for_rule(snakemake)
 settings = PolicySettings.from_config(snakemake.params.settings)

@@ -3,11 +3,11 @@ sample_generator benchmark files (rule cost_generate_points)."""
 
 import pandas as pd
 
-from tacgen_lib.cost.benchmarks import read_benchmark
 from tacgen_lib.cost.points import write_points
 from tacgen_lib.cost.spread import replicate_seconds
 from tacgen_lib.cost.sweeps import Seconds, generate_points
 from tacgen_lib.io import log
+from tacgen_lib.runtime.benchmarks import read_benchmark
 
 logger = log.for_rule(snakemake)
 params = snakemake.params

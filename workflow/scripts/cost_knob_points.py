@@ -1,10 +1,10 @@
 """Points of one swept knob from the main-rule edges of each of its settings and the benchmark
 files of their jobs (rule cost_knob_points; the reader: tacgen_lib.cost.readers)."""
 
-from tacgen_lib.cost.benchmarks import read_benchmark
 from tacgen_lib.cost.points import write_points
 from tacgen_lib.cost.readers import SettingRun, read_knob
 from tacgen_lib.io import edges, log
+from tacgen_lib.runtime.benchmarks import read_benchmark
 
 logger = log.for_rule(snakemake)
 knob, params = snakemake.wildcards.knob, snakemake.params

@@ -3,11 +3,11 @@ train_policy + rollout_policy benchmark files (rule cost_policy_points)."""
 
 import pandas as pd
 
-from tacgen_lib.cost.benchmarks import Benchmark, read_benchmark
 from tacgen_lib.cost.points import write_points
 from tacgen_lib.cost.spread import replicate_seconds
 from tacgen_lib.cost.sweeps import Seconds, policy_points
 from tacgen_lib.io import log
+from tacgen_lib.runtime.benchmarks import Benchmark, read_benchmark
 
 logger = log.for_rule(snakemake)
 params = snakemake.params

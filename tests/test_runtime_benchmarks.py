@@ -2,7 +2,7 @@
 
 import pytest
 
-from tacgen_lib.cost.benchmarks import benchmark_table, read_benchmark
+from tacgen_lib.runtime.benchmarks import benchmark_table, read_benchmark
 
 HEADER = "s\th:m:s\tmax_rss\tmax_vms\tmax_uss\tmax_pss\tio_in\tio_out\tmean_load\tcpu_time\n"
 

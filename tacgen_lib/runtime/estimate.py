@@ -1,18 +1,18 @@
 """Estimate before running: per-rule and total wall time of a config's DAG on N local cores or
 on a SLURM cluster of K nodes, from per-unit costs fitted on benchmark files.
 
-1. The jobs: Snakemake builds the config's DAG (`tacgen_lib.cost.dag.dag_jobs`, `--forceall`).
+1. The jobs: Snakemake builds the config's DAG (`tacgen_lib.runtime.dag.dag_jobs`, `--forceall`).
 2. Each job's seconds: `overhead + per_unit × units` of its cost class
-   (`tacgen_lib.cost.units.UNITS`, one line per rule), the line fitted by non-negative least
-   squares (`tacgen_lib.cost.calibration.fit_costs`) on the last run's benchmark files when
+   (`tacgen_lib.runtime.units.UNITS`, one line per rule), the line fitted by non-negative least
+   squares (`tacgen_lib.runtime.calibration.fit_costs`) on the last run's benchmark files when
    they are a complete run of `--benchmarks-config`, else on the shipped calibration
    (`config/cost_calibration/`), labelled with the CPU it was measured on.
 3. The run's wall: list scheduling of those jobs over the cores, honouring threads and
-   dependencies (`tacgen_lib.cost.schedule`), plus the workflow's own overhead (DAG building
+   dependencies (`tacgen_lib.runtime.schedule`), plus the workflow's own overhead (DAG building
    and per-job bookkeeping, fitted on the calibration runs' total wall times).
 
-    .venv/bin/python -m tacgen_lib.cost.estimate --configfile config/paper.yaml --cores 2
-    .venv/bin/python -m tacgen_lib.cost.estimate --configfile config/paper.yaml \\
+    .venv/bin/python -m tacgen_lib.runtime.estimate --configfile config/paper.yaml --cores 2
+    .venv/bin/python -m tacgen_lib.runtime.estimate --configfile config/paper.yaml \\
         --slurm-nodes 8 --cores-per-node 32
 
 The per-unit costs hold for the calibration's CPU; on another CPU class scale them (the
@@ -33,8 +33,8 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import nnls
 
-from tacgen_lib.cost.benchmarks import cpu_label
-from tacgen_lib.cost.calibration import (
+from tacgen_lib.runtime.benchmarks import cpu_label
+from tacgen_lib.runtime.calibration import (
     SHIPPED,
     Calibration,
     CostLine,
@@ -44,9 +44,9 @@ from tacgen_lib.cost.calibration import (
     load_calibration,
     run_calibration,
 )
-from tacgen_lib.cost.dag import DagJob, dag_jobs
-from tacgen_lib.cost.schedule import Machine, Task, list_schedule, local_machine, slurm_machine
-from tacgen_lib.cost.units import UNITS, MissingUnitsError, flop_seconds, job_units
+from tacgen_lib.runtime.dag import DagJob, dag_jobs
+from tacgen_lib.runtime.schedule import Machine, Task, list_schedule, local_machine, slurm_machine
+from tacgen_lib.runtime.units import UNITS, MissingUnitsError, flop_seconds, job_units
 
 __all__ = [
     "Estimate",
@@ -105,7 +105,7 @@ def job_seconds(
             raise MissingCalibrationError(
                 f"rule {job.rule!r}: cost class {cost_class!r} has no calibration point "
                 f"(calibrated classes of this rule: {have or 'none'}); run a config that has such "
-                "jobs and regenerate the calibration (python -m tacgen_lib.cost.calibration)"
+                "jobs and regenerate the calibration (python -m tacgen_lib.runtime.calibration)"
             )
         line = lines[cost_class]
         seconds = line.seconds(units) + flop_seconds(flops, job.threads)
@@ -298,7 +298,7 @@ def write_table(est: Estimate, out: str | os.PathLike[str]) -> None:
 
 def main(argv: Sequence[str] | None = None) -> Estimate:
     parser = argparse.ArgumentParser(
-        prog="python -m tacgen_lib.cost.estimate",
+        prog="python -m tacgen_lib.runtime.estimate",
         description="Predict per-rule and total wall time of a config's DAG before running it.",
     )
     parser.add_argument(

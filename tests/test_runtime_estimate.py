@@ -1,4 +1,4 @@
-"""Run-time estimate before running (tacgen_lib.cost.estimate, .schedule, .calibration, .units).
+"""Run-time estimate before running (tacgen_lib.runtime.estimate, .schedule, .calibration, .units).
 
 Scheduling on tiny hand-made DAGs, the non-negative least-squares fit recovering known per-unit
 costs, clear errors naming the rule, and the shipped calibration over the real DAGs. How close
@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from tacgen_lib.cost.calibration import (
+from tacgen_lib.runtime.calibration import (
     CALIBRATION_COLUMNS,
     Calibration,
     MissingCalibrationError,
@@ -20,16 +20,16 @@ from tacgen_lib.cost.calibration import (
     load_calibration,
     load_factors,
 )
-from tacgen_lib.cost.dag import DagJob
-from tacgen_lib.cost.estimate import (
+from tacgen_lib.runtime.dag import DagJob
+from tacgen_lib.runtime.estimate import (
     estimate_run,
     format_estimate,
     job_seconds,
     workflow_overhead,
     write_table,
 )
-from tacgen_lib.cost.schedule import Machine, Task, list_schedule, local_machine, slurm_machine
-from tacgen_lib.cost.units import UNITS, MissingUnitsError, job_units
+from tacgen_lib.runtime.schedule import Machine, Task, list_schedule, local_machine, slurm_machine
+from tacgen_lib.runtime.units import UNITS, MissingUnitsError, job_units
 
 # ---- scheduling -----------------------------------------------------------------------------
 
@@ -221,7 +221,7 @@ def test_every_rule_of_the_workflow_has_a_unit_line():
         for m in re.finditer(r"^rule (\w+):", smk.read_text(), re.M)
     }
     missing = sorted(rules - set(UNITS) - {"all"})
-    assert not missing, f"rules without a line in tacgen_lib/cost/units.py UNITS: {missing}"
+    assert not missing, f"rules without a line in tacgen_lib/runtime/units.py UNITS: {missing}"
 
 
 # ---- the estimate end to end on a hand DAG ------------------------------------------------------
@@ -279,7 +279,7 @@ def test_shipped_calibration_estimates_the_real_dags(configfile):
     class; the schedule honours the DAG (a job never starts before what it waits for)."""
     from pathlib import Path
 
-    from tacgen_lib.cost.dag import dag_jobs
+    from tacgen_lib.runtime.dag import dag_jobs
 
     root = Path(__file__).resolve().parents[1]
     jobs, config = dag_jobs([configfile], workdir=root)

@@ -1,7 +1,7 @@
 """The work units of each rule's jobs: the one table the run-time estimate is built on.
 
 A job's predicted wall time is `overhead + cost_per_unit × units + FLOPs / rate`
-(tacgen_lib.cost.calibration fits the first two per cost class on benchmark files; the FLOP term,
+(tacgen_lib.runtime.calibration fits the first two per cost class on benchmark files; the FLOP term,
 for rules with a model, is charged at the CPU's effective GEMM rate so that a model 100x
 larger than any calibrated one costs 100x its arithmetic, not 100x its calibrated overheads). `UNITS` has one line per rule: what one unit is,
 and how many a job has, read from the merged config and the job's wildcards. A rule may split
@@ -12,7 +12,7 @@ The counts are proportional to the work the job's code does (rows × steps × mo
 exact: early stopping (align `patience`, generator `patience`) can end training before its
 budget, so those rules' predictions are upper-side. Changing a rule's code or its config keys
 may change its units: edit its line here, then regenerate the shipped calibration
-(`python -m tacgen_lib.cost.calibration`, README "Run-time estimate").
+(`python -m tacgen_lib.runtime.calibration`, README "Run-time estimate").
 """
 
 from __future__ import annotations
@@ -398,8 +398,8 @@ def job_units(rule: str, config: Config, wildcards: Wildcards) -> tuple[str, flo
     if rule not in UNITS:
         raise MissingUnitsError(
             f"rule {rule!r} has no unit definition: add a line for it to "
-            "tacgen_lib/cost/units.py UNITS, then regenerate the calibration "
-            "(python -m tacgen_lib.cost.calibration)"
+            "tacgen_lib/runtime/units.py UNITS, then regenerate the calibration "
+            "(python -m tacgen_lib.runtime.calibration)"
         )
     try:
         suffix, units = UNITS[rule].count(config, wildcards)
@@ -408,7 +408,7 @@ def job_units(rule: str, config: Config, wildcards: Wildcards) -> tuple[str, flo
         raise MissingUnitsError(
             f"rule {rule!r}: cannot count its units ({UNITS[rule].unit}) for wildcards "
             f"{dict(wildcards)} from this config ({type(exc).__name__}: {exc}); fix its line in "
-            "tacgen_lib/cost/units.py UNITS"
+            "tacgen_lib/runtime/units.py UNITS"
         ) from exc
     name = UNITS[rule].same_as or rule
     return (f"{name}:{suffix}" if suffix else name), float(units), float(flops)

@@ -20,7 +20,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-__all__ = ["DagJob", "dag_jobs"]
+__all__ = ["DagJob", "base_rule", "dag_jobs"]
 
 
 @dataclass(frozen=True)
@@ -125,8 +125,6 @@ def dag_jobs(
 def _setting_rule(rule: Any) -> tuple[str, str | None, dict[str, Any] | None]:
     """(main rule name, module name, module config) of a Snakemake rule; (name, None, None)
     for a rule of the run itself."""
-    from tacgen_lib.cost.knobs import base_rule
-
     module_config = (getattr(rule, "module_globals", None) or {}).get("config")
     setting = ((module_config or {}).get("cost") or {}).get("setting")
     if not setting:
@@ -141,3 +139,12 @@ def _plain(value: Any) -> Any:
     if isinstance(value, list | tuple):
         return [_plain(v) for v in value]
     return value
+
+
+def base_rule(rule: str, config: Mapping[str, Any]) -> str:
+    """The main rule a job of a setting's module runs: its name without the module prefix
+    (`config` is the job's own config; a main-run job's rule is returned as it is)."""
+    setting = (config.get("cost") or {}).get("setting")
+    if not setting:
+        return rule
+    return rule.removeprefix(f"{setting['module']}_")
