@@ -1,7 +1,7 @@
 """Head-training throughput against the machine's float32 GEMM roofline (same run).
 
 For in_dim 384 and 768 (ViT-S / ViT-B feature widths) and batch 256, this times
-`tacgen_lib.align.heads.train_step` (forward of both heads, symmetric InfoNCE, backward, clipping,
+`tacgen_lib.align.train.train_step` (forward of both heads, symmetric InfoNCE, backward, clipping,
 fused AdamW) and compares it with the time the same step's matrix products would take at the
 float32 GEMM rate torch.matmul reaches on this machine, measured in the same process,
 interleaved with the step timings (so both see the same load):
@@ -33,15 +33,9 @@ import numpy as np
 import torch
 from machine import Timing, best_of, gemm_peak
 
-from tacgen_lib.align.heads import (
-    HIDDEN_DIM,
-    OUT_DIM,
-    AlignHeads,
-    fit_heads,
-    make_optimizer,
-    train_step,
-)
+from tacgen_lib.align.heads import HIDDEN_DIM, OUT_DIM, AlignHeads
 from tacgen_lib.align.settings import AlignSettings
+from tacgen_lib.align.train import fit_heads, make_optimizer, train_step
 
 PAPER_STEPS = 6000
 BATCH = 256

@@ -1,4 +1,4 @@
-"""Tests of tacgen_lib.align.heads: heads, symmetric InfoNCE (paper eq. 1) and head training.
+"""Tests of tacgen_lib.align (heads, loss, train, checkpoint): heads, symmetric InfoNCE (paper eq. 1) and head training.
 
 Hard cases are checked against `info_nce_reference` (float64, plain loops, no cross_entropy or
 matmul) and against a float64 copy of the heads.
@@ -18,20 +18,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.stats import binom
 
-from tacgen_lib.align import heads as align
-from tacgen_lib.align.heads import (
-    AlignHeads,
-    cosine_warmup_lr,
-    fit_heads,
-    info_nce,
-    info_nce_reference,
-    l2_normalise,
-    load_heads,
-    project,
-    save_heads,
-)
+from tacgen_lib.align import checkpoint as align_checkpoint
+from tacgen_lib.align import heads as align_heads
+from tacgen_lib.align.checkpoint import load_heads, save_heads
+from tacgen_lib.align.heads import AlignHeads, l2_normalise, project
+from tacgen_lib.align.loss import info_nce, info_nce_reference
 from tacgen_lib.align.retrieval import paired_retrieval
 from tacgen_lib.align.settings import AlignSettings
+from tacgen_lib.align.train import cosine_warmup_lr, fit_heads
 
 
 def near_duplicate_pairs(batch: int, dim: int, scale: float, seed: int = 0):
@@ -64,12 +58,12 @@ def assert_grad_close(got: torch.Tensor, ref: torch.Tensor, rtol: float) -> None
 def test_head_shapes_and_unit_norm():
     heads = AlignHeads(20, 12)
     z_v, z_t = heads(torch.randn(7, 20), torch.randn(7, 12))
-    assert z_v.shape == (7, align.OUT_DIM) and z_t.shape == (7, align.OUT_DIM)
+    assert z_v.shape == (7, align_heads.OUT_DIM) and z_t.shape == (7, align_heads.OUT_DIM)
     torch.testing.assert_close(z_v.norm(dim=1), torch.ones(7))
     torch.testing.assert_close(z_t.norm(dim=1), torch.ones(7))
     layers = [type(m).__name__ for m in heads.vision.children()]
     assert layers == ["Linear", "LayerNorm", "Linear"]  # GELU is functional between them
-    assert heads.vision.fc1.out_features == align.HIDDEN_DIM == 512
+    assert heads.vision.fc1.out_features == align_heads.HIDDEN_DIM == 512
 
 
 def test_l2_normalise_zero_rows_stay_finite_with_finite_gradient():
@@ -240,7 +234,7 @@ def synthetic_pairs(n: int, dv: int, dt: int, noise: float, seed: int):
 
 def saved_bytes(result) -> bytes:
     buf = io.BytesIO()
-    torch.save(align.heads_payload(result), buf)
+    torch.save(align_checkpoint.heads_payload(result), buf)
     return buf.getvalue()
 
 

@@ -16,7 +16,8 @@ import pandas as pd
 import pytest
 from snakemake_run import copy_tree, smk
 
-from tacgen_lib.align import heads as align  # noqa: E402
+from tacgen_lib.align import checkpoint as align_checkpoint
+from tacgen_lib.align import grid as align_grid  # noqa: E402
 from tacgen_lib.align.cells import cell_name
 from tacgen_lib.align.settings import AlignSettings  # noqa: E402
 from tacgen_lib.corpus.splits import LeakageError  # noqa: E402
@@ -89,7 +90,7 @@ def test_summary_has_one_row_per_cell_with_the_documented_columns(align_run):
 
 def test_cell_outputs_are_verified_edges(align_run):
     folder = align_run / "results/align/sim_paired/clip128" / CELL
-    heads = align.load_heads(folder / "heads.pt")  # verifies the sidecar hash
+    heads = align_checkpoint.load_heads(folder / "heads.pt")  # verifies the sidecar hash
     assert heads.meta["config"]["tau"] == 0.07 and heads.meta["config"]["n_train"] == 28
     curve = edges.read(folder / "curve.parquet").frame
     assert curve["step"].iloc[0] == 0 and curve["step"].is_monotonic_increasing
@@ -134,47 +135,47 @@ TRAIN = AlignSettings.tiny(steps=4, batch_size=8, weight_decay=0.0, eval_every=2
 
 def test_split_guard_refuses_a_poisoned_split():
     vision, tactile, splits = _edges_in_memory()
-    ids = align.cell_ids(splits, corpus="c", n_train="all", seed=0)
+    ids = align_grid.cell_ids(splits, corpus="c", n_train="all", seed=0)
     test_id = ids["test"][0]
     poisoned = {**ids, "train": np.append(ids["train"], test_id)}
     with pytest.raises(LeakageError, match=f"train_heads.*{test_id}.*'test'"):
-        align.fit_cell(vision, tactile, splits, poisoned, tau=0.1, seed=0, settings=TRAIN)
+        align_grid.fit_cell(vision, tactile, splits, poisoned, tau=0.1, seed=0, settings=TRAIN)
     # validation rows only steer early stopping: a train row among them is refused too
     val_poisoned = {**ids, "val": np.append(ids["val"], ids["train"][0])}
     with pytest.raises(LeakageError, match=str(ids["train"][0])):
-        align.fit_cell(vision, tactile, splits, val_poisoned, tau=0.1, seed=0, settings=TRAIN)
+        align_grid.fit_cell(vision, tactile, splits, val_poisoned, tau=0.1, seed=0, settings=TRAIN)
     # and a split edge that calls a test row "train" is caught by the train/test overlap check
     relabelled = splits.copy()
     relabelled.loc[relabelled["sample_id"] == test_id, "split"] = "train"
     with pytest.raises(ValueError, match=f"{test_id}.*both a test row and a training row"):
-        align.fit_cell(vision, tactile, relabelled, poisoned, tau=0.1, seed=0, settings=TRAIN)
+        align_grid.fit_cell(vision, tactile, relabelled, poisoned, tau=0.1, seed=0, settings=TRAIN)
 
 
 def test_fit_cell_evaluates_on_test_rows_only():
     vision, tactile, splits = _edges_in_memory()
-    ids = align.cell_ids(splits, corpus="c", n_train=16, seed=1)
-    fit = align.fit_cell(vision, tactile, splits, ids, tau=0.1, seed=1, settings=TRAIN)
+    ids = align_grid.cell_ids(splits, corpus="c", n_train=16, seed=1)
+    fit = align_grid.fit_cell(vision, tactile, splits, ids, tau=0.1, seed=1, settings=TRAIN)
     assert fit.metrics["n_test"] == 8 and fit.metrics["n_train_rows"] == 16
     assert fit.metrics["chance_top1"] == 1 / 8 and fit.metrics["steps_run"] == 4
     assert list(fit.curve["eval"]) == ["step~0", "step~2", "step~4"]
     with pytest.raises(edges.EdgeError, match="no vector column 'pixel'"):
-        align.fit_cell(
+        align_grid.fit_cell(
             vision, tactile, splits, ids, tau=0.1, seed=1, settings=replace(TRAIN, feature="pixel")
         )
 
 
 def test_train_subset_is_seeded_nested_and_bounded():
     ids = [f"s{i:03d}" for i in range(50)]
-    a, b = align.train_subset(ids, 10, seed=5), align.train_subset(ids[::-1], 10, seed=5)
+    a, b = align_grid.train_subset(ids, 10, seed=5), align_grid.train_subset(ids[::-1], 10, seed=5)
     assert list(a) == list(b) and len(set(a)) == 10  # depends on the id set, not its order
-    assert set(a) <= set(align.train_subset(ids, 20, seed=5))  # nested across N
-    assert list(a) != list(align.train_subset(ids, 10, seed=6))
-    assert len(align.train_subset(ids, "all", seed=0)) == 50
+    assert set(a) <= set(align_grid.train_subset(ids, 20, seed=5))  # nested across N
+    assert list(a) != list(align_grid.train_subset(ids, 10, seed=6))
+    assert len(align_grid.train_subset(ids, "all", seed=0)) == 50
     with pytest.raises(ValueError, match="n_train=60 but the train split has only 50 rows"):
-        align.train_subset(ids, 60, seed=0)
+        align_grid.train_subset(ids, 60, seed=0)
     for bad in ("ALL", "1", "07", 1.5):
         with pytest.raises(ValueError, match="n_train must be"):
-            align.parse_n_train(bad)
+            align_grid.parse_n_train(bad)
 
 
 def test_tables_report_mean_and_sd_over_seeds():

@@ -409,7 +409,7 @@ class _Payload:
 def test_crafted_pickle_checkpoint_is_refused_without_running_code(tmp_path):
     import torch
 
-    from tacgen_lib.align.heads import load_heads
+    from tacgen_lib.align.checkpoint import load_heads
     from tacgen_lib.features.vit import load_backbone
 
     marker = tmp_path / "side_effect"

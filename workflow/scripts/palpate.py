@@ -3,7 +3,7 @@
 import pandas as pd
 import torch
 
-from tacgen_lib.align import heads as align_heads
+from tacgen_lib.align import checkpoint as align_checkpoint
 from tacgen_lib.features.vit import load_backbone
 from tacgen_lib.io import edges, log
 from tacgen_lib.policy.features import palpation_features
@@ -26,7 +26,7 @@ backgrounds = {
     pad: pad_background(settings.seed, k, settings.tactile_size) for k, pad in enumerate(PAD_NAMES)
 }
 heads = {
-    seed: align_heads.load_heads(path)
+    seed: align_checkpoint.load_heads(path)
     for seed, path in zip(snakemake.params.align_seeds, snakemake.input.heads, strict=True)
 }
 logger.info(

@@ -3,7 +3,8 @@
 import pandas as pd
 import torch
 
-from tacgen_lib.align import heads
+from tacgen_lib.align import checkpoint as align_checkpoint
+from tacgen_lib.align import heads as align_heads
 from tacgen_lib.align.settings import AlignSettings
 from tacgen_lib.io import edges, log
 
@@ -12,7 +13,7 @@ torch.set_num_threads(snakemake.threads)
 feature = AlignSettings.from_config(snakemake.params.settings).feature
 target = snakemake.wildcards.target
 
-model = heads.load_heads(snakemake.input.heads)
+model = align_checkpoint.load_heads(snakemake.input.heads)
 vision = edges.read(snakemake.input.v, columns=[feature], require={feature: "vector"})
 tactile = edges.read(snakemake.input.t, columns=[feature], require={feature: "vector"})
 ids = sorted(vision.ids)
@@ -23,7 +24,7 @@ if set(ids) != set(tactile.ids):
         "two feature edges; rebuild the features of corpus " + repr(target)
     )
 try:
-    v_aligned, t_aligned = heads.project(
+    v_aligned, t_aligned = align_heads.project(
         model, vision.subset(ids).vectors[feature], tactile.subset(ids).vectors[feature]
     )
 except ValueError as exc:

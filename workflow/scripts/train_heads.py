@@ -4,7 +4,8 @@ import pandas as pd
 import torch
 from threadpoolctl import threadpool_limits
 
-from tacgen_lib.align import heads
+from tacgen_lib.align import checkpoint as align_checkpoint
+from tacgen_lib.align import grid as align_grid
 from tacgen_lib.align.cells import cell_name
 from tacgen_lib.align.settings import AlignSettings
 from tacgen_lib.io import edges, log
@@ -14,12 +15,12 @@ torch.set_num_threads(snakemake.threads)
 w = snakemake.wildcards
 settings = AlignSettings.from_config(snakemake.params.settings)
 feature = settings.feature
-seed, n_train = int(w.seed), heads.parse_n_train(w.n_train)
+seed, n_train = int(w.seed), align_grid.parse_n_train(w.n_train)
 
 vision = edges.read(snakemake.input.v, columns=[feature], require={feature: "vector"})
 tactile = edges.read(snakemake.input.t, columns=[feature], require={feature: "vector"})
 splits = edges.read(snakemake.input.splits, require={"split": "str", "corpus": "str"}).frame
-ids = heads.cell_ids(splits, corpus=w.corpus, n_train=n_train, seed=seed)
+ids = align_grid.cell_ids(splits, corpus=w.corpus, n_train=n_train, seed=seed)
 logger.info(
     "%s: %d train / %d val / %d test rows, %s features v[%d] t[%d]",
     w.corpus,
@@ -31,7 +32,7 @@ logger.info(
     tactile.vectors[feature].shape[1],
 )
 with threadpool_limits(snakemake.threads):
-    fit = heads.fit_cell(
+    fit = align_grid.fit_cell(
         vision,
         tactile,
         splits,
@@ -53,7 +54,7 @@ row = {
     "feature": feature,
     **fit.metrics,
 }
-heads.save_heads(fit.result, snakemake.output.heads, producer=snakemake.rule)
+align_checkpoint.save_heads(fit.result, snakemake.output.heads, producer=snakemake.rule)
 edges.write(snakemake.output.curve, fit.curve, key="eval", producer=snakemake.rule)
 edges.write(snakemake.output.ranks, fit.ranks, key="sample_id", producer=snakemake.rule)
 edges.write(snakemake.output.metrics, pd.DataFrame([row]), key="cell", producer=snakemake.rule)

@@ -1,0 +1,324 @@
+"""Training the alignment heads: `fit_heads` (AdamW, a cosine schedule with linear warm-up
+`cosine_warmup_lr`, gradient clipping, early stopping on the held-out validation loss keeping the
+best weights, seeded shuffling, bit-for-bit reproducible on CPU for a given seed and thread
+count) with two budgets, ``"epochs"`` and ``"steps"``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import torch
+from torch import Tensor
+
+from tacgen_lib.align.heads import (
+    AlignHeads,
+    as_features,
+    heads_from_state,
+)
+from tacgen_lib.align.loss import info_nce
+from tacgen_lib.align.retrieval import (
+    paired_retrieval,
+)
+from tacgen_lib.align.settings import AlignSettings
+from tacgen_lib.optim import AdamW
+
+
+def cosine_warmup_lr(step: int, total_steps: int, base_lr: float, warmup_frac: float) -> float:
+    """Learning rate of optimiser step `step` (0-based) out of `total_steps`.
+
+    Linear warm-up over ``W = max(1, round(warmup_frac * total_steps))`` steps
+    (``base_lr * (step + 1) / W``), then cosine decay from base_lr towards 0:
+    ``base_lr * 0.5 * (1 + cos(pi * (step - W) / (total_steps - W)))``.
+    """
+    if total_steps < 1:
+        raise ValueError(f"cosine_warmup_lr: total_steps must be >= 1, got {total_steps}")
+    warmup = min(total_steps, max(1, round(warmup_frac * total_steps)))
+    if step < warmup:
+        return base_lr * (step + 1) / warmup
+    decay = total_steps - warmup
+    progress = (step - warmup) / decay if decay > 0 else 1.0
+    return base_lr * 0.5 * (1.0 + math.cos(math.pi * min(progress, 1.0)))
+
+
+def make_optimizer(heads: AlignHeads, *, lr: float, weight_decay: float) -> AdamW:
+    """AdamW (betas 0.9/0.999) over both heads; torch's fused single-kernel variant, through
+    `tacgen_lib.optim` (no torch._dynamo import).
+
+    Fused AdamW is about 5x cheaper per step than the foreach variant on CPU and is
+    deterministic on CPU (checked by the reproducibility test).
+    """
+    return AdamW(
+        heads.parameters(), lr=lr, betas=(0.9, 0.999), weight_decay=weight_decay, fused=True
+    )
+
+
+def train_step(
+    heads: AlignHeads,
+    opt: AdamW,
+    v_batch: Tensor,
+    t_batch: Tensor,
+    *,
+    tau: float,
+    lr: float,
+    clip_grad: float,
+) -> float:
+    """One optimiser step on one batch of pairs; returns the batch's InfoNCE loss.
+
+    Sets the learning rate, forward through both heads, `info_nce`, backward, gradient-norm
+    clipping at `clip_grad` (<= 0 disables), AdamW step. This is the step `fit_heads` runs and
+    `benchmarks/bench_align.py` times.
+    """
+    for group in opt.param_groups:
+        group["lr"] = lr
+    z_v, z_t = heads(v_batch, t_batch)
+    loss = info_nce(z_v, z_t, tau)
+    opt.zero_grad(set_to_none=True)
+    loss.backward()
+    if clip_grad > 0:
+        torch.nn.utils.clip_grad_norm_(heads.parameters(), clip_grad, foreach=True)
+    opt.step()
+    return float(loss.detach())
+
+
+@dataclass
+class AlignResult:
+    """What `fit_heads` returns.
+
+    heads: {"vision": state_dict, "tactile": state_dict} of the best-validation weights.
+    dims: in_dim_v, in_dim_t, hidden_dim, out_dim. curve: one dict per evaluation with step
+    (optimiser steps done), epoch (epochs done, fractional), lr, train_loss (mean training
+    loss since the previous evaluation; None at step 0), val_loss, val_top1 (mean of v2t and t2v
+    top-1 over the whole validation set). best_step: step of the kept weights (0 = the
+    initialisation). seconds: wall time of the fit.
+    """
+
+    heads: dict[str, dict[str, Tensor]]
+    dims: dict[str, int]
+    config: dict[str, Any]
+    curve: list[dict[str, float | None]] = field(default_factory=list)
+    best_step: int = 0
+    best_val_loss: float = float("nan")
+    steps_run: int = 0
+    total_steps: int = 0
+    stopped_early: bool = False
+    seconds: float = 0.0
+
+    def module(self) -> AlignHeads:
+        """The best heads as an `AlignHeads` module in eval mode."""
+        return heads_from_state(self.dims, self.heads)
+
+
+def _as_index(idx: Sequence[int] | np.ndarray, n: int, name: str) -> np.ndarray:
+    arr = np.asarray(idx)
+    if arr.ndim != 1 or arr.size == 0 or not np.issubdtype(arr.dtype, np.integer):
+        raise ValueError(f"fit_heads: {name} must be a non-empty 1-D array of row positions")
+    if arr.min() < 0 or arr.max() >= n:
+        raise ValueError(f"fit_heads: {name} has positions outside [0, {n}) (the feature rows)")
+    if np.unique(arr).size != arr.size:
+        raise ValueError(f"fit_heads: {name} repeats row positions; pass each sample once")
+    return arr.astype(np.int64)
+
+
+def _state_copy(heads: AlignHeads) -> dict[str, dict[str, Tensor]]:
+    return {
+        "vision": {k: v.detach().clone() for k, v in heads.vision.state_dict().items()},
+        "tactile": {k: v.detach().clone() for k, v in heads.tactile.state_dict().items()},
+    }
+
+
+@torch.no_grad()
+def _evaluate(
+    heads: AlignHeads, v: Tensor, t: Tensor, val_idx: np.ndarray, tau: float, batch_size: int
+) -> tuple[float, float]:
+    """Validation loss (mean InfoNCE over fixed, balanced chunks of <= batch_size) and top-1."""
+    heads.eval()
+    chunks = np.array_split(val_idx, math.ceil(val_idx.size / batch_size))
+    zs_v, zs_t, loss_sum = [], [], 0.0
+    for chunk in chunks:
+        ix = torch.from_numpy(chunk)
+        z_v, z_t = heads(v[ix], t[ix])
+        loss_sum += float(info_nce(z_v, z_t, tau)) * chunk.size
+        zs_v.append(z_v)
+        zs_t.append(z_t)
+    heads.train()
+    metrics = paired_retrieval(torch.cat(zs_v).numpy(), torch.cat(zs_t).numpy())
+    top1 = 0.5 * (metrics["top1_v2t"] + metrics["top1_t2v"])
+    return loss_sum / val_idx.size, top1
+
+
+def fit_heads(
+    v: np.ndarray | Tensor,
+    t: np.ndarray | Tensor,
+    train_idx: Sequence[int] | np.ndarray,
+    val_idx: Sequence[int] | np.ndarray,
+    *,
+    tau: float,
+    seed: int,
+    settings: AlignSettings,
+    progress: Callable[[str], Any] | None = None,
+) -> AlignResult:
+    """Train the two projection heads with symmetric InfoNCE (paper eq. 1).
+
+    v: (N, dv) vision features, t: (N, dt) tactile features; row i of each is one sample.
+    train_idx / val_idx: disjoint row positions of the alignment train and held-out validation
+    samples (the caller takes them from the split edge; test rows must not be here).
+
+    settings: the training budget and optimiser (`AlignSettings`, from config ``align``).
+    Budget: ``"epochs"`` runs ``epochs * (n_train // B)`` steps, ``"steps"`` runs `steps`
+    steps, with ``B = min(batch_size, n_train)``. Each epoch is a fresh seeded permutation of
+    train_idx cut into full batches of B (the remainder of a permutation is dropped, so every
+    step sees B - 1 negatives per query). AdamW (betas 0.9/0.999, weight_decay), learning rate
+    `cosine_warmup_lr`, gradient-norm clipping at `clip_grad`.
+
+    Evaluation at step 0 and every `eval_every` steps (and at the last step): validation loss
+    and top-1; the weights with the lowest validation loss are kept. Early stopping after
+    `patience` consecutive evaluations without improvement (`patience=0` disables it).
+    Each step is `train_step` with the optimiser from `make_optimizer`.
+    Initialisation (torch.manual_seed(seed) in a forked RNG, so global RNG state is untouched)
+    and shuffling (numpy Generator(seed)) are seeded: on CPU, the same inputs, seed and
+    thread count give bit-identical weights.
+    """
+    started = time.perf_counter()
+    s = settings
+    budget, epochs, steps, batch_size = s.budget, s.epochs, s.steps, s.batch_size
+    lr, weight_decay, warmup_frac, clip_grad = s.lr, s.weight_decay, s.warmup_frac, s.clip_grad
+    patience, eval_every = s.patience, s.eval_every
+    v_t = as_features(v, "fit_heads: vision features v")
+    t_t = as_features(t, "fit_heads: tactile features t")
+    if v_t.shape[0] != t_t.shape[0]:
+        raise ValueError(
+            f"fit_heads: v has {v_t.shape[0]} rows but t has {t_t.shape[0]}; rows must be the "
+            "same samples in the same order (join on sample_id first)"
+        )
+    n = v_t.shape[0]
+    tr = _as_index(train_idx, n, "train_idx")
+    va = _as_index(val_idx, n, "val_idx")
+    overlap = np.intersect1d(tr, va)
+    if overlap.size:
+        raise ValueError(
+            f"fit_heads: {overlap.size} rows are in both train_idx and val_idx "
+            f"(first: position {int(overlap[0])}); validation rows must be held out"
+        )
+    if tr.size < 2:
+        raise ValueError("fit_heads: InfoNCE needs >= 2 training pairs (in-batch negatives)")
+    if budget not in ("epochs", "steps"):
+        raise ValueError(f"fit_heads: budget must be 'epochs' or 'steps', got {budget!r}")
+    for name, val, low in (("batch_size", batch_size, 2), ("eval_every", eval_every, 1)):
+        if int(val) != val or val < low:
+            raise ValueError(f"fit_heads: {name} must be an integer >= {low}, got {val!r}")
+    if patience < 0:
+        raise ValueError(f"fit_heads: patience must be >= 0 (0 disables), got {patience}")
+    if not (math.isfinite(tau) and tau > 0):
+        raise ValueError(f"fit_heads: tau must be > 0, got {tau!r}")
+
+    bsz = min(int(batch_size), tr.size)
+    steps_per_epoch = tr.size // bsz
+    if budget == "epochs":
+        if epochs < 1:
+            raise ValueError(f"fit_heads: budget 'epochs' needs epochs >= 1, got {epochs}")
+        total = int(epochs) * steps_per_epoch
+    else:
+        if steps < 1:
+            raise ValueError(f"fit_heads: budget 'steps' needs steps >= 1, got {steps}")
+        total = int(steps)
+
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(seed)
+        heads = AlignHeads(v_t.shape[1], t_t.shape[1])
+    heads.train()
+    opt = make_optimizer(heads, lr=lr, weight_decay=weight_decay)
+    rng = np.random.default_rng(seed)
+    config = {
+        "tau": float(tau),
+        "seed": int(seed),
+        "budget": budget,
+        "epochs": int(epochs),
+        "steps": int(steps),
+        "batch_size": bsz,
+        "lr": float(lr),
+        "weight_decay": float(weight_decay),
+        "warmup_frac": float(warmup_frac),
+        "clip_grad": float(clip_grad),
+        "patience": int(patience),
+        "eval_every": int(eval_every),
+        "n_train": int(tr.size),
+        "n_val": int(va.size),
+    }
+
+    curve: list[dict[str, float | None]] = []
+    best_state = _state_copy(heads)
+    best_loss, best_step, bad_evals = math.inf, 0, 0
+    running, running_n = 0.0, 0
+    stopped_early = False
+
+    def record(step: int, lr_now: float) -> bool:
+        """Evaluate; returns True when early stopping should fire."""
+        nonlocal best_state, best_loss, best_step, bad_evals, running, running_n
+        val_loss, val_top1 = _evaluate(heads, v_t, t_t, va, tau, bsz)
+        train_loss = running / running_n if running_n else None
+        running, running_n = 0.0, 0
+        curve.append(
+            {
+                "step": step,
+                "epoch": step / steps_per_epoch,
+                "lr": lr_now,
+                "train_loss": train_loss,
+                "val_loss": val_loss,
+                "val_top1": val_top1,
+            }
+        )
+        if val_loss < best_loss:
+            best_loss, best_step, bad_evals = val_loss, step, 0
+            best_state = _state_copy(heads)
+        else:
+            bad_evals += 1
+        if progress is not None:
+            progress(
+                f"align step {step}/{total} epoch {step / steps_per_epoch:.2f} "
+                f"lr {lr_now:.3g} train_loss {'-' if train_loss is None else f'{train_loss:.4f}'} "
+                f"val_loss {val_loss:.4f} "
+                f"val_top1 {val_top1:.4f} best_step {best_step}"
+            )
+        return patience > 0 and bad_evals >= patience
+
+    record(0, 0.0)
+    order = np.empty(0, dtype=np.int64)
+    step = 0
+    while step < total:
+        pos = step % steps_per_epoch
+        if pos == 0:
+            order = tr[rng.permutation(tr.size)]
+        ix = torch.from_numpy(order[pos * bsz : (pos + 1) * bsz])
+        lr_now = cosine_warmup_lr(step, total, lr, warmup_frac)
+        loss = train_step(heads, opt, v_t[ix], t_t[ix], tau=tau, lr=lr_now, clip_grad=clip_grad)
+        if not math.isfinite(loss):
+            raise FloatingPointError(
+                f"fit_heads: training loss became {loss} at step {step} "
+                f"(tau={tau}, lr={lr_now:.3g}); lower lr or raise tau"
+            )
+        running += loss
+        running_n += 1
+        step += 1
+        if step % eval_every == 0 or step == total:
+            if record(step, lr_now) and step < total:
+                stopped_early = True
+                break
+
+    return AlignResult(
+        heads=best_state,
+        dims=heads.dims(),
+        config=config,
+        curve=curve,
+        best_step=best_step,
+        best_val_loss=best_loss,
+        steps_run=step,
+        total_steps=total,
+        stopped_early=stopped_early,
+        seconds=time.perf_counter() - started,
+    )
