@@ -8,14 +8,13 @@ import numpy as np
 import pytest
 import torch
 
-from tacgen_lib.features.dino import (
-    DINOHead,
+from tacgen_lib.features.augment import multi_crop
+from tacgen_lib.features.dino import DINOHead, pretrain_dino
+from tacgen_lib.features.dino_losses import (
     collapse_diagnostics,
     dino_loss,
     dino_loss_terms,
     koleo_loss,
-    multi_crop,
-    pretrain_dino,
     sinkhorn_knopp,
 )
 from tacgen_lib.features.settings import DinoSettings

@@ -22,19 +22,20 @@ from scipy import linalg
 from snakemake.utils import update_config
 from snakemake_run import ROOT
 
-from tacgen_lib.generate.cells import guidance_text, sample_cells
-from tacgen_lib.generate.evaluate import (
+from tacgen_lib.generate.baselines import (
     BASELINE_INPUTS,
     TargetSpec,
     baselines_frame,
     baselines_from_frame,
-    cosine_pairing,
-    evaluate_generator,
-    fidelity,
     fit_baselines,
+)
+from tacgen_lib.generate.cells import guidance_text, sample_cells
+from tacgen_lib.generate.evaluate import evaluate_generator, shuffled_rows
+from tacgen_lib.generate.fidelity import (
+    cosine_pairing,
+    fidelity,
     frechet_distance,
     pairing_permutation,
-    shuffled_rows,
 )
 from tacgen_lib.generate.inference import DenoiserArrays, read_generator
 from tacgen_lib.generate.model import Denoiser, fit_standardiser, sinusoidal_embedding

@@ -1,6 +1,6 @@
 """DINO self-distillation pretraining of a per-modality ViT backbone (in-workflow, CPU).
 
-This module owns the DINO recipe (Caron et al. 2021) with DINOv2's image-level safeguards
+The DINO recipe (Caron et al. 2021) with DINOv2's image-level safeguards
 (Oquab et al. 2023): a student and a teacher of the same architecture (tacgen_lib.features.vit backbone +
 DINO projection head); the teacher is an exponential moving average (EMA) of the student; the
 teacher's logits are turned into targets by Sinkhorn-Knopp centring (`sinkhorn_knopp`, DINOv2)
@@ -28,12 +28,14 @@ Determinism: weights are initialised under a forked RNG seeded with `seed`, the 
 comes from numpy's Generator(seed) and augmentations from torch.Generator(seed), and the loop
 runs with torch.use_deterministic_algorithms(True) (restored afterwards). Same images + same
 arguments + same torch build and thread count => bit-identical weights and curve on CPU.
+
+The losses and the collapse diagnostics live in `dino_losses`, the multi-crop augmentation in
+`augment`; this module holds the head and the training loop (`pretrain_dino`).
 """
 
 from __future__ import annotations
 
 import copy
-import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -43,23 +45,19 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from tacgen_lib.features.extract import imagenet_normalise, to_unit_tensor
+from tacgen_lib.features.augment import multi_crop
+from tacgen_lib.features.dino_losses import (
+    CURVE_MEANS,
+    centre_and_sharpen,
+    collapse_diagnostics,
+    dino_cross_entropy,
+    koleo_loss,
+    sinkhorn_knopp,
+)
+from tacgen_lib.features.extract import to_unit_tensor
 from tacgen_lib.features.settings import DinoSettings
 from tacgen_lib.features.vit import PATCH_SIZE, DinoVisionTransformer, build_vit
 from tacgen_lib.optim import AdamW
-
-__all__ = [
-    "DINOHead",
-    "PretrainResult",
-    "collapse_diagnostics",
-    "dino_cross_entropy",
-    "dino_loss",
-    "dino_loss_terms",
-    "koleo_loss",
-    "multi_crop",
-    "pretrain_dino",
-    "sinkhorn_knopp",
-]
 
 
 class DINOHead(nn.Module):
@@ -101,245 +99,6 @@ class _Net(nn.Module):
         """(CLS features (B, D), head logits (B, K))."""
         cls = self.backbone(x)
         return cls, self.head(cls)
-
-
-def _check_logits(student_out: Tensor, teacher_out: Tensor) -> None:
-    if student_out.ndim != 3 or teacher_out.ndim != 3:
-        raise ValueError(
-            f"dino_loss: expected (crops, batch, K) logits, got student {tuple(student_out.shape)}"
-            f" and teacher {tuple(teacher_out.shape)}"
-        )
-    n_s, b, k = student_out.shape
-    n_t = teacher_out.shape[0]
-    if teacher_out.shape[1:] != (b, k) or n_t > n_s:
-        raise ValueError(
-            f"dino_loss: teacher {tuple(teacher_out.shape)} does not match student "
-            f"{tuple(student_out.shape)} (need same batch and K, teacher crops <= student crops)"
-        )
-    if n_s == n_t == 1:
-        raise ValueError("dino_loss: need at least one student crop the teacher did not see")
-
-
-def dino_cross_entropy(
-    student_out: Tensor, teacher_probs: Tensor, student_temp: float
-) -> tuple[Tensor, Tensor, Tensor]:
-    """DINO cross-entropy against given teacher targets: (loss, teacher entropy, KL).
-
-    student_out: (S, B, K) student logits for S crops, the first T of which are the global
-    crops the teacher saw; teacher_probs: (T, B, K) teacher distributions (rows sum to 1, from
-    `sinkhorn_knopp` or centring + sharpening). The student's distribution is
-    log_softmax(student / student_temp). The loss averages -sum_k p_t log p_s over all
-    (teacher crop t, student crop s) pairs with s != t and over the batch; the per-sample
-    teacher entropy and KL(teacher || student) are averaged the same way (loss = entropy + KL).
-    """
-    _check_logits(student_out, teacher_probs)
-    if not 0 < student_temp:
-        raise ValueError(f"dino_loss: student temperature must be > 0, got {student_temp}")
-    n_s, b, _ = student_out.shape
-    n_t = teacher_probs.shape[0]
-    pair_mask = torch.ones(n_t, n_s, dtype=torch.bool)
-    pair_mask[torch.arange(n_t), torch.arange(n_t)] = False
-    log_p_s = F.log_softmax(student_out / student_temp, dim=-1)
-    # cross-entropy for every (teacher crop, student crop) pair, averaged over the batch
-    ce = -torch.einsum("tbk,sbk->ts", teacher_probs, log_p_s) / b
-    entropy_t = _entropy(teacher_probs).mean(-1)  # (T,)
-    n_pairs = pair_mask.sum()
-    loss = ce[pair_mask].sum() / n_pairs
-    entropy = (entropy_t[:, None].expand(n_t, n_s)[pair_mask]).sum() / n_pairs
-    return loss, entropy, loss - entropy
-
-
-def _entropy(p: Tensor) -> Tensor:
-    """Shannon entropy (nats) over the last axis, 0 log 0 = 0."""
-    return -torch.special.xlogy(p, p).sum(-1)
-
-
-def dino_loss_terms(
-    student_out: Tensor,
-    teacher_out: Tensor,
-    center: Tensor,
-    student_temp: float,
-    teacher_temp: float,
-) -> tuple[Tensor, Tensor, Tensor]:
-    """DINO cross-entropy with a centred teacher (DINO v1): (loss, teacher entropy, KL).
-
-    teacher_out: (T, B, K) teacher logits; center: (K,) or (1, K). The teacher distribution is
-    softmax((teacher - center) / teacher_temp); see `dino_cross_entropy` for the rest.
-    Log-sum-exp throughout, so constant, identical or single-sample batches and large logits
-    stay finite.
-    """
-    _check_logits(student_out, teacher_out)
-    if not (0 < teacher_temp and 0 < student_temp):
-        raise ValueError(f"dino_loss: temperatures must be > 0, got {student_temp}, {teacher_temp}")
-    p_t = _centre_and_sharpen(teacher_out, center, teacher_temp)
-    return dino_cross_entropy(student_out, p_t, student_temp)
-
-
-def _centre_and_sharpen(teacher_out: Tensor, center: Tensor, teacher_temp: float) -> Tensor:
-    """DINO v1 teacher targets: softmax((teacher_out - center) / teacher_temp) over K."""
-    k = teacher_out.shape[-1]
-    return F.softmax((teacher_out - center.reshape(1, 1, k)) / teacher_temp, dim=-1)
-
-
-def sinkhorn_knopp(teacher_out: Tensor, teacher_temp: float, n_iterations: int = 3) -> Tensor:
-    """Sinkhorn-Knopp centring of teacher logits (SwAV; DINOv2's replacement for the centre).
-
-    teacher_out: (..., K) logits; all leading axes together are the N rows of one batch (DINOv2
-    normalises both global crops jointly). Starting from Q = exp(logits / teacher_temp), each
-    iteration rescales every prototype (column) to total mass N/K and then every row to mass 1,
-    as DINOv2's `sinkhorn_knopp_teacher`; the result (same shape) has rows summing to 1 exactly
-    and columns approaching N/K (equipartition) as n_iterations grows. Computed in the log
-    domain, so huge logits and small temperatures stay finite. A batch whose rows are all equal
-    gets uniform rows, which is why SK alone does not prevent representation collapse (see
-    `koleo_loss`).
-    """
-    if not 0 < teacher_temp:
-        raise ValueError(f"sinkhorn_knopp: teacher_temp must be > 0, got {teacher_temp}")
-    if n_iterations < 1:
-        raise ValueError(f"sinkhorn_knopp: n_iterations must be >= 1, got {n_iterations}")
-    shape = teacher_out.shape
-    log_q = (teacher_out.reshape(-1, shape[-1]) / teacher_temp).float()
-    n, k = log_q.shape
-    for _ in range(n_iterations):
-        log_q = log_q - torch.logsumexp(log_q, dim=0, keepdim=True) + math.log(n / k)
-        log_q = log_q - torch.logsumexp(log_q, dim=1, keepdim=True)
-    return log_q.exp().reshape(shape).to(teacher_out.dtype)
-
-
-def koleo_loss(features: Tensor, eps: float = 1e-8) -> Tensor:
-    """KoLeo regulariser (DINOv2, after Sablayrolles et al. 2019): -mean_i log d(x_i, NN(x_i)).
-
-    features: (B, D), l2-normalised here; d is the Euclidean distance from each row to its
-    nearest other row (torch pairwise_distance with `eps`, as DINOv2). Minimising it spreads
-    the batch over the sphere (the Kozachenko-Leonenko entropy estimator, up to constants).
-    Identical rows give -log(~eps*sqrt(D)), large but finite with finite gradients; a batch of
-    one row has no neighbour and gives 0.
-    """
-    if features.ndim != 2:
-        raise ValueError(f"koleo_loss: expected (batch, dim) features, got {tuple(features.shape)}")
-    b = features.shape[0]
-    if b < 2:
-        return features.sum() * 0.0
-    x = F.normalize(features, dim=-1, eps=eps)
-    with torch.no_grad():
-        dots = x @ x.T
-        dots.fill_diagonal_(-2.0)  # never its own neighbour (cosines are >= -1)
-        nn_idx = dots.argmax(dim=1)
-    return -torch.log(F.pairwise_distance(x, x[nn_idx], p=2, eps=eps) + eps).mean()
-
-
-def dino_loss(
-    student_out: Tensor,
-    teacher_out: Tensor,
-    center: Tensor,
-    student_temp: float,
-    teacher_temp: float,
-) -> Tensor:
-    """DINO self-distillation loss (see `dino_loss_terms` for shapes and definition)."""
-    return dino_loss_terms(student_out, teacher_out, center, student_temp, teacher_temp)[0]
-
-
-_CURVE_MEANS = (
-    "loss",
-    "teacher_entropy",
-    "kl",
-    "koleo",
-    "teacher_batch_entropy",
-    "teacher_cls_cosine",
-)
-
-
-def collapse_diagnostics(teacher_probs: Tensor, teacher_cls: Tensor) -> dict[str, float]:
-    """Two collapse read-outs of one teacher batch (averaged over its global crops).
-
-    teacher_probs: (T, B, K) teacher targets; teacher_cls: (T, B, D) teacher CLS features.
-    teacher_batch_entropy: entropy of the batch-mean target, H(mean_b p_b). With the per-sample
-    entropy mean_b H(p_b) it brackets the two collapses: one-prototype collapse has both near 0,
-    uniform collapse both near ln K; a healthy teacher has per-sample low and batch-mean high
-    (their difference is the mutual information between image and prototype, <= ln B).
-    teacher_cls_cosine: mean cosine between the CLS features of different images (-> 1 when the
-    representation collapses to a constant).
-    """
-    if teacher_probs.ndim != 3 or teacher_cls.ndim != 3:
-        raise ValueError(
-            f"collapse_diagnostics: expected (crops, batch, .) tensors, got "
-            f"{tuple(teacher_probs.shape)} and {tuple(teacher_cls.shape)}"
-        )
-    batch_h = _entropy(teacher_probs.double().mean(dim=1)).mean()
-    b = teacher_cls.shape[1]
-    if b < 2:
-        cos = torch.tensor(1.0, dtype=torch.float64)
-    else:
-        z = F.normalize(teacher_cls.double(), dim=-1, eps=1e-12)
-        gram = z @ z.transpose(1, 2)  # (T, B, B)
-        cos = (gram.sum((1, 2)) - gram.diagonal(dim1=1, dim2=2).sum(-1)) / (b * (b - 1))
-        cos = cos.mean()
-    return {"teacher_batch_entropy": float(batch_h), "teacher_cls_cosine": float(cos)}
-
-
-def _random_resized_crop(
-    x: Tensor, size: int, scale: tuple[float, float], gen: torch.Generator
-) -> Tensor:
-    """Per-image random resized crop (area fraction in `scale`, aspect 3/4..4/3) + h-flip."""
-    b = x.shape[0]
-    u = torch.rand(b, 6, generator=gen, dtype=torch.float64)
-    area = scale[0] + (scale[1] - scale[0]) * u[:, 0]
-    log_ratio = math.log(3 / 4) + (math.log(4 / 3) - math.log(3 / 4)) * u[:, 1]
-    ratio = torch.exp(log_ratio)
-    cw = torch.sqrt(area * ratio).clamp(max=1.0)  # crop width / image width
-    ch = torch.sqrt(area / ratio).clamp(max=1.0)
-    cx = (1 - cw) * (2 * u[:, 2] - 1)  # crop centre in [-1, 1] coordinates
-    cy = (1 - ch) * (2 * u[:, 3] - 1)
-    flip = torch.where(u[:, 4] < 0.5, -1.0, 1.0).to(torch.float64)
-    theta = torch.zeros(b, 2, 3, dtype=torch.float64)
-    theta[:, 0, 0] = cw * flip
-    theta[:, 0, 2] = cx
-    theta[:, 1, 1] = ch
-    theta[:, 1, 2] = cy
-    grid = F.affine_grid(theta.to(x.dtype), [b, 3, size, size], align_corners=False)
-    return F.grid_sample(x, grid, mode="bilinear", padding_mode="reflection", align_corners=False)
-
-
-def _colour_jitter(x: Tensor, gen: torch.Generator, strength: float) -> Tensor:
-    """Brightness, contrast, saturation jitter (p=0.8) then random greyscale (p=0.2)."""
-    b = x.shape[0]
-    u = torch.rand(b, 5, generator=gen)
-    on = (u[:, 0] < 0.8).view(b, 1, 1, 1)
-    bright = (1 + strength * (2 * u[:, 1] - 1)).view(b, 1, 1, 1)
-    contrast = (1 + strength * (2 * u[:, 2] - 1)).view(b, 1, 1, 1)
-    sat = (1 + strength * (2 * u[:, 3] - 1)).view(b, 1, 1, 1)
-    lum_w = torch.tensor([0.299, 0.587, 0.114], dtype=x.dtype).view(1, 3, 1, 1)
-    y = (x * bright).clamp(0, 1)
-    mean = (y * lum_w).sum(1, keepdim=True).mean((2, 3), keepdim=True)
-    y = ((y - mean) * contrast + mean).clamp(0, 1)
-    grey = (y * lum_w).sum(1, keepdim=True)
-    y = ((y - grey) * sat + grey).clamp(0, 1)
-    y = torch.where(on, y, x)
-    to_grey = (u[:, 4] < 0.2).view(b, 1, 1, 1)
-    return torch.where(to_grey, (y * lum_w).sum(1, keepdim=True).expand_as(y), y)
-
-
-def multi_crop(
-    x: Tensor,
-    gen: torch.Generator,
-    *,
-    global_size: int,
-    local_size: int,
-    n_local: int,
-    global_scale: tuple[float, float] = (0.4, 1.0),
-    local_scale: tuple[float, float] = (0.05, 0.4),
-    jitter: float = 0.4,
-) -> list[Tensor]:
-    """DINO multi-crop of a batch (B, 3, H, W) in [0, 1]: 2 global then n_local local views.
-
-    Each view is ImageNet-normalised and ready for the backbone.
-    """
-    views = []
-    for i in range(2 + n_local):
-        size, scale = (global_size, global_scale) if i < 2 else (local_size, local_scale)
-        v = _colour_jitter(_random_resized_crop(x, size, scale, gen), gen, jitter)
-        views.append(imagenet_normalise(v))
-    return views
 
 
 @dataclass
@@ -507,7 +266,7 @@ def pretrain_dino(
         for epoch in range(epochs):
             t0 = time.perf_counter()
             perm = order_rng.permutation(n)
-            sums = dict.fromkeys(_CURVE_MEANS, 0.0)
+            sums = dict.fromkeys(CURVE_MEANS, 0.0)
             student.train()
             for bi in range(steps_per_epoch):
                 idx = torch.from_numpy(perm[bi * batch_size : (bi + 1) * batch_size])
@@ -529,7 +288,7 @@ def pretrain_dino(
                     else:
                         if center is None:
                             center = t_out.mean(dim=(0, 1)).view(1, out_dim)
-                        p_t = _centre_and_sharpen(t_out, center, t_temp)
+                        p_t = centre_and_sharpen(t_out, center, t_temp)
                 s_cls, s_glob = student(torch.cat(views[:2]))
                 s_glob = s_glob.view(2, b, out_dim)
                 if n_local_crops:

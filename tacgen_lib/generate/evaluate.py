@@ -38,144 +38,36 @@ test latents, beside the Frechet distance between the real train and real test l
 distance two real samples of these sizes already have). Cosines are taken after centring on
 the real train mean (ViT features share a large common component that makes every cosine
 near 1).
+
+The fidelity measures live in `fidelity`, the baselines fitted once per corpus in `baselines`;
+this module evaluates one generator's cells against them (`evaluate_generator`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
-from scipy import linalg
-from scipy.spatial.distance import pdist
-from sklearn.kernel_approximation import Nystroem
 
-from tacgen_lib.corpus.splits import assert_trainable
+from tacgen_lib.generate.baselines import (
+    BASELINE_INPUTS,
+    Baselines,
+    TargetSpec,
+    feature_block,
+)
+from tacgen_lib.generate.fidelity import (
+    PERMUTATION_COLUMNS,
+    fidelity,
+)
 from tacgen_lib.probes.bootstrap import fixed_test_bootstrap, resample_indices
 from tacgen_lib.probes.fit import FittedProbe, fit_probe
 from tacgen_lib.probes.logistic import FixedLogistic
-from tacgen_lib.probes.rows import FamilyRows, family_rows, strata_for
+from tacgen_lib.probes.rows import FamilyRows
 from tacgen_lib.probes.settings import ProbeSettings
-
-__all__ = [
-    "INPUTS",
-    "FIDELITY_COLUMNS",
-    "PERMUTATION_COLUMNS",
-    "BASELINE_INPUTS",
-    "Baselines",
-    "TargetSpec",
-    "baselines_frame",
-    "baselines_from_frame",
-    "cosine_pairing",
-    "evaluate_generator",
-    "fit_baselines",
-    "target_specs",
-    "fidelity",
-    "frechet_distance",
-    "nonlinear_baseline",
-    "pairing_permutation",
-    "shuffled_rows",
-]
 
 #: What is added to V in a summary row.
 INPUTS = ("t_real", "t_gen", "t_gen_shuffled", "v_nonlinear")
-FIDELITY_COLUMNS = ("cos_matched", "cos_offdiag", "pairing_p", "frechet", "frechet_real_ref")
-#: Columns of the permutation-draw table (one row per cell, target and permutation).
-PERMUTATION_COLUMNS = (
-    "row_id",
-    "corpus",
-    "seed",
-    "target",
-    "sampler",
-    "guidance",
-    "steps",
-    "permutation",
-    "statistic",
-    "observed",
-)
-
-
-def frechet_distance(a: np.ndarray, b: np.ndarray) -> float:
-    """Frechet distance between Gaussians fitted to the rows of `a` and `b` (float64).
-
-    ||mu_a - mu_b||^2 + tr(S_a + S_b - 2 (S_a^1/2 S_b S_a^1/2)^1/2): the symmetric form, whose
-    square roots are of PSD matrices (eigh, negative round-off eigenvalues set to 0), so it
-    stays real and finite where sqrtm(S_a S_b) can turn complex.
-    """
-    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
-    if a.ndim != 2 or b.ndim != 2 or a.shape[1] != b.shape[1] or len(a) < 2 or len(b) < 2:
-        raise ValueError(
-            f"frechet_distance: need (n >= 2, d) arrays of one d, got {a.shape}, {b.shape}"
-        )
-    mu = a.mean(0) - b.mean(0)
-    s_a, s_b = np.cov(a, rowvar=False), np.cov(b, rowvar=False)
-
-    def psd_sqrt(m: np.ndarray) -> np.ndarray:
-        w, v = linalg.eigh((m + m.T) / 2.0)
-        return (v * np.sqrt(np.clip(w, 0.0, None))) @ v.T
-
-    r = psd_sqrt(s_a)
-    cross = psd_sqrt(r @ s_b @ r)
-    return float(max(mu @ mu + np.trace(s_a) + np.trace(s_b) - 2.0 * np.trace(cross), 0.0))
-
-
-def _unit(x: np.ndarray) -> np.ndarray:
-    n = np.linalg.norm(x, axis=1, keepdims=True)
-    return x / np.where(n > 0, n, 1.0)
-
-
-def cosine_pairing(gen: np.ndarray, real: np.ndarray) -> tuple[float, float]:
-    """(mean cos(gen_i, real_i), mean over i != j of cos(gen_i, real_j)); rows already centred."""
-    g, r = _unit(np.asarray(gen, np.float64)), _unit(np.asarray(real, np.float64))
-    sims = g @ r.T
-    n = sims.shape[0]
-    matched = float(np.mean(np.diag(sims)))
-    off = float((sims.sum() - np.trace(sims)) / (n * (n - 1))) if n > 1 else float("nan")
-    return matched, off
-
-
-def pairing_permutation(
-    gen: np.ndarray, real: np.ndarray, n_permutations: int, seed: int
-) -> tuple[float, np.ndarray, float]:
-    """Matched mean cosine against `n_permutations` re-pairings of generated and real rows.
-
-    Returns (observed, permuted statistics, one-sided p = (1 + #{perm >= observed}) / (1 + B)).
-    """
-    g, r = _unit(np.asarray(gen, np.float64)), _unit(np.asarray(real, np.float64))
-    sims = g @ r.T
-    n = sims.shape[0]
-    observed = float(np.mean(np.diag(sims)))
-    if n_permutations <= 0:
-        return observed, np.zeros(0), float("nan")
-    rng = np.random.default_rng(seed)
-    perms = np.argsort(rng.random((n_permutations, n)), axis=1, kind="stable")
-    null = sims[perms, np.arange(n)[None, :]].mean(axis=1)
-    p = float((1 + np.sum(null >= observed)) / (1 + n_permutations))
-    return observed, null, p
-
-
-def fidelity(
-    gen_test: np.ndarray,
-    real_test: np.ndarray,
-    real_train: np.ndarray,
-    *,
-    n_permutations: int,
-    seed: int,
-) -> tuple[dict[str, float], np.ndarray]:
-    """The cell's fidelity columns (`FIDELITY_COLUMNS`) and its permutation distribution."""
-    centre = np.asarray(real_train, np.float64).mean(axis=0)
-    g, r = np.asarray(gen_test, np.float64) - centre, np.asarray(real_test, np.float64) - centre
-    matched, off = cosine_pairing(g, r)
-    _, null, p = pairing_permutation(g, r, n_permutations, seed)
-    out = {
-        "cos_matched": matched,
-        "cos_offdiag": off,
-        "pairing_p": p,
-        "frechet": frechet_distance(gen_test, real_test),
-        "frechet_real_ref": frechet_distance(real_train, real_test),
-    }
-    return out, null
 
 
 def shuffled_rows(n: int, seed: int) -> np.ndarray:
@@ -192,242 +84,9 @@ def shuffled_rows(n: int, seed: int) -> np.ndarray:
     return perm
 
 
-def _standardise(train: np.ndarray, test: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    mu, sd = train.mean(0), train.std(0)
-    sd = np.where(sd > 0, sd, 1.0)
-    return (train - mu) / sd, (test - mu) / sd
-
-
-def nonlinear_baseline(
-    v_train: np.ndarray,
-    v_test: np.ndarray,
-    rows: FamilyRows,
-    settings: ProbeSettings,
-    *,
-    gammas: Sequence[float],
-    n_components: int,
-    seed: int,
-) -> tuple[FittedProbe, float]:
-    """The nonlinear V-only baseline: the family's probe on [V, phi(V)], tuned on train rows.
-
-    phi: RBF Nystroem features of standardised V (fitted on the train rows), gamma =
-    multiple / median squared train distance; the multiple with the best CV score wins.
-    Returns the fitted probe and the chosen gamma.
-    """
-    z_tr, z_te = _standardise(np.asarray(v_train, np.float64), np.asarray(v_test, np.float64))
-    sub = z_tr[: min(len(z_tr), 500)]
-    # pairwise squared distances i < j (pdist: no (n, n, d) temporary)
-    med = float(np.median(pdist(sub, "sqeuclidean"))) if len(sub) > 1 else 1.0
-    med = med if med > 0 else 1.0
-    best: tuple[float, FittedProbe, float] | None = None
-    for mult in gammas:
-        gamma = float(mult) / med
-        k = min(n_components, len(z_tr))
-        phi = Nystroem(kernel="rbf", gamma=gamma, n_components=k, random_state=seed).fit(z_tr)
-        x_tr = np.hstack([v_train, phi.transform(z_tr)])
-        x_te = np.hstack([v_test, phi.transform(z_te)])
-        fit = fit_probe(
-            x_tr, rows.y_train, x_te, settings, train_ids=rows.train_ids, test_ids=rows.test_ids
-        )
-        cv = float(np.nanmax(fit.cv_scores))
-        if best is None or cv > best[0]:
-            best = (cv, fit, gamma)
-    assert best is not None
-    return best[1], best[2]
-
-
-@dataclass(frozen=True)
-class TargetSpec:
-    """One generator target: a probe family's rows and settings, and its name."""
-
-    name: str
-    rows: FamilyRows
-    settings: ProbeSettings
-
-
-def target_specs(
-    manifest: pd.DataFrame,
-    splits: pd.DataFrame,
-    *,
-    corpus: str,
-    targets: Mapping[str, str],
-    corpus_config: Mapping,
-    probes_config: Mapping,
-    probe_seed: int,
-    rule: str,
-) -> list[TargetSpec]:
-    """The `TargetSpec` of each generator target of `corpus` (target -> ridge | logistic).
-
-    The probes' rows (`family_rows`, the probes stage's strata) train on train + val rows, as
-    in the probes stage: `assert_trainable` refuses any test row in them, naming `rule`.
-    """
-    out = []
-    for target, kind in targets.items():
-        rows = family_rows(
-            manifest,
-            splits,
-            corpus=corpus,
-            target=target,
-            kind=kind,
-            strata=strata_for(corpus_config),
-        )
-        assert_trainable(rows.train_ids, splits, rule=rule, allowed=("train", "val"))
-        out.append(
-            TargetSpec(target, rows, ProbeSettings.from_config(probes_config, kind, probe_seed))
-        )
-    return out
-
-
-#: The probes of the baselines edge, by what they fit: V alone, V + T_real, V + phi(V).
-BASELINE_INPUTS = ("v", "t_real", "v_nonlinear")
-#: Columns of the baselines edge (one row per target x baseline input x test row).
-BASELINE_COLUMNS = (
-    "row_id",
-    "corpus",
-    "target",
-    "kind",
-    "input",
-    "sample_id",
-    "prediction",
-    "label",
-    "reg",
-    "nonlinear_gamma",
-)
-
-
-def _block(source: Mapping[str, np.ndarray], ids: np.ndarray) -> np.ndarray:
-    """Rows `ids` of a sample_id -> vector mapping, stacked as float64."""
-    return np.stack([source[i] for i in ids]).astype(np.float64)
-
-
-@dataclass(frozen=True)
-class Baselines:
-    """The probes of one target that no generator changes, fitted once per corpus.
-
-    ``pred``: input (`BASELINE_INPUTS`) -> test predictions in ``rows.test_ids`` order (floats
-    for ridge, labels for logistic); ``reg``: input -> the lambda or C its CV chose;
-    ``gamma``: the nonlinear baseline's RBF gamma.
-    """
-
-    target: str
-    pred: Mapping[str, np.ndarray]
-    reg: Mapping[str, float]
-    gamma: float
-
-
-def fit_baselines(
-    spec: TargetSpec,
-    vision: Mapping[str, np.ndarray],
-    t_real: Mapping[str, np.ndarray],
-    *,
-    gammas: Sequence[float],
-) -> Baselines:
-    """V alone, V + T_real and the nonlinear V baseline of one target (module docstring).
-
-    Nothing here depends on a generator, so one fit per corpus serves every generator seed;
-    the nonlinear baseline's Nystroem draw uses the probe seed.
-    """
-    rows, ps = spec.rows, spec.settings
-    v_tr, v_te = _block(vision, rows.train_ids), _block(vision, rows.test_ids)
-    t_tr, t_te = _block(t_real, rows.train_ids), _block(t_real, rows.test_ids)
-
-    def fit(x_tr: np.ndarray, x_te: np.ndarray) -> FittedProbe:
-        return fit_probe(
-            x_tr, rows.y_train, x_te, ps, train_ids=rows.train_ids, test_ids=rows.test_ids
-        )
-
-    v_fit, real_fit = fit(v_tr, v_te), fit(np.hstack([v_tr, t_tr]), np.hstack([v_te, t_te]))
-    nl, gamma = nonlinear_baseline(
-        v_tr, v_te, rows, ps, gammas=gammas, n_components=t_tr.shape[1], seed=ps.seed
-    )
-    fits = {"v": v_fit, "t_real": real_fit, "v_nonlinear": nl}
-    return Baselines(
-        spec.name,
-        {k: f.pred_test for k, f in fits.items()},
-        {k: float(f.reg) for k, f in fits.items()},
-        float(gamma),
-    )
-
-
-def baselines_frame(
-    corpus: str, specs: Sequence[TargetSpec], fits: Sequence[Baselines]
-) -> pd.DataFrame:
-    """The baselines edge: one row per target x input x test row (`BASELINE_COLUMNS`).
-
-    Ridge predictions go to ``prediction`` (float64, bit-exact through Parquet), logistic
-    labels to ``label`` (the targets' labels are strings); the other column is NaN / "".
-    """
-    out = []
-    for spec, b in zip(specs, fits, strict=True):
-        if spec.name != b.target:
-            raise ValueError(f"baselines_frame: target {spec.name!r} got the fit of {b.target!r}")
-        logistic = spec.settings.kind == "logistic"
-        for inp in BASELINE_INPUTS:
-            pred = np.asarray(b.pred[inp])
-            for sid, value in zip(spec.rows.test_ids, pred, strict=True):
-                out.append(
-                    {
-                        "row_id": f"{spec.name}|{inp}|{sid}",
-                        "corpus": corpus,
-                        "target": spec.name,
-                        "kind": spec.settings.kind,
-                        "input": inp,
-                        "sample_id": str(sid),
-                        "prediction": np.nan if logistic else float(value),
-                        "label": str(value) if logistic else "",
-                        "reg": b.reg[inp],
-                        "nonlinear_gamma": b.gamma,
-                    }
-                )
-    return pd.DataFrame(out, columns=list(BASELINE_COLUMNS))
-
-
-def baselines_from_frame(
-    frame: pd.DataFrame, specs: Sequence[TargetSpec], *, source: str = "baselines edge"
-) -> dict[str, Baselines]:
-    """Target -> `Baselines` read back from `baselines_frame`'s rows, checked against `specs`.
-
-    Every target and input must hold exactly the spec's test rows (same sample_ids), and
-    every logistic label must be a class of the training rows; anything else is an error
-    naming `source`, the target and the offending sample_id (the edge was built from other
-    splits or another probe config).
-    """
-    out: dict[str, Baselines] = {}
-    for spec in specs:
-        rows, logistic = spec.rows, spec.settings.kind == "logistic"
-        sub = frame[frame["target"] == spec.name]
-        if sub.empty:
-            raise ValueError(f"{source}: no rows for target {spec.name!r}")
-        pred, reg = {}, {}
-        want = [str(i) for i in rows.test_ids]
-        classes = {str(c): c for c in np.unique(rows.y_train)}
-        for inp in BASELINE_INPUTS:
-            part = sub[sub["input"] == inp].set_index("sample_id")
-            got = set(part.index)
-            missing = [i for i in want if i not in got]
-            extra = sorted(got - set(want))
-            if missing or extra:
-                bad = (missing or extra)[0]
-                raise ValueError(
-                    f"{source}: target {spec.name!r} input {inp!r} does not hold this "
-                    f"evaluation's test rows ({len(missing)} missing, {len(extra)} extra; "
-                    f"sample_id {bad!r}): rebuild it from the same splits and probe config"
-                )
-            part = part.loc[want]
-            if logistic:
-                unknown = part.index[~part["label"].isin(list(classes))]
-                if len(unknown):
-                    raise ValueError(
-                        f"{source}: target {spec.name!r} input {inp!r}, sample_id "
-                        f"{unknown[0]!r}: label {part.loc[unknown[0], 'label']!r} is not a "
-                        f"training class ({sorted(classes)})"
-                    )
-                pred[inp] = np.array([classes[x] for x in part["label"]], dtype=object)
-            else:
-                pred[inp] = part["prediction"].to_numpy(dtype=np.float64)
-            reg[inp] = float(part["reg"].iloc[0])
-        out[spec.name] = Baselines(spec.name, pred, reg, float(sub["nonlinear_gamma"].iloc[0]))
-    return out
+#: ``reg_source`` of a probe whose regulariser was chosen by its own CV / taken from the
+#: reference cell's CV of the same input kind (logistic t_gen and t_gen_shuffled only).
+REG_CV, REG_REFERENCE = "cv", "reference cell"
 
 
 def _row(base: dict, inp: str, boot: dict, vs_nl: dict | None) -> dict:
@@ -444,11 +103,6 @@ def _row(base: dict, inp: str, boot: dict, vs_nl: dict | None) -> dict:
         "ci_low_vs_nonlinear": np.nan if vs_nl is None else vs_nl["ci_low"],
         "ci_high_vs_nonlinear": np.nan if vs_nl is None else vs_nl["ci_high"],
     }
-
-
-#: ``reg_source`` of a probe whose regulariser was chosen by its own CV / taken from the
-#: reference cell's CV of the same input kind (logistic t_gen and t_gen_shuffled only).
-REG_CV, REG_REFERENCE = "cv", "reference cell"
 
 
 def _cell_order(
@@ -497,8 +151,8 @@ def evaluate_generator(
     fid_cache: dict[tuple, dict] = {}
     for spec in targets:
         rows, ps = spec.rows, spec.settings
-        v_tr, v_te = _block(vision, rows.train_ids), _block(vision, rows.test_ids)
-        t_tr, t_te = _block(t_real, rows.train_ids), _block(t_real, rows.test_ids)
+        v_tr, v_te = feature_block(vision, rows.train_ids), feature_block(vision, rows.test_ids)
+        t_tr, t_te = feature_block(t_real, rows.train_ids), feature_block(t_real, rows.test_ids)
         # one draw of the 5,000 test resamples, shared by every bootstrap of this target
         resamples = resample_indices(
             len(rows.y_test), ps.bootstrap, ps.seed, strata=rows.strata_test
@@ -593,9 +247,9 @@ def evaluate_generator(
                 "guidance": float(guidance),
                 "steps": int(steps),
             }
-            g_tr, g_te = _block(gen, rows.train_ids), _block(gen, rows.test_ids)
+            g_tr, g_te = feature_block(gen, rows.train_ids), feature_block(gen, rows.test_ids)
             shuf = {i: gen[shuffled_of[i]] for i in vision}
-            s_tr, s_te = _block(shuf, rows.train_ids), _block(shuf, rows.test_ids)
+            s_tr, s_te = feature_block(shuf, rows.train_ids), feature_block(shuf, rows.test_ids)
             p_gen, reg_gen, src_gen = fit_cell(
                 "t_gen", np.hstack([v_tr, g_tr]), np.hstack([v_te, g_te])
             )

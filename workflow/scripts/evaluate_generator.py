@@ -3,7 +3,8 @@ baselines (rule evaluate_generator)."""
 
 from threadpoolctl import threadpool_limits
 
-from tacgen_lib.generate.evaluate import baselines_from_frame, evaluate_generator, target_specs
+from tacgen_lib.generate.baselines import baselines_from_frame, target_specs
+from tacgen_lib.generate.evaluate import evaluate_generator
 from tacgen_lib.generate.settings import GenerateSettings
 from tacgen_lib.io import edges, log
 

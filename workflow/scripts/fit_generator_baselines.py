@@ -3,7 +3,7 @@ every generator seed (rule fit_generator_baselines)."""
 
 from threadpoolctl import threadpool_limits
 
-from tacgen_lib.generate.evaluate import baselines_frame, fit_baselines, target_specs
+from tacgen_lib.generate.baselines import baselines_frame, fit_baselines, target_specs
 from tacgen_lib.generate.settings import GenerateSettings
 from tacgen_lib.io import edges, log
 

@@ -1,0 +1,259 @@
+"""The probes no generator changes, fitted once per corpus: V alone, V + real T and the nonlinear
+V-only baseline (V + RBF Nyström features of V, gamma and regulariser by CV on train rows), with
+their test predictions as an edge every generator's evaluation reads (and checks).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from scipy.spatial.distance import pdist
+from sklearn.kernel_approximation import Nystroem
+
+from tacgen_lib.corpus.splits import assert_trainable
+from tacgen_lib.probes.fit import FittedProbe, fit_probe
+from tacgen_lib.probes.rows import FamilyRows, family_rows, strata_for
+from tacgen_lib.probes.settings import ProbeSettings
+
+
+@dataclass(frozen=True)
+class TargetSpec:
+    """One generator target: a probe family's rows and settings, and its name."""
+
+    name: str
+    rows: FamilyRows
+    settings: ProbeSettings
+
+
+def target_specs(
+    manifest: pd.DataFrame,
+    splits: pd.DataFrame,
+    *,
+    corpus: str,
+    targets: Mapping[str, str],
+    corpus_config: Mapping,
+    probes_config: Mapping,
+    probe_seed: int,
+    rule: str,
+) -> list[TargetSpec]:
+    """The `TargetSpec` of each generator target of `corpus` (target -> ridge | logistic).
+
+    The probes' rows (`family_rows`, the probes stage's strata) train on train + val rows, as
+    in the probes stage: `assert_trainable` refuses any test row in them, naming `rule`.
+    """
+    out = []
+    for target, kind in targets.items():
+        rows = family_rows(
+            manifest,
+            splits,
+            corpus=corpus,
+            target=target,
+            kind=kind,
+            strata=strata_for(corpus_config),
+        )
+        assert_trainable(rows.train_ids, splits, rule=rule, allowed=("train", "val"))
+        out.append(
+            TargetSpec(target, rows, ProbeSettings.from_config(probes_config, kind, probe_seed))
+        )
+    return out
+
+
+def _standardise(train: np.ndarray, test: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    mu, sd = train.mean(0), train.std(0)
+    sd = np.where(sd > 0, sd, 1.0)
+    return (train - mu) / sd, (test - mu) / sd
+
+
+def nonlinear_baseline(
+    v_train: np.ndarray,
+    v_test: np.ndarray,
+    rows: FamilyRows,
+    settings: ProbeSettings,
+    *,
+    gammas: Sequence[float],
+    n_components: int,
+    seed: int,
+) -> tuple[FittedProbe, float]:
+    """The nonlinear V-only baseline: the family's probe on [V, phi(V)], tuned on train rows.
+
+    phi: RBF Nystroem features of standardised V (fitted on the train rows), gamma =
+    multiple / median squared train distance; the multiple with the best CV score wins.
+    Returns the fitted probe and the chosen gamma.
+    """
+    z_tr, z_te = _standardise(np.asarray(v_train, np.float64), np.asarray(v_test, np.float64))
+    sub = z_tr[: min(len(z_tr), 500)]
+    # pairwise squared distances i < j (pdist: no (n, n, d) temporary)
+    med = float(np.median(pdist(sub, "sqeuclidean"))) if len(sub) > 1 else 1.0
+    med = med if med > 0 else 1.0
+    best: tuple[float, FittedProbe, float] | None = None
+    for mult in gammas:
+        gamma = float(mult) / med
+        k = min(n_components, len(z_tr))
+        phi = Nystroem(kernel="rbf", gamma=gamma, n_components=k, random_state=seed).fit(z_tr)
+        x_tr = np.hstack([v_train, phi.transform(z_tr)])
+        x_te = np.hstack([v_test, phi.transform(z_te)])
+        fit = fit_probe(
+            x_tr, rows.y_train, x_te, settings, train_ids=rows.train_ids, test_ids=rows.test_ids
+        )
+        cv = float(np.nanmax(fit.cv_scores))
+        if best is None or cv > best[0]:
+            best = (cv, fit, gamma)
+    assert best is not None
+    return best[1], best[2]
+
+
+#: The probes of the baselines edge, by what they fit: V alone, V + T_real, V + phi(V).
+BASELINE_INPUTS = ("v", "t_real", "v_nonlinear")
+
+
+#: Columns of the baselines edge (one row per target x baseline input x test row).
+BASELINE_COLUMNS = (
+    "row_id",
+    "corpus",
+    "target",
+    "kind",
+    "input",
+    "sample_id",
+    "prediction",
+    "label",
+    "reg",
+    "nonlinear_gamma",
+)
+
+
+def feature_block(source: Mapping[str, np.ndarray], ids: np.ndarray) -> np.ndarray:
+    """Rows `ids` of a sample_id -> vector mapping, stacked as float64."""
+    return np.stack([source[i] for i in ids]).astype(np.float64)
+
+
+@dataclass(frozen=True)
+class Baselines:
+    """The probes of one target that no generator changes, fitted once per corpus.
+
+    ``pred``: input (`BASELINE_INPUTS`) -> test predictions in ``rows.test_ids`` order (floats
+    for ridge, labels for logistic); ``reg``: input -> the lambda or C its CV chose;
+    ``gamma``: the nonlinear baseline's RBF gamma.
+    """
+
+    target: str
+    pred: Mapping[str, np.ndarray]
+    reg: Mapping[str, float]
+    gamma: float
+
+
+def fit_baselines(
+    spec: TargetSpec,
+    vision: Mapping[str, np.ndarray],
+    t_real: Mapping[str, np.ndarray],
+    *,
+    gammas: Sequence[float],
+) -> Baselines:
+    """V alone, V + T_real and the nonlinear V baseline of one target (module docstring).
+
+    Nothing here depends on a generator, so one fit per corpus serves every generator seed;
+    the nonlinear baseline's Nystroem draw uses the probe seed.
+    """
+    rows, ps = spec.rows, spec.settings
+    v_tr, v_te = feature_block(vision, rows.train_ids), feature_block(vision, rows.test_ids)
+    t_tr, t_te = feature_block(t_real, rows.train_ids), feature_block(t_real, rows.test_ids)
+
+    def fit(x_tr: np.ndarray, x_te: np.ndarray) -> FittedProbe:
+        return fit_probe(
+            x_tr, rows.y_train, x_te, ps, train_ids=rows.train_ids, test_ids=rows.test_ids
+        )
+
+    v_fit, real_fit = fit(v_tr, v_te), fit(np.hstack([v_tr, t_tr]), np.hstack([v_te, t_te]))
+    nl, gamma = nonlinear_baseline(
+        v_tr, v_te, rows, ps, gammas=gammas, n_components=t_tr.shape[1], seed=ps.seed
+    )
+    fits = {"v": v_fit, "t_real": real_fit, "v_nonlinear": nl}
+    return Baselines(
+        spec.name,
+        {k: f.pred_test for k, f in fits.items()},
+        {k: float(f.reg) for k, f in fits.items()},
+        float(gamma),
+    )
+
+
+def baselines_frame(
+    corpus: str, specs: Sequence[TargetSpec], fits: Sequence[Baselines]
+) -> pd.DataFrame:
+    """The baselines edge: one row per target x input x test row (`BASELINE_COLUMNS`).
+
+    Ridge predictions go to ``prediction`` (float64, bit-exact through Parquet), logistic
+    labels to ``label`` (the targets' labels are strings); the other column is NaN / "".
+    """
+    out = []
+    for spec, b in zip(specs, fits, strict=True):
+        if spec.name != b.target:
+            raise ValueError(f"baselines_frame: target {spec.name!r} got the fit of {b.target!r}")
+        logistic = spec.settings.kind == "logistic"
+        for inp in BASELINE_INPUTS:
+            pred = np.asarray(b.pred[inp])
+            for sid, value in zip(spec.rows.test_ids, pred, strict=True):
+                out.append(
+                    {
+                        "row_id": f"{spec.name}|{inp}|{sid}",
+                        "corpus": corpus,
+                        "target": spec.name,
+                        "kind": spec.settings.kind,
+                        "input": inp,
+                        "sample_id": str(sid),
+                        "prediction": np.nan if logistic else float(value),
+                        "label": str(value) if logistic else "",
+                        "reg": b.reg[inp],
+                        "nonlinear_gamma": b.gamma,
+                    }
+                )
+    return pd.DataFrame(out, columns=list(BASELINE_COLUMNS))
+
+
+def baselines_from_frame(
+    frame: pd.DataFrame, specs: Sequence[TargetSpec], *, source: str = "baselines edge"
+) -> dict[str, Baselines]:
+    """Target -> `Baselines` read back from `baselines_frame`'s rows, checked against `specs`.
+
+    Every target and input must hold exactly the spec's test rows (same sample_ids), and
+    every logistic label must be a class of the training rows; anything else is an error
+    naming `source`, the target and the offending sample_id (the edge was built from other
+    splits or another probe config).
+    """
+    out: dict[str, Baselines] = {}
+    for spec in specs:
+        rows, logistic = spec.rows, spec.settings.kind == "logistic"
+        sub = frame[frame["target"] == spec.name]
+        if sub.empty:
+            raise ValueError(f"{source}: no rows for target {spec.name!r}")
+        pred, reg = {}, {}
+        want = [str(i) for i in rows.test_ids]
+        classes = {str(c): c for c in np.unique(rows.y_train)}
+        for inp in BASELINE_INPUTS:
+            part = sub[sub["input"] == inp].set_index("sample_id")
+            got = set(part.index)
+            missing = [i for i in want if i not in got]
+            extra = sorted(got - set(want))
+            if missing or extra:
+                bad = (missing or extra)[0]
+                raise ValueError(
+                    f"{source}: target {spec.name!r} input {inp!r} does not hold this "
+                    f"evaluation's test rows ({len(missing)} missing, {len(extra)} extra; "
+                    f"sample_id {bad!r}): rebuild it from the same splits and probe config"
+                )
+            part = part.loc[want]
+            if logistic:
+                unknown = part.index[~part["label"].isin(list(classes))]
+                if len(unknown):
+                    raise ValueError(
+                        f"{source}: target {spec.name!r} input {inp!r}, sample_id "
+                        f"{unknown[0]!r}: label {part.loc[unknown[0], 'label']!r} is not a "
+                        f"training class ({sorted(classes)})"
+                    )
+                pred[inp] = np.array([classes[x] for x in part["label"]], dtype=object)
+            else:
+                pred[inp] = part["prediction"].to_numpy(dtype=np.float64)
+            reg[inp] = float(part["reg"].iloc[0])
+        out[spec.name] = Baselines(spec.name, pred, reg, float(sub["nonlinear_gamma"].iloc[0]))
+    return out
