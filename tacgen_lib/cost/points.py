@@ -25,7 +25,14 @@ from __future__ import annotations
 
 import pandas as pd
 
-__all__ = ["DIRECTIONS", "POINT_COLUMNS", "check_points", "read_points", "write_points"]
+__all__ = [
+    "DIRECTIONS",
+    "POINT_COLUMNS",
+    "check_points",
+    "log_points",
+    "read_points",
+    "write_points",
+]
 
 POINT_COLUMNS = [
     "knob",
@@ -86,3 +93,21 @@ def write_points(table: pd.DataFrame, path: str, source: str) -> pd.DataFrame:
 def read_points(path: str) -> pd.DataFrame:
     """A knob's points, checked (`check_points`, naming `path` on a bad table)."""
     return check_points(pd.read_parquet(path), str(path))
+
+
+def log_points(table: pd.DataFrame, say) -> None:
+    """One log line per point: the knob's setting, the metric with its uncertainty, the
+    seconds (`say`: the rule's logger's `info`)."""
+    for r in table.itertuples(index=False):
+        say(
+            "%s = %s: %s %.4g [%.4g, %.4g] in %.1f s wall, %.1f s CPU (%d jobs)",
+            r.knob,
+            r.label,
+            r.metric,
+            r.value,
+            r.ci_low,
+            r.ci_high,
+            r.wall_s,
+            r.cpu_s,
+            r.n_jobs,
+        )

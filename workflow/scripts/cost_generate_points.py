@@ -3,7 +3,7 @@ sample_generator benchmark files (rule cost_generate_points)."""
 
 import pandas as pd
 
-from tacgen_lib.cost.points import write_points
+from tacgen_lib.cost.points import log_points, write_points
 from tacgen_lib.cost.spread import replicate_seconds
 from tacgen_lib.cost.sweeps import Seconds, generate_points
 from tacgen_lib.io import log
@@ -37,15 +37,4 @@ table = generate_points(
     snakemake.wildcards.knob, rows, seconds, params.default, target=params.target
 )
 table = write_points(table, snakemake.output.points, snakemake.output.points)
-for r in table.itertuples(index=False):
-    logger.info(
-        "%s = %s: %s %.3f [%.3f, %.3f] in %.1f s (%d jobs)",
-        r.knob,
-        r.label,
-        r.metric,
-        r.value,
-        r.ci_low,
-        r.ci_high,
-        r.wall_s,
-        r.n_jobs,
-    )
+log_points(table, logger.info)

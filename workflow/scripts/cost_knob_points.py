@@ -1,7 +1,7 @@
 """Points of one swept knob from the main-rule edges of each of its settings and the benchmark
 files of their jobs (rule cost_knob_points; the reader: tacgen_lib.cost.readers)."""
 
-from tacgen_lib.cost.points import write_points
+from tacgen_lib.cost.points import log_points, write_points
 from tacgen_lib.cost.readers import SettingRun, read_knob
 from tacgen_lib.io import edges, log
 from tacgen_lib.runtime.benchmarks import read_benchmark
@@ -36,16 +36,4 @@ table = write_points(
     snakemake.output.points,
     snakemake.output.points,
 )
-for r in table.itertuples(index=False):
-    logger.info(
-        "%s = %s: %s %.4g [%.4g, %.4g] in %.1f s wall, %.1f s CPU (%d jobs)",
-        r.knob,
-        r.label,
-        r.metric,
-        r.value,
-        r.ci_low,
-        r.ci_high,
-        r.wall_s,
-        r.cpu_s,
-        r.n_jobs,
-    )
+log_points(table, logger.info)

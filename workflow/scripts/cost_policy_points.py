@@ -3,7 +3,7 @@ train_policy + rollout_policy benchmark files (rule cost_policy_points)."""
 
 import pandas as pd
 
-from tacgen_lib.cost.points import write_points
+from tacgen_lib.cost.points import log_points, write_points
 from tacgen_lib.cost.spread import replicate_seconds
 from tacgen_lib.cost.sweeps import Seconds, policy_points
 from tacgen_lib.io import log
@@ -32,15 +32,4 @@ seconds = {
 }
 table = policy_points(snakemake.wildcards.knob, rows, seconds, params.default)
 table = write_points(table, snakemake.output.points, snakemake.output.points)
-for r in table.itertuples(index=False):
-    logger.info(
-        "%s = %s: %s %.3f [%.3f, %.3f] in %.1f s (%d jobs)",
-        r.knob,
-        r.label,
-        r.metric,
-        r.value,
-        r.ci_low,
-        r.ci_high,
-        r.wall_s,
-        r.n_jobs,
-    )
+log_points(table, logger.info)

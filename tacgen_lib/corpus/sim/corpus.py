@@ -36,6 +36,7 @@ import mujoco
 import numpy as np
 import pandas as pd
 
+from tacgen_lib.corpus.manifest import LABEL_COLUMNS
 from tacgen_lib.corpus.sim import physics, tactile
 from tacgen_lib.corpus.sim.scenes import Scene, compile_scene, validate_scene
 from tacgen_lib.io.config import settings_from
@@ -490,17 +491,7 @@ def simulate_shard(
                 f"{1e3 * dt / (count + 1):.1f} ms/sample"
             )
     df = pd.DataFrame(rows, columns=COLUMNS)
-    for col in (
-        "scale",
-        "density",
-        "mass",
-        "stiffness",
-        "friction",
-        "force_normal",
-        "force_p05",
-        "force_p50",
-        "force_p95",
-    ):
+    for col in LABEL_COLUMNS:
         df[col] = df[col].astype("float64")
     for col in ("appearance_id", "scene_seed"):
         df[col] = df[col].astype("int64")
