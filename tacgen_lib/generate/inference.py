@@ -10,7 +10,7 @@ prints both):
   as JSON in the schema metadata. The bytes depend only on the arrays and the metadata (no
   timestamps, unlike a zip), so the same fit writes the same file.
 - `DenoiserArrays`: the forward pass of `model.Denoiser` in float32 numpy on its state dict,
-  equal to the torch module up to float rounding (tests/test_generate.py). Training stays in
+  equal to the torch module up to float rounding (tests/generate/test_generate.py). Training stays in
   torch (`train`); only inference is here.
 - `sinusoidal_embedding`, `Standardiser` and `fit_standardiser`, shared with the torch model.
 """

@@ -23,7 +23,7 @@ from tacgen_lib.cost.readers import READERS, headline_row
 from tacgen_lib.io.config import load_yaml
 from tacgen_lib.runtime.dag import base_rule
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 CONFIG = load_yaml(ROOT / "config" / "config.yaml")
 COST = load_yaml(ROOT / "config" / "cost.yaml")["cost"]
 

@@ -288,7 +288,7 @@ def test_families_compare_like_with_like_and_repeat_no_rows():
     heads = {**fam, "heads_from": "q", "vision": "vit"}  # other heads: same raw rows
     with pytest.raises(ValueError, match="identical raw rows"):
         ps_settings.check_families({"a": {**fam, "vision": "vit"}, "b": heads})
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     families = yaml.safe_load((root / "config/config.yaml").read_text())["probes"]["families"]
     ps_settings.check_families(families)
     pixel = [f for f, spec in families.items() if spec["vision"] == "pixel"]

@@ -214,7 +214,7 @@ def test_every_rule_of_the_workflow_has_a_unit_line():
     import re
     from pathlib import Path
 
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     rules = {
         m.group(1)
         for smk in [root / "Snakefile", *(root / "rules").glob("*.smk")]
@@ -281,7 +281,7 @@ def test_shipped_calibration_estimates_the_real_dags(configfile):
 
     from tacgen_lib.runtime.dag import dag_jobs
 
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]
     jobs, config = dag_jobs([configfile], workdir=root)
     assert {j.rule for j in jobs} >= {"simulate_corpus", "train_heads", "probe"}
     est = estimate_run(jobs, config, load_calibration(), local_machine(2))

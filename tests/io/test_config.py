@@ -10,7 +10,7 @@ import yaml
 
 from tacgen_lib.io.config import ConfigError, validate_config
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 SCHEMA = ROOT / "config" / "config.schema.yaml"
 
 
