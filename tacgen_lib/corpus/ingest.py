@@ -3,9 +3,9 @@
 This module owns reading the public Touch-Vision-Language (TVL) dataset (Fu et al., 2024) from
 disk and turning it into the two tables every corpus provides: one row per visuo-tactile sample
 (images as PNG bytes, caption, adjectives, hardness label, stratum, source split) and one row
-per tactile sensor background. It also owns the caption vocabulary helpers the paper uses for
-real data: adjective parsing, the hard/soft label and the top-5 adjective-pattern strata that
-SSVTP splits are stratified by.
+per tactile sensor background. The caption vocabulary the paper uses for real data (adjective
+parsing, the hard/soft label, the top-5 adjective-pattern strata SSVTP splits are stratified
+by) is `tacgen_lib.corpus.captions`.
 
 Layouts (``root`` is the unzipped ``tvl_dataset`` folder holding ``ssvtp/`` and ``hct/``)::
 
@@ -51,27 +51,18 @@ import csv
 import os
 import re
 from collections import Counter
-from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
 import pandas as pd
 
+from tacgen_lib.corpus.captions import (
+    hardness_from_adjectives,
+    parse_caption,
+    top_pattern_strata,
+)
 from tacgen_lib.io.images import decode_png, encode_png
-
-__all__ = [
-    "HCT_COLUMNS",
-    "OTHER_STRATUM",
-    "SAMPLE_COLUMNS",
-    "SENSOR_COLUMNS",
-    "SSVTP_BACKGROUND_NAME",
-    "hardness_from_adjectives",
-    "ingest_hct",
-    "ingest_ssvtp",
-    "parse_caption",
-    "top_pattern_strata",
-]
 
 SAMPLE_COLUMNS: tuple[str, ...] = (
     "sample_id",
@@ -86,88 +77,33 @@ SAMPLE_COLUMNS: tuple[str, ...] = (
     "source_split",
     "source_path",
 )
+
+
 SENSOR_COLUMNS: tuple[str, ...] = ("sensor_id", "background", "corpus")
+
+
 HCT_COLUMNS: tuple[str, ...] = ("vision", "tactile", "background", "caption")
-SSVTP_BACKGROUND_NAME = "tac_background.png"
-HCT_FALLBACK_BACKGROUND = "digit_background.png"
-OTHER_STRATUM = "other"
+
 
 _SPLIT_CSVS: tuple[tuple[str, str], ...] = (("train", "train.csv"), ("test", "test.csv"))
+
+
+SSVTP_BACKGROUND_NAME = "tac_background.png"
+
+
+HCT_FALLBACK_BACKGROUND = "digit_background.png"
+
+
 _IMAGE_EXT = r"\.(?:jpg|jpeg|png)"
+
+
 _SSVTP_RGB = re.compile(rf"image_(\d+)_rgb{_IMAGE_EXT}", re.IGNORECASE)
+
+
 _SSVTP_TAC = re.compile(rf"image_(\d+)_tac{_IMAGE_EXT}", re.IGNORECASE)
+
+
 _SSVTP_TEXT = re.compile(r"labels_(\d+)\.txt", re.IGNORECASE)
-
-
-# --------------------------------------------------------------------------- captions
-
-
-def parse_caption(text: str) -> list[str]:
-    """Adjectives of a TVL caption: comma (or line) separated, normalised, in order.
-
-    Each piece is lower-cased, inner whitespace is collapsed, surrounding spaces and periods are
-    dropped (TVL removes periods too), empty pieces (trailing commas) are skipped and repeats
-    keep their first position. ``"Smooth,  HARD, smooth., "`` gives ``["smooth", "hard"]``.
-    """
-    adjectives: list[str] = []
-    seen: set[str] = set()
-    for piece in re.split(r"[,\n\r]", text):
-        adjective = " ".join(piece.split()).strip(". ").lower()
-        if adjective and adjective not in seen:
-            seen.add(adjective)
-            adjectives.append(adjective)
-    return adjectives
-
-
-def hardness_from_adjectives(adjs: Iterable[str]) -> str | None:
-    """Binary hardness label of a caption: "hard", "soft" or None.
-
-    Exact adjective match after normalisation ("hard", not "hardened"). A caption with both
-    "hard" and "soft" is contradictory and one with neither says nothing: both give None, so
-    such samples carry no hardness label rather than a guessed one.
-    """
-    words = {" ".join(a.split()).strip(". ").lower() for a in adjs}
-    hard, soft = "hard" in words, "soft" in words
-    if hard and not soft:
-        return "hard"
-    if soft and not hard:
-        return "soft"
-    return None
-
-
-def adjective_pattern(adjs: Sequence[str]) -> str:
-    """The pattern of an adjective list: its distinct adjectives, sorted, joined by "+"."""
-    return "+".join(sorted(set(adjs)))
-
-
-def top_pattern_strata(adjective_lists: Sequence[Sequence[str]], k: int = 5) -> list[str]:
-    """Stratum of every sample: its adjective pattern if among the k most frequent, else "other".
-
-    The paper stratifies SSVTP splits by the top-5 adjective patterns. Patterns are ranked by
-    count (descending), ties broken by pattern name (ascending), so the result does not depend
-    on row order. Returns one stratum per input list, in input order.
-    """
-    if k < 0:
-        raise ValueError(f"top_pattern_strata: k must be >= 0, got {k}")
-    patterns: list[str] = []
-    for position, adjs in enumerate(adjective_lists):
-        if isinstance(adjs, str):
-            raise TypeError(
-                f"top_pattern_strata: item {position} is a string ({adjs!r}); "
-                "pass lists of adjectives (see parse_caption)"
-            )
-        if len(adjs) == 0:
-            raise ValueError(
-                f"top_pattern_strata: adjective list at position {position} is empty; "
-                "every sample needs at least one adjective to have a pattern"
-            )
-        patterns.append(adjective_pattern(adjs))
-    ranked = sorted(Counter(patterns).items(), key=lambda item: (-item[1], item[0]))
-    top = {pattern for pattern, _ in ranked[:k]}
-    return [p if p in top else OTHER_STRATUM for p in patterns]
-
-
-# --------------------------------------------------------------------------- shared helpers
 
 
 @dataclass(frozen=True)
@@ -232,7 +168,6 @@ def _relative(path: Path, root: Path) -> str:
         return path.as_posix()
 
 
-# hostile dataset folders (paths that leave the dataset root)
 def _inside_root(path: Path, root: Path, *, where: str, sample_id: str, role: str) -> Path:
     """``path`` if the file it names, symlinks followed, lies inside the dataset ``root``.
 
@@ -299,9 +234,6 @@ def _frames(
         columns=list(SENSOR_COLUMNS),
     )
     return samples, sensor_table
-
-
-# --------------------------------------------------------------------------- SSVTP
 
 
 def _index_files(folder: Path, pattern: re.Pattern[str]) -> dict[int, Path]:
@@ -435,9 +367,6 @@ def ingest_ssvtp(
             )
         )
     return _frames(records, {sensor_id: bg.png}, corpus)
-
-
-# --------------------------------------------------------------------------- HCT
 
 
 def _hct_background(path: Path, hct: Path) -> Path | None:

@@ -17,16 +17,13 @@ from fixtures_real import IMAGE_SHAPE, write_hct_fixture, write_ssvtp_fixture
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from tacgen_lib.corpus.ingest import (
+from tacgen_lib.corpus.captions import (
     OTHER_STRATUM,
-    SAMPLE_COLUMNS,
-    SENSOR_COLUMNS,
     hardness_from_adjectives,
-    ingest_hct,
-    ingest_ssvtp,
     parse_caption,
     top_pattern_strata,
 )
+from tacgen_lib.corpus.ingest import SAMPLE_COLUMNS, SENSOR_COLUMNS, ingest_hct, ingest_ssvtp
 from tacgen_lib.io.images import decode_png
 
 
