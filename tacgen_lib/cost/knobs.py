@@ -120,112 +120,47 @@ class Knob:
     bootstrap_key: str | None = None
 
 
-KNOBS: dict[str, Knob] = {
-    k.name: k
-    for k in (
-        Knob(
-            "align_steps",
-            stage="align",
-            reads="align",
-            keys=("align.steps",),
-            fixed={"align.budget": "steps"},
-            reruns=("train_heads",),
-            moves=("results/align/",),
-            has_default=False,
-        ),
-        Knob(
-            "align_n",
-            stage="align",
-            reads="align",
-            keys=("probes.heads.n_train", "align.n_train[]"),
-            reruns=("train_heads",),
-            moves=("results/align/",),
-        ),
-        Knob(
-            "probe_bootstrap",
-            stage="probes",
-            reads="probe_bootstrap",
-            keys=("probes.bootstrap",),
-            reruns=("probe",),
-            moves=("results/probes/",),
-            replicate_key="probes.resample_seed",
-        ),
-        Knob(
-            "probe_permutations",
-            stage="probes",
-            reads="probe_permutations",
-            keys=("probes.permutations",),
-            reruns=("probe",),
-            moves=("results/probes/",),
-            replicate_key="probes.resample_seed",
-        ),
-        Knob(
-            "presses",
-            stage="corpus",
-            reads="simulation",
-            keys=("corpora.{sim}.presses",),
-            fixed={"corpora.{sim}.n": "{sim_n}", "corpora.{sim}.shards": 1},
-            reruns=_SIM_RERUNS,
-            moves=_SIM_MOVES,
-            bootstrap_key="probes.bootstrap",
-            metrics=("force band p05–p95 width (N)", "force_p50 ΔR² V+T − V"),
-        ),
-        Knob(
-            "tactile_resolution",
-            stage="corpus",
-            reads="simulation",
-            keys=("corpora.{sim}.tactile_size",),
-            fixed={"corpora.{sim}.n": "{sim_n}", "corpora.{sim}.shards": 1},
-            reruns=_SIM_RERUNS,
-            moves=_SIM_MOVES,
-            axis="height",
-            bootstrap_key="probes.bootstrap",
-            metrics=(
-                "force_p50 ΔR² V+T − V",
-                "hardness Δaccuracy V+T − V",
-                "frames/s (simulate job, one core)",
-            ),
-        ),
-        Knob(
-            "image_size",
-            stage="features",
-            reads="features",
-            keys=("features.image_size",),
-            reruns=_FEATURES_RERUNS,
-            moves=("results/features/",),
-            bootstrap_key="features.pretrained_vs_random.bootstrap",
-            metrics=("vision {vision_target} accuracy", "tactile {tactile_target} accuracy"),
-        ),
-        Knob(
-            "backbone_arch",
-            stage="features",
-            reads="features",
-            keys=("features.backbones.vision.arch", "features.backbones.tactile.arch"),
-            reruns=_FEATURES_RERUNS,
-            moves=("results/features/",),
-            bootstrap_key="features.pretrained_vs_random.bootstrap",
-            axis="width",
-            metrics=("vision {vision_target} accuracy", "tactile {tactile_target} accuracy"),
-        ),
-        Knob(
-            "pretrain_epochs",
-            stage="features",
-            reads="features",
-            keys=("features.pretrain.epochs",),
-            reruns=_FEATURES_RERUNS,
-            moves=("results/features/",),
-            bootstrap_key="features.pretrained_vs_random.bootstrap",
-            metrics=(
-                "vision {vision_target} Δaccuracy pretrained − random",
-                "tactile {tactile_target} Δaccuracy pretrained − random",
-            ),
-        ),
-        Knob("generate_steps", stage="generate", reads="generate_steps", free=True),
-        Knob("generate_sampler", stage="generate", reads="generate_sampler", free=True),
-        Knob("policy_width", stage="policy", reads="policy_width", free=True),
-        Knob("policy_epochs", stage="policy", reads="policy_epochs", free=True),
-    )
-}
+# fmt: off
+# (a table: one knob per entry, its keys, reruns and moves side by side; the formatter would put
+# every argument on a line of its own)
+_SIM = dict(reruns=_SIM_RERUNS, moves=_SIM_MOVES, bootstrap_key="probes.bootstrap",
+            fixed={"corpora.{sim}.n": "{sim_n}", "corpora.{sim}.shards": 1})
+_FEATURES = dict(reruns=_FEATURES_RERUNS, moves=("results/features/",),
+                 bootstrap_key="features.pretrained_vs_random.bootstrap")
+_ACCURACY = ("vision {vision_target} accuracy", "tactile {tactile_target} accuracy")
+KNOBS: dict[str, Knob] = {k.name: k for k in (
+    Knob("align_steps", stage="align", reads="align", keys=("align.steps",),
+         fixed={"align.budget": "steps"}, reruns=("train_heads",), moves=("results/align/",),
+         has_default=False),
+    Knob("align_n", stage="align", reads="align",
+         keys=("probes.heads.n_train", "align.n_train[]"), reruns=("train_heads",),
+         moves=("results/align/",)),
+    Knob("probe_bootstrap", stage="probes", reads="probe_bootstrap", keys=("probes.bootstrap",),
+         reruns=("probe",), moves=("results/probes/",), replicate_key="probes.resample_seed"),
+    Knob("probe_permutations", stage="probes", reads="probe_permutations",
+         keys=("probes.permutations",), reruns=("probe",), moves=("results/probes/",),
+         replicate_key="probes.resample_seed"),
+    Knob("presses", stage="corpus", reads="simulation", keys=("corpora.{sim}.presses",),
+         metrics=("force band p05–p95 width (N)", "force_p50 ΔR² V+T − V"), **_SIM),
+    Knob("tactile_resolution", stage="corpus", reads="simulation",
+         keys=("corpora.{sim}.tactile_size",), axis="height",
+         metrics=("force_p50 ΔR² V+T − V", "hardness Δaccuracy V+T − V",
+                  "frames/s (simulate job, one core)"), **_SIM),
+    Knob("image_size", stage="features", reads="features", keys=("features.image_size",),
+         metrics=_ACCURACY, **_FEATURES),
+    Knob("backbone_arch", stage="features", reads="features", axis="width",
+         keys=("features.backbones.vision.arch", "features.backbones.tactile.arch"),
+         metrics=_ACCURACY, **_FEATURES),
+    Knob("pretrain_epochs", stage="features", reads="features",
+         keys=("features.pretrain.epochs",),
+         metrics=("vision {vision_target} Δaccuracy pretrained − random",
+                  "tactile {tactile_target} Δaccuracy pretrained − random"), **_FEATURES),
+    Knob("generate_steps", stage="generate", reads="generate_steps", free=True),
+    Knob("generate_sampler", stage="generate", reads="generate_sampler", free=True),
+    Knob("policy_width", stage="policy", reads="policy_width", free=True),
+    Knob("policy_epochs", stage="policy", reads="policy_epochs", free=True),
+)}
+# fmt: on
 
 
 class UnknownKnobError(ValueError):
