@@ -24,7 +24,7 @@ import numpy as np
 import yaml
 
 import tacgen_lib.corpus.sim  # noqa: F401  (sets MUJOCO_GL=egl before mujoco is imported)
-from tacgen_lib.corpus.sim import corpus, physics, tactile
+from tacgen_lib.corpus.sim import corpus, physics, render, tactile
 from tacgen_lib.corpus.sim.scenes import scene_xml, validate_scene
 
 SCENES = yaml.safe_load(open("config/scenes.yaml"))
@@ -74,7 +74,7 @@ def frames(method: str, n_frames: int, n_states: int = 40) -> float:
     bg = tactile.sensor_background([1, 0, 0xB6], optics.image_size)
     renderer = None
     if method == "depth":
-        corpus.prefer_headless_egl()
+        render.prefer_headless_egl()
         renderer = mujoco.Renderer(rt.model, *optics.image_size)
         renderer.enable_depth_rendering()
         cam = mujoco.mj_name2id(rt.model, mujoco.mjtObj.mjOBJ_CAMERA, "gel_cam")

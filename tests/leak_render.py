@@ -21,7 +21,7 @@ import numpy as np
 import yaml
 
 from tacgen_lib.corpus.sim import physics, tactile
-from tacgen_lib.corpus.sim.corpus import render_rgb
+from tacgen_lib.corpus.sim.render import render_rgb
 from tacgen_lib.corpus.sim.scenes import compile_scene, validate_scene
 from tacgen_lib.io.images import encode_png
 

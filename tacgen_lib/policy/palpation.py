@@ -27,7 +27,7 @@ import mujoco
 import numpy as np
 
 from tacgen_lib.corpus.sim import tactile
-from tacgen_lib.corpus.sim.corpus import prefer_headless_egl
+from tacgen_lib.corpus.sim.render import prefer_headless_egl
 from tacgen_lib.policy.task import Episode, GraspTask
 
 __all__ = ["Palpation", "PadOptics", "palpate", "pad_background", "PAD_NAMES", "frame_names"]

@@ -25,35 +25,26 @@ hardness = the contact-compliance class, stiffness = its effective contact stiff
 
 from __future__ import annotations
 
-import functools
-import os
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any, Literal
 
-import mujoco
 import numpy as np
 import pandas as pd
 
 from tacgen_lib.corpus.manifest import LABEL_COLUMNS
-from tacgen_lib.corpus.sim import physics, tactile
-from tacgen_lib.corpus.sim.scenes import Scene, compile_scene, validate_scene
+from tacgen_lib.corpus.sim import physics
+from tacgen_lib.corpus.sim.render import (
+    render_rgb,
+    scene_runtime,
+    sensor_background,
+    sensor_id,
+    tactile_frame,
+)
+from tacgen_lib.corpus.sim.scenes import Scene, validate_scene
 from tacgen_lib.io.config import settings_from
 from tacgen_lib.io.images import encode_png
-
-__all__ = [
-    "CorpusSettings",
-    "prefer_headless_egl",
-    "SampleSpec",
-    "simulate_shard",
-    "sensor_backgrounds",
-    "sample_spec",
-    "scene_seed",
-    "null_sources",
-    "render_rgb",
-    "COLUMNS",
-]
 
 COLUMNS = [
     "sample_id",
@@ -83,6 +74,7 @@ COLUMNS = [
     "hardness_source",
 ]
 
+
 PALETTE: dict[str, tuple[float, float, float]] = {
     "red": (0.85, 0.15, 0.12),
     "orange": (0.95, 0.55, 0.1),
@@ -93,14 +85,22 @@ PALETTE: dict[str, tuple[float, float, float]] = {
     "white": (0.92, 0.92, 0.9),
     "black": (0.12, 0.12, 0.13),
 }
+
+
 TEXTURE_WORDS = {
     "plain": "plain",
     "checkered": "checkered",
     "striped": "striped",
     "speckled": "speckled",
 }
+
+
 SOFT_RANGE = (600.0, 2000.0)  # N/m, contact stiffness of soft objects (log-uniform)
+
+
 HARD_RANGE = (8000.0, 25000.0)  # N/m, hard objects
+
+
 FRICTION_RANGE = (0.3, 1.2)
 
 
@@ -263,110 +263,6 @@ def null_sources(seed: int, n: int) -> np.ndarray:
     return perm
 
 
-# ---------------------------------------------------------------------------------------------
-# runtime: one compiled scene (and renderer) per process, reused across samples
-
-_RUNTIMES: dict[tuple, dict[str, Any]] = {}
-
-
-def _runtime(scene: Scene, cfg: CorpusSettings) -> dict[str, Any]:
-    key = (repr(scene), tuple(cfg.image_size), tuple(cfg.tactile_size))
-    if key not in _RUNTIMES:
-        rt = physics.SceneRuntime(scene, compile_scene(scene))
-        optics = tactile.GelOptics(
-            gel_size=scene.gel_size,
-            image_size=(int(cfg.tactile_size[0]), int(cfg.tactile_size[1])),
-            camera_distance=scene.gel_camera_distance,
-            saturation=scene.gel_saturation,
-            smoothing=scene.gel_smoothing,
-        )
-        _RUNTIMES[key] = {
-            "rt": rt,
-            "optics": optics,
-            "directions": tactile.ray_directions(optics),
-            "markers": tactile.marker_pattern(optics.image_size) if scene.has("markers") else None,
-            "renderer": None,
-        }
-    return _RUNTIMES[key]
-
-
-def prefer_headless_egl() -> None:
-    """Use EGL when no display exists and MUJOCO_GL asked for nothing else.
-
-    mujoco picks its GL backend when first imported; if that happened before tacgen_lib.corpus.sim
-    could default MUJOCO_GL to egl (e.g. `import mujoco` first), it chose GLFW, which needs
-    an X display. Switch the backend class the renderer will use to EGL in that case.
-    """
-    if os.environ.get("DISPLAY") or os.environ.get("MUJOCO_GL", "egl").lower() != "egl":
-        return
-    from mujoco.rendering.classic import gl_context
-
-    if getattr(gl_context.GLContext, "__module__", "").startswith("mujoco.glfw"):
-        from mujoco import egl
-
-        gl_context.GLContext = egl.GLContext
-
-
-def render_rgb(state: dict[str, Any], image_size: tuple[int, int]) -> np.ndarray:
-    """Render the context camera (uint8 H x W x 3) of the current MuJoCo state; the renderer is
-    created on first use, so scenes without `rgb` never create one."""
-    rt: physics.SceneRuntime = state["rt"]
-    if state["renderer"] is None:
-        prefer_headless_egl()
-        state["renderer"] = mujoco.Renderer(rt.model, int(image_size[0]), int(image_size[1]))
-        flags = state["renderer"].scene.flags
-        flags[mujoco.mjtRndFlag.mjRND_SHADOW] = int(rt.scene.has("shadows"))
-        flags[mujoco.mjtRndFlag.mjRND_REFLECTION] = 0
-        flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = 0
-    renderer = state["renderer"]
-    renderer.update_scene(rt.data, camera="context0")
-    return renderer.render().copy()
-
-
-@functools.lru_cache(maxsize=64)
-def _background_cached(seed: int, k: int, size: tuple[int, int]) -> np.ndarray:
-    img = tactile.sensor_background([seed, k, 0xB6], size)
-    img.flags.writeable = False
-    return img
-
-
-def _background(cfg: CorpusSettings, k: int) -> np.ndarray:
-    """Sensor k's background: seeded from (corpus seed, k) only, cached per process."""
-    size = (int(cfg.tactile_size[0]), int(cfg.tactile_size[1]))
-    return _background_cached(int(cfg.seed), int(k), size)
-
-
-def _sensor_id(cfg: CorpusSettings, k: int) -> str:
-    return f"{cfg.name}/digit{k}"
-
-
-def _tactile_frame(state, spec_phys: SampleSpec, spec_pix: SampleSpec, cfg, press_force) -> bytes:
-    """Press `spec_phys`'s object and shade its imprint on `spec_pix`'s sensor and noise."""
-    rt: physics.SceneRuntime = state["rt"]
-    scene = rt.scene
-    res = physics.press_object(rt, press_force)
-    frame_id = mujoco.mj_name2id(rt.model, mujoco.mjtObj.mjOBJ_SITE, "gel_frame")
-    raw = tactile.height_field_rays(
-        rt.model,
-        rt.data,
-        rt.active_geom,
-        rt.data.site_xpos[frame_id],
-        rt.data.site_xmat[frame_id],
-        state["optics"],
-        state["directions"],
-    )
-    height = np.minimum(raw, max(res.gel_depth, 0.0))
-    noise = np.random.default_rng(spec_pix.pixel_seed) if scene.has("sensor_noise") else None
-    img = tactile.tactile_shading(
-        height,
-        _background(cfg, spec_pix.sensor),
-        state["optics"],
-        noise=noise,
-        markers=state["markers"],
-    )
-    return encode_png(img, compression=int(cfg.png_compression)), res
-
-
 def _adjectives(spec: SampleSpec, cfg: CorpusSettings) -> list[str]:
     if cfg.design == "paired":
         lo, hi = (float(v) for v in cfg.size_range)
@@ -403,7 +299,7 @@ def simulate_shard(
             f"corpus {cfg.name!r}: scene {scene.name!r} is a {scene.kind!r} scene; corpora "
             "need a 'press' scene"
         )
-    state = _runtime(scene, cfg)
+    state = scene_runtime(scene, cfg)
     rt: physics.SceneRuntime = state["rt"]
     n, name = int(cfg.n), str(cfg.name)
     perm = null_sources(int(cfg.seed), n) if cfg.null else None
@@ -423,7 +319,7 @@ def simulate_shard(
             )
         tac, null_source = None, None
         if scene.has("tactile") and perm is None:
-            tac, res = _tactile_frame(state, spec, spec, cfg, press_force)
+            tac, res = tactile_frame(state, spec, spec, cfg, press_force)
         else:
             res = physics.press_object(rt, press_force)
         forces = np.array([res.force_normal])
@@ -441,7 +337,7 @@ def simulate_shard(
             j = int(perm[i])
             other = sample_spec(cfg, scene, j)
             physics.apply_object(rt, other.obj)
-            tac, _ = _tactile_frame(state, other, spec, cfg, press_force)
+            tac, _ = tactile_frame(state, other, spec, cfg, press_force)
             null_source = f"{name}-{j:06d}"
         p05, p50, p95 = np.percentile(forces, [5, 50, 95])
         adjectives = _adjectives(spec, cfg)
@@ -452,7 +348,7 @@ def simulate_shard(
                 "corpus": name,
                 "rgb": rgb,
                 "tactile": tac,
-                "sensor_id": _sensor_id(cfg, spec.sensor),
+                "sensor_id": sensor_id(cfg, spec.sensor),
                 "caption": f"a {adjectives[0]} {adjectives[1]} {adjectives[2]} {shape_word}, "
                 f"{adjectives[3]} and {adjectives[4]}",
                 "adjectives": adjectives,
@@ -504,8 +400,8 @@ def sensor_backgrounds(corpus: CorpusSettings | Mapping[str, Any]) -> pd.DataFra
     cfg = _settings(corpus)
     return pd.DataFrame(
         {
-            "sensor_id": [_sensor_id(cfg, k) for k in range(int(cfg.sensors))],
-            "background": [encode_png(_background(cfg, k)) for k in range(int(cfg.sensors))],
+            "sensor_id": [sensor_id(cfg, k) for k in range(int(cfg.sensors))],
+            "background": [encode_png(sensor_background(cfg, k)) for k in range(int(cfg.sensors))],
             "corpus": [str(cfg.name)] * int(cfg.sensors),
         }
     )
