@@ -95,3 +95,17 @@ def merged_config() -> dict:
 
     base = yaml.safe_load((ROOT / "config/config.yaml").read_text())
     return merge(base, yaml.safe_load((ROOT / "config/test.yaml").read_text()))
+
+
+def validated(overlay: str | None = None) -> dict:
+    """config/config.yaml (merged with an overlay of config/, as Snakemake merges), validated
+    against the schema (its defaults filled in)."""
+    from snakemake.utils import update_config
+
+    from tacgen_lib.io.config import validate_config
+
+    cfg = yaml.safe_load((ROOT / "config/config.yaml").read_text())
+    if overlay:
+        update_config(cfg, yaml.safe_load((ROOT / "config" / overlay).read_text()))
+    cfg["scenes_file"] = str(ROOT / cfg["scenes_file"])
+    return validate_config(cfg, ROOT / "config" / "config.schema.yaml")

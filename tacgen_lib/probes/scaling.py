@@ -29,7 +29,7 @@ from tacgen_lib.probes.folds import make_folds
 from tacgen_lib.probes.inputs import check_features, check_lambdas, check_target
 from tacgen_lib.probes.metrics import score_rows
 from tacgen_lib.probes.refits import Refits, Refitted
-from tacgen_lib.probes.ridge import RidgePath, ridge_fixed, ridge_path
+from tacgen_lib.probes.ridge_path import RidgePath, ridge_fixed, ridge_path
 
 __all__ = ["FixedStandardisedRidge", "StandardisedRidgeProbe", "fit_standardised_ridge"]
 

@@ -6,24 +6,14 @@ import dataclasses
 
 import pytest
 import yaml
-from snakemake.utils import update_config
-from snakemake_run import ROOT
+from snakemake_run import ROOT, validated
 
 from tacgen_lib.align.settings import AlignSettings
 from tacgen_lib.corpus.sim.corpus import CorpusSettings
 from tacgen_lib.features.settings import DinoSettings
-from tacgen_lib.io.config import ConfigError, settings_from, validate_config
+from tacgen_lib.io.config import ConfigError, settings_from
 
 SCHEMA = ROOT / "config" / "config.schema.yaml"
-
-
-def validated(overlay: str | None = None) -> dict:
-    """config/config.yaml (merged with an overlay, as Snakemake merges), validated."""
-    cfg = yaml.safe_load((ROOT / "config/config.yaml").read_text())
-    if overlay:
-        update_config(cfg, yaml.safe_load((ROOT / "config" / overlay).read_text()))
-    cfg["scenes_file"] = str(ROOT / cfg["scenes_file"])
-    return validate_config(cfg, SCHEMA)
 
 
 def schema_keys(*path: str) -> set[str]:

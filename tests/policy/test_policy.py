@@ -7,8 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 import yaml
-from snakemake_run import ROOT
-from test_settings import validated
+from snakemake_run import ROOT, validated
 
 from tacgen_lib.policy import bc, cells, evaluate
 from tacgen_lib.policy.settings import LEARNED_CONDITIONS, PolicySettings

@@ -304,7 +304,7 @@ def test_within_scale_split_uses_training_rows_only_stratified_by_scale():
 
 
 def test_robustness_settings_from_every_config_and_jobs():
-    from test_settings import validated
+    from snakemake_run import validated
 
     for overlay in (None, "test.yaml", "paper.yaml"):
         cfg = validated(overlay)["probes"]

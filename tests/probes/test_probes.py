@@ -22,13 +22,9 @@ from tacgen_lib.probes.folds import make_folds
 from tacgen_lib.probes.logistic import fit_logistic
 from tacgen_lib.probes.metrics import accuracy, r2
 from tacgen_lib.probes.objective import DesignBlock, standardise_block
-from tacgen_lib.probes.ridge import (
-    FixedRidge,
-    fit_ridge_probe,
-    ridge_fixed,
-    ridge_path,
-    select_lambda_cv,
-)
+from tacgen_lib.probes.ridge import FixedRidge, fit_ridge_probe
+from tacgen_lib.probes.ridge_cv import select_lambda_cv
+from tacgen_lib.probes.ridge_path import ridge_fixed, ridge_path
 
 
 def ridge_reference(X, y, lam):
