@@ -50,42 +50,23 @@ from __future__ import annotations
 import csv
 import os
 import re
-from collections import Counter
-from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
 import pandas as pd
 
-from tacgen_lib.corpus.captions import (
-    hardness_from_adjectives,
-    parse_caption,
-    top_pattern_strata,
+from tacgen_lib.corpus.ingest_files import (
+    SPLIT_CSVS,
+    Image,
+    Record,
+    check_same_shape,
+    corpus_frames,
+    inside_root,
+    load_image,
+    parsed_caption,
+    relative_path,
 )
-from tacgen_lib.io.images import decode_png, encode_png
-
-SAMPLE_COLUMNS: tuple[str, ...] = (
-    "sample_id",
-    "corpus",
-    "rgb",
-    "tactile",
-    "sensor_id",
-    "caption",
-    "adjectives",
-    "hardness",
-    "stratum",
-    "source_split",
-    "source_path",
-)
-
-
-SENSOR_COLUMNS: tuple[str, ...] = ("sensor_id", "background", "corpus")
-
 
 HCT_COLUMNS: tuple[str, ...] = ("vision", "tactile", "background", "caption")
-
-
-_SPLIT_CSVS: tuple[tuple[str, str], ...] = (("train", "train.csv"), ("test", "test.csv"))
 
 
 SSVTP_BACKGROUND_NAME = "tac_background.png"
@@ -104,136 +85,6 @@ _SSVTP_TAC = re.compile(rf"image_(\d+)_tac{_IMAGE_EXT}", re.IGNORECASE)
 
 
 _SSVTP_TEXT = re.compile(r"labels_(\d+)\.txt", re.IGNORECASE)
-
-
-@dataclass(frozen=True)
-class _Image:
-    png: bytes
-    shape: tuple[int, ...]
-
-
-@dataclass
-class _Record:
-    sample_id: str
-    rgb: bytes
-    tactile: bytes
-    sensor_id: str
-    caption: str
-    adjectives: list[str]
-    source_split: str | None
-    source_path: str
-
-
-def _load_image(path: Path, *, sample_id: str, role: str) -> _Image:
-    """Read an image file and re-encode it as PNG; errors name the file and the sample."""
-    if not path.is_file():
-        raise FileNotFoundError(
-            f"sample_id '{sample_id}': {role} image not found, expected {path}; "
-            "restore the file or remove the sample from the corpus"
-        )
-    try:
-        data = path.read_bytes()
-    except OSError as err:
-        raise ValueError(
-            f"sample_id '{sample_id}': cannot read {role} image {path}: {err}"
-        ) from err
-    where = f"{role} image {path} (sample_id '{sample_id}')"
-    try:
-        if not data:
-            raise ValueError(f"{where}: file is empty")
-        array = decode_png(data, where=where)
-    except (ValueError, cv2.error) as err:
-        raise ValueError(
-            f"{where} is not a readable image ({err}); re-extract the file from the dataset"
-        ) from err
-    return _Image(png=encode_png(array), shape=tuple(array.shape))
-
-
-def _check_same_shape(
-    tactile: _Image, background: _Image, *, sample_id: str, tactile_path: Path, bg_path: Path
-) -> None:
-    if tactile.shape != background.shape:
-        raise ValueError(
-            f"sample_id '{sample_id}': tactile image {tactile_path} is {tactile.shape[:2]} but its "
-            f"sensor background {bg_path} is {background.shape[:2]}; background subtraction needs "
-            "equal sizes, so pass the background recorded with this sensor"
-        )
-
-
-def _relative(path: Path, root: Path) -> str:
-    """POSIX path of ``path`` relative to ``root`` (absolute when outside it)."""
-    try:
-        return path.relative_to(root).as_posix()
-    except ValueError:
-        return path.as_posix()
-
-
-def _inside_root(path: Path, root: Path, *, where: str, sample_id: str, role: str) -> Path:
-    """``path`` if the file it names, symlinks followed, lies inside the dataset ``root``.
-
-    A CSV row naming an absolute path, a ``../`` path that climbs out of the root, or a
-    symlink pointing out of it is refused: a dataset folder must not make the workflow read
-    (and copy into an edge) files elsewhere on the machine.
-    """
-    real_root = root.resolve()
-    real = path.resolve()
-    if not real.is_relative_to(real_root):
-        raise ValueError(
-            f"{where}: sample_id '{sample_id}': {role} path {path} resolves to {real}, outside "
-            f"the dataset root {real_root}; absolute paths, '../' paths that leave the root and "
-            "symlinks out of it are refused: copy the file into the dataset folder"
-        )
-    return path
-
-
-def _parsed_caption(caption: str, *, where: str, sample_id: str) -> list[str]:
-    adjectives = parse_caption(caption)
-    if not adjectives:
-        raise ValueError(
-            f"{where}: empty caption for sample_id '{sample_id}' ({caption!r} has no adjectives); "
-            "write comma-separated adjectives or remove the sample"
-        )
-    return adjectives
-
-
-def _frames(
-    records: list[_Record], sensors: dict[str, bytes], corpus: str
-) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """Assemble the samples and sensors tables, sorted by their keys."""
-    records = sorted(records, key=lambda r: r.sample_id)
-    ids = [r.sample_id for r in records]
-    if len(set(ids)) != len(ids):
-        dup = next(i for i, c in Counter(ids).items() if c > 1)
-        raise ValueError(f"{corpus}: sample_id '{dup}' occurs more than once")
-    adjective_lists = [r.adjectives for r in records]
-    samples = pd.DataFrame(
-        {
-            "sample_id": ids,
-            "corpus": [corpus] * len(records),
-            "rgb": pd.Series([r.rgb for r in records], dtype=object),
-            "tactile": pd.Series([r.tactile for r in records], dtype=object),
-            "sensor_id": [r.sensor_id for r in records],
-            "caption": [r.caption for r in records],
-            "adjectives": pd.Series(adjective_lists, dtype=object),
-            "hardness": pd.Series(
-                [hardness_from_adjectives(a) for a in adjective_lists], dtype=object
-            ),
-            "stratum": top_pattern_strata(adjective_lists),
-            "source_split": pd.Series([r.source_split for r in records], dtype=object),
-            "source_path": [r.source_path for r in records],
-        },
-        columns=list(SAMPLE_COLUMNS),
-    )
-    sensor_ids = sorted(sensors)
-    sensor_table = pd.DataFrame(
-        {
-            "sensor_id": sensor_ids,
-            "background": pd.Series([sensors[s] for s in sensor_ids], dtype=object),
-            "corpus": [corpus] * len(sensor_ids),
-        },
-        columns=list(SENSOR_COLUMNS),
-    )
-    return samples, sensor_table
 
 
 def _index_files(folder: Path, pattern: re.Pattern[str]) -> dict[int, Path]:
@@ -304,14 +155,14 @@ def ingest_ssvtp(
             f"tvl_enc/data/{SSVTP_BACKGROUND_NAME} from the TVL code release there or pass "
             "background=<path>"
         )
-    bg = _load_image(bg_path, sample_id=sensor_id, role="background")
+    bg = load_image(bg_path, sample_id=sensor_id, role="background")
 
     rgb_files = _index_files(folder / "images_rgb", _SSVTP_RGB)
     tac_files = _index_files(folder / "images_tac", _SSVTP_TAC)
     text_files = _index_files(folder / "text", _SSVTP_TEXT)
     split_of: dict[int, str] = {}
     listed_in: dict[int, str] = {}
-    for split, name in _SPLIT_CSVS:
+    for split, name in SPLIT_CSVS:
         csv_path = folder / name
         if not csv_path.is_file():
             continue
@@ -331,17 +182,17 @@ def ingest_ssvtp(
             "images_tac/image_<i>_tac.jpg and text/labels_<i>.txt"
         )
 
-    records: list[_Record] = []
+    records: list[Record] = []
     for index in indices:
         sample_id = f"{corpus}-{index:06d}"
         rgb_path = rgb_files.get(index, folder / "images_rgb" / f"image_{index}_rgb.jpg")
         tac_path = tac_files.get(index, folder / "images_tac" / f"image_{index}_tac.jpg")
         text_path = text_files.get(index, folder / "text" / f"labels_{index}.txt")
         for role, path in (("RGB", rgb_path), ("tactile", tac_path), ("caption", text_path)):
-            _inside_root(path, root, where=str(folder), sample_id=sample_id, role=role)
-        rgb = _load_image(rgb_path, sample_id=sample_id, role="RGB")
-        tactile = _load_image(tac_path, sample_id=sample_id, role="tactile")
-        _check_same_shape(tactile, bg, sample_id=sample_id, tactile_path=tac_path, bg_path=bg_path)
+            inside_root(path, root, where=str(folder), sample_id=sample_id, role=role)
+        rgb = load_image(rgb_path, sample_id=sample_id, role="RGB")
+        tactile = load_image(tac_path, sample_id=sample_id, role="tactile")
+        check_same_shape(tactile, bg, sample_id=sample_id, tactile_path=tac_path, bg_path=bg_path)
         if not text_path.is_file():
             raise FileNotFoundError(
                 f"sample_id '{sample_id}': caption file not found, expected {text_path}; "
@@ -353,9 +204,9 @@ def ingest_ssvtp(
             raise ValueError(
                 f"sample_id '{sample_id}': cannot read caption {text_path}: {err}"
             ) from err
-        adjectives = _parsed_caption(caption, where=str(text_path), sample_id=sample_id)
+        adjectives = parsed_caption(caption, where=str(text_path), sample_id=sample_id)
         records.append(
-            _Record(
+            Record(
                 sample_id=sample_id,
                 rgb=rgb.png,
                 tactile=tactile.png,
@@ -363,10 +214,10 @@ def ingest_ssvtp(
                 caption=caption,
                 adjectives=adjectives,
                 source_split=split_of.get(index),
-                source_path=_relative(tac_path, root),
+                source_path=relative_path(tac_path, root),
             )
         )
-    return _frames(records, {sensor_id: bg.png}, corpus)
+    return corpus_frames(records, {sensor_id: bg.png}, corpus)
 
 
 def _hct_background(path: Path, hct: Path) -> Path | None:
@@ -415,7 +266,7 @@ def _read_hct_csv(csv_path: Path) -> list[tuple[int, dict[str, str]]]:
 def _hct_data_folders(hct: Path) -> list[Path]:
     folders: list[Path] = []
     for folder in sorted(p for p in hct.iterdir() if p.is_dir()):
-        has_csv = any((folder / name).is_file() for _, name in _SPLIT_CSVS)
+        has_csv = any((folder / name).is_file() for _, name in SPLIT_CSVS)
         if has_csv:
             folders.append(folder)
         elif (folder / "contact.json").is_file():
@@ -445,11 +296,11 @@ def ingest_hct(root: Path, *, corpus: str = "hct") -> tuple[pd.DataFrame, pd.Dat
             f"HCT folder {hct} not found; pass the unzipped TVL dataset folder that holds "
             "ssvtp/ and hct/"
         )
-    backgrounds: dict[Path, tuple[str, _Image]] = {}
-    records: list[_Record] = []
+    backgrounds: dict[Path, tuple[str, Image]] = {}
+    records: list[Record] = []
     for folder in _hct_data_folders(hct):
         row_number = 0
-        for split, name in _SPLIT_CSVS:
+        for split, name in SPLIT_CSVS:
             csv_path = folder / name
             if not csv_path.is_file():
                 continue
@@ -457,7 +308,7 @@ def ingest_hct(root: Path, *, corpus: str = "hct") -> tuple[pd.DataFrame, pd.Dat
                 sample_id = f"{corpus}-{folder.name}-{row_number:05d}"
                 row_number += 1
                 where = f"{csv_path}:{line}"
-                adjectives = _parsed_caption(row["caption"], where=where, sample_id=sample_id)
+                adjectives = parsed_caption(row["caption"], where=where, sample_id=sample_id)
                 rgb_path = Path(os.path.normpath(folder / row["vision"]))
                 tac_path = Path(os.path.normpath(folder / row["tactile"]))
                 listed_bg = Path(os.path.normpath(folder / row["background"]))
@@ -473,21 +324,21 @@ def ingest_hct(root: Path, *, corpus: str = "hct") -> tuple[pd.DataFrame, pd.Dat
                     ("tactile", tac_path),
                     ("background", bg_path),
                 ):
-                    _inside_root(path, root, where=where, sample_id=sample_id, role=role)
+                    inside_root(path, root, where=where, sample_id=sample_id, role=role)
                 if bg_path not in backgrounds:
-                    sensor_id = f"{corpus}-bg:{_relative(bg_path, hct)}"
+                    sensor_id = f"{corpus}-bg:{relative_path(bg_path, hct)}"
                     backgrounds[bg_path] = (
                         sensor_id,
-                        _load_image(bg_path, sample_id=sample_id, role="background"),
+                        load_image(bg_path, sample_id=sample_id, role="background"),
                     )
                 sensor_id, bg = backgrounds[bg_path]
-                rgb = _load_image(rgb_path, sample_id=sample_id, role="RGB")
-                tactile = _load_image(tac_path, sample_id=sample_id, role="tactile")
-                _check_same_shape(
+                rgb = load_image(rgb_path, sample_id=sample_id, role="RGB")
+                tactile = load_image(tac_path, sample_id=sample_id, role="tactile")
+                check_same_shape(
                     tactile, bg, sample_id=sample_id, tactile_path=tac_path, bg_path=bg_path
                 )
                 records.append(
-                    _Record(
+                    Record(
                         sample_id=sample_id,
                         rgb=rgb.png,
                         tactile=tactile.png,
@@ -495,10 +346,10 @@ def ingest_hct(root: Path, *, corpus: str = "hct") -> tuple[pd.DataFrame, pd.Dat
                         caption=row["caption"],
                         adjectives=adjectives,
                         source_split=split,
-                        source_path=_relative(tac_path, root),
+                        source_path=relative_path(tac_path, root),
                     )
                 )
     if not records:
         raise ValueError(f"no HCT samples under {hct}: the split CSVs have no data rows")
     sensors = {sensor_id: image.png for sensor_id, image in backgrounds.values()}
-    return _frames(records, sensors, corpus)
+    return corpus_frames(records, sensors, corpus)

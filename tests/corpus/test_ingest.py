@@ -23,7 +23,8 @@ from tacgen_lib.corpus.captions import (
     parse_caption,
     top_pattern_strata,
 )
-from tacgen_lib.corpus.ingest import SAMPLE_COLUMNS, SENSOR_COLUMNS, ingest_hct, ingest_ssvtp
+from tacgen_lib.corpus.ingest import ingest_hct, ingest_ssvtp
+from tacgen_lib.corpus.ingest_files import SAMPLE_COLUMNS, SENSOR_COLUMNS
 from tacgen_lib.io.images import decode_png
 
 
