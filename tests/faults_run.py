@@ -17,7 +17,7 @@ from pathlib import Path
 
 from snakemake_run import ROOT, SNAKEMAKE, smk
 
-from tacgen_lib.io import edges
+from tacgen_lib.io import hashed
 
 sys.path.insert(0, str(ROOT / "tools"))
 import resume  # noqa: E402 - tools/ is not a package
@@ -102,10 +102,10 @@ def assert_no_half_written_edge(work: Path) -> int:
     """Every edge present beside its sidecar verifies (the atomic writers only ever rename a
     complete file into place). Returns how many were checked."""
     checked = 0
-    for side in (work / "results").rglob("*" + edges.SIDECAR_SUFFIX):
-        edge = side.with_name(side.name.removesuffix(edges.SIDECAR_SUFFIX))
+    for side in (work / "results").rglob("*" + hashed.SIDECAR_SUFFIX):
+        edge = side.with_name(side.name.removesuffix(hashed.SIDECAR_SUFFIX))
         if edge.exists():
-            edges.verify(edge)
+            hashed.verify(edge)
             checked += 1
     return checked
 

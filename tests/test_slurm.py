@@ -229,7 +229,7 @@ def _cancel_one_running(proc: subprocess.Popen, rule: str, timeout: float = 300)
     "(installs slurm-wlm + munge as root, ~2-3 min); make test sets it",
 )
 def test_align_grid_through_slurm_profile(reference_run, tmp_path):
-    from tacgen_lib.io import edges
+    from tacgen_lib.io import hashed
 
     # the upstream (corpus, splits, features) is the session's local run of config/test.yaml
     # (conftest.reference_run); the stages the SLURM run makes start empty, so every grid cell
@@ -316,8 +316,8 @@ def test_align_grid_through_slurm_profile(reference_run, tmp_path):
     assert sorted(set(summary["seed"])) == GRID["seeds"]
     assert (summary["train_seconds"] > 0).all()
     for cell in summary["cell"]:
-        edges.verify(work / "results/align" / cell / "metrics.parquet")
-        edges.verify(work / "results/align" / cell / "heads.pt")
+        hashed.verify(work / "results/align" / cell / "metrics.parquet")
+        hashed.verify(work / "results/align" / cell / "heads.pt")
     assert (work / "results/report/align/seeds.html").stat().st_size > 500
     # the same grid run locally gives the same edges
     # at the profile's thread counts: edges are bit-identical per thread count, and the
@@ -348,4 +348,4 @@ def test_align_grid_through_slurm_profile(reference_run, tmp_path):
     assert len(gen_logs) == 1, gen_logs
     gen_jobs = [line.split("|") for line in jobs.splitlines() if "train_generator" in line]
     assert [(c, m, st) for _k, c, m, st in gen_jobs] == [("2", "3000M", "COMPLETED")], jobs
-    edges.verify(work / GENERATOR_WEIGHTS)
+    hashed.verify(work / GENERATOR_WEIGHTS)

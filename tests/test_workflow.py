@@ -68,7 +68,7 @@ def test_dry_run_plans_the_whole_dag(cold_dry_run):
 
 
 def test_full_run_makes_verified_edges_logs_and_benchmarks(run_dir):
-    from tacgen_lib.io import edges
+    from tacgen_lib.io import edges, hashed
 
     manifest = edges.read(run_dir / "results/corpus/manifest.parquet").frame
     splits = edges.read(run_dir / "results/corpus/splits.parquet").frame
@@ -88,7 +88,7 @@ def test_full_run_makes_verified_edges_logs_and_benchmarks(run_dir):
         for figure in ("examples", "labels"):
             assert (run_dir / f"results/report/corpus/{corpus}_{figure}.png").stat().st_size > 5000
     table = (run_dir / "results/report/edge_manifest.tsv").read_text()
-    assert edges.sha256_file(run_dir / "results/corpus/splits.parquet") in table
+    assert hashed.sha256_file(run_dir / "results/corpus/splits.parquet") in table
 
 
 def test_second_run_has_nothing_to_do(run_dir):
@@ -350,9 +350,10 @@ def test_runs_as_a_module_from_another_directory(tmp_path, cold_dry_run):
         timeout=600,
     )
     assert run.returncode == 0, run.stderr[-4000:]
-    from tacgen_lib.io import edges
 
-    edges.verify(user / "results/corpus/splits.parquet")
+    from tacgen_lib.io import hashed
+
+    hashed.verify(user / "results/corpus/splits.parquet")
     assert not (repo / "results").exists()  # everything lands in the user's directory
 
 

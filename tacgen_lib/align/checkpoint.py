@@ -18,7 +18,7 @@ from tacgen_lib.align.heads import (
 from tacgen_lib.align.train import (
     AlignResult,
 )
-from tacgen_lib.io import edges
+from tacgen_lib.io import hashed
 
 _FORMAT = "tacgen-align-heads/1"
 
@@ -55,7 +55,7 @@ def save_heads(result: AlignResult, path: str | os.PathLike[str], *, producer: s
     data = buf.getvalue()
     dims = result.dims
     layers = f"{dims['hidden_dim']}->{dims['out_dim']}"
-    return edges.write_bytes(
+    return hashed.write_bytes(
         path,
         data,
         rows=2,
@@ -72,11 +72,11 @@ def save_heads(result: AlignResult, path: str | os.PathLike[str], *, producer: s
 def load_heads(path: str | os.PathLike[str], *, verify: bool = True) -> AlignHeads:
     """Load heads written by `save_heads` as an `AlignHeads` module in eval mode.
 
-    verify: check the file's SHA-256 against its sidecar first (`edges.verify`).
+    verify: check the file's SHA-256 against its sidecar first (`hashed.verify`).
     The stored metadata (config, curve, best_step...) is attached as ``heads.meta``.
     """
     if verify:
-        edges.verify(path)
+        hashed.verify(path)
     try:
         payload = torch.load(os.fspath(path), map_location="cpu", weights_only=True)
     except Exception as exc:  # noqa: BLE001 - re-raised with the file named

@@ -81,7 +81,7 @@ def write_points(table: pd.DataFrame, path: str, source: str) -> pd.DataFrame:
     edge (no sidecar): its seconds vary from run to run (DESIGN §3)."""
     import io
 
-    from tacgen_lib.io.edges import atomic_write_bytes
+    from tacgen_lib.io.hashed import atomic_write_bytes
 
     table = check_points(table, source)
     sink = io.BytesIO()

@@ -30,7 +30,7 @@ import pyarrow as pa
 
 from tacgen_lib.generate.schedules import Schedule, make_schedule
 from tacgen_lib.generate.settings import GenerateSettings
-from tacgen_lib.io import edges
+from tacgen_lib.io import hashed
 
 __all__ = [
     "FORMAT",
@@ -291,7 +291,7 @@ def read_generator(path: str | os.PathLike[str], *, verify: bool = True) -> Gene
     """A weights file written by `encode_generator` (through `train.save_generator`), its
     sidecar hash checked first. Raises ValueError naming the file if it is not one."""
     if verify:
-        edges.verify(path)
+        hashed.verify(path)
     try:
         with pa.memory_map(os.fspath(path)) as source:
             table = pa.ipc.open_file(source).read_all()

@@ -32,7 +32,7 @@ from tacgen_lib.generate.inference import (
 from tacgen_lib.generate.model import Denoiser
 from tacgen_lib.generate.schedules import make_schedule
 from tacgen_lib.generate.settings import GenerateSettings
-from tacgen_lib.io import edges
+from tacgen_lib.io import hashed
 from tacgen_lib.optim import AdamW
 
 __all__ = [
@@ -235,9 +235,9 @@ def fit_generator(
 
 def save_generator(fit: GeneratorFit, path: str | os.PathLike[str], *, producer: str = "") -> str:
     """Write EMA weights + standardisation statistics + settings + curve atomically, with a
-    sidecar hash (`edges.write_bytes`); the bytes depend only on the fit. Returns SHA-256."""
+    sidecar hash (`hashed.write_bytes`); the bytes depend only on the fit. Returns SHA-256."""
     d = fit.model.dims
-    return edges.write_bytes(
+    return hashed.write_bytes(
         path,
         encode_generator(fit.weights()),
         rows=1,

@@ -23,7 +23,7 @@ import numpy as np
 import torch
 from torch import nn
 
-from tacgen_lib.io import edges
+from tacgen_lib.io import hashed
 from tacgen_lib.optim import AdamW
 from tacgen_lib.policy.settings import LEARNED_CONDITIONS
 
@@ -149,8 +149,8 @@ def save_bc(policy: BCPolicy, hidden: int, layers: int) -> bytes:
 
 
 def load_bc(path: str) -> BCPolicy:
-    """Load a policy written by `save_bc` after checking its hash (tacgen_lib.io.edges.verify)."""
-    edges.verify(path)
+    """Load a policy written by `save_bc` after checking its hash (tacgen_lib.io.hashed.verify)."""
+    hashed.verify(path)
     obj = torch.load(path, weights_only=False)
     net = _mlp(len(obj["mean"]), obj["hidden"], obj["layers"])
     net.load_state_dict(obj["state"])

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from tacgen_lib.io import edges
+from tacgen_lib.io import hashed
 from tacgen_lib.report import format as fmt
 
 __all__ = ["edge_manifest_table", "pretrained_vs_random_view", "to_html"]
@@ -18,7 +18,7 @@ def edge_manifest_table(paths: Iterable[str]) -> pd.DataFrame:
     """One row per edge: path, SHA-256 (re-verified against the file), rows, key, columns, rule."""
     rows = []
     for path in paths:
-        meta = edges.verify(path)
+        meta = hashed.verify(path)
         rows.append(
             {
                 "edge": str(path),

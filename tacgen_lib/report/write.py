@@ -16,7 +16,7 @@ import matplotlib.pyplot as plt
 import matplotlib.text
 import pandas as pd
 
-from tacgen_lib.io.edges import atomic_write_bytes
+from tacgen_lib.io.hashed import atomic_write_bytes
 from tacgen_lib.report.tables import to_html
 
 __all__ = [

@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from tacgen_lib.io import edges
+from tacgen_lib.io import edges, hashed
 from tacgen_lib.io.edges import EdgeError
 from tacgen_lib.io.images import decode_png, encode_png
 
@@ -35,14 +35,14 @@ def test_round_trip_keeps_values_vectors_and_images(tmp_path):
     frame, vec = _frame(), _vec()
     digest = edges.write(path, frame, {"v": vec}, producer="unit")
     edge = edges.read(path, require={"v": 8, "mass": "float", "rgb": "bytes", "caption": "str"})
-    assert edge.sha256 == digest == edges.sha256_file(path)
+    assert edge.sha256 == digest == hashed.sha256_file(path)
     assert list(edge.ids) == list(frame["sample_id"])
     np.testing.assert_array_equal(edge.vectors["v"], vec)
     assert edge.vectors["v"].dtype == np.float32
     np.testing.assert_array_equal(edge.frame["mass"], frame["mass"])
     assert (decode_png(edge.frame["rgb"][2]) == decode_png(frame["rgb"][2])).all()
     assert list(edge.frame["adjectives"][0]) == ["hard", "smooth"]
-    meta = json.loads(edges.sidecar_path(path).read_text())
+    meta = json.loads(hashed.sidecar_path(path).read_text())
     assert meta["vectors"] == {"v": 8} and meta["rows"] == 5 and meta["producer"] == "unit"
     assert "fixed_size_list<element: float>[8]" in meta["columns"]["v"]
 
@@ -131,7 +131,7 @@ def test_missing_sidecar_and_missing_file(tmp_path):
     with pytest.raises(EdgeError, match="does not exist"):
         edges.read(path)
     edges.write(path, _frame())
-    edges.sidecar_path(path).unlink()
+    hashed.sidecar_path(path).unlink()
     with pytest.raises(EdgeError, match="no manifest"):
         edges.read(path)
 
@@ -200,7 +200,7 @@ def test_vectors_only_edge_is_the_same_file_without_pandas(tmp_path):
     digest = edges.write_vectors(a, ids, {"v": vec}, producer="unit")
     assert digest == edges.write(b, pd.DataFrame({"sample_id": ids}), {"v": vec}, producer="unit")
     assert a.read_bytes() == b.read_bytes()
-    side_a, side_b = (json.loads(edges.sidecar_path(p).read_text()) for p in (a, b))
+    side_a, side_b = (json.loads(hashed.sidecar_path(p).read_text()) for p in (a, b))
     assert {**side_a, "file": ""} == {**side_b, "file": ""}
     got_ids, got = edges.read_vectors(a, "v")
     assert list(got_ids) == ids and got.dtype == np.float32

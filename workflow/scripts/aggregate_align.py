@@ -7,7 +7,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from tacgen_lib.align.cells import CELL_COLUMNS
-from tacgen_lib.io import edges, log
+from tacgen_lib.io import edges, hashed, log
 from tacgen_lib.report import align as align_report
 from tacgen_lib.report.write import write_figure, write_table
 from tacgen_lib.runtime.benchmarks import benchmark_seconds
@@ -44,7 +44,7 @@ edges.write(out.metrics, metrics.sort_values("cell"), key="cell", producer=snake
 # ... and the summary with wall times: a report table, not an edge (wall times vary by run).
 sink = io.BytesIO()
 pq.write_table(pa.Table.from_pandas(summary, preserve_index=False), sink, compression="zstd")
-edges.atomic_write_bytes(out.summary, sink.getvalue())
+hashed.atomic_write_bytes(out.summary, sink.getvalue())
 
 tables = {
     "tau": (

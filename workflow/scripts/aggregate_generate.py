@@ -8,7 +8,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from tacgen_lib.corpus.splits import ids_in_split
-from tacgen_lib.io import edges, log
+from tacgen_lib.io import edges, hashed, log
 from tacgen_lib.report import generate as gen_report
 from tacgen_lib.report.write import write_figure, write_table
 from tacgen_lib.runtime.benchmarks import benchmark_seconds
@@ -37,7 +37,7 @@ edges.write(out.evaluation, rows.sort_values("row_id"), key="row_id", producer=s
 summary = gen_report.generation_summary(rows, sample_seconds, train_seconds)
 sink = io.BytesIO()
 pq.write_table(pa.Table.from_pandas(summary, preserve_index=False), sink, compression="zstd")
-edges.atomic_write_bytes(out.summary, sink.getvalue())
+hashed.atomic_write_bytes(out.summary, sink.getvalue())
 
 label = f"{ref['sampler']} {ref['steps']} steps, w = {ref['guidance']}"
 write_table(

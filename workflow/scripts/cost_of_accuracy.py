@@ -7,7 +7,7 @@ import pandas as pd
 
 from tacgen_lib.cost.points import POINT_COLUMNS, read_points
 from tacgen_lib.io import log
-from tacgen_lib.io.edges import atomic_write_bytes
+from tacgen_lib.io.hashed import atomic_write_bytes
 from tacgen_lib.report.cost import cost_figures, cost_page_html, knob_sentences, marginal_view
 from tacgen_lib.report.write import write_figure, write_table
 from tacgen_lib.runtime.benchmarks import cpu_label

@@ -3,12 +3,12 @@
 import pyarrow.parquet as pq
 
 from tacgen_lib.corpus.manifest import fuse_manifest
-from tacgen_lib.io import edges, log
+from tacgen_lib.io import edges, hashed, log
 
 logger = log.for_rule(snakemake)
 frames = []
 for path in snakemake.input.samples:
-    edges.verify(path)
+    hashed.verify(path)
     names = pq.read_schema(path).names
     frames.append(edges.read(path, columns=[c for c in names if c not in ("rgb", "tactile")]).frame)
 manifest = fuse_manifest(frames, sources=[str(p) for p in snakemake.input.samples])

@@ -7,7 +7,7 @@ from tacgen_lib.corpus.splits import assert_trainable, ids_in_split
 from tacgen_lib.features.dino import pretrain_dino
 from tacgen_lib.features.settings import DinoSettings
 from tacgen_lib.features.vit import build_vit, load_pretrained, random_backbone, save_backbone
-from tacgen_lib.io import edges, log
+from tacgen_lib.io import edges, hashed, log
 from tacgen_lib.preprocess.frames import decode_frames
 
 logger = log.for_rule(snakemake)
@@ -58,6 +58,6 @@ curve.insert(
     0, "epoch_id", pd.Series([f"{modality}-{int(e):04d}" for e in curve["epoch"]], dtype=object)
 )
 save_backbone(model, snakemake.output.weights)
-digest = edges.record_file(snakemake.output.weights, producer=snakemake.rule)
+digest = hashed.record_file(snakemake.output.weights, producer=snakemake.rule)
 edges.write(snakemake.output.curve, curve, key="epoch_id", producer=snakemake.rule)
 logger.info("saved %s backbone, sha256 %s", modality, digest)

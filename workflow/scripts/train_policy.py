@@ -3,7 +3,7 @@
 import pandas as pd
 import torch
 
-from tacgen_lib.io import edges, log
+from tacgen_lib.io import edges, hashed, log
 from tacgen_lib.policy import bc, data
 from tacgen_lib.policy.settings import PolicySettings
 
@@ -41,7 +41,7 @@ logger.info(
     losses[0],
     losses[-1],
 )
-edges.write_bytes(
+hashed.write_bytes(
     snakemake.output.weights,
     bc.save_bc(policy, hidden, settings.layers),
     rows=None,
