@@ -157,27 +157,18 @@ def test_edit_to_an_indirectly_imported_module_reruns_exactly_its_users(run_dir,
         for p in scripts.glob("*.py")
         if ROOT / module in import_closure(p, ROOT / "tacgen_lib")
     }
-    # evaluate_generator and fit_generator_baselines reach it through probes.compare too
-    # (generate)
+    # the generator's evaluation and baselines fit probes (probes.fit, probes.rows) but run no
+    # control, so they do not reach it since the protocol was split by concept
     robustness = {"probe_training_size", "probe_within_scale", "aggregate_robustness"}
     assert direct == []
-    generate = {"evaluate_generator", "fit_generator_baselines"}
-    assert users == {"probe", "aggregate_probes"} | generate | robustness
+    assert users == {"probe", "aggregate_probes"} | robustness
     work = copy_tree(tmp_path / "f")
     shutil.copytree(run_dir / "results", work / "results")
     shutil.copytree(run_dir / ".snakemake", work / ".snakemake")
     (work / module).write_text((work / module).read_text() + "\n# an edit\n")
-    # its users rerun, then only what reads their outputs: the generation summary,
-    # the findings page, the edge manifest and `all`
-    # (the cost sweeps run only under config/cost.yaml: not planned here)
-    assert set(planned_rules(work)) == users | {
-        "aggregate_generate",
-        "cost_generate_points",
-        "cost_of_accuracy",
-        "edge_manifest",
-        "findings",
-        "all",
-    }
+    # its users rerun, then only what reads their outputs: the findings page, the edge
+    # manifest and `all` (the cost sweeps run only under config/cost.yaml: not planned here)
+    assert set(planned_rules(work)) == users | {"edge_manifest", "findings", "all"}
 
 
 def test_two_runs_give_identical_edges(run_dir, resumed_run):
