@@ -9,6 +9,7 @@ generator's steps and samplers, the policy sweep) are the stages' own grids and 
 """
 
 from tacgen_lib.align.cells import cell_name
+from tacgen_lib.features.settings import backbones_pretrained
 from tacgen_lib.cost.knobs import (
     KNOBS,
     knob_bootstrap,
@@ -176,7 +177,6 @@ def cost_setting_plan(knob):
     plan = []
     for run in COST_SETTINGS[knob]:
         edges, benchmarks = _SETTING_FILES[KNOBS[knob].reads](knob, run)
-        feat = run.config["features"]
         plan.append(
             {
                 "label": run.label,
@@ -189,8 +189,7 @@ def cost_setting_plan(knob):
                 },
                 "benchmarks": [moved_path(b, run.replace_prefix) for b in benchmarks],
                 "options": {
-                    "pretraining": int(feat["pretrain"]["epochs"]) > 0
-                    or any(feat["backbones"][m].get("checkpoint") for m in MODALITIES),
+                    "pretraining": backbones_pretrained(run.config["features"])
                 },
             }
         )
@@ -198,12 +197,11 @@ def cost_setting_plan(knob):
 
 
 def cost_knob_options(knob):
-    """What a knob's reader needs from the run's config (resamples, the heads' variant...)."""
+    """What a knob's reader needs from the run's config (resamples, seed, metrics)."""
     probes = config["probes"]
     return {
         "bootstrap": knob_bootstrap(KNOBS[knob], COST_KNOB_CONFIG[knob], config),
         "seed": int(probes["seeds"][0]),
-        "heads_variant": probes["heads"]["variant"],
         "metrics": knob_metrics(KNOBS[knob], config),
     }
 

@@ -1,11 +1,11 @@
 """Helpers of the report's items that rule files share (included before the stages)."""
 
+from tacgen_lib.features.settings import backbones_pretrained
+
 #: whether the backbones learned anything: DINO epochs, or an official checkpoint. Without, the
 #: pretraining curve and the pretrained-vs-random table (Δ = 0 by construction) are still made
 #: and hashed, but left out of the report rather than shown as placeholders.
-PRETRAINED = config["features"]["pretrain"]["epochs"] > 0 or any(
-    config["features"]["backbones"][m].get("checkpoint") for m in ("vision", "tactile")
-)
+PRETRAINED = backbones_pretrained(config["features"])
 
 
 #: this run is one setting of a cost knob (a module of this Snakefile, rules/cost_common.smk):

@@ -30,6 +30,8 @@ generator and policy knobs are `free`: their settings are the stages' own grids
 from __future__ import annotations
 
 import copy
+import dataclasses
+import json
 import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -293,8 +295,6 @@ def knob_settings(name: str, entry: Mapping[str, Any], config: Mapping[str, Any]
     paths = [_path(k, ctx) for k in knob.keys]
     # the run's own setting: every scalar key at its value (a list key is a grid)
     defaults = [_get(config, parts) for parts, as_list in paths if not as_list]
-    if not knob.has_default:
-        defaults = [object()]  # no value is the run's own
     reps = int(entry.get("replicates", 5)) if knob.replicate_key else 1
     first_seed = int(config["probes"]["seeds"][0])
     out = []
@@ -320,17 +320,10 @@ def knob_settings(name: str, entry: Mapping[str, Any], config: Mapping[str, Any]
                 m.format(**ctx): root + m.format(**ctx).removeprefix("results/") for m in knob.moves
             }
             moves |= {"results/benchmarks/": root + "benchmarks/", "results/logs/": root + "logs/"}
+            is_default = knob.has_default and all(_same(value, d) for d in defaults)
             out.append(
                 Setting(
-                    name,
-                    label,
-                    _number(knob, value),
-                    all(_same(value, d) for d in defaults),
-                    rep,
-                    module,
-                    root,
-                    cfg,
-                    moves,
+                    name, label, _number(knob, value), is_default, rep, module, root, cfg, moves
                 )
             )
     return out
@@ -344,35 +337,25 @@ def shared_runs(runs: Sequence[Setting]) -> list[Setting]:
     first: dict[str, Setting] = {}
     out = []
     for run in runs:
-        cfg = dict(run.config)
-        cfg["cost"] = {k: v for k, v in cfg["cost"].items() if k != "setting"}
+        cfg = {
+            **run.config,
+            "cost": {k: v for k, v in run.config["cost"].items() if k != "setting"},
+        }
         # the same config and the same folders moved (else a rule could write a main path)
-        key = repr((_canonical(cfg), sorted(run.replace_prefix)))
+        key = json.dumps([cfg, sorted(run.replace_prefix)], sort_keys=True)
         owner = first.setdefault(key, run)
         out.append(
             run
             if owner is run
-            else Setting(
-                run.knob,
-                run.label,
-                run.number,
-                run.is_default,
-                run.rep,
-                owner.module,
-                owner.root,
-                owner.config,
-                owner.replace_prefix,
+            else dataclasses.replace(
+                run,
+                module=owner.module,
+                root=owner.root,
+                config=owner.config,
+                replace_prefix=owner.replace_prefix,
             )
         )
     return out
-
-
-def _canonical(value: Any) -> Any:
-    if isinstance(value, Mapping):
-        return tuple(sorted((k, _canonical(v)) for k, v in value.items()))
-    if isinstance(value, list | tuple):
-        return tuple(_canonical(v) for v in value)
-    return value
 
 
 def moved_path(path: str, replace_prefix: Mapping[str, str]) -> str:

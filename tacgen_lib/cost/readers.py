@@ -45,7 +45,15 @@ from tacgen_lib.cost.sweeps import (
 )
 from tacgen_lib.runtime.benchmarks import Benchmark
 
-__all__ = ["READERS", "SettingRun", "headline_row", "read_knob"]
+__all__ = ["EDGE_COLUMNS", "READERS", "SettingRun", "headline_row", "read_knob"]
+
+#: the columns a reader uses of each edge role (the key is always read; a role not named here
+#: is read whole): a reduced corpus's samples edge also holds every frame as PNG bytes
+EDGE_COLUMNS: dict[str, tuple[str, ...]] = {
+    "samples": ("force_p05", "force_p95"),
+    "ranks": ("rank_v2t",),
+    "metrics": ("n_train_rows",),
+}
 
 
 @dataclass(frozen=True)
@@ -83,19 +91,20 @@ def _default_label(runs: Sequence[SettingRun]) -> str | None:
     return next((r.label for r in runs if r.is_default), None)
 
 
-def headline_row(rows: pd.DataFrame, heads_variant: str, control: str = "none") -> pd.Series:
+def headline_row(rows: pd.DataFrame, control: str = "none") -> pd.Series:
     """The probe job's headline comparison: raw features, concat fusion, the heads' tactile
-    variant, and `control` ("none": the comparison itself). Raises naming what is missing."""
+    variant (each row's `heads_variant`), and `control` ("none": the comparison itself).
+    Raises naming what is missing."""
     hit = rows[
         (rows["input"] == "raw")
         & (rows["fusion"] == "concat")
-        & (rows["t_variant"] == heads_variant)
+        & (rows["t_variant"] == rows["heads_variant"])
         & (rows["control"] == control)
     ]
     if len(hit) != 1:
         raise ValueError(
             f"probe rows of {sorted(set(rows['family']))}: {len(hit)} headline rows "
-            f"(raw, concat, t~{heads_variant}, control {control}); expected 1"
+            f"(raw, concat, the heads' variant, control {control}); expected 1"
         )
     return hit.iloc[0]
 
@@ -117,12 +126,12 @@ def read_align(knob: str, runs: Sequence[SettingRun], options: Mapping[str, Any]
     )
 
 
-def _replicates(runs: Sequence[SettingRun], heads_variant: str) -> pd.DataFrame:
+def _replicates(runs: Sequence[SettingRun]) -> pd.DataFrame:
     out = []
     for r in runs:
         rows = r.edges["rows"][0]
-        main = headline_row(rows, heads_variant)
-        perm = headline_row(rows, heads_variant, "tactile_permutation")
+        main = headline_row(rows)
+        perm = headline_row(rows, "tactile_permutation")
         out.append(
             {
                 "label": r.label,
@@ -139,16 +148,16 @@ def _replicates(runs: Sequence[SettingRun], heads_variant: str) -> pd.DataFrame:
 
 
 def read_probe_bootstrap(knob: str, runs: Sequence[SettingRun], options: Mapping[str, Any]):
-    reps = _replicates(runs, options["heads_variant"])
+    reps = _replicates(runs)
     return bootstrap_spread_points(knob, reps, _seconds(runs), _default_label(runs))
 
 
 def read_probe_permutations(knob: str, runs: Sequence[SettingRun], options: Mapping[str, Any]):
-    reps = _replicates(runs, options["heads_variant"])
+    reps = _replicates(runs)
     return permutation_points(knob, reps, _seconds(runs), _default_label(runs))
 
 
-def _settings(knob: str, runs: Sequence[SettingRun], metrics: Callable[[SettingRun], list[dict]]):
+def _settings(runs: Sequence[SettingRun], metrics: Callable[[SettingRun], list[dict]]):
     return [
         KnobSetting(r.number, r.label, r.is_default, pd.DataFrame(metrics(r)), r.benchmarks)
         for r in runs
@@ -163,7 +172,7 @@ def read_features(knob: str, runs: Sequence[SettingRun], options: Mapping[str, A
             n_resamples=int(options["bootstrap"]),
         )
 
-    return knob_points(knob, "features", _settings(knob, runs, metrics), options["metrics"])
+    return knob_points(knob, "features", _settings(runs, metrics), options["metrics"])
 
 
 def read_simulation(knob: str, runs: Sequence[SettingRun], options: Mapping[str, Any]):
@@ -183,7 +192,7 @@ def read_simulation(knob: str, runs: Sequence[SettingRun], options: Mapping[str,
             )
         ]
         for rows in r.edges["rows"]:
-            h = headline_row(rows, options["heads_variant"])
+            h = headline_row(rows)
             out.append(
                 metric_row(
                     probe_metric_ids(h["target"], h["metric"])[1],
@@ -205,7 +214,7 @@ def read_simulation(knob: str, runs: Sequence[SettingRun], options: Mapping[str,
         )
         return out
 
-    return knob_points(knob, "corpus", _settings(knob, runs, metrics), options["metrics"])
+    return knob_points(knob, "corpus", _settings(runs, metrics), options["metrics"])
 
 
 READERS: dict[str, Callable[[str, Sequence[SettingRun], Mapping[str, Any]], pd.DataFrame]] = {

@@ -15,7 +15,7 @@ from typing import Any, Literal
 
 from tacgen_lib.io.config import settings_from
 
-__all__ = ["DinoSettings"]
+__all__ = ["DinoSettings", "backbones_pretrained"]
 
 
 @dataclass(frozen=True)
@@ -75,3 +75,11 @@ class DinoSettings:
             bottleneck_dim=16,
         )
         return replace(small, **changes)
+
+
+def backbones_pretrained(features: Mapping[str, Any]) -> bool:
+    """Whether config ``features`` gives backbones that learned anything: DINO epochs above 0,
+    or an official checkpoint for either modality (else they are the seeded random init)."""
+    return int(features["pretrain"]["epochs"]) > 0 or any(
+        features["backbones"][m].get("checkpoint") for m in ("vision", "tactile")
+    )

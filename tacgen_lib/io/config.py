@@ -184,8 +184,9 @@ def settings_from(
     the section the rules read themselves, such as grids) raises ConfigError naming it. Values
     are coerced to the field's annotated type: int, float, str, bool, `tuple[X, ...]`,
     `tuple[X, Y]` and unions of those (the first member that fits: `int | str` reads 10 and
-    "all"; a whole number given as 2.0 becomes 2; a bool is never a number). The schema stays the validator at start-up; this reader is what turns
-    its checked sections into typed settings.
+    "all"; a whole number given as 2.0 becomes 2; a bool is never a number). The schema stays
+    the validator at start-up; this reader is what turns its checked sections into typed
+    settings.
     """
     section = dict(section or {})
     rename = dict(rename or {})
@@ -229,15 +230,12 @@ def _coerce(tp: Any, value: Any, where: str) -> Any:
             raise ConfigError(f"config {where}: {value!r} is not a list")
         if len(args) == 2 and args[1] is Ellipsis:
             return tuple(_coerce(args[0], v, f"{where}[{i}]") for i, v in enumerate(value))
-        if args and len(args) != len(value):
+        if not args:
+            return tuple(value)
+        if len(args) != len(value):
             raise ConfigError(f"config {where}: {value!r} needs {len(args)} items")
-        return (
-            tuple(
-                _coerce(a, v, f"{where}[{i}]")
-                for i, (a, v) in enumerate(zip(args, value, strict=False))
-            )
-            if args
-            else tuple(value)
+        return tuple(
+            _coerce(a, v, f"{where}[{i}]") for i, (a, v) in enumerate(zip(args, value, strict=True))
         )
     if tp is bool:
         if not isinstance(value, bool):

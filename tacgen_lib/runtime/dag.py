@@ -101,18 +101,23 @@ def dag_jobs(
             snake_jobs = list(dag.jobs)
             ids = {job: i for i, job in enumerate(snake_jobs)}
             local_rules = set(getattr(workflow, "_localrules", set()))
+            module_configs: dict[str, dict[str, Any]] = {}  # one plain copy per setting
+            setting_of = {
+                rule.name: _setting_rule(rule, module_configs)
+                for rule in {job.rule for job in snake_jobs}
+            }
             jobs = [
                 DagJob(
                     jobid=ids[job],
-                    rule=_setting_rule(job.rule)[0],
+                    rule=setting_of[job.rule.name][0],
                     wildcards={k: str(v) for k, v in job.wildcards_dict.items()},
                     threads=int(job.threads),
                     local=job.rule.name in local_rules,
                     benchmark=str(job.benchmark) if job.benchmark is not None else None,
                     runs=not job.rule.norun,
                     deps=tuple(sorted(ids[d] for d in dag.job_dependencies(job))),
-                    setting=_setting_rule(job.rule)[1],
-                    config=_setting_rule(job.rule)[2],
+                    setting=setting_of[job.rule.name][1],
+                    config=setting_of[job.rule.name][2],
                 )
                 for job in snake_jobs
             ]
@@ -122,14 +127,20 @@ def dag_jobs(
     return jobs, config
 
 
-def _setting_rule(rule: Any) -> tuple[str, str | None, dict[str, Any] | None]:
+def _setting_rule(
+    rule: Any, module_configs: dict[str, dict[str, Any]]
+) -> tuple[str, str | None, dict[str, Any] | None]:
     """(main rule name, module name, module config) of a Snakemake rule; (name, None, None)
-    for a rule of the run itself."""
+    for a rule of the run itself. `module_configs` keeps one plain copy of each module's
+    config, shared by its rules' jobs."""
     module_config = (getattr(rule, "module_globals", None) or {}).get("config")
     setting = ((module_config or {}).get("cost") or {}).get("setting")
     if not setting:
         return rule.name, None, None
-    return base_rule(rule.name, module_config), setting["module"], _plain(module_config)
+    name = setting["module"]
+    if name not in module_configs:
+        module_configs[name] = _plain(module_config)
+    return base_rule(rule.name, module_config), name, module_configs[name]
 
 
 def _plain(value: Any) -> Any:

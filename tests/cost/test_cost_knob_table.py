@@ -173,6 +173,7 @@ def test_headline_row_is_raw_concat_at_the_heads_variant():
         "input": "raw",
         "fusion": "concat",
         "t_variant": "clip128",
+        "heads_variant": "clip128",
         "control": "none",
         "delta": 0.5,
     }
@@ -185,10 +186,10 @@ def test_headline_row_is_raw_concat_at_the_heads_variant():
             {**base, "control": "tactile_permutation", "delta": -0.1},
         ]
     )
-    assert headline_row(rows, "clip128")["delta"] == 0.5
-    assert headline_row(rows, "clip128", "tactile_permutation")["delta"] == -0.1
+    assert headline_row(rows)["delta"] == 0.5
+    assert headline_row(rows, "tactile_permutation")["delta"] == -0.1
     with pytest.raises(ValueError, match="0 headline rows"):
-        headline_row(rows, "histmatch")
+        headline_row(rows.assign(heads_variant="histmatch"))
 
 
 def test_config_yaml_states_what_the_knobs_read():

@@ -2,7 +2,7 @@
 files of their jobs (rule cost_knob_points; the reader: tacgen_lib.cost.readers)."""
 
 from tacgen_lib.cost.points import log_points, write_points
-from tacgen_lib.cost.readers import SettingRun, read_knob
+from tacgen_lib.cost.readers import EDGE_COLUMNS, SettingRun, read_knob
 from tacgen_lib.io import edges, log
 from tacgen_lib.runtime.benchmarks import read_benchmark
 
@@ -17,7 +17,8 @@ for p in params.plan:
             is_default=p["is_default"],
             rep=p["rep"],
             edges={
-                role: [edges.read(f).frame for f in files] for role, files in p["edges"].items()
+                role: [edges.read(f, columns=EDGE_COLUMNS.get(role)).frame for f in files]
+                for role, files in p["edges"].items()
             },
             benchmarks=[read_benchmark(b) for b in p["benchmarks"]],
             options=p["options"],
