@@ -17,6 +17,11 @@ stage's own (`tacgen_lib.probes.fit.fit_probe` on the same `family_rows` train/t
   the train rows only (Nystroem drawn with the probe seed: it does not depend on the generator).
   T_gen is a function of V, so a gain of V + T_gen over linear V may be nonlinearity, not
   touch; ``delta_vs_nonlinear`` = score(V + x) - score(V + phi(V)) says.
+- ``t_ridge`` / ``t_ridge_residual``: V + the simplest generator's output, ridge V->T fitted on
+  the generator's own train rows (its conditional mean; the mean plus a sampled train
+  residual: `tacgen_lib.generate.ridge`). A diffusion generator that does no better than it
+  has learnt nothing a linear map does not give; ``delta_vs_ridge`` = score(V + T_gen) -
+  score(V + T_ridge) on the ``t_gen`` rows says, and each ridge row carries its own fidelity.
 
 Every Delta is paired on the same test rows with the same 5,000 fixed-test resamples (drawn
 once per target and shared by every bootstrap of that target: identical to drawing them per
@@ -60,6 +65,7 @@ from tacgen_lib.generate.fidelity import (
     PERMUTATION_COLUMNS,
     fidelity,
 )
+from tacgen_lib.generate.ridge import RIDGE_ALPHAS, RIDGE_INPUTS, ridge_generate
 from tacgen_lib.probes.bootstrap import fixed_test_bootstrap, resample_indices
 from tacgen_lib.probes.fit import FittedProbe, fit_probe
 from tacgen_lib.probes.logistic import FixedLogistic
@@ -67,7 +73,7 @@ from tacgen_lib.probes.rows import FamilyRows
 from tacgen_lib.probes.settings import ProbeSettings
 
 #: What is added to V in a summary row.
-INPUTS = ("t_real", "t_gen", "t_gen_shuffled", "v_nonlinear")
+INPUTS = ("t_real", "t_gen", "t_gen_shuffled", "v_nonlinear", *RIDGE_INPUTS)
 
 
 def shuffled_rows(n: int, seed: int) -> np.ndarray:
@@ -89,7 +95,9 @@ def shuffled_rows(n: int, seed: int) -> np.ndarray:
 REG_CV, REG_REFERENCE = "cv", "reference cell"
 
 
-def _row(base: dict, inp: str, boot: dict, vs_nl: dict | None) -> dict:
+def _row(
+    base: dict, inp: str, boot: dict, vs_nl: dict | None, vs_ridge: dict | None = None
+) -> dict:
     return {
         **base,
         "input": inp,
@@ -102,6 +110,9 @@ def _row(base: dict, inp: str, boot: dict, vs_nl: dict | None) -> dict:
         "delta_vs_nonlinear": np.nan if vs_nl is None else vs_nl["delta"],
         "ci_low_vs_nonlinear": np.nan if vs_nl is None else vs_nl["ci_low"],
         "ci_high_vs_nonlinear": np.nan if vs_nl is None else vs_nl["ci_high"],
+        "delta_vs_ridge": np.nan if vs_ridge is None else vs_ridge["delta"],
+        "ci_low_vs_ridge": np.nan if vs_ridge is None else vs_ridge["ci_low"],
+        "ci_high_vs_ridge": np.nan if vs_ridge is None else vs_ridge["ci_high"],
     }
 
 
@@ -128,6 +139,7 @@ def evaluate_generator(
     t_gen: Mapping[tuple[str, str, str], Mapping[str, np.ndarray]],
     baselines: Mapping[str, Baselines],
     permutations: int,
+    generator_train_ids: Sequence[str],
     reference: tuple[str, str, str] | None = None,
     labels: Mapping[str, object] | None = None,
     progress: Callable[[str], None] | None = None,
@@ -137,10 +149,17 @@ def evaluate_generator(
     vision, t_real: sample_id -> vector, for every row of the corpus (dicts keep this
     function free of edge I/O); t_gen: (sampler, guidance, steps) -> sample_id -> vector;
     baselines: target -> its `fit_baselines` (V, V + T_real, nonlinear V: shared by seeds).
-    `reference`: the cell whose CV chooses the logistic C of every cell (module docstring;
-    default: the first cell).
+    `generator_train_ids`: the rows the generator learnt from; the ridge V->T generator
+    (`tacgen_lib.generate.ridge`, its residual draw seeded by `seed`) is fitted on them, and
+    its two arms are evaluated beside every cell: rows ``t_ridge`` and ``t_ridge_residual``,
+    each with its own fidelity, and ``delta_vs_ridge`` = score(V + T_gen) - score(V + T_ridge)
+    on the ``t_gen`` rows. `reference`: the cell whose CV chooses the logistic C of every cell
+    (module docstring; default: the first cell).
     """
     say = progress or (lambda _m: None)
+    ridge = ridge_generate(vision, t_real, generator_train_ids, seed=seed, alphas=RIDGE_ALPHAS)
+    say(f"ridge V->T generator: alpha {ridge.alpha:g} by leave-one-out on {ridge.n_train} rows")
+    ridge_sources = dict(zip(RIDGE_INPUTS, (ridge.mean, ridge.residual), strict=True))
 
     all_ids = np.array(sorted(vision), dtype=object)
     perm = shuffled_rows(len(all_ids), seed)
@@ -233,6 +252,21 @@ def evaluate_generator(
         nl_row = _row({}, "v_nonlinear", boot(p_v, p_nl), None)
         real_row.update(reg=bl.reg["t_real"], reg_source=REG_CV)
         nl_row.update(reg=bl.reg["v_nonlinear"], reg_source=REG_CV)
+        # the ridge generator's arms: fitted and bootstrapped once, repeated in every cell
+        ridge_rows, p_ridge = [], None
+        for inp, source in ridge_sources.items():
+            r_tr, r_te = feature_block(source, rows.train_ids), feature_block(source, rows.test_ids)
+            probe = fit(np.hstack([v_tr, r_tr]), np.hstack([v_te, r_te]))
+            p_ridge = probe.pred_test if p_ridge is None else p_ridge  # the mean arm's
+            r_fid, _ = fidelity(r_te, t_te, t_tr, n_permutations=permutations, seed=seed)
+            r_row = _row({}, inp, boot(p_v, probe.pred_test), boot(p_nl, probe.pred_test))
+            r_row.update(reg=float(probe.reg), reg_source=REG_CV, **r_fid)
+            ridge_rows.append(r_row)
+            say(
+                f"{spec.name}: V+T_{inp.removeprefix('t_')} delta {r_row['delta']:+.3f} "
+                f"[{r_row['ci_low']:+.3f}, {r_row['ci_high']:+.3f}], cos "
+                f"{r_fid['cos_matched']:.3f} vs {r_fid['cos_offdiag']:.3f}"
+            )
         say(
             f"{spec.name}: V {real_row['v_score']:.3f}, V+T_real delta {real_row['delta']:+.3f} "
             f"[{real_row['ci_low']:+.3f}, {real_row['ci_high']:+.3f}], nonlinear V delta "
@@ -277,13 +311,18 @@ def evaluate_generator(
                     for k, s in enumerate(null)
                 ]
             fid = fid_cache[key]
-            gen_row = _row(cell_base, "t_gen", boot(p_v, p_gen), boot(p_nl, p_gen))
+            gen_row = _row(
+                cell_base, "t_gen", boot(p_v, p_gen), boot(p_nl, p_gen), boot(p_ridge, p_gen)
+            )
             shuf_row = _row(cell_base, "t_gen_shuffled", boot(p_v, p_shuf), boot(p_nl, p_shuf))
             gen_row.update(reg=reg_gen, reg_source=src_gen)
             shuf_row.update(reg=reg_shuf, reg_source=src_shuf)
             rows_cell = [{**cell_base, **real_row}, gen_row, shuf_row, {**cell_base, **nl_row}]
             for r in rows_cell:
                 r.update(fid)
+            rows_cell += [{**cell_base, **r} for r in ridge_rows]  # with their own fidelity
+            for r in rows_cell:
+                r["ridge_alpha"] = ridge.alpha
                 r["row_id"] = (
                     f"{corpus}|{spec.name}|seed~{seed}|{sampler}|w={guidance}|"
                     f"steps={steps}|{r['input']}"
@@ -293,7 +332,8 @@ def evaluate_generator(
                 f"{spec.name} {sampler} w={guidance} steps={steps}: V+T_gen delta "
                 f"{gen_row['delta']:+.3f} [{gen_row['ci_low']:+.3f}, {gen_row['ci_high']:+.3f}]"
                 f" (C/lambda {reg_gen:g}, {src_gen}), vs nonlinear V "
-                f"{gen_row['delta_vs_nonlinear']:+.3f}; shuffled {shuf_row['delta']:+.3f}; "
+                f"{gen_row['delta_vs_nonlinear']:+.3f}, vs ridge V->T "
+                f"{gen_row['delta_vs_ridge']:+.3f}; shuffled {shuf_row['delta']:+.3f}; "
                 f"cos {fid['cos_matched']:.3f} vs {fid['cos_offdiag']:.3f} "
                 f"(p {fid['pairing_p']:.3f}), FD {fid['frechet']:.2f}"
             )

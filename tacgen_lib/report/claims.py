@@ -24,6 +24,7 @@ __all__ = [
     "delta_verdict",
     "probe_verdict",
     "generation_verdict",
+    "ridge_verdict",
     "gain_within_uncertainty",
     "ceiling_verdict",
     "proportion_interval",
@@ -124,6 +125,23 @@ def generation_verdict(
                 "is in the probe, not in generated touch."
             )
     return text
+
+
+def ridge_verdict(vs_ridge: tuple[float, float, float], cos_gen: float, cos_ridge: float) -> str:
+    """Generated touch against the simplest generator, ridge V->T (its conditional mean):
+    `vs_ridge` is (score(V + T_gen) - score(V + T_ridge), lo, hi); `cos_gen`, `cos_ridge` the
+    matched-pair cosines of each generator's test rows with the real ones."""
+    side = interval_side(*vs_ridge[1:])
+    d = fmt.with_ci(*vs_ridge, sign=True)
+    cos = f"matched-pair cosine {cos_gen:.3f} against ridge's {cos_ridge:.3f}"
+    if side == "below":
+        return (
+            f"The ridge V→T generator does better in the probe (Δ_gen − ridge {d}; {cos}): "
+            "the diffusion generator has learnt less of the V→T map than a linear regression."
+        )
+    if side == "above":
+        return f"It beats the ridge V→T generator in the probe (Δ_gen − ridge {d}; {cos})."
+    return f"No measurable difference from the ridge V→T generator (Δ_gen − ridge {d}; {cos})."
 
 
 def gain_within_uncertainty(cheap_value: float, dear_lo: float, dear_hi: float) -> bool:

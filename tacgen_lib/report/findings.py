@@ -90,9 +90,8 @@ def _first_seed(rows: pd.DataFrame, col: str = "delta") -> tuple[float, float, f
     if rows is None or not len(rows):
         return (np.nan, np.nan, np.nan)
     r = rows.sort_values("seed", kind="stable").iloc[0]
-    if col == "delta":
-        return (float(r["delta"]), float(r["ci_low"]), float(r["ci_high"]))
-    return tuple(float(r[c]) for c in (col, "ci_low_vs_nonlinear", "ci_high_vs_nonlinear"))
+    against = col.removeprefix("delta")  # "", "_vs_nonlinear" or "_vs_ridge"
+    return tuple(float(r[c]) for c in (col, f"ci_low{against}", f"ci_high{against}"))
 
 
 def generation_findings(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
@@ -111,6 +110,12 @@ def generation_findings(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
         gen, real = _first_seed(by["t_gen"]), _first_seed(by["t_real"])
         shuffled = _first_seed(by.get("t_gen_shuffled"))
         nonlin = _first_seed(by.get("v_nonlinear"))
+        ridge = _first_seed(by["t_ridge"])
+        vs_ridge = _first_seed(by["t_gen"], "delta_vs_ridge")
+        cos_gen, cos_ridge = (
+            float(rows.sort_values("seed", kind="stable")["cos_matched"].iloc[0])
+            for rows in (by["t_gen"], by["t_ridge"])
+        )
         seeds = cross_seed_interval(by["t_gen"]["delta"].to_numpy())
         n = int(g["seed"].nunique())
         first = int(g["seed"].min())
@@ -123,8 +128,11 @@ def generation_findings(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
                 f"{n} seeds {fmt.with_ci(*seeds, sign=True)}); "
                 f"Δ_real {fmt.with_ci(*real, sign=True)}",
                 "control": f"shuffled pairs Δ {fmt.with_ci(*shuffled, sign=True)}; nonlinear "
-                f"V only Δ {fmt.with_ci(*nonlin, sign=True)}",
-                "verdict": claims.generation_verdict(gen, real, nonlin),
+                f"V only Δ {fmt.with_ci(*nonlin, sign=True)}; ridge V→T generator Δ "
+                f"{fmt.with_ci(*ridge, sign=True)}",
+                "verdict": claims.generation_verdict(gen, real, nonlin)
+                + " "
+                + claims.ridge_verdict(vs_ridge, cos_gen, cos_ridge),
                 "page": category("Generation"),
             }
         )

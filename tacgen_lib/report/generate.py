@@ -84,7 +84,8 @@ def reference_cell_rows(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
 def headline_table(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
     """Paper-style table at the reference cell: per corpus x target, first-seed Delta_gen with
     its bootstrap CI, the cross-seed mean with its 95 % interval, protocol-matched Delta_real,
-    the nonlinear V-only baseline, Delta_gen against that baseline, and the shuffled control."""
+    the nonlinear V-only baseline, Delta_gen against that baseline, the ridge V->T generator's
+    Delta and Delta_gen against it, and the shuffled control."""
     s = reference_cell_rows(summary, ref)
     out = []
     for (corpus, target), g in s.groupby(["corpus", "target"], sort=True):
@@ -93,12 +94,8 @@ def headline_table(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
 
         def one(inp: str, col: str = "delta", g1: int = first, by: dict = by) -> str:
             r = by[inp][by[inp]["seed"] == g1].iloc[0]
-            lo, hi = (
-                ("ci_low", "ci_high")
-                if col == "delta"
-                else ("ci_low_vs_nonlinear", "ci_high_vs_nonlinear")
-            )
-            return _ci(r[col], r[lo], r[hi])
+            against = col.removeprefix("delta")  # "", "_vs_nonlinear" or "_vs_ridge"
+            return _ci(r[col], r[f"ci_low{against}"], r[f"ci_high{against}"])
 
         m, lo, hi = cross_seed_interval(by["t_gen"]["delta"].to_numpy())
         out.append(
@@ -113,6 +110,8 @@ def headline_table(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
                 "Δ nonlinear V only": one("v_nonlinear"),
                 "Δ_gen − nonlinear V": one("t_gen", "delta_vs_nonlinear"),
                 "Δ_real − nonlinear V": one("t_real", "delta_vs_nonlinear"),
+                "Δ ridge V→T": one("t_ridge"),
+                "Δ_gen − ridge V→T": one("t_gen", "delta_vs_ridge"),
                 "Δ_gen shuffled V rows": one("t_gen_shuffled"),
             }
         )
@@ -153,19 +152,43 @@ def honesty_table(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
     )
 
 
+#: The fidelity table's name of each generator arm (diffusion: its sampler).
+RIDGE_ARMS = {"t_ridge": "ridge V→T (mean)", "t_ridge_residual": "ridge V→T + residual"}
+
+
 def fidelity_table(summary: pd.DataFrame) -> pd.DataFrame:
-    """Per generator and sampling cell: matched vs off-diagonal cosine, pairing p, Frechet."""
+    """Per generator seed: each diffusion sampling cell, then the ridge V->T generator's two
+    arms (the simplest generator, the bar the diffusion rows must clear): matched vs
+    off-diagonal cosine, pairing p, Frechet distances, sampling seconds."""
     cols = ["corpus", "seed", "sampler", "guidance", "steps"]
-    s = summary[summary["input"] == "t_gen"].drop_duplicates(cols).sort_values(cols)
+    diffusion = summary[summary["input"] == "t_gen"].drop_duplicates(cols)
+    ridge = summary[summary["input"].isin(list(RIDGE_ARMS))].drop_duplicates(
+        ["corpus", "seed", "input"]
+    )
+    ridge = ridge.assign(
+        generator=ridge["input"].map(RIDGE_ARMS),
+        sampler="—",
+        sample_seconds=math.nan,
+        order=1,
+    )
+    s = pd.concat(
+        [diffusion.assign(generator="diffusion", order=0), ridge], ignore_index=True
+    ).sort_values(["corpus", "seed", "order", "generator", "sampler", "guidance", "steps"])
     return pd.DataFrame(
         {
-            **{c: s[c].to_numpy() for c in cols},
+            "generator": s["generator"].to_numpy(),
+            **{c: s[c].to_numpy() for c in ("corpus", "seed", "sampler")},
+            # the ridge generator has no guidance or sampling steps
+            "guidance": [
+                g if o == 0 else "—" for g, o in zip(s["guidance"], s["order"], strict=True)
+            ],
+            "steps": [st if o == 0 else "—" for st, o in zip(s["steps"], s["order"], strict=True)],
             "cos matched": s["cos_matched"].map("{:.3f}".format).to_numpy(),
             "cos off-diagonal": s["cos_offdiag"].map("{:.3f}".format).to_numpy(),
             "pairing p": s["pairing_p"].map("{:.3f}".format).to_numpy(),
             "Fréchet gen–real": s["frechet"].map("{:.2f}".format).to_numpy(),
             "Fréchet real train–test": s["frechet_real_ref"].map("{:.2f}".format).to_numpy(),
-            "sample s": s["sample_seconds"].map("{:.1f}".format).to_numpy(),
+            "sample s": ["—" if math.isnan(x) else f"{x:.1f}" for x in s["sample_seconds"]],
         }
     )
 

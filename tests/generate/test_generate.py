@@ -577,6 +577,11 @@ def toy_world(n=240, seed=0):
     return ids, v, t, manifest, splits
 
 
+def train_ids(splits: pd.DataFrame) -> list[str]:
+    """The toy world's generator train rows."""
+    return splits.loc[splits["split"] == "train", "sample_id"].tolist()
+
+
 def test_evaluation_real_touch_helps_where_generated_touch_cannot():
     """The label depends on an attribute only touch sees: V+T_real gains, V+T_gen (a function
     of V) does not, and the summary has every input with its CI."""
@@ -623,9 +628,17 @@ def test_evaluation_real_touch_helps_where_generated_touch_cannot():
         t_gen={("ddim", "1", "10"): dict(zip(ids, gen, strict=True))},
         baselines={"force_p50": fit_baselines(spec, vision, t_real, gammas=(1.0,))},
         permutations=100,
+        generator_train_ids=train_ids(splits),
     )
     by = summary.set_index("input")
-    assert set(by.index) == {"t_real", "t_gen", "t_gen_shuffled", "v_nonlinear"}
+    assert set(by.index) == {
+        "t_real",
+        "t_gen",
+        "t_gen_shuffled",
+        "v_nonlinear",
+        "t_ridge",
+        "t_ridge_residual",
+    }
     assert summary["row_id"].is_unique and len(perms) == 100
     assert by.loc["t_real", "ci_low"] > 0.3  # touch sees the hidden attribute
     assert by.loc["t_gen", "ci_low"] <= 0.0 < by.loc["t_real", "delta"]
@@ -712,6 +725,7 @@ def test_evaluation_of_two_seeds_shares_the_baselines():
             t_gen={cell: gen},
             baselines=baselines,
             permutations=10,
+            generator_train_ids=train_ids(toy_world()[4]),
         )[0]
 
     s0, s1 = run(0, fits), run(1, edge)
@@ -772,6 +786,7 @@ def test_logistic_c_is_chosen_on_the_reference_cell_and_reused():
         t_gen=cells,
         baselines={"hardness": fit_baselines(spec, vision, t_real, gammas=(1.0,))},
         permutations=10,
+        generator_train_ids=train_ids(splits),
         reference=("ddim", "1", "5"),
     )
     gen = summary[summary["input"].isin(["t_gen", "t_gen_shuffled"])].set_index(
@@ -863,6 +878,8 @@ def synthetic_summary() -> pd.DataFrame:
                     ("t_gen", 0.05 * seed),
                     ("t_gen_shuffled", 0.0),
                     ("v_nonlinear", 0.02),
+                    ("t_ridge", 0.04),
+                    ("t_ridge_residual", 0.01),
                 ):
                     rows.append(
                         {
@@ -883,9 +900,12 @@ def synthetic_summary() -> pd.DataFrame:
                             "delta_vs_nonlinear": d - 0.02,
                             "ci_low_vs_nonlinear": d - 0.12,
                             "ci_high_vs_nonlinear": d + 0.08,
+                            "delta_vs_ridge": d - 0.04 if inp == "t_gen" else np.nan,
+                            "ci_low_vs_ridge": d - 0.3 if inp == "t_gen" else np.nan,
+                            "ci_high_vs_ridge": d - 0.01 if inp == "t_gen" else np.nan,
                             "design": design,
                             "null_corpus": null,
-                            "cos_matched": 0.3,
+                            "cos_matched": 0.6 if inp == "t_ridge" else 0.3,
                             "cos_offdiag": 0.1,
                             "pairing_p": 0.01,
                             "frechet": 2.0,
@@ -913,12 +933,14 @@ def test_report_tables_and_figures_from_a_summary():
     rows = synthetic_summary()
     seconds = {("sim_paired", 0, "ddim", 1.0, 10): 2.5}
     summary = rep.generation_summary(rows, seconds, {("sim_paired", 0): 9.0})
-    assert summary["sample_seconds"].notna().sum() == 4  # one cell: its 4 inputs
+    assert summary["sample_seconds"].notna().sum() == 6  # one cell: its 6 inputs
     ref = {"sampler": "ddim", "steps": 10, "guidance": "1"}
     head = rep.headline_table(summary, ref)
     assert len(head) == 3 and "Δ_real (protocol-matched)" in head.columns
     paired = head.set_index("corpus").loc["sim_paired"]
     assert paired["Δ_gen seed 0 [bootstrap CI]"] == "+0.000 [-0.100, +0.100]"
+    assert paired["Δ ridge V→T"] == "+0.040 [-0.060, +0.140]"
+    assert paired["Δ_gen − ridge V→T"] == "-0.040 [-0.300, -0.010]"
     mean, lo, hi = rep.cross_seed_interval(np.array([0.0, 0.05]))
     assert mean == pytest.approx(0.025) and lo < 0 < hi
     honesty = rep.honesty_table(summary, ref)
@@ -926,7 +948,18 @@ def test_report_tables_and_figures_from_a_summary():
     assert verdict[("sim_controlled", 0, "t_real")] == "yes"  # CI (0.2, 0.4) > 0
     assert verdict[("sim_controlled", 0, "t_gen")] == "yes"  # CI covers 0
     assert verdict[("sim_null", 0, "t_real")] == "NO"  # real touch "helps" on the null corpus
-    assert len(rep.fidelity_table(summary)) == 12
+    fid = rep.fidelity_table(summary)
+    # 3 corpora x 2 seeds: 2 diffusion cells each, then the ridge generator's 2 arms
+    assert len(fid) == 24
+    first = fid[(fid["corpus"] == "sim_paired") & (fid["seed"] == 0)]
+    assert list(first["generator"]) == [
+        "diffusion",
+        "diffusion",
+        "ridge V→T (mean)",
+        "ridge V→T + residual",
+    ]
+    assert list(first["cos matched"]) == ["0.300", "0.300", "0.600", "0.300"]
+    assert list(first["guidance"][2:]) == ["—", "—"] and list(first["sample s"][2:]) == ["—", "—"]
     perms = pd.DataFrame(
         {
             "corpus": "sim_paired",

@@ -123,6 +123,17 @@ def test_generation_verdict_credits_the_probe_when_a_nonlinear_v_gains_as_much()
     assert one_seed.startswith("Generated touch does not help") and "one point" in one_seed
 
 
+def test_ridge_verdict_says_which_generator_the_interval_favours():
+    below = claims.ridge_verdict((-0.1, -0.2, -0.01), 0.33, 0.68)
+    assert below.startswith("The ridge V→T generator does better") and "0.330" in below
+    assert "0.680" in below and "less of the V→T map" in below
+    above = claims.ridge_verdict((0.1, 0.01, 0.2), 0.7, 0.6)
+    assert above.startswith("It beats the ridge V→T generator")
+    for lo in (-0.1, 0.0):  # an interval containing or touching 0 favours neither
+        assert claims.ridge_verdict((0.0, lo, 0.1), 0.5, 0.5).startswith("No measurable")
+    assert claims.ridge_verdict((0.1, math.nan, math.nan), 0.5, 0.5).startswith("No measurable")
+
+
 def test_ceiling_verdict_never_calls_a_point_above_the_ceiling_a_breach_unless_its_ci_is():
     assert "below the vision-only ceiling" in claims.ceiling_verdict(0.3, 0.22, 0.36, 0.383)
     noise = claims.ceiling_verdict(0.430, 0.352, 0.516, 0.383)

@@ -3,6 +3,7 @@ baselines (rule evaluate_generator)."""
 
 from threadpoolctl import threadpool_limits
 
+from tacgen_lib.corpus.splits import assert_trainable, ids_in_split
 from tacgen_lib.generate.baselines import baselines_from_frame, target_specs
 from tacgen_lib.generate.evaluate import evaluate_generator
 from tacgen_lib.generate.settings import GenerateSettings
@@ -12,9 +13,13 @@ logger = log.for_rule(snakemake)
 w, params = snakemake.wildcards, snakemake.params
 settings = GenerateSettings.from_config(params.settings)
 corpus_cfg = params.corpus
+splits = edges.read(snakemake.input.splits).frame
+# the ridge V->T generator learns from the rows the diffusion generator learnt from
+generator_train_ids = sorted(ids_in_split(splits, "train", w.corpus))
+assert_trainable(generator_train_ids, splits, rule=snakemake.rule, allowed=("train",))
 targets = target_specs(
     edges.read(snakemake.input.manifest).frame,
-    edges.read(snakemake.input.splits).frame,
+    splits,
     corpus=w.corpus,
     targets=params.targets,
     corpus_config=corpus_cfg,
@@ -56,6 +61,7 @@ with threadpool_limits(snakemake.threads):
         t_gen=t_gen,
         baselines=baselines,
         permutations=settings.permutations,
+        generator_train_ids=generator_train_ids,
         reference=tuple(params.reference),
         labels={
             "design": corpus_cfg.get("design", corpus_cfg["kind"]),
