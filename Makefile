@@ -40,14 +40,16 @@ lint:
 ## and the real one-node SLURM fan-out, which skips itself, saying why, where it cannot run),
 ## on $(CORES) pytest-xdist workers (a module stays on one worker; the longest workflow modules go first).
 ## Beside them, the tests that are not workflow runs again under other CPU kernels
-## (test-kernels: its output follows the main run's). Fails if either fails.
+## (test-kernels: its output follows the main run's), at the lowest CPU priority: the
+## workflow runs leave a core idle at times (a DAG's narrow stages, SLURM's polling), and the
+## variant fills those gaps instead of slowing the runs down. Fails if either fails.
 ## TACGEN_SLURM_TEST=0 leaves the SLURM test out (it installs slurm-wlm + munge as root).
 setup-test:
 	@bash tools/setup.sh $(VENV) --browser
 
 test: setup-test lint
 	@kernels_log=$$(mktemp); \
-	$(BIN)/python tools/kernel_variants.py >"$$kernels_log" 2>&1 & kernels=$$!; \
+	nice -n 19 $(BIN)/python tools/kernel_variants.py >"$$kernels_log" 2>&1 & kernels=$$!; \
 	TACGEN_SLURM_TEST=$${TACGEN_SLURM_TEST:-1} $(BIN)/python -m pytest -ra --durations=15 -n $(CORES) --dist loadfile --no-loadscope-reorder; \
 	main=$$?; wait $$kernels; kernels_rc=$$?; \
 	echo "---- the same tests under other CPU kernels (tools/kernel_variants.py) ----"; \
