@@ -110,6 +110,7 @@ rule fit_generator_baselines:
     params:
         # only what these probes read: a generator knob must not refit them
         gammas=GENERATE["nonlinear_gammas"],
+        cv_repeats=GENERATE["cv_repeats"],
         targets=lambda w: GENERATE["corpora"][w.corpus],
         corpus=lambda w: CORPORA[w.corpus],
         probes=PROBE_SETTINGS,

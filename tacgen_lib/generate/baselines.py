@@ -6,7 +6,7 @@ their test predictions as an edge every generator's evaluation reads (and checks
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
@@ -38,8 +38,10 @@ def target_specs(
     probes_config: Mapping,
     probe_seed: int,
     rule: str,
+    cv_repeats: int,
 ) -> list[TargetSpec]:
-    """The `TargetSpec` of each generator target of `corpus` (target -> ridge | logistic).
+    """The `TargetSpec` of each generator target of `corpus` (target -> ridge | logistic),
+    each probe's regulariser chosen by `cv_repeats` draws of the CV folds.
 
     The probes' rows (`family_rows`, the probes stage's strata) train on train + val rows, as
     in the probes stage: `assert_trainable` refuses any test row in them, naming `rule`.
@@ -55,9 +57,8 @@ def target_specs(
             strata=strata_for(corpus_config),
         )
         assert_trainable(rows.train_ids, splits, rule=rule, allowed=("train", "val"))
-        out.append(
-            TargetSpec(target, rows, ProbeSettings.from_config(probes_config, kind, probe_seed))
-        )
+        settings = ProbeSettings.from_config(probes_config, kind, probe_seed)
+        out.append(TargetSpec(target, rows, replace(settings, cv_repeats=cv_repeats)))
     return out
 
 

@@ -34,7 +34,10 @@ class GenerateSettings:
     early stopping after ``patience`` evaluations without improvement (0: never stop).
     Sampling: DDIM's ``eta`` (0 = deterministic); ``batch`` rows per sampling batch.
     Evaluation: ``permutations`` of the pairing-permutation check, ``nonlinear_gammas``
-    (multiples of the median-heuristic RBF gamma) for the nonlinear V-only baseline.
+    (multiples of the median-heuristic RBF gamma) for the nonlinear V-only baseline,
+    ``cv_repeats`` draws of the CV folds that choose every evaluation probe's regulariser
+    (repeated K-fold: on a few hundred rows one draw's choice of the logistic C moved a
+    verdict).
     """
 
     schedule: Literal["cosine", "linear"] = "cosine"
@@ -56,6 +59,7 @@ class GenerateSettings:
     batch: int = 2048
     permutations: int = 1000
     nonlinear_gammas: tuple[float, ...] = (0.25, 1.0, 4.0)
+    cv_repeats: int = 5
 
     def __post_init__(self) -> None:
         if self.schedule not in ("cosine", "linear"):
@@ -75,6 +79,7 @@ class GenerateSettings:
             ("patience", 0),
             ("batch", 1),
             ("permutations", 0),
+            ("cv_repeats", 1),
         )
         for name, low in ints:
             value = getattr(self, name)

@@ -67,7 +67,8 @@ def fit_probe(
     under every protocol but ``mlp2``.
 
     The number of folds is capped at the number of training rows (ridge) or the smallest
-    class count (logistic, inside `probes.fit_logistic`).
+    class count (logistic, inside `probes.fit_logistic`); ``settings.cv_repeats`` draws of
+    them are averaged (repeated K-fold; the ``mlp2`` probe's CV draws once).
     """
     if settings.protocol == "mlp2":
         mlp = fit_mlp_probe(
@@ -96,6 +97,7 @@ def fit_probe(
             n_folds=min(settings.folds, len(y_train)),
             seed=settings.seed,
             sample_ids=train_ids,
+            repeats=settings.cv_repeats,
         )
         grid = sp.predict_grid(X_test, sample_ids=test_ids)
         return FittedProbe(
@@ -116,13 +118,20 @@ def fit_probe(
             n_folds=min(settings.folds, len(y_train)),
             seed=settings.seed,
             sample_ids=train_ids,
+            repeats=settings.cv_repeats,
         )
         sel = probe.selection
         pred = probe.predict(X_test, sample_ids=test_ids)
         grid = probe.predict_grid(X_test, sample_ids=test_ids)  # same decomposition as the CV
         return FittedProbe(pred, probe.lam, sel.lambdas, sel.cv_scores, True, None, grid)
     probe = fit_logistic(
-        X_train, y_train, settings.C, settings.seed, n_folds=settings.folds, sample_ids=train_ids
+        X_train,
+        y_train,
+        settings.C,
+        settings.seed,
+        n_folds=settings.folds,
+        sample_ids=train_ids,
+        repeats=settings.cv_repeats,
     )
     pred = np.asarray(probe.predict(X_test, sample_ids=test_ids), dtype=object)
     return FittedProbe(

@@ -136,8 +136,10 @@ def fit_logistic(
     max_iter_cap: int = 12800,
     tol: float = 1e-6,
     sample_ids: Sequence | np.ndarray | None = None,
+    repeats: int = 1,
 ) -> LogisticProbe:
-    """Logistic probe (density, hardness): C by stratified K-fold CV on the training rows.
+    """Logistic probe (density, hardness): C by stratified K-fold CV on the training rows
+    (`repeats` draws of the folds: the CV score is the mean over all of them).
 
     Features are standardised inside every fit (scaler fitted on that fit's training rows
     only), which keeps lbfgs well conditioned; with the L2 penalty the objective is strictly
@@ -162,11 +164,11 @@ def fit_logistic(
             f"fit_logistic: class {classes[np.argmin(counts)]!r} has {counts.min()} training "
             "row(s); stratified CV needs at least 2 per class"
         )
-    folds = make_folds(X.shape[0], k, seed, labels=y)
+    folds = make_folds(X.shape[0], k, seed, labels=y, repeats=repeats)
     if cv_batches(X.shape, folds):
         scores, all_conv, worst = _cv_scores_batched(X, y, folds, C, max_iter, max_iter_cap, tol)
     else:
-        scores = np.zeros((k, C.size))
+        scores = np.zeros((len(folds), C.size))
         all_conv = True
         worst = 0
         for f, ho in enumerate(folds):

@@ -191,6 +191,7 @@ def fit_ridge_probe(
     n_folds: int = 5,
     seed: int = 0,
     sample_ids: Sequence | np.ndarray | None = None,
+    repeats: int = 1,
 ) -> RidgeProbe:
     """Select lambda by CV on the training rows, then refit on all of them (mass, force).
 
@@ -198,7 +199,13 @@ def fit_ridge_probe(
     eigenpairs when its deletion path ran), equal to ``Ridge(alpha=lam)`` for each lambda.
     """
     sel = select_lambda_cv(
-        X_train, y_train, lambdas, n_folds=n_folds, seed=seed, sample_ids=sample_ids
+        X_train,
+        y_train,
+        lambdas,
+        n_folds=n_folds,
+        seed=seed,
+        sample_ids=sample_ids,
+        repeats=repeats,
     )
     X = check_features(X_train, sample_ids=sample_ids)
     y = check_target(y_train, X.shape[0], sample_ids=sample_ids)

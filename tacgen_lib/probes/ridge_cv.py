@@ -194,10 +194,12 @@ def select_lambda_cv(
     seed: int = 0,
     folds: list[np.ndarray] | None = None,
     sample_ids: Sequence | np.ndarray | None = None,
+    repeats: int = 1,
 ) -> LambdaSelection:
     """Choose lambda by K-fold CV on the training rows (mean held-out R^2, first best in grid).
 
-    Pass only TRAINING rows. Folds come from `make_folds(n, n_folds, seed)` unless given.
+    Pass only TRAINING rows. Folds come from `make_folds(n, n_folds, seed, repeats=repeats)`
+    unless given (repeated K-fold: the mean is over every fold of every draw).
     One eigendecomposition serves every fold and lambda through the block-deletion identity:
     of the centred Gram with more features than fold-training rows
     (`_deletion_predictions`), else of the p x p scatter (`_deletion_predictions_primal`);
@@ -210,7 +212,7 @@ def select_lambda_cv(
     lam = check_lambdas(lambdas)
     n, p = X.shape
     if folds is None:
-        folds = make_folds(n, n_folds, seed)
+        folds = make_folds(n, n_folds, seed, repeats=repeats)
     X0 = X - X.mean(axis=0)  # shared centring keeps the Gram free of large-offset cancellation
     G0 = X0 @ X0.T if p > n - max(len(f) for f in folds) else None
     scores = np.empty((len(folds), lam.size))

@@ -71,17 +71,18 @@ def fit_standardised_ridge(
     n_folds: int = 5,
     seed: int = 0,
     sample_ids: Sequence | np.ndarray | None = None,
+    repeats: int = 1,
 ) -> StandardisedRidgeProbe:
     """StandardScaler + ridge, lambda by K-fold CV on the training rows (pass only those).
 
     In each fold the scaler is fitted on the fold's training rows, so a held-out row never
     shapes the scaling that scores it; the refit's scaler sees every training row and no test
-    row. Folds are `make_folds(n, n_folds, seed)`, the same as the raw ridge probe's.
+    row. Folds are `make_folds(n, n_folds, seed, repeats=repeats)`, the raw ridge probe's.
     """
     X = check_features(X_train, sample_ids=sample_ids)
     y = check_target(y_train, X.shape[0], sample_ids=sample_ids)
     lam = check_lambdas(lambdas)
-    folds = make_folds(X.shape[0], n_folds, seed)
+    folds = make_folds(X.shape[0], n_folds, seed, repeats=repeats)
     scores = np.empty((len(folds), lam.size))
     for k, ho in enumerate(folds):
         tr = np.setdiff1d(np.arange(X.shape[0]), ho, assume_unique=True)

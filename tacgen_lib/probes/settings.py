@@ -200,12 +200,16 @@ class ProbeSettings:
     #: seed of the bootstrap resamples and control draws; None: `seed` (which also draws the
     #: CV folds). The cost sweep's probe knobs vary it alone to measure Monte Carlo error.
     resample_seed: int | None = None
+    #: draws of the CV folds whose mean held-out score chooses the regulariser (repeated K-fold)
+    cv_repeats: int = 1
     mlp: MLPGrid = field(default_factory=MLPGrid)  # the ``mlp2`` probe's grid
 
     def __post_init__(self) -> None:
         if self.kind not in ("ridge", "logistic"):
             raise ValueError(f"ProbeSettings.kind must be 'ridge' or 'logistic', got {self.kind!r}")
         check_protocol(self.protocol)
+        if int(self.cv_repeats) != self.cv_repeats or self.cv_repeats < 1:
+            raise ValueError(f"probes.cv_repeats must be an integer >= 1, got {self.cv_repeats!r}")
 
     @property
     def metric(self) -> str:

@@ -26,6 +26,7 @@ targets = target_specs(
     probes_config=params.probes,
     probe_seed=params.probe_seed,
     rule=snakemake.rule,
+    cv_repeats=settings.cv_repeats,
 )
 for spec in targets:
     logger.info(

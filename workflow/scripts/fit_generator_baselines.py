@@ -10,7 +10,10 @@ from tacgen_lib.io import edges, log
 logger = log.for_rule(snakemake)
 w, params = snakemake.wildcards, snakemake.params
 # validated as the generate settings validate them
-gammas = GenerateSettings(nonlinear_gammas=tuple(float(g) for g in params.gammas)).nonlinear_gammas
+checked = GenerateSettings(
+    nonlinear_gammas=tuple(float(g) for g in params.gammas), cv_repeats=params.cv_repeats
+)
+gammas = checked.nonlinear_gammas
 specs = target_specs(
     edges.read(snakemake.input.manifest).frame,
     edges.read(snakemake.input.splits).frame,
@@ -20,6 +23,7 @@ specs = target_specs(
     probes_config=params.probes,
     probe_seed=params.probe_seed,
     rule=snakemake.rule,
+    cv_repeats=checked.cv_repeats,
 )
 
 
