@@ -59,7 +59,7 @@ class GenerateSettings:
     batch: int = 2048
     permutations: int = 1000
     nonlinear_gammas: tuple[float, ...] = (0.25, 1.0, 4.0)
-    cv_repeats: int = 5
+    cv_repeats: int = 10
 
     def __post_init__(self) -> None:
         if self.schedule not in ("cosine", "linear"):
