@@ -127,21 +127,49 @@ def generation_verdict(
     return text
 
 
-def ridge_verdict(vs_ridge: tuple[float, float, float], cos_gen: float, cos_ridge: float) -> str:
-    """Generated touch against the simplest generator, ridge V->T (its conditional mean):
-    `vs_ridge` is (score(V + T_gen) - score(V + T_ridge), lo, hi); `cos_gen`, `cos_ridge` the
-    matched-pair cosines of each generator's test rows with the real ones."""
+def ridge_verdict(
+    vs_ridge: tuple[float, float, float],
+    cos_gen: float,
+    cos_ridge: float,
+    cos_ridge_residual: float,
+) -> str:
+    """Generated touch against the simplest generator, ridge V->T, in two sentences.
+
+    The probe: `vs_ridge` = (score(V + T_gen) - score(V + T_ridge), lo, hi). T_ridge is a
+    linear function of V, so a linear probe gains nothing from it beyond V: an interval below
+    0 says the generated vectors cost the probe more than they give. Fidelity: the matched-pair
+    cosines with the real test rows of the diffusion samples (`cos_gen`), of ridge's
+    conditional mean (`cos_ridge`) and of ridge's mean plus a sampled residual
+    (`cos_ridge_residual`). A sample carries the conditional spread that a mean averages out,
+    so a sampler is judged against the residual arm, and the mean bounds what any sample of
+    the same map can reach."""
     side = interval_side(*vs_ridge[1:])
     d = fmt.with_ci(*vs_ridge, sign=True)
-    cos = f"matched-pair cosine {cos_gen:.3f} against ridge's {cos_ridge:.3f}"
     if side == "below":
-        return (
-            f"The ridge V→T generator does better in the probe (Δ_gen − ridge {d}; {cos}): "
-            "the diffusion generator has learnt less of the V→T map than a linear regression."
+        probe = (
+            f"V + T_gen scores below V + ridge V→T (Δ_gen − ridge {d}): the samples cost the probe."
         )
-    if side == "above":
-        return f"It beats the ridge V→T generator in the probe (Δ_gen − ridge {d}; {cos})."
-    return f"No measurable difference from the ridge V→T generator (Δ_gen − ridge {d}; {cos})."
+    elif side == "above":
+        probe = f"V + T_gen beats V + ridge V→T in the probe (Δ_gen − ridge {d})."
+    else:
+        probe = f"In the probe V + T_gen and V + ridge V→T do not differ measurably ({d})."
+    cos = (
+        f"matched-pair cosine {cos_gen:.3f}, against {cos_ridge:.3f} for ridge's conditional mean "
+        f"and {cos_ridge_residual:.3f} for ridge + a sampled residual"
+    )
+    if cos_gen < cos_ridge_residual:
+        fid = (
+            f"Its samples are further from real touch than ridge's ({cos}): the diffusion "
+            "generator has learnt less of the V→T map than a linear regression."
+        )
+    elif cos_gen < cos_ridge:
+        fid = (
+            f"Its samples match real touch better than ridge's samples but not its mean ({cos}): "
+            "a sample carries the spread a mean averages out."
+        )
+    else:
+        fid = f"Its samples match real touch at least as well as ridge's conditional mean ({cos})."
+    return f"{probe} {fid}"
 
 
 def gain_within_uncertainty(cheap_value: float, dear_lo: float, dear_hi: float) -> bool:

@@ -123,15 +123,19 @@ def test_generation_verdict_credits_the_probe_when_a_nonlinear_v_gains_as_much()
     assert one_seed.startswith("Generated touch does not help") and "one point" in one_seed
 
 
-def test_ridge_verdict_says_which_generator_the_interval_favours():
-    below = claims.ridge_verdict((-0.1, -0.2, -0.01), 0.33, 0.68)
-    assert below.startswith("The ridge V→T generator does better") and "0.330" in below
-    assert "0.680" in below and "less of the V→T map" in below
-    above = claims.ridge_verdict((0.1, 0.01, 0.2), 0.7, 0.6)
-    assert above.startswith("It beats the ridge V→T generator")
+def test_ridge_verdict_reads_the_probe_interval_and_the_three_cosines():
+    below = claims.ridge_verdict((-0.1, -0.2, -0.01), 0.33, 0.68, 0.41)
+    assert below.startswith("V + T_gen scores below V + ridge V→T") and "cost the probe" in below
+    assert "0.330, against 0.680" in below and "0.410 for ridge + a sampled residual" in below
+    assert "learnt less of the V→T map than a linear regression" in below
+    between = claims.ridge_verdict((0.1, 0.01, 0.2), 0.55, 0.7, 0.45)
+    assert between.startswith("V + T_gen beats V + ridge V→T") and "not its mean" in between
+    assert "at least as well" in claims.ridge_verdict((0.0, -0.1, 0.1), 0.72, 0.7, 0.45)
     for lo in (-0.1, 0.0):  # an interval containing or touching 0 favours neither
-        assert claims.ridge_verdict((0.0, lo, 0.1), 0.5, 0.5).startswith("No measurable")
-    assert claims.ridge_verdict((0.1, math.nan, math.nan), 0.5, 0.5).startswith("No measurable")
+        text = claims.ridge_verdict((0.0, lo, 0.1), 0.5, 0.6, 0.4)
+        assert text.startswith("In the probe V + T_gen and V + ridge V→T do not differ")
+    one_point = claims.ridge_verdict((0.1, math.nan, math.nan), 0.5, 0.6, 0.4)
+    assert one_point.startswith("In the probe V + T_gen and V + ridge V→T do not differ")
 
 
 def test_ceiling_verdict_never_calls_a_point_above_the_ceiling_a_breach_unless_its_ci_is():
