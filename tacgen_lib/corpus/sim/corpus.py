@@ -1,8 +1,9 @@
-"""Simulated corpora (paired, appearance-controlled, null), one shard at a time.
+"""Simulated corpora (paired, appearance-controlled, natural, null), one shard at a time.
 
 A corpus config (config/config.yaml `corpora.<name>`, plus `name`) has the keys
 
-    name, kind: simulated, design: paired | controlled, n, seed, scene, null (bool, default
+    name, kind: simulated, design: paired | controlled | natural, n, seed, scene,
+    rho (natural: the appearance-material link, default 0), null (bool, default
     false), sensors (default 4), presses (default 8), image_size [H, W] (default [224, 224]),
     tactile_size [H, W] (default [120, 160]), shapes (optional subset of the scene's shapes),
     size_range [min, max] (paired: object size in m, default [0.02, 0.04]),
@@ -13,9 +14,21 @@ A corpus config (config/config.yaml `corpora.<name>`, plus `name`) has the keys
 
 Everything about sample i is drawn from `scene_seed(seed, i)` only, in five independent
 streams (geometry, physics, appearance, jitter, pixels), so shards can run in parallel and
-concatenate to the same corpus for any n_shards. Appearance (colour, texture, yaw) never
-depends on physics (density, hardness, friction): the RGB frame is rendered in the
-presentation pose (object resting on the undeformed gel), before any press.
+concatenate to the same corpus for any n_shards. In the paired and controlled designs
+appearance (colour, texture, yaw) never depends on physics (density, hardness, friction): the
+RGB frame is rendered in the presentation pose (object resting on the undeformed gel), before
+any press.
+
+The natural design links them as real objects are linked, imperfectly: each object is of a
+material class (`MATERIALS`: class-level density, contact stiffness range, hence hardness,
+and friction, each with within-class spread), and shows the textures and colours of an
+*appearance class* that is its material with probability ``rho`` and uniform over the classes
+otherwise (`appearance_class`). An appearance class is a family of (colour, texture) pairs,
+class = (colour index + texture index) mod 6 (`APPEARANCE_FAMILIES`): every texture and most
+colours occur in several classes, so neither decodes the class alone, and the colour is
+jittered per object (lighting, dye). rho = 0 reproduces the independence of the paired design;
+rho = 1 makes appearance a (nonlinear) function of material. The physics of sample i does not
+depend on rho: a rho grid changes only what the objects look like.
 
 Labels: mass = density x MuJoCo geom volume; force_normal = MuJoCo contact force in the
 nominal press; force_p05/p50/p95 = percentiles over `presses` repeated presses with seeded
@@ -105,6 +118,66 @@ FRICTION_RANGE = (0.3, 1.2)
 
 
 @dataclass(frozen=True)
+class Material:
+    """A material class of the natural design: density (kg/m^3, the class mean; objects
+    spread log-normally around it), contact stiffness range (N/m, log-uniform; it sets the
+    hardness class), friction (the class mean; objects spread uniformly around it)."""
+
+    name: str
+    density: float
+    stiffness: tuple[float, float]
+    friction: float
+
+    @property
+    def hardness(self) -> str:
+        return "soft" if self.stiffness[1] <= SOFT_RANGE[1] else "hard"
+
+
+#: The natural design's material classes (their order is the appearance-class index).
+MATERIALS: tuple[Material, ...] = (
+    Material("foam", 300.0, (600.0, 1200.0), 0.9),
+    Material("rubber", 1100.0, (1200.0, 2000.0), 1.1),
+    Material("wood", 650.0, (8000.0, 12000.0), 0.5),
+    Material("plastic", 1200.0, (10000.0, 16000.0), 0.4),
+    Material("ceramic", 2400.0, (16000.0, 25000.0), 0.6),
+    Material("metal", 7800.0, (18000.0, 25000.0), 0.3),
+)
+
+#: Within-class spread of the natural design: log-normal sd of density, half-width of friction.
+DENSITY_LOG_SD, FRICTION_SPREAD = 0.15, 0.08
+
+#: Per-channel colour jitter of a natural object (a multiplicative N(1, sd) per RGB channel).
+COLOUR_JITTER_SD = 0.12
+
+
+def _appearance_families() -> tuple[tuple[tuple[str, str], ...], ...]:
+    """Class c -> its (colour, texture) pairs: those with (colour index + texture index) mod
+    the number of classes == c."""
+    colours, textures, k = list(PALETTE), list(TEXTURE_WORDS), len(MATERIALS)
+    return tuple(
+        tuple(
+            (colours[a], textures[b])
+            for a in range(len(colours))
+            for b in range(len(textures))
+            if (a + b) % k == c
+        )
+        for c in range(k)
+    )
+
+
+#: Appearance class -> the (colour, texture) pairs an object of that class shows.
+APPEARANCE_FAMILIES = _appearance_families()
+
+
+def appearance_class(material: int, rho: float, u: float, uniform: int) -> int:
+    """The appearance class of an object of class `material`: the material itself when
+    u < rho, else `uniform` (a class drawn uniformly, which may equal the material); u in
+    [0, 1) and `uniform` are drawn whatever rho is, so the draws of a sample do not depend on
+    it. P(appearance = material) = rho + (1 - rho) / n_classes."""
+    return int(material) if u < rho else int(uniform)
+
+
+@dataclass(frozen=True)
 class SampleSpec:
     """Everything drawn for one sample (before simulation)."""
 
@@ -119,6 +192,8 @@ class SampleSpec:
     sensor: int
     jitter: np.ndarray  # (presses, 4): force factor, dx, dy, dyaw
     pixel_seed: int
+    material: str = ""  # natural design: the material class (else "")
+    rgb: tuple[float, float, float] | None = None  # natural: the jittered colour
 
 
 def scene_seed(seed: int, i: int) -> int:
@@ -133,7 +208,9 @@ class CorpusSettings:
 
     design "paired" draws shape, size (``size_range``, m) and density per sample; "controlled"
     crosses shapes x ``scales`` (size = scale x ``size_per_scale``) x ``densities`` so that
-    density varies within every appearance group. ``null``: tactile frames from an unrelated
+    density varies within every appearance group; "natural" draws shape and size as "paired",
+    and a material class that sets density, stiffness and friction and, with probability
+    ``rho``, the appearance class (module docstring). ``null``: tactile frames from an unrelated
     sample's physics. ``presses``: repeated noisy presses per sample (the force bands);
     ``sensors``: tactile sensors (backgrounds); ``image_size`` / ``tactile_size``: RGB and
     tactile frame sizes (H, W); ``shapes``: a subset of the scene's shapes (None: all).
@@ -141,7 +218,7 @@ class CorpusSettings:
     """
 
     name: str
-    design: Literal["paired", "controlled"]
+    design: Literal["paired", "controlled", "natural"]
     n: int
     seed: int
     scene: str
@@ -158,10 +235,19 @@ class CorpusSettings:
     size_per_scale: float = 0.15
     densities: Sequence[float] = (500.0, 2000.0, 5000.0)
     png_compression: int = 1
+    rho: float = 0.0
 
     def __post_init__(self) -> None:
-        if self.design not in ("paired", "controlled"):
-            raise ValueError(f"corpus {self.name!r}: key 'design' must be 'paired' or 'controlled'")
+        if self.design not in ("paired", "controlled", "natural"):
+            raise ValueError(
+                f"corpus {self.name!r}: key 'design' must be 'paired', 'controlled' or 'natural'"
+            )
+        if not 0.0 <= float(self.rho) <= 1.0:
+            raise ValueError(f"corpus {self.name!r}: key 'rho' must be in [0, 1], got {self.rho}")
+        if self.rho and self.design != "natural":
+            raise ValueError(
+                f"corpus {self.name!r}: key 'rho' belongs to design 'natural', not {self.design!r}"
+            )
         if int(self.n) < 1 or int(self.sensors) < 1 or int(self.presses) < 1:
             raise ValueError(f"corpus {self.name!r}: n, sensors and presses must be >= 1")
 
@@ -210,6 +296,8 @@ def sample_spec(cfg: CorpusSettings, scene: Scene, i: int) -> SampleSpec:
     )
     shapes = _shapes(cfg, scene)
     densities = [float(d) for d in cfg.densities]
+    if cfg.design == "natural":
+        return _natural_spec(cfg, scene, i, ss, shapes, (geo, phys, app, jit, pix))
     if cfg.design == "paired":
         shape = shapes[int(geo.integers(len(shapes)))]
         lo, hi = (float(v) for v in cfg.size_range)
@@ -234,6 +322,17 @@ def sample_spec(cfg: CorpusSettings, scene: Scene, i: int) -> SampleSpec:
     colour = list(PALETTE)[int(app.integers(len(PALETTE)))]
     texture = list(TEXTURE_WORDS)[int(app.integers(len(TEXTURE_WORDS)))]
     yaw = float(app.uniform(0.0, np.pi / 2))
+    jitter, sensor, pixel_seed = _press_and_pixel_draws(cfg, scene, jit, pix)
+    obj = physics.ObjectPhysics(shape, size, density, stiffness, friction, yaw)
+    return SampleSpec(
+        i, ss, obj, scale, hardness, colour, texture, appearance_id, sensor, jitter, pixel_seed
+    )
+
+
+def _press_and_pixel_draws(
+    cfg: CorpusSettings, scene: Scene, jit: np.random.Generator, pix: np.random.Generator
+) -> tuple[np.ndarray, int, int]:
+    """The repeated presses' jitter, the sensor and the pixel-noise seed of one sample."""
     presses = int(cfg.presses)
     jitter = np.column_stack(
         [
@@ -242,11 +341,55 @@ def sample_spec(cfg: CorpusSettings, scene: Scene, i: int) -> SampleSpec:
             scene.jitter_yaw * jit.standard_normal(presses),
         ]
     )
-    sensor = int(pix.integers(int(cfg.sensors)))
-    pixel_seed = int(pix.integers(2**63 - 1))
+    return jitter, int(pix.integers(int(cfg.sensors))), int(pix.integers(2**63 - 1))
+
+
+def _natural_spec(
+    cfg: CorpusSettings,
+    scene: Scene,
+    i: int,
+    ss: int,
+    shapes: tuple[str, ...],
+    streams: tuple[np.random.Generator, ...],
+) -> SampleSpec:
+    """Sample i of the natural design (module docstring): geometry as the paired design's, a
+    material class with its within-class spread, and an appearance class linked to it by rho.
+    Every draw is made whatever rho is, so only the appearance class depends on it."""
+    geo, phys, app, jit, pix = streams
+    shape = shapes[int(geo.integers(len(shapes)))]
+    lo, hi = (float(v) for v in cfg.size_range)
+    size = float(geo.uniform(lo, hi))
+    m = int(phys.integers(len(MATERIALS)))
+    mat = MATERIALS[m]
+    density = float(mat.density * np.exp(DENSITY_LOG_SD * phys.standard_normal()))
+    stiffness = float(np.exp(phys.uniform(*np.log(mat.stiffness))))
+    friction = float(
+        np.clip(mat.friction + phys.uniform(-FRICTION_SPREAD, FRICTION_SPREAD), *FRICTION_RANGE)
+    )
+    u, uniform = float(app.random()), int(app.integers(len(MATERIALS)))
+    cls = appearance_class(m, float(cfg.rho), u, uniform)
+    family = APPEARANCE_FAMILIES[cls]
+    colour, texture = family[int(app.integers(len(family)))]
+    tint = np.clip(
+        np.asarray(PALETTE[colour]) * (1.0 + COLOUR_JITTER_SD * app.standard_normal(3)), 0, 1
+    )
+    yaw = float(app.uniform(0.0, np.pi / 2))
+    jitter, sensor, pixel_seed = _press_and_pixel_draws(cfg, scene, jit, pix)
     obj = physics.ObjectPhysics(shape, size, density, stiffness, friction, yaw)
     return SampleSpec(
-        i, ss, obj, scale, hardness, colour, texture, appearance_id, sensor, jitter, pixel_seed
+        i,
+        ss,
+        obj,
+        size,
+        mat.hardness,
+        colour,
+        texture,
+        cls,
+        sensor,
+        jitter,
+        pixel_seed,
+        material=mat.name,
+        rgb=(float(tint[0]), float(tint[1]), float(tint[2])),
     )
 
 
@@ -264,7 +407,7 @@ def null_sources(seed: int, n: int) -> np.ndarray:
 
 
 def _adjectives(spec: SampleSpec, cfg: CorpusSettings) -> list[str]:
-    if cfg.design == "paired":
+    if cfg.design in ("paired", "natural"):
         lo, hi = (float(v) for v in cfg.size_range)
         t = (spec.obj.size - lo) / (hi - lo)
     else:
@@ -309,7 +452,7 @@ def simulate_shard(
     indices = range(shard, n, n_shards)
     for count, i in enumerate(indices):
         spec = sample_spec(cfg, scene, i)
-        rgba = (*PALETTE[spec.colour], 1.0)
+        rgba = (*(spec.rgb or PALETTE[spec.colour]), 1.0)
         physics.apply_object(rt, spec.obj, rgba=rgba, texture=spec.texture)
         rgb = None
         if scene.has("rgb"):
@@ -365,7 +508,12 @@ def simulate_shard(
                 "force_p95": float(p95),
                 "appearance_id": int(spec.appearance_id),
                 "scene_seed": int(spec.scene_seed),
-                "stratum": f"{shape_word}|{spec.hardness}|{int(spec.obj.density)}",
+                # natural: the material and appearance classes (the regime's known process)
+                "stratum": (
+                    f"{spec.material}|appearance~{spec.appearance_id}"
+                    if cfg.design == "natural"
+                    else f"{shape_word}|{spec.hardness}|{int(spec.obj.density)}"
+                ),
                 "null_source": null_source,
                 "mass_source": "density x MuJoCo geom volume (body_mass), kg",
                 "force_source": (
