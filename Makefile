@@ -50,7 +50,7 @@ setup-test:
 test: setup-test lint
 	@kernels_log=$$(mktemp); \
 	nice -n 19 $(BIN)/python tools/kernel_variants.py >"$$kernels_log" 2>&1 & kernels=$$!; \
-	TACGEN_SLURM_TEST=$${TACGEN_SLURM_TEST:-1} $(BIN)/python -m pytest -ra --durations=15 -n $(CORES) --dist loadfile --no-loadscope-reorder; \
+	TACGEN_SLURM_TEST=$${TACGEN_SLURM_TEST:-1} $(BIN)/python -m pytest -ra --durations=25 -n $(CORES) --dist loadfile --no-loadscope-reorder; \
 	main=$$?; wait $$kernels; kernels_rc=$$?; \
 	echo "---- the same tests under other CPU kernels (tools/kernel_variants.py) ----"; \
 	cat "$$kernels_log"; rm -f "$$kernels_log"; \
