@@ -14,6 +14,7 @@ cell); none reads files. The words follow fixed rules:
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -129,20 +130,20 @@ def generation_verdict(
 
 def ridge_verdict(
     vs_ridge: tuple[float, float, float],
-    cos_gen: float,
-    cos_ridge: float,
-    cos_ridge_residual: float,
+    pairing: Mapping[str, tuple[float, float]],
+    pairing_p: float,
 ) -> str:
     """Generated touch against the simplest generator, ridge V->T, in two sentences.
 
     The probe: `vs_ridge` = (score(V + T_gen) - score(V + T_ridge), lo, hi). T_ridge is a
     linear function of V, so a linear probe gains nothing from it beyond V: an interval below
-    0 says the generated vectors cost the probe more than they give. Fidelity: the matched-pair
-    cosines with the real test rows of the diffusion samples (`cos_gen`), of ridge's
-    conditional mean (`cos_ridge`) and of ridge's mean plus a sampled residual
-    (`cos_ridge_residual`). A sample carries the conditional spread that a mean averages out,
-    so a sampler is judged against the residual arm, and the mean bounds what any sample of
-    the same map can reach."""
+    0 says the generated vectors cost the probe more than they give. Fidelity: `pairing` maps
+    "t_gen", "t_ridge" (ridge's conditional mean) and "t_ridge_residual" (the mean plus a
+    sampled residual) to (matched-pair cosine, off-diagonal cosine) with the real test rows;
+    what is paired is the gap between them (on a corpus where nothing is, both are equal).
+    `pairing_p` is the diffusion samples' pairing-permutation p. A sample carries the
+    conditional spread that a mean averages out, so a sampler is judged against the residual
+    arm, and the mean bounds what any sample of the same map reaches."""
     side = interval_side(*vs_ridge[1:])
     d = fmt.with_ci(*vs_ridge, sign=True)
     if side == "below":
@@ -153,22 +154,29 @@ def ridge_verdict(
         probe = f"V + T_gen beats V + ridge V→T in the probe (Δ_gen − ridge {d})."
     else:
         probe = f"In the probe V + T_gen and V + ridge V→T do not differ measurably ({d})."
+    gap = {k: m - off for k, (m, off) in pairing.items()}
     cos = (
-        f"matched-pair cosine {cos_gen:.3f}, against {cos_ridge:.3f} for ridge's conditional mean "
-        f"and {cos_ridge_residual:.3f} for ridge + a sampled residual"
+        f"matched minus off-diagonal cosine {gap['t_gen']:+.3f}, against {gap['t_ridge']:+.3f} "
+        f"for ridge's conditional mean and {gap['t_ridge_residual']:+.3f} for ridge + a sampled "
+        "residual"
     )
-    if cos_gen < cos_ridge_residual:
+    if fmt.is_missing(pairing_p) or pairing_p > 0.05:
         fid = (
-            f"Its samples are further from real touch than ridge's ({cos}): the diffusion "
+            f"Its samples are not measurably paired with the real rows (pairing p "
+            f"{pairing_p:.3f}; {cos}): nothing row-specific of real touch is in them."
+        )
+    elif gap["t_gen"] < gap["t_ridge_residual"]:
+        fid = (
+            f"Its samples are less paired with real touch than ridge's ({cos}): the diffusion "
             "generator has learnt less of the V→T map than a linear regression."
         )
-    elif cos_gen < cos_ridge:
+    elif gap["t_gen"] < gap["t_ridge"]:
         fid = (
-            f"Its samples match real touch better than ridge's samples but not its mean ({cos}): "
-            "a sample carries the spread a mean averages out."
+            f"Its samples are paired with real touch better than ridge's samples but not its "
+            f"mean ({cos}): a sample carries the spread a mean averages out."
         )
     else:
-        fid = f"Its samples match real touch at least as well as ridge's conditional mean ({cos})."
+        fid = f"Its samples are paired with real touch at least as well as ridge's mean ({cos})."
     return f"{probe} {fid}"
 
 

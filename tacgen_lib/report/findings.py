@@ -112,10 +112,13 @@ def generation_findings(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
         nonlin = _first_seed(by.get("v_nonlinear"))
         ridge = _first_seed(by["t_ridge"])
         vs_ridge = _first_seed(by["t_gen"], "delta_vs_ridge")
-        cos_gen, cos_ridge, cos_residual = (
-            float(rows.sort_values("seed", kind="stable")["cos_matched"].iloc[0])
-            for rows in (by["t_gen"], by["t_ridge"], by["t_ridge_residual"])
-        )
+        first_rows = {
+            k: by[k].sort_values("seed", kind="stable").iloc[0]
+            for k in ("t_gen", "t_ridge", "t_ridge_residual")
+        }
+        pairing = {
+            k: (float(r["cos_matched"]), float(r["cos_offdiag"])) for k, r in first_rows.items()
+        }
         seeds = cross_seed_interval(by["t_gen"]["delta"].to_numpy())
         n = int(g["seed"].nunique())
         first = int(g["seed"].min())
@@ -132,7 +135,7 @@ def generation_findings(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
                 f"{fmt.with_ci(*ridge, sign=True)}",
                 "verdict": claims.generation_verdict(gen, real, nonlin)
                 + " "
-                + claims.ridge_verdict(vs_ridge, cos_gen, cos_ridge, cos_residual),
+                + claims.ridge_verdict(vs_ridge, pairing, float(first_rows["t_gen"]["pairing_p"])),
                 "page": category("Generation"),
             }
         )

@@ -123,18 +123,30 @@ def test_generation_verdict_credits_the_probe_when_a_nonlinear_v_gains_as_much()
     assert one_seed.startswith("Generated touch does not help") and "one point" in one_seed
 
 
-def test_ridge_verdict_reads_the_probe_interval_and_the_three_cosines():
-    below = claims.ridge_verdict((-0.1, -0.2, -0.01), 0.33, 0.68, 0.41)
+def test_ridge_verdict_reads_the_probe_interval_and_the_pairing_gaps():
+    def pairing(gen, mean, residual):  # matched-pair cosines, off-diagonal 0.1 each
+        return {"t_gen": (gen, 0.1), "t_ridge": (mean, 0.1), "t_ridge_residual": (residual, 0.1)}
+
+    below = claims.ridge_verdict((-0.1, -0.2, -0.01), pairing(0.33, 0.68, 0.41), 0.001)
     assert below.startswith("V + T_gen scores below V + ridge V→T") and "cost the probe" in below
-    assert "0.330, against 0.680" in below and "0.410 for ridge + a sampled residual" in below
+    assert "+0.230, against +0.580" in below and "+0.310 for ridge + a sampled residual" in below
     assert "learnt less of the V→T map than a linear regression" in below
-    between = claims.ridge_verdict((0.1, 0.01, 0.2), 0.55, 0.7, 0.45)
+    between = claims.ridge_verdict((0.1, 0.01, 0.2), pairing(0.55, 0.7, 0.45), 0.001)
     assert between.startswith("V + T_gen beats V + ridge V→T") and "not its mean" in between
-    assert "at least as well" in claims.ridge_verdict((0.0, -0.1, 0.1), 0.72, 0.7, 0.45)
+    best = claims.ridge_verdict((0.0, -0.1, 0.1), pairing(0.72, 0.7, 0.45), 0.001)
+    assert "at least as well as ridge's mean" in best
+    # a null corpus: matched = off-diagonal, the permutation p large -> not paired, whatever
+    # the cosines' sizes
+    null = claims.ridge_verdict(
+        (0.0, -0.1, 0.1),
+        {"t_gen": (0.149, 0.147), "t_ridge": (-0.03, -0.05), "t_ridge_residual": (0.11, 0.11)},
+        0.48,
+    )
+    assert "not measurably paired with the real rows (pairing p 0.480" in null
     for lo in (-0.1, 0.0):  # an interval containing or touching 0 favours neither
-        text = claims.ridge_verdict((0.0, lo, 0.1), 0.5, 0.6, 0.4)
+        text = claims.ridge_verdict((0.0, lo, 0.1), pairing(0.5, 0.6, 0.4), 0.001)
         assert text.startswith("In the probe V + T_gen and V + ridge V→T do not differ")
-    one_point = claims.ridge_verdict((0.1, math.nan, math.nan), 0.5, 0.6, 0.4)
+    one_point = claims.ridge_verdict((0.1, math.nan, math.nan), pairing(0.5, 0.6, 0.4), 0.001)
     assert one_point.startswith("In the probe V + T_gen and V + ridge V→T do not differ")
 
 
