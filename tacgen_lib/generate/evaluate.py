@@ -69,7 +69,7 @@ from tacgen_lib.generate.ridge import RIDGE_ALPHAS, RIDGE_INPUTS, ridge_generate
 from tacgen_lib.probes.bootstrap import fixed_test_bootstrap, resample_indices
 from tacgen_lib.probes.fit import FittedProbe, fit_probe
 from tacgen_lib.probes.logistic import FixedLogistic
-from tacgen_lib.probes.rows import FamilyRows
+from tacgen_lib.probes.rows import FamilyRows, baseline_score
 from tacgen_lib.probes.settings import ProbeSettings
 
 #: What is added to V in a summary row.
@@ -244,6 +244,9 @@ def evaluate_generator(
             "probe_seed": ps.seed,
             "n_train": rows.n_train,
             "n_test": rows.n_test,
+            # the constant predictor's test score (train mean / majority class): a V score
+            # below it is a probe failing, not vision lacking the label
+            "baseline_score": baseline_score(rows.y_train, rows.y_test, ps.metric),
             "nonlinear_gamma": gamma,
             **(labels or {}),
         }

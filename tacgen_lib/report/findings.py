@@ -134,6 +134,14 @@ def generation_findings(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
                 f"V only Δ {fmt.with_ci(*nonlin, sign=True)}; ridge V→T generator Δ "
                 f"{fmt.with_ci(*ridge, sign=True)}",
                 "verdict": claims.generation_verdict(gen, real, nonlin)
+                + _flag(
+                    {
+                        **first_rows["t_gen"].to_dict(),
+                        "vt_score": first_rows["t_gen"]["score"],
+                        "ci_low": gen[1],
+                        "ci_high": gen[2],
+                    }
+                )
                 + " "
                 + claims.ridge_verdict(vs_ridge, pairing, float(first_rows["t_gen"]["pairing_p"])),
                 "page": category("Generation"),

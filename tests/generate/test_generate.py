@@ -62,6 +62,7 @@ from tacgen_lib.probes.fit import fit_probe
 from tacgen_lib.probes.logistic import FixedLogistic
 from tacgen_lib.probes.rows import family_rows
 from tacgen_lib.probes.settings import ProbeSettings
+from tacgen_lib.report.findings import generation_findings
 
 SCHEMA = ROOT / "config" / "config.schema.yaml"
 
@@ -886,7 +887,9 @@ def synthetic_summary() -> pd.DataFrame:
                             "row_id": f"{corpus}|{target}|{seed}|{w}|{inp}",
                             "corpus": corpus,
                             "target": target,
-                            "metric": "r2",
+                            "metric": "accuracy" if design == "controlled" else "r2",
+                            # the controlled rows' V (0.5) is below their majority rate
+                            "baseline_score": 0.6 if design == "controlled" else 0.0,
                             "seed": seed,
                             "sampler": "ddim",
                             "guidance": w,
@@ -943,6 +946,12 @@ def test_report_tables_and_figures_from_a_summary():
     assert paired["Δ_gen − ridge V→T"] == "-0.040 [-0.300, -0.010]"
     mean, lo, hi = rep.cross_seed_interval(np.array([0.0, 0.05]))
     assert mean == pytest.approx(0.025) and lo < 0 < hi
+    found = generation_findings(summary, ref).set_index("question")
+    controlled = found.loc[found.index.str.contains("sim_controlled"), "verdict"].iloc[0]
+    assert "⚠ V accuracy 0.500 below the majority-class rate 0.600" in controlled
+    assert "V + T_gen scores below V + ridge V→T" in controlled  # Δ_gen − ridge CI < 0
+    paired = found.loc[found.index.str.contains("sim_paired"), "verdict"].iloc[0]
+    assert "⚠" not in paired and "not measurably paired" not in paired
     honesty = rep.honesty_table(summary, ref)
     verdict = honesty.set_index(["corpus", "seed", "input"])["as expected"]
     assert verdict[("sim_controlled", 0, "t_real")] == "yes"  # CI (0.2, 0.4) > 0
