@@ -15,7 +15,7 @@ TARGETS += expand("results/report/corpus/{corpus}_examples.png", corpus=sorted(C
 
 
 rule corpus_examples:
-    """Example grid per corpus: RGB, raw tactile, sensor background, background-subtracted."""
+    """Example grid per corpus (RGB, raw tactile, background, subtracted), label distributions, force bands vs true force."""
     input:
         samples=corpus_edge("{corpus}"),
         sensors=corpus_edge("{corpus}", "sensors"),
@@ -36,6 +36,15 @@ rule corpus_examples:
             caption="../workflow/report/corpus_labels.rst",
             category=category("Corpus"),
             labels={"corpus": "{corpus}", "figure": "label distributions"},
+        ),
+        force_bands=report(
+            "results/report/corpus/{corpus}_force_bands.html",
+            caption="../workflow/report/corpus_force_bands.rst",
+            category=category("Corpus"),
+            labels={
+                "corpus": "{corpus}",
+                "figure": "force bands against the true force",
+            },
         ),
     log:
         "results/logs/corpus_examples/{corpus}.log",

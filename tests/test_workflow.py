@@ -88,6 +88,9 @@ def test_full_run_makes_verified_edges_logs_and_benchmarks(run_dir):
     for corpus in ("sim_paired", "sim_null", "sim_controlled"):
         for figure in ("examples", "labels"):
             assert (run_dir / f"results/report/corpus/{corpus}_{figure}.png").stat().st_size > 5000
+        # the force bands against the true force, beside the shuffled-force control
+        bands = (run_dir / f"results/report/corpus/{corpus}_force_bands.html").read_text()
+        assert "share of nominal forces inside [p05, p95]" in bands and "(control)" in bands
     table = (run_dir / "results/report/edge_manifest.tsv").read_text()
     assert hashed.sha256_file(run_dir / "results/corpus/splits.parquet") in table
 

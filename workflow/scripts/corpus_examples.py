@@ -1,8 +1,11 @@
-"""Example grid of one corpus for the report (rule corpus_examples)."""
+"""Example grid, label distributions and force bands of one corpus for the report (rule
+corpus_examples)."""
 
+from tacgen_lib.corpus.force_bands import FORCE_BAND_COLUMNS, force_band_check
 from tacgen_lib.io import edges, log
+from tacgen_lib.report.corpus import force_band_table
 from tacgen_lib.report.figures import corpus_example_grid, label_distribution_figure
-from tacgen_lib.report.write import write_figure
+from tacgen_lib.report.write import write_figure, write_table
 
 logger = log.for_rule(snakemake)
 samples = edges.read(snakemake.input.samples)
@@ -16,4 +19,21 @@ labels = label_distribution_figure(
     samples.frame.drop(columns=["rgb", "tactile"]), title=snakemake.wildcards.corpus
 )
 write_figure(labels, snakemake.output.labels)
-logger.info("example grid of %d samples", snakemake.params.n)
+corpus = snakemake.wildcards.corpus
+frame = samples.frame
+forces = [frame[c].to_numpy(dtype="float64") for c in FORCE_BAND_COLUMNS]
+has_force = int(sum(frame["force_normal"].notna())) >= 2
+check = force_band_check(*forces, seed=0) if has_force else None
+write_table(
+    force_band_table(corpus, check),
+    snakemake.output.force_bands,
+    title=f"{corpus}: force bands against the true contact force",
+    mono=(),
+)
+logger.info(
+    "example grid of %d samples; force bands: %s",
+    snakemake.params.n,
+    "no true force recorded"
+    if check is None
+    else f"R2 {check.r2:.3f}, coverage {check.coverage:.3f} (control {check.shuffled_coverage:.3f})",
+)
