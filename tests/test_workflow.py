@@ -310,6 +310,9 @@ def test_real_corpus_path_runs_on_fixtures(tmp_path):
     manifest = edges.read(work / "results/corpus/manifest.parquet").frame
     assert manifest["corpus"].value_counts().to_dict() == {"ssvtp": 12, "hct": 8}
     assert (work / "results/report/corpus/ssvtp_examples.png").stat().st_size > 1000
+    for corpus in ("ssvtp", "hct"):  # real corpora record no contact force, and say so
+        bands = (work / f"results/report/corpus/{corpus}_force_bands.html").read_text()
+        assert "no true contact force recorded" in bands
     assert len(edges.read(work / "results/features/hct/tactile~clip128.parquet")) == 8
     vision = edges.read(work / "results/features/ssvtp/vision.parquet", require={"vit": 384})
     assert len(vision) == 12  # ViT-S/14 features from the checkpoint

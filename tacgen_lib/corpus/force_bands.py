@@ -18,9 +18,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import pandas as pd
 from scipy.stats import binomtest
 
-__all__ = ["FORCE_BAND_COLUMNS", "ForceBandCheck", "force_band_check"]
+__all__ = ["FORCE_BAND_COLUMNS", "ForceBandCheck", "corpus_force_bands", "force_band_check"]
 
 #: The corpus columns the check reads.
 FORCE_BAND_COLUMNS = ("force_normal", "force_p05", "force_p50", "force_p95")
@@ -100,3 +101,14 @@ def force_band_check(
         shuffled_low=s_lo,
         shuffled_high=s_hi,
     )
+
+
+def corpus_force_bands(frame: pd.DataFrame, *, seed: int) -> ForceBandCheck | None:
+    """`force_band_check` of a corpus edge's rows, or None when the corpus records no true
+    force: a real corpus's edge has no force columns, or fewer than 2 rows hold one."""
+    if not set(FORCE_BAND_COLUMNS) <= set(frame.columns):
+        return None
+    cols = [frame[c].to_numpy(dtype=np.float64) for c in FORCE_BAND_COLUMNS]
+    if int(np.all([np.isfinite(c) for c in cols], axis=0).sum()) < 2:
+        return None
+    return force_band_check(*cols, seed=seed)

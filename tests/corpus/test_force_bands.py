@@ -5,10 +5,11 @@ and the hard cases refused by name."""
 from __future__ import annotations
 
 import numpy as np
+import pandas as pd
 import pytest
 from sklearn.metrics import r2_score
 
-from tacgen_lib.corpus.force_bands import force_band_check
+from tacgen_lib.corpus.force_bands import corpus_force_bands, force_band_check
 
 
 def bands(n=400, seed=0):
@@ -58,3 +59,15 @@ def test_rows_without_a_true_force_are_left_out_and_bad_bands_refused():
         force_band_check(true, p05, p50, p95, seed=0)
     with pytest.raises(ValueError, match="differ in length"):
         force_band_check(true, p05[:-1], p50, p95, seed=0)
+
+
+def test_a_corpus_without_true_forces_has_no_check():
+    """A real corpus's edge has no force columns (or no values in them): None, not an error."""
+    true, p05, p50, p95 = bands(20)
+    frame = pd.DataFrame(
+        {"force_normal": true, "force_p05": p05, "force_p50": p50, "force_p95": p95}
+    )
+    assert corpus_force_bands(frame, seed=0) == force_band_check(true, p05, p50, p95, seed=0)
+    assert corpus_force_bands(frame.drop(columns=["force_normal"]), seed=0) is None
+    assert corpus_force_bands(frame.assign(force_normal=float("nan")), seed=0) is None
+    assert corpus_force_bands(pd.DataFrame({"sample_id": ["a", "b"]}), seed=0) is None

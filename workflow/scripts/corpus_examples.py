@@ -1,7 +1,7 @@
 """Example grid, label distributions and force bands of one corpus for the report (rule
 corpus_examples)."""
 
-from tacgen_lib.corpus.force_bands import FORCE_BAND_COLUMNS, force_band_check
+from tacgen_lib.corpus.force_bands import corpus_force_bands
 from tacgen_lib.io import edges, log
 from tacgen_lib.report.corpus import force_band_table
 from tacgen_lib.report.figures import corpus_example_grid, label_distribution_figure
@@ -20,10 +20,7 @@ labels = label_distribution_figure(
 )
 write_figure(labels, snakemake.output.labels)
 corpus = snakemake.wildcards.corpus
-frame = samples.frame
-forces = [frame[c].to_numpy(dtype="float64") for c in FORCE_BAND_COLUMNS]
-has_force = int(sum(frame["force_normal"].notna())) >= 2
-check = force_band_check(*forces, seed=0) if has_force else None
+check = corpus_force_bands(samples.frame, seed=0)  # None: a real corpus, no true force
 write_table(
     force_band_table(corpus, check),
     snakemake.output.force_bands,
