@@ -5,7 +5,8 @@ A simulated sample's force label is a band over `presses` jittered repeated pres
 p95 of the MuJoCo contact force) and ``force_normal`` is the contact force of its nominal,
 unjittered press. `force_band_check` asks how well the band's p50 predicts that force (R^2)
 and how often the band [p05, p95] holds it (coverage, with its Wilson 95 % interval), beside
-the same two numbers with the true forces of other samples (a seeded derangement of the rows):
+the same two numbers with the true forces of other samples (a seeded derangement of the rows,
+`derangement.sattolo_cycle`, the null corpus's):
 the chance level a band of that width reaches on a force it was not computed from.
 
 In simulation the bands and the true force come from one simulator, so this is a check of how
@@ -20,6 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 from scipy.stats import binomtest
+
+from tacgen_lib.corpus.derangement import sattolo_cycle
 
 __all__ = ["FORCE_BAND_COLUMNS", "ForceBandCheck", "corpus_force_bands", "force_band_check"]
 
@@ -81,12 +84,8 @@ def force_band_check(
             f"force_band_check: row {int(np.flatnonzero(keep)[bad[0]])} has p05 "
             f"{lo[bad[0]]:g} > p95 {hi[bad[0]]:g}"
         )
-    # another sample's true force for every row: each row takes the next one's in a seeded
-    # random cycle through all rows (a derangement: no row keeps its own)
-    order = np.random.default_rng(seed).permutation(f.size)
-    perm = np.empty(f.size, dtype=np.int64)
-    perm[order] = np.roll(order, -1)
-    other = f[perm]
+    # another sample's true force for every row: a seeded derangement (no row keeps its own)
+    other = f[sattolo_cycle(f.size, np.random.default_rng(seed))]
     cov, c_lo, c_hi = _coverage((f >= lo) & (f <= hi))
     s_cov, s_lo, s_hi = _coverage((other >= lo) & (other <= hi))
     return ForceBandCheck(

@@ -46,6 +46,7 @@ from typing import Any, Literal
 import numpy as np
 import pandas as pd
 
+from tacgen_lib.corpus.derangement import sattolo_cycle
 from tacgen_lib.corpus.manifest import LABEL_COLUMNS
 from tacgen_lib.corpus.sim import physics
 from tacgen_lib.corpus.sim.render import (
@@ -398,12 +399,7 @@ def null_sources(seed: int, n: int) -> np.ndarray:
     sample i of a null corpus takes its tactile frame from sample null_sources(seed, n)[i]."""
     if n < 2:
         raise ValueError(f"null corpus: need n >= 2 to derange samples, got n={n}")
-    rng = np.random.default_rng([int(seed), 0x6E756C6C])
-    perm = np.arange(n)
-    for k in range(n - 1, 0, -1):
-        j = int(rng.integers(k))
-        perm[k], perm[j] = perm[j], perm[k]
-    return perm
+    return sattolo_cycle(n, np.random.default_rng([int(seed), 0x6E756C6C]))
 
 
 def _adjectives(spec: SampleSpec, cfg: CorpusSettings) -> list[str]:
