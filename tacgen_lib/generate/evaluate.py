@@ -256,12 +256,18 @@ def evaluate_generator(
         real_row.update(reg=bl.reg["t_real"], reg_source=REG_CV)
         nl_row.update(reg=bl.reg["v_nonlinear"], reg_source=REG_CV)
         # the ridge generator's arms: fitted and bootstrapped once, repeated in every cell
-        ridge_rows, p_ridge = [], None
+        ridge_rows, ridge_pred = [], {}
         for inp, source in ridge_sources.items():
             r_tr, r_te = feature_block(source, rows.train_ids), feature_block(source, rows.test_ids)
             probe = fit(np.hstack([v_tr, r_tr]), np.hstack([v_te, r_te]))
-            p_ridge = probe.pred_test if p_ridge is None else p_ridge  # the mean arm's
-            r_fid, _ = fidelity(r_te, t_te, t_tr, n_permutations=permutations, seed=seed)
+            ridge_pred[inp] = probe.pred_test
+            # the fidelity of these vectors on these rows: a target with the same test and
+            # train rows (the centring) as another reuses it
+            key = (inp, tuple(rows.test_ids), tuple(rows.train_ids))
+            if key not in fid_cache:
+                fid, _ = fidelity(r_te, t_te, t_tr, n_permutations=permutations, seed=seed)
+                fid_cache[key] = fid
+            r_fid = fid_cache[key]
             r_row = _row({}, inp, boot(p_v, probe.pred_test), boot(p_nl, probe.pred_test))
             r_row.update(reg=float(probe.reg), reg_source=REG_CV, **r_fid)
             ridge_rows.append(r_row)
@@ -315,7 +321,11 @@ def evaluate_generator(
                 ]
             fid = fid_cache[key]
             gen_row = _row(
-                cell_base, "t_gen", boot(p_v, p_gen), boot(p_nl, p_gen), boot(p_ridge, p_gen)
+                cell_base,
+                "t_gen",
+                boot(p_v, p_gen),
+                boot(p_nl, p_gen),
+                boot(ridge_pred["t_ridge"], p_gen),
             )
             shuf_row = _row(cell_base, "t_gen_shuffled", boot(p_v, p_shuf), boot(p_nl, p_shuf))
             gen_row.update(reg=reg_gen, reg_source=src_gen)
