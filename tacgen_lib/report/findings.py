@@ -17,7 +17,7 @@ import pandas as pd
 
 from tacgen_lib.report import claims
 from tacgen_lib.report import format as fmt
-from tacgen_lib.report.generate import cross_seed_interval, reference_cell_rows
+from tacgen_lib.report.generate import cross_seed_interval, delta_with_ci, reference_cell_rows
 from tacgen_lib.report_pages import category
 
 __all__ = ["FINDINGS_COLUMNS", "probe_findings", "generation_findings", "policy_findings"]
@@ -89,14 +89,17 @@ def _first_seed(rows: pd.DataFrame, col: str = "delta") -> tuple[float, float, f
     """(Δ, lo, hi) of the first generator seed with its fixed-test bootstrap CI."""
     if rows is None or not len(rows):
         return (np.nan, np.nan, np.nan)
-    r = rows.sort_values("seed", kind="stable").iloc[0]
-    against = col.removeprefix("delta")  # "", "_vs_nonlinear" or "_vs_ridge"
-    return tuple(float(r[c]) for c in (col, f"ci_low{against}", f"ci_high{against}"))
+    return delta_with_ci(_first_row(rows), col)
+
+
+def _first_row(rows: pd.DataFrame) -> pd.Series:
+    """The first generator seed's row."""
+    return rows.sort_values("seed", kind="stable").iloc[0]
 
 
 def generation_findings(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
     """Per corpus × target at the reference sampling cell: generated touch against real touch,
-    with the shuffled-pair control and the nonlinear V-only baseline.
+    with the shuffled-pair control, the nonlinear V-only baseline and the ridge V->T generator.
 
     The verdict reads the first generator seed's fixed-test bootstrap CIs (they carry the test
     rows' sampling noise; real touch and the baselines do not depend on the generator seed); the
@@ -112,10 +115,7 @@ def generation_findings(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
         nonlin = _first_seed(by.get("v_nonlinear"))
         ridge = _first_seed(by["t_ridge"])
         vs_ridge = _first_seed(by["t_gen"], "delta_vs_ridge")
-        first_rows = {
-            k: by[k].sort_values("seed", kind="stable").iloc[0]
-            for k in ("t_gen", "t_ridge", "t_ridge_residual")
-        }
+        first_rows = {k: _first_row(by[k]) for k in ("t_gen", "t_ridge", "t_ridge_residual")}
         pairing = {
             k: (float(r["cos_matched"]), float(r["cos_offdiag"])) for k, r in first_rows.items()
         }

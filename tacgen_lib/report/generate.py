@@ -25,6 +25,7 @@ from tacgen_lib.report.write import panel_grid
 
 __all__ = [
     "cross_seed_interval",
+    "delta_with_ci",
     "curve_figure",
     "fidelity_table",
     "generation_summary",
@@ -69,6 +70,13 @@ def cross_seed_interval(values: np.ndarray) -> tuple[float, float, float]:
     return m, m - h, m + h
 
 
+def delta_with_ci(row: Mapping, col: str = "delta") -> tuple[float, float, float]:
+    """(Δ, lo, hi) of a summary row: `col` is ``delta`` (against linear V),
+    ``delta_vs_nonlinear`` or ``delta_vs_ridge``, each with its CI columns."""
+    against = col.removeprefix("delta")
+    return tuple(float(row[c]) for c in (col, f"ci_low{against}", f"ci_high{against}"))
+
+
 def _ci(d: float, lo: float, hi: float) -> str:
     return fmt.with_ci(d, lo, hi, sign=True)
 
@@ -93,9 +101,7 @@ def headline_table(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
         by = {k: v for k, v in g.groupby("input")}
 
         def one(inp: str, col: str = "delta", g1: int = first, by: dict = by) -> str:
-            r = by[inp][by[inp]["seed"] == g1].iloc[0]
-            against = col.removeprefix("delta")  # "", "_vs_nonlinear" or "_vs_ridge"
-            return _ci(r[col], r[f"ci_low{against}"], r[f"ci_high{against}"])
+            return _ci(*delta_with_ci(by[inp][by[inp]["seed"] == g1].iloc[0], col))
 
         m, lo, hi = cross_seed_interval(by["t_gen"]["delta"].to_numpy())
         out.append(
