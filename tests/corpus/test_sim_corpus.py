@@ -5,14 +5,12 @@ import copy
 import numpy as np
 import pandas as pd
 import pytest
-import yaml
+from sim_scenes import fast_scenes
 
 from tacgen_lib.corpus.sim import corpus
 from tacgen_lib.io.images import decode_png
 
-SCENES = yaml.safe_load(open("config/scenes.yaml"))
-for _decl in SCENES.values():
-    _decl.setdefault("settle_steps", 80)
+SCENES = fast_scenes()
 PAIRED = {
     "name": "p",
     "kind": "simulated",

@@ -8,16 +8,14 @@ import dataclasses
 
 import numpy as np
 import pytest
-import yaml
 from scipy import stats
+from sim_scenes import fast_scenes
 
 from tacgen_lib.corpus.sim import corpus
 from tacgen_lib.corpus.sim.physics import shape_volume
 from tacgen_lib.corpus.sim.scenes import validate_scene
 
-SCENES = yaml.safe_load(open("config/scenes.yaml"))
-for _decl in SCENES.values():
-    _decl.setdefault("settle_steps", 80)
+SCENES = fast_scenes()
 NATURAL = {
     "name": "nat",
     "kind": "simulated",
