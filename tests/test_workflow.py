@@ -236,6 +236,18 @@ def test_bad_config_stops_with_the_key_named(tmp_path):
     )
 
 
+def test_a_regime_that_cannot_be_drawn_stops_before_any_job_naming_the_sizes(tmp_path):
+    work = copy_tree(tmp_path / "regime")
+    cfg = work / "config/test.yaml"
+    cfg.write_text(cfg.read_text().replace("  n_pool: [24]", "  n_pool: [48]"))
+    proc = smk(work, "--dry-run", check=False)
+    assert proc.returncode != 0
+    out = proc.stdout + proc.stderr
+    assert "corpus 'sim_natural_r0' has 48 non-test rows (60 rows, 12 test)" in out
+    assert "(16) and the largest pool (48) need 64 disjoint rows" in out
+    assert not (work / "results").exists()
+
+
 def test_real_corpus_path_runs_on_fixtures(tmp_path):
     """The TVL ingest path end to end: SSVTP and HCT fixtures in the real layouts."""
     sys.path.insert(0, str(ROOT / "tests"))
@@ -261,6 +273,7 @@ def test_real_corpus_path_runs_on_fixtures(tmp_path):
     cfg["features"]["pretrained_vs_random"]["corpus"] = "ssvtp"
     cfg["align"]["corpora"] = ["ssvtp"]
     cfg["generate"]["corpora"] = {"ssvtp": {"hardness": "logistic"}}  # generate
+    cfg["regime"]["corpora"] = []  # the regime needs simulated natural corpora
     # the official-checkpoint path: a ViT-S/14 state dict in DINOv2's key format (random
     # weights, 518-px position grid as released), loaded and interpolated instead of pretraining
     import torch

@@ -268,6 +268,17 @@ def _same(a: Any, b: Any) -> bool:
     return setting_label(a) == setting_label(b)
 
 
+def _without_regime(cfg: dict[str, Any]) -> None:
+    """A simulation setting simulates every corpus of its manifest again; the regime's
+    natural corpora feed none of the sweep corpus's probes, so the setting drops them (and
+    the regime) instead of simulating them once per setting."""
+    regime = cfg.get("regime") or {}
+    for corpus in regime.get("corpora") or []:
+        cfg["corpora"].pop(corpus, None)
+    if regime:
+        cfg["regime"] = {**regime, "corpora": []}
+
+
 def knob_settings(name: str, entry: Mapping[str, Any], config: Mapping[str, Any]) -> list[Setting]:
     """Every run a swept knob needs: one per value (× replicate), each with the module config
     (`config` with the knob's keys set, no knobs of its own, `cost.setting` naming it) and the
@@ -311,6 +322,8 @@ def knob_settings(name: str, entry: Mapping[str, Any], config: Mapping[str, Any]
                 _set(cfg, _path(key, ctx)[0], _fill(fixed, ctx))
             if knob.replicate_key:
                 _set(cfg, knob.replicate_key.split("."), first_seed + rep)
+            if knob.reads == "simulation":
+                _without_regime(cfg)
             cfg["cost"] = {
                 "knobs": {},
                 "grid_knobs": False,

@@ -17,9 +17,12 @@ may change its units: edit its line here, then regenerate the shipped calibratio
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
+
+import yaml
 
 from tacgen_lib.features.archs import ARCHS, PATCH_SIZE
 from tacgen_lib.generate.cells import guidance_passes
@@ -72,6 +75,27 @@ GFLOPS_PER_THREAD = 50.0
 
 def _corpus(c: Config, name: str) -> Mapping[str, Any]:
     return c["corpora"][name]
+
+
+@functools.cache
+def _scene_effects(scenes_file: str) -> dict[str, tuple[str, ...]]:
+    """Scene name -> its declared effects, read once from the scenes file ({} if absent)."""
+    try:
+        with open(scenes_file, encoding="utf-8") as fh:
+            scenes = yaml.safe_load(fh) or {}
+    except FileNotFoundError:
+        return {}
+    return {name: tuple(decl.get("effects", ())) for name, decl in scenes.items()}
+
+
+def _presses(c: Config, name: str) -> float:
+    """Presses a simulated sample costs: its jittered presses (`presses`, default 8) where its
+    scene declares press_jitter, else the one nominal press."""
+    corpus = _corpus(c, name)
+    effects = _scene_effects(str(c.get("scenes_file", "config/scenes.yaml"))).get(
+        str(corpus.get("scene")), ("press_jitter",)
+    )
+    return float(corpus.get("presses", 8)) if "press_jitter" in effects else 1.0
 
 
 def _n(c: Config, name: str) -> float:
@@ -212,7 +236,7 @@ UNITS: dict[str, UnitRule] = {
             "",
             _n(c, w["corpus"])
             / int(_corpus(c, w["corpus"])["shards"])
-            * int(_corpus(c, w["corpus"])["presses"])
+            * _presses(c, w["corpus"])
             * _tactile_pixels(c, w["corpus"]),
         ),
     ),
@@ -315,6 +339,33 @@ UNITS: dict[str, UnitRule] = {
             "",
             _generate_cells(c) * len(c["generate"]["corpora"]) * len(c["generate"]["seeds"]),
         ),
+    ),
+    # regime (where generated touch helps)
+    "regime_generators": UnitRule(
+        "optimiser step × pool size × pairing (at most; + MLP FLOPs)",
+        lambda c, w: ("", float(c["regime"]["steps"]) * 2 * len(c["regime"]["n_pool"])),
+        lambda c, w: (
+            3.0
+            * int(c["regime"]["steps"])
+            * int(c["regime"]["batch_size"])
+            * 2
+            * len(c["regime"]["n_pool"])
+            * _generator_mlp(c)
+        ),
+    ),
+    "regime_evaluate": UnitRule(
+        "(labelled + pool rows) × target × labelled size × pool size",
+        lambda c, w: (
+            "",
+            (max(c["regime"]["n_labelled"]) + max(c["regime"]["n_pool"]))
+            * len(c["regime"]["targets"])
+            * len(c["regime"]["n_labelled"])
+            * len(c["regime"]["n_pool"]),
+        ),
+    ),
+    "aggregate_regime": UnitRule(
+        "corpus × seed",
+        lambda c, w: ("", len(c["regime"]["corpora"]) * len(c["regime"]["seeds"])),
     ),
     # probes
     "probe": UnitRule("row × fit (inputs × CV grid + control refits)", _probe_work),

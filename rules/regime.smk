@@ -1,0 +1,116 @@
+"""Where generated touch helps, and where it cannot (tacgen_lib.generate.regime): per natural
+corpus (one rho each) x seed, diffusion generators trained on unlabelled paired pools of
+every size (real and re-paired pairs), then every arm of the regime fitted on N_L labelled
+rows and scored on the corpus's test split; one summary and the report page."""
+
+
+include: "regime_common.smk"
+
+
+if REGIME_CORPORA:
+    TARGETS += [f"{REGIME_DIR}/summary.parquet"]
+    TARGETS += [f"{REGIME_REPORT}/{n}.{e}" for n, e in REGIME_ITEMS.items()]
+    EDGES += [f"{REGIME_DIR}/evaluation.parquet"]
+    EDGES += [p for c, s in regime_cells() for p in regime_t_gen(c, s)]
+
+
+rule regime_generators:
+    """Latent V->T diffusion generators on the unlabelled pools of one corpus x seed (real and re-paired pairs), sampled for its labelled and test rows."""
+    input:
+        v=lambda w: feature_edge(w.corpus, "vision"),
+        t=lambda w: generate_tactile(w.corpus),
+        splits="results/corpus/splits.parquet",
+        code=imports_of("regime_generators"),
+    output:
+        t_gen=regime_t_gen("{corpus}", "{seed}"),
+        curves=f"{REGIME_CELL}/curves.parquet",
+    log:
+        "results/logs/regime_generators/{corpus}/seed~{seed}.log",
+    benchmark:
+        "results/benchmarks/regime_generators/{corpus}/{seed}.tsv"
+    wildcard_constraints:
+        corpus=one_of(REGIME_CORPORA),
+        seed=r"\d+",
+    conda:
+        "../envs/generate.yaml"
+    threads: 1
+    resources:
+        mem_mb=3000,
+        runtime=30,
+    params:
+        generate=GENERATE,
+        regime=REGIME,
+        cells=REGIME_CELLS,  # the order of the t_gen outputs
+    script:
+        "../workflow/scripts/regime_generators.py"
+
+
+rule regime_evaluate:
+    """Every arm of the regime (linear and nonlinear V, V + T_gen, the shuffled-pool generator, generalised distillation, V + real T, the vision ceiling) for one corpus x seed."""
+    input:
+        manifest="results/corpus/manifest.parquet",
+        splits="results/corpus/splits.parquet",
+        v=lambda w: feature_edge(w.corpus, "vision"),
+        t=lambda w: generate_tactile(w.corpus),
+        t_gen=lambda w: regime_t_gen(w.corpus, w.seed),
+        code=imports_of("regime_evaluate"),
+    output:
+        rows=f"{REGIME_CELL}/evaluation.parquet",
+        appearance=f"{REGIME_CELL}/appearance.parquet",
+    log:
+        "results/logs/regime_evaluate/{corpus}/seed~{seed}.log",
+    benchmark:
+        "results/benchmarks/regime_evaluate/{corpus}/{seed}.tsv"
+    wildcard_constraints:
+        corpus=one_of(REGIME_CORPORA),
+        seed=r"\d+",
+    conda:
+        "../envs/probes.yaml"
+    threads: 1
+    resources:
+        mem_mb=3000,
+        runtime=30,
+    params:
+        regime=REGIME,
+        targets=REGIME["targets"],
+        rho=lambda w: float(CORPORA[w.corpus].get("rho", 0.0)),
+        probes=PROBE_SETTINGS,
+        probe_seed=config["probes"]["seeds"][0],
+        gammas=GENERATE["nonlinear_gammas"],
+        cells=REGIME_CELLS,
+    script:
+        "../workflow/scripts/regime_evaluate.py"
+
+
+rule aggregate_regime:
+    """One summary of every regime cell and arm; the report page Where generated touch helps."""
+    input:
+        rows=regime_files(f"{REGIME_CELL}/evaluation.parquet"),
+        appearance=regime_files(f"{REGIME_CELL}/appearance.parquet"),
+        curves=regime_files(f"{REGIME_CELL}/curves.parquet"),
+        code=imports_of("aggregate_regime"),
+    output:
+        **{
+            name: report(
+                f"{REGIME_REPORT}/{name}.{ext}",
+                caption=f"../workflow/report/regime_{name}.rst",
+                category=category("Where generated touch helps"),
+                subcategory="Figures" if ext == "png" else "Tables",
+                labels={"item": name},
+            )
+            for name, ext in REGIME_ITEMS.items()
+        },
+        summary=f"{REGIME_DIR}/summary.parquet",
+        evaluation=f"{REGIME_DIR}/evaluation.parquet",
+    log:
+        "results/logs/aggregate_regime.log",
+    benchmark:
+        "results/benchmarks/aggregate_regime.tsv"
+    conda:
+        "../envs/report.yaml"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    script:
+        "../workflow/scripts/aggregate_regime.py"

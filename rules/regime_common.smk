@@ -1,0 +1,70 @@
+"""Helpers of the regime (where generated touch helps); included by regime.smk."""
+
+from tacgen_lib.generate.regime_sets import PAIRINGS, check_regime_sizes
+
+# a config without the section (one given with --replace-workflow-config) runs no regime
+REGIME = config.get("regime") or {
+    "corpora": [],
+    "targets": {},
+    "n_labelled": [2],
+    "n_pool": [2],
+    "seeds": [0],
+}
+REGIME_CORPORA = list(REGIME["corpora"])
+REGIME_DIR = "results/generate/regime"
+REGIME_CELL = f"{REGIME_DIR}/{{corpus}}/seed~{{seed}}"
+REGIME_REPORT = "results/report/regime"
+REGIME_ITEMS = {
+    "findings": "html",
+    "table": "html",
+    "appearance": "html",
+    "heatmap": "png",
+    "curves": "png",
+}
+# every (pool size, pairing) generator of a corpus x seed, in the order of its outputs
+REGIME_CELLS = [(int(n), p) for n in REGIME["n_pool"] for p in PAIRINGS]
+
+
+def _regime_test_rows(corpus, n):
+    """The size of the corpus's test split (make_splits: round(test fraction x n), >= 1)."""
+    test = float(config["splits"]["fractions"].get("test", 0.0))
+    return max(1, round(test * n)) if test > 0 else 0
+
+
+for _c in REGIME_CORPORA:
+    if _c not in CORPORA:
+        raise ValueError(
+            f"config regime.corpora: {_c!r} is not a corpus (have {sorted(CORPORA)})"
+        )
+    if CORPORA[_c].get("design") != "natural":
+        raise ValueError(
+            f"config regime.corpora: corpus {_c!r} has design "
+            f"{CORPORA[_c].get('design', CORPORA[_c]['kind'])!r}; the regime needs design "
+            "natural (its appearance classes define the vision ceiling)"
+        )
+    if _c in config["splits"].get("by_scale", {}):
+        raise ValueError(
+            f"config regime.corpora: corpus {_c!r} is split by scale; the regime needs the random split"
+        )
+    check_regime_sizes(
+        _c,
+        int(CORPORA[_c]["n"]),
+        _regime_test_rows(_c, int(CORPORA[_c]["n"])),
+        REGIME["n_labelled"],
+        REGIME["n_pool"],
+    )
+
+
+def regime_cells():
+    return [(c, str(s)) for c in REGIME_CORPORA for s in REGIME["seeds"]]
+
+
+def regime_files(path):
+    return [path.format(corpus=c, seed=s) for c, s in regime_cells()]
+
+
+def regime_t_gen(corpus, seed):
+    return [
+        f"{REGIME_CELL}/pool~{n}/{p}/t_gen.parquet".format(corpus=corpus, seed=seed)
+        for n, p in REGIME_CELLS
+    ]

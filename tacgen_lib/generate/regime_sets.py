@@ -1,0 +1,156 @@
+"""The regime's sets and settings (`tacgen_lib.generate.regime`), apart from its probes so that
+the DAG's parse-time size check and the generator jobs import no scikit-learn.
+
+Sets (`draw_regime_sets`): the corpus's test split is the fixed, object-level test set; the
+non-test rows are permuted with the cell seed; the first max(N_L) form the labelled order
+(N_L = n takes its first n: the labelled sets are nested) and the next max(N_P) the pool
+order (nested likewise). Labelled, pool and test rows are disjoint by construction and
+`assert_regime_disjoint` checks it again against the split edge in every job.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from tacgen_lib.corpus.splits import LeakageError, assert_trainable
+from tacgen_lib.io.config import settings_from
+
+__all__ = [
+    "PAIRINGS",
+    "RegimeSets",
+    "RegimeSettings",
+    "assert_regime_disjoint",
+    "check_regime_sizes",
+    "draw_regime_sets",
+]
+
+#: The two generators of each pool: trained on its real pairs, or on re-paired ones.
+PAIRINGS = ("real", "shuffled")
+
+
+@dataclass(frozen=True)
+class RegimeSettings:
+    """The regime grid and how its arms are fitted (config ``regime``).
+
+    ``n_labelled`` / ``n_pool``: the label and pool sizes of the grid; ``seeds``: one per set
+    draw and generator; ``targets``: target -> ridge | logistic; ``pool_val_fraction``: the
+    share of the pool that only steers the generator's early stopping; ``steps``,
+    ``batch_size``: the regime generators' step cap and batch (the rest of the model is
+    config ``generate``'s); ``sampling_steps``, ``guidance``: the DDIM cell they are sampled
+    with; ``bootstrap``: fixed-test resamples.
+    """
+
+    n_labelled: tuple[int, ...] = (32, 128, 384)
+    n_pool: tuple[int, ...] = (256, 1024)
+    seeds: tuple[int, ...] = (0, 1)
+    pool_val_fraction: float = 0.1
+    steps: int = 1000
+    batch_size: int = 128
+    sampling_steps: int = 25
+    guidance: float = 1.0
+    bootstrap: int = 5000
+
+    def __post_init__(self) -> None:
+        for name in ("n_labelled", "n_pool"):
+            values = getattr(self, name)
+            if not values or any(int(v) != v or v < 1 for v in values):
+                raise ValueError(f"regime.{name} must be integers >= 1, got {values!r}")
+        if not 0.0 < self.pool_val_fraction < 1.0:
+            raise ValueError(
+                f"regime.pool_val_fraction must be in (0, 1), got {self.pool_val_fraction}"
+            )
+
+    @classmethod
+    def from_config(cls, regime: Mapping[str, Any]) -> RegimeSettings:
+        return settings_from(cls, regime, where="regime", ignore=("targets", "corpora"))
+
+
+@dataclass(frozen=True)
+class RegimeSets:
+    """The draw of one regime seed: ``labelled`` (max N_L ids, nested by prefix), ``pool``
+    (max N_P ids, nested by prefix) and ``test`` (the corpus's test split), all disjoint."""
+
+    labelled: np.ndarray
+    pool: np.ndarray
+    test: np.ndarray
+
+    def labelled_ids(self, n: int) -> np.ndarray:
+        return self.labelled[: int(n)]
+
+    def pool_ids(self, n: int) -> np.ndarray:
+        return self.pool[: int(n)]
+
+
+def check_regime_sizes(
+    corpus: str, n_rows: int, n_test: int, n_labelled: Sequence[int], n_pool: Sequence[int]
+) -> None:
+    """Refuse a grid whose labelled, pool and test sets cannot be drawn disjointly.
+
+    The labelled and pool sets come from the corpus's n_rows - n_test non-test rows; each
+    labelled set must hold at least 2 rows and each pool 2 (one to train on, one to stop
+    early on). Raises ValueError naming the corpus and the sizes.
+    """
+    need = max(int(n) for n in n_labelled) + max(int(n) for n in n_pool)
+    have = int(n_rows) - int(n_test)
+    if need > have:
+        raise ValueError(
+            f"regime: corpus {corpus!r} has {have} non-test rows ({n_rows} rows, "
+            f"{n_test} test), but the largest labelled set ({max(n_labelled)}) and the largest "
+            f"pool ({max(n_pool)}) need {need} disjoint rows: raise the corpus's n or lower "
+            "regime.n_labelled / n_pool"
+        )
+    if min(int(n) for n in n_labelled) < 2:
+        raise ValueError(f"regime: corpus {corpus!r}: a labelled set needs >= 2 rows")
+    if min(int(n) for n in n_pool) < 2:
+        raise ValueError(f"regime: corpus {corpus!r}: a pool needs >= 2 rows")
+
+
+def draw_regime_sets(
+    splits: pd.DataFrame,
+    corpus: str,
+    *,
+    n_labelled: int,
+    n_pool: int,
+    seed: int,
+) -> RegimeSets:
+    """The labelled order, the pool order and the test rows of `corpus` (module docstring).
+
+    splits: the split edge (sample_id, corpus, split). The non-test rows, sorted by
+    sample_id, are permuted with ``default_rng([seed, 0x7265676D])``; the first `n_labelled`
+    are the labelled order, the next `n_pool` the pool order.
+    """
+    rows = splits.loc[splits["corpus"] == corpus].sort_values("sample_id")
+    test = rows.loc[rows["split"] == "test", "sample_id"].to_numpy(dtype=object)
+    rest = rows.loc[rows["split"] != "test", "sample_id"].to_numpy(dtype=object)
+    check_regime_sizes(corpus, len(rows), len(test), [n_labelled], [n_pool])
+    order = rest[np.random.default_rng([int(seed), 0x7265676D]).permutation(len(rest))]
+    return RegimeSets(
+        labelled=order[: int(n_labelled)],
+        pool=order[int(n_labelled) : int(n_labelled) + int(n_pool)],
+        test=test,
+    )
+
+
+def assert_regime_disjoint(sets: RegimeSets, splits: pd.DataFrame, *, rule: str) -> None:
+    """Refuse overlapping sets, and any labelled or pool row that the split edge holds out.
+
+    Raises LeakageError naming the rule, the sets and the first shared sample_id.
+    """
+    named = {"labelled": sets.labelled, "pool": sets.pool, "test": sets.test}
+    names = list(named)
+    for i, a in enumerate(names):
+        for b in names[i + 1 :]:
+            shared = sorted(set(map(str, named[a])) & set(map(str, named[b])))
+            if shared:
+                raise LeakageError(
+                    f"rule {rule}: the regime's {a} and {b} sets share {len(shared)} row(s), "
+                    f"e.g. sample_id {shared[0]!r}"
+                )
+    assert_trainable(
+        list(sets.labelled) + list(sets.pool), splits, rule=rule, allowed=("train", "val")
+    )

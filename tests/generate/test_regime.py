@@ -1,0 +1,343 @@
+"""The regime (tacgen_lib.generate.regime, regime_generators): disjoint nested sets drawn from
+the split, sizes refused before anything runs, the probes on tiny labelled sets (a missing
+class, a class of one row, fewer rows than features) against scikit-learn, generalised
+distillation against its pieces refitted with scikit-learn, the vision ceiling at rho = 0 and
+rho = 1 exactly, and every arm of every cell on a synthetic world."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+from sklearn.linear_model import LogisticRegression, Ridge
+from sklearn.preprocessing import StandardScaler
+
+from tacgen_lib.corpus.splits import LeakageError
+from tacgen_lib.generate.regime import (
+    ARMS,
+    SUMMARY_COLUMNS,
+    RegimeSets,
+    RegimeTarget,
+    appearance_check,
+    appearance_design,
+    assert_regime_disjoint,
+    check_regime_sizes,
+    draw_regime_sets,
+    evaluate_regime,
+    fit_small_probe,
+    gap_closed,
+    generalised_distillation,
+)
+from tacgen_lib.generate.regime_generators import pool_pairs
+from tacgen_lib.probes.rows import family_rows
+from tacgen_lib.probes.settings import ProbeSettings
+
+N_CLASSES = 6
+
+
+def probe_settings(kind: str, **kw) -> ProbeSettings:
+    cfg = {
+        "bootstrap": 200,
+        "train_resamples": 2,
+        "permutations": 2,
+        "label_permutations": 2,
+        "random_draws": 2,
+        "lambdas": [0.1, 1, 10, 100],
+        "C": [0.1, 1, 10],
+        "folds": 3,
+        **kw,
+    }
+    return ProbeSettings.from_config(cfg, kind, 42)
+
+
+def world(n: int = 240, *, rho: float, seed: int = 0, d_v: int = 10, d_t: int = 6):
+    """A natural-design world: material m, appearance a = m with probability rho (else
+    uniform); V a nonlinear (circular) code of a plus noise; T a noisy code of hardness and
+    density (touch sees them); hardness soft for classes 0, 1; log mass from the class."""
+    rng = np.random.default_rng(seed)
+    m = rng.integers(N_CLASSES, size=n)
+    a = np.where(rng.random(n) < rho, m, rng.integers(N_CLASSES, size=n))
+    angle = 2 * np.pi * a / N_CLASSES
+    v = np.column_stack([np.cos(angle), np.sin(angle)]) @ rng.normal(size=(2, d_v))
+    v += 0.3 * rng.normal(size=(n, d_v))
+    hard = np.where(m < 2, "soft", "hard")
+    log_density = np.log([300, 1100, 650, 1200, 2400, 7800])[m]
+    scale = rng.uniform(0.02, 0.04, size=n)
+    log_mass = log_density + 3 * np.log(scale) + 0.1 * rng.normal(size=n)
+    t = np.column_stack([(m < 2).astype(float), log_density / 5]) @ rng.normal(size=(2, d_t))
+    t += 0.2 * rng.normal(size=(n, d_t))
+    ids = np.array([f"nat-{i:04d}" for i in range(n)], dtype=object)
+    split = np.array(["train"] * n, dtype=object)
+    split[rng.permutation(n)[: n // 5]] = "test"
+    manifest = pd.DataFrame(
+        {
+            "sample_id": ids,
+            "corpus": "nat",
+            "hardness": hard,
+            "mass": np.exp(log_mass),
+            "appearance_id": a,
+            "shape": "cube",
+            "scale": scale,
+        }
+    )
+    splits = pd.DataFrame({"sample_id": ids, "corpus": "nat", "split": split})
+    vision = dict(zip(ids, v, strict=True))
+    tactile = dict(zip(ids, t, strict=True))
+    return manifest, splits, vision, tactile
+
+
+# --------------------------------------------------------------------------- sets
+
+
+def test_sets_are_disjoint_nested_and_seeded():
+    _, splits, _, _ = world(rho=1.0)
+    a = draw_regime_sets(splits, "nat", n_labelled=40, n_pool=100, seed=3)
+    b = draw_regime_sets(splits, "nat", n_labelled=40, n_pool=100, seed=3)
+    c = draw_regime_sets(splits, "nat", n_labelled=40, n_pool=100, seed=4)
+    assert list(a.labelled) == list(b.labelled) and list(a.pool) == list(b.pool)
+    assert list(a.labelled) != list(c.labelled)
+    assert set(a.test) == set(splits.loc[splits["split"] == "test", "sample_id"])
+    assert not (set(a.labelled) & set(a.pool)) and not (set(a.pool) & set(a.test))
+    assert not (set(a.labelled) & set(a.test))
+    # nested: the smaller sets are prefixes
+    assert list(a.labelled_ids(8)) == list(a.labelled[:8])
+    assert set(a.pool_ids(10)) <= set(a.pool_ids(50))
+    assert_regime_disjoint(a, splits, rule="test")
+
+
+def test_sizes_that_cannot_be_drawn_disjointly_are_refused_naming_the_corpus():
+    with pytest.raises(ValueError, match=r"corpus 'nat' has 48 non-test rows .*need 52"):
+        check_regime_sizes("nat", 60, 12, [8, 16], [36])
+    check_regime_sizes("nat", 60, 12, [8, 16], [32])  # exactly enough
+    _, splits, _, _ = world(n=60, rho=0.0)
+    with pytest.raises(ValueError, match="corpus 'nat'"):
+        draw_regime_sets(splits, "nat", n_labelled=40, n_pool=40, seed=0)
+
+
+def test_overlapping_or_held_out_rows_are_refused():
+    _, splits, _, _ = world(rho=1.0)
+    s = draw_regime_sets(splits, "nat", n_labelled=10, n_pool=20, seed=0)
+    overlap = RegimeSets(s.labelled, np.concatenate([s.pool, s.labelled[:1]]), s.test)
+    with pytest.raises(LeakageError, match=f"labelled and pool .*{s.labelled[0]}"):
+        assert_regime_disjoint(overlap, splits, rule="regime_generators")
+    test_in_pool = RegimeSets(s.labelled, np.concatenate([s.pool, s.test[:1]]), s.test[1:])
+    with pytest.raises(LeakageError, match="regime_generators.*'test'"):
+        assert_regime_disjoint(test_in_pool, splits, rule="regime_generators")
+
+
+def test_pool_pairs_split_in_order_and_shuffled_pairs_break_every_pair():
+    pool = [f"p{i}" for i in range(20)]
+    train, val = pool_pairs(pool, val_fraction=0.1, pairing="real", seed=0)
+    assert [v for v, _ in val] == ["p0", "p1"] and all(v == t for v, t in train + val)
+    s_train, s_val = pool_pairs(pool, val_fraction=0.1, pairing="shuffled", seed=0)
+    assert [v for v, _ in s_train] == [v for v, _ in train]
+    assert sorted(t for _, t in s_train) == sorted(t for _, t in train)  # same marginal
+    assert all(v != t for v, t in s_train + s_val)
+    assert pool_pairs(pool, val_fraction=0.1, pairing="shuffled", seed=0) == (s_train, s_val)
+    two = pool_pairs(["a", "b"], val_fraction=0.1, pairing="real", seed=0)
+    assert two == ([("b", "b")], [("a", "a")])
+    with pytest.raises(ValueError, match="a pool needs >= 2 rows"):
+        pool_pairs(["a"], val_fraction=0.1, pairing="real", seed=0)
+
+
+# --------------------------------------------------------------------------- probes
+
+
+def test_a_single_labelled_class_predicts_that_class():
+    x = np.random.default_rng(0).normal(size=(5, 3))
+    got = fit_small_probe(
+        x, np.array(["hard"] * 5, dtype=object), x[:2], probe_settings("logistic")
+    )
+    assert list(got.pred) == ["hard", "hard"] and math.isnan(got.reg)
+    assert got.source.startswith("single class")
+
+
+def test_a_class_of_one_row_fits_the_middle_C_as_scikit_learn_does():
+    rng = np.random.default_rng(1)
+    x, x_te = rng.normal(size=(9, 4)), rng.normal(size=(30, 4))
+    y = np.array(["hard"] * 8 + ["soft"], dtype=object)
+    got = fit_small_probe(x, y, x_te, probe_settings("logistic"))
+    assert got.reg == 1.0 and got.source.startswith("fixed C")
+    ref = LogisticRegression(C=1.0, tol=1e-10, max_iter=10000)
+    scaler = StandardScaler().fit(x)
+    ref.fit(scaler.transform(x), y)
+    want = ref.predict(scaler.transform(x_te))
+    # lbfgs to 1e-6 against 1e-10: labels agree wherever the margin is not at rounding level
+    margin = np.abs(ref.decision_function(scaler.transform(x_te)))
+    assert (got.pred[margin > 1e-4] == want[margin > 1e-4]).all()
+
+
+def test_ridge_on_fewer_rows_than_features_is_closed_form_float64_ridge():
+    rng = np.random.default_rng(2)
+    x, x_te = rng.normal(size=(8, 20)), rng.normal(size=(15, 20))
+    y = x @ rng.normal(size=20) + 0.1 * rng.normal(size=8)
+    got = fit_small_probe(x, y, x_te, probe_settings("ridge"))
+    ref = Ridge(alpha=got.reg, solver="svd").fit(x, y).predict(x_te)
+    np.testing.assert_allclose(got.pred, ref, rtol=1e-8, atol=1e-8)
+
+
+def test_distillation_is_a_v_only_student_of_the_teachers_pool_labels():
+    manifest, splits, vision, tactile = world(rho=1.0, seed=5)
+    sets = draw_regime_sets(splits, "nat", n_labelled=30, n_pool=120, seed=0)
+    ps = probe_settings("ridge")
+    y = dict(zip(manifest["sample_id"], np.log(manifest["mass"]), strict=True))
+    lab, pool, test = sets.labelled, sets.pool, sets.test
+
+    def block(src, ids):
+        return np.stack([src[i] for i in ids])
+
+    got = generalised_distillation(
+        block(vision, lab),
+        block(tactile, lab),
+        np.array([y[i] for i in lab]),
+        block(vision, pool),
+        block(tactile, pool),
+        block(vision, test),
+        ps,
+        nonlinear=False,
+        gammas=[1.0],
+        n_components=6,
+    )
+    # the pieces refitted with scikit-learn at the penalties the probes chose
+    teacher = fit_small_probe(
+        np.hstack([block(vision, lab), block(tactile, lab)]),
+        np.array([y[i] for i in lab]),
+        np.hstack([block(vision, pool), block(tactile, pool)]),
+        ps,
+    )
+    t_ref = Ridge(alpha=teacher.reg, solver="svd").fit(
+        np.hstack([block(vision, lab), block(tactile, lab)]), [y[i] for i in lab]
+    )
+    np.testing.assert_allclose(
+        teacher.pred,
+        t_ref.predict(np.hstack([block(vision, pool), block(tactile, pool)])),
+        rtol=1e-8,
+        atol=1e-8,
+    )
+    x_all = np.vstack([block(vision, lab), block(vision, pool)])
+    y_all = np.concatenate([[y[i] for i in lab], teacher.pred])
+    s_ref = Ridge(alpha=got.reg, solver="svd").fit(x_all, y_all).predict(block(vision, test))
+    np.testing.assert_allclose(got.pred, s_ref, rtol=1e-8, atol=1e-8)
+    # a pool of one row still distils
+    one = generalised_distillation(
+        block(vision, lab),
+        block(tactile, lab),
+        np.array([y[i] for i in lab]),
+        block(vision, pool[:1]),
+        block(tactile, pool[:1]),
+        block(vision, test),
+        ps,
+        nonlinear=False,
+        gammas=[1.0],
+        n_components=6,
+    )
+    assert np.isfinite(one.pred.astype(float)).all()
+
+
+def test_gap_closed():
+    assert gap_closed(0.7, 0.5, 0.9) == pytest.approx(0.5)
+    assert gap_closed(0.5, 0.5, 0.9) == 0.0
+    assert math.isnan(gap_closed(0.7, 0.5, 0.5)) and math.isnan(gap_closed(0.7, 0.6, 0.5))
+
+
+# --------------------------------------------------------------------------- ceiling + arms
+
+
+def _ceiling_accuracy(rho: float) -> float:
+    manifest, splits, _, _ = world(n=600, rho=rho, seed=9)
+    m = manifest.set_index("sample_id")
+    train = splits.loc[splits["split"] != "test", "sample_id"]
+    test = splits.loc[splits["split"] == "test", "sample_id"]
+    x_tr, x_te = appearance_design(m.loc[train], m.loc[test], log_target=True, n_classes=6)
+    fit = fit_small_probe(
+        x_tr, m.loc[train, "hardness"].to_numpy(object), x_te, probe_settings("logistic")
+    )
+    return float(np.mean(fit.pred == m.loc[test, "hardness"].to_numpy(object)))
+
+
+def test_vision_ceiling_is_perfect_at_rho_1_and_the_majority_at_rho_0():
+    assert _ceiling_accuracy(1.0) == 1.0  # appearance = material decides hardness exactly
+    majority = 4 / 6  # classes 2..5 are hard: at rho = 0 appearance says nothing
+    assert abs(_ceiling_accuracy(0.0) - majority) < 0.1
+
+
+def _evaluate(rho: float, *, n_labelled=(6, 40), t_gen_from_real: bool = False):
+    manifest, splits, vision, tactile = world(rho=rho, seed=11)
+    sets = draw_regime_sets(splits, "nat", n_labelled=max(n_labelled), n_pool=100, seed=0)
+    ceiling_rows = manifest.set_index("sample_id")[["appearance_id", "shape", "scale"]]
+    targets = []
+    for target, kind in (("hardness", "logistic"), ("log_mass", "ridge")):
+        rows = family_rows(manifest, splits, corpus="nat", target=target, kind=kind)
+        targets.append(RegimeTarget(rows, probe_settings(kind), ceiling_rows))
+    rng = np.random.default_rng(0)
+    noisy = {i: v + 0.5 * rng.normal(size=v.shape) for i, v in tactile.items()}
+    ids = list(tactile)
+    shuffled = dict(zip(ids, [tactile[j] for j in np.roll(ids, 1)], strict=True))
+    t_gen = {(100, "real"): tactile if t_gen_from_real else noisy, (100, "shuffled"): shuffled}
+    return evaluate_regime(
+        targets,
+        sets,
+        corpus="nat",
+        rho=rho,
+        seed=0,
+        n_labelled=n_labelled,
+        n_pool=[100],
+        vision=vision,
+        t_real=tactile,
+        t_gen=t_gen,
+        gammas=[0.5, 2.0],
+        bootstrap=200,
+        n_classes=6,
+    )
+
+
+def test_every_arm_of_every_cell_is_scored_and_reproducible():
+    a = _evaluate(1.0)
+    assert list(a.columns) == list(SUMMARY_COLUMNS)
+    assert len(a) == 2 * 2 * len(ARMS) and a["row_id"].is_unique
+    assert set(zip(a["arm"], a["probe"], strict=True)) == set(ARMS)
+    assert np.isfinite(a["score"]).all() and (a["ci_low"] <= a["ci_high"]).all()
+    v = a[(a["arm"] == "v") & (a["probe"] == "linear")]
+    assert (v["delta_vs_linear_v"] == 0).all() and (v["ci_low_vs_linear_v"] == 0).all()
+    pd.testing.assert_frame_equal(a, _evaluate(1.0))  # the same computation twice: bit for bit
+
+
+def test_a_generator_that_returns_real_touch_scores_as_real_touch():
+    a = _evaluate(1.0, t_gen_from_real=True)
+    for (target, n_l), g in a.groupby(["target", "n_labelled"]):
+        real = g[g["arm"] == "v_treal"]["score"].iloc[0]
+        gen = g[(g["arm"] == "v_tgen") & (g["probe"] == "linear")]["score"].iloc[0]
+        assert gen == real, (target, n_l)
+
+
+def test_a_labelled_set_with_one_class_is_scored_not_refused():
+    manifest, splits, *_ = world(rho=1.0, seed=11)
+    sets = draw_regime_sets(splits, "nat", n_labelled=40, n_pool=100, seed=0)
+    y = manifest.set_index("sample_id").loc[sets.labelled, "hardness"].to_numpy()
+    first_two = len(set(y[:2]))
+    a = _evaluate(1.0, n_labelled=(2, 40))
+    hard = a[(a["target"] == "hardness") & (a["n_labelled"] == 2)]
+    assert (hard["n_labelled_classes"] == first_two).all()
+    assert np.isfinite(hard["score"]).all()
+
+
+def test_appearance_check_scores_both_probes():
+    manifest, splits, vision, _ = world(n=400, rho=1.0, seed=3)
+    sets = draw_regime_sets(splits, "nat", n_labelled=60, n_pool=200, seed=0)
+    out = appearance_check(
+        vision,
+        manifest.set_index("sample_id")["appearance_id"],
+        sets,
+        probe_settings("logistic"),
+        corpus="nat",
+        rho=1.0,
+        seed=0,
+        gammas=[0.5, 2.0],
+        bootstrap=200,
+    )
+    assert list(out["probe"]) == ["linear", "nonlinear"]
+    assert ((out["score"] >= 0) & (out["score"] <= 1)).all()
+    # V codes the class (on a circle, plus noise): both probes decode it above the majority
+    assert (out["score"] > out["chance"]).all()

@@ -1,0 +1,89 @@
+"""Every arm of the regime for one corpus x seed: linear and nonlinear V, V + T_gen (real and
+shuffled pools), generalised distillation, V + real T and the vision ceiling, per labelled
+size and pool size (rule regime_evaluate)."""
+
+from threadpoolctl import threadpool_limits
+
+from tacgen_lib.generate.regime import (
+    RegimeSettings,
+    RegimeTarget,
+    appearance_check,
+    assert_regime_disjoint,
+    draw_regime_sets,
+    evaluate_regime,
+    regime_test_rows,
+)
+from tacgen_lib.io import edges, log
+from tacgen_lib.probes.rows import family_rows
+from tacgen_lib.probes.settings import ProbeSettings
+
+logger = log.for_rule(snakemake)
+w, params = snakemake.wildcards, snakemake.params
+regime = RegimeSettings.from_config(params.regime)
+seed = int(w.seed)
+splits = edges.read(snakemake.input.splits, require={"split": "str", "corpus": "str"}).frame
+manifest = edges.read(snakemake.input.manifest).frame
+sets = draw_regime_sets(
+    splits, w.corpus, n_labelled=max(regime.n_labelled), n_pool=max(regime.n_pool), seed=seed
+)
+# the probes fit on labelled rows, the distillation teacher labels pool rows: never a test row
+assert_regime_disjoint(sets, splits, rule=snakemake.rule)
+ceiling_rows = manifest.set_index("sample_id")[["appearance_id", "shape", "scale"]]
+# the appearance classes of the natural design (0 .. k-1)
+n_classes = int(manifest.loc[manifest["corpus"] == w.corpus, "appearance_id"].max()) + 1
+targets = []
+for target, kind in params.targets.items():
+    rows = family_rows(manifest, splits, corpus=w.corpus, target=target, kind=kind)
+    settings = ProbeSettings.from_config(params.probes, kind, params.probe_seed)
+    targets.append(
+        RegimeTarget(
+            regime_test_rows(rows, sets),
+            settings,
+            ceiling_rows.loc[list(rows.train_ids) + list(rows.test_ids)],
+        )
+    )
+
+
+def vectors(path, column):
+    edge = edges.read(path, columns=[column], require={column: "vector"})
+    return dict(zip(edge.ids, edge.vectors[column], strict=True))
+
+
+vision = vectors(snakemake.input.v, "vit")
+t_gen = {
+    (int(n_pool), pairing): vectors(path, "t_gen")
+    for (n_pool, pairing), path in zip(params.cells, snakemake.input.t_gen, strict=True)
+}
+with threadpool_limits(snakemake.threads):
+    rows = evaluate_regime(
+        targets,
+        sets,
+        corpus=w.corpus,
+        rho=float(params.rho),
+        seed=seed,
+        n_labelled=regime.n_labelled,
+        n_pool=regime.n_pool,
+        vision=vision,
+        t_real=vectors(snakemake.input.t, "vit"),
+        t_gen=t_gen,
+        gammas=params.gammas,
+        bootstrap=regime.bootstrap,
+        n_classes=n_classes,
+        progress=logger.info,
+    )
+    appearance = appearance_check(
+        vision,
+        ceiling_rows["appearance_id"],
+        sets,
+        ProbeSettings.from_config(params.probes, "logistic", params.probe_seed),
+        corpus=w.corpus,
+        rho=float(params.rho),
+        seed=seed,
+        gammas=params.gammas,
+        bootstrap=regime.bootstrap,
+    )
+edges.write(snakemake.output.rows, rows, key="row_id", producer=snakemake.rule)
+edges.write(snakemake.output.appearance, appearance, key="row_id", producer=snakemake.rule)
+logger.info(
+    "%d regime rows; appearance class from V: %s", len(rows), appearance["score"].round(3).tolist()
+)
