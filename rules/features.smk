@@ -4,10 +4,21 @@ FEAT = config["features"]
 PRETRAIN = FEAT["pretrain"]
 MODALITIES = ["vision", "tactile"]
 
+# corpora only the regime reads (its natural corpora) need the generator's tactile variant
+# alone, not the preprocessing ablation's every variant
+_REGIME_ONLY = (
+    set((config.get("regime") or {}).get("corpora") or [])
+    - set(config["align"]["corpora"])
+    - set(config["generate"]["corpora"])
+    - {f["corpus"] for f in config["probes"]["families"].values()}
+    - {PRETRAIN["corpus"], FEAT["pretrained_vs_random"]["corpus"]}
+)
 for _corpus in sorted(CORPORA):
     TARGETS.append(feature_edge(_corpus, "vision"))
     EDGES.append(feature_edge(_corpus, "vision"))
-    for _variant in VARIANTS:
+    for _variant in (
+        [config["generate"]["variant"]] if _corpus in _REGIME_ONLY else VARIANTS
+    ):
         TARGETS.append(feature_edge(_corpus, "tactile", _variant))
         EDGES.append(feature_edge(_corpus, "tactile", _variant))
 TARGETS += ["results/features/pretrained_vs_random.html"]

@@ -18,6 +18,7 @@ GENERATE_CELLS = sample_cells(GENERATE["guidance"], GENERATE["samplers"])
 GENERATE_ITEMS = {
     "headline": "html",
     "honesty": "html",
+    "protocol": "html",
     "fidelity": "html",
     "heatmap": "png",
     "steps": "png",

@@ -125,6 +125,7 @@ rule findings:
     """The findings page: headline results with their controls and generated verdicts."""
     input:
         unpack(findings_policy_inputs),
+        unpack(findings_regime_inputs),
         probes="results/probes/summary.parquet",
         generation="results/generate/evaluation.parquet",
         code=imports_of("findings"),
@@ -149,5 +150,6 @@ rule findings:
         run_name=config["run_name"],
         generate_ref=generate_ref(),
         policy=POLICY_ON,
+        regime=bool(REGIME_CORPORA),
     script:
         "../workflow/scripts/findings.py"

@@ -26,6 +26,11 @@ def features_report_item(path, caption, labels):
     )
 
 
+def findings_regime_inputs(wildcards):
+    """The regime summary the findings page reads, where the regime runs."""
+    return {"regime": f"{REGIME_DIR}/summary.parquet"} if REGIME_CORPORA else {}
+
+
 def findings_policy_inputs(wildcards):
     """The policy summaries the findings page reads, where the policy stage runs."""
     if not POLICY_ON:

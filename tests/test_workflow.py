@@ -63,9 +63,13 @@ def test_dry_run_plans_the_whole_dag(cold_dry_run):
         "fit_generator_baselines",
         "evaluate_generator",
         "aggregate_generate",
+        # regime
+        "regime_generators",
+        "regime_evaluate",
+        "aggregate_regime",
     ):
         assert rule in rules, rules
-    assert rules["merge_corpus"] == 3
+    assert rules["merge_corpus"] == 6  # 3 corpora + the regime's 3 natural ones
 
 
 def test_full_run_makes_verified_edges_logs_and_benchmarks(run_dir):
@@ -73,7 +77,8 @@ def test_full_run_makes_verified_edges_logs_and_benchmarks(run_dir):
 
     manifest = edges.read(run_dir / "results/corpus/manifest.parquet").frame
     splits = edges.read(run_dir / "results/corpus/splits.parquet").frame
-    assert set(manifest["corpus"]) == {"sim_paired", "sim_null", "sim_controlled"}
+    natural = {"sim_natural_r0", "sim_natural_r05", "sim_natural_r1"}
+    assert set(manifest["corpus"]) == {"sim_paired", "sim_null", "sim_controlled"} | natural
     assert set(splits["sample_id"]) == set(manifest["sample_id"])
     ctrl = splits.merge(manifest[["sample_id", "scale"]], on="sample_id").query(
         "corpus == 'sim_controlled'"
@@ -93,6 +98,58 @@ def test_full_run_makes_verified_edges_logs_and_benchmarks(run_dir):
         assert "share of nominal forces inside [p05, p95]" in bands and "(control)" in bands
     table = (run_dir / "results/report/edge_manifest.tsv").read_text()
     assert hashed.sha256_file(run_dir / "results/corpus/splits.parquet") in table
+
+
+def test_regime_summary_has_every_arm_of_every_cell(run_dir):
+    import yaml
+
+    from tacgen_lib.generate.regime import ARMS, SUMMARY_COLUMNS
+    from tacgen_lib.io import edges
+
+    cfg = yaml.safe_load((run_dir / "config/test.yaml").read_text())["regime"]
+    summary = edges.read(run_dir / "results/generate/regime/summary.parquet").frame
+    assert list(summary.columns) == list(SUMMARY_COLUMNS)
+    cells = {
+        (c, n_l, n_p, s, t, a, p)
+        for c in cfg["corpora"]
+        for n_l in cfg["n_labelled"]
+        for n_p in cfg["n_pool"]
+        for s in cfg["seeds"]
+        for t in ("hardness", "log_mass")
+        for a, p in ARMS
+    }
+    got = set(
+        summary[["corpus", "n_labelled", "n_pool", "seed", "target", "arm", "probe"]].itertuples(
+            index=False, name=None
+        )
+    )
+    assert got == cells
+    assert summary["score"].notna().all() and (summary["ci_low"] <= summary["ci_high"]).all()
+    assert set(summary["rho"]) == {0.0, 1.0}
+    # generated touch is sampled for the labelled and test rows (the pool only trains)
+    from tacgen_lib.generate.regime_sets import draw_regime_sets
+
+    splits = edges.read(run_dir / "results/corpus/splits.parquet").frame
+    corpus, seed = cfg["corpora"][0], cfg["seeds"][0]
+    sets = draw_regime_sets(
+        splits,
+        corpus,
+        n_labelled=max(cfg["n_labelled"]),
+        n_pool=max(cfg["n_pool"]),
+        seed=seed,
+    )
+    t_gen = edges.read(
+        run_dir
+        / f"results/generate/regime/{corpus}/seed~{seed}/pool~{max(cfg['n_pool'])}/real/t_gen.parquet"
+    )
+    assert set(t_gen.ids) == set(sets.labelled) | set(sets.test)
+    page = run_dir / "results/report/regime"
+    for name in ("findings.html", "table.html", "appearance.html", "heatmap.png", "curves.png"):
+        assert (page / name).stat().st_size > 500, name
+    assert "H1 (ρ = 0" in (page / "findings.html").read_text()
+    # the natural corpora's scene presses once: their force-band table says there is no band
+    bands = (run_dir / "results/report/corpus/sim_natural_r1_force_bands.html").read_text()
+    assert "no band to check" in bands
 
 
 def test_second_run_has_nothing_to_do(run_dir):

@@ -103,11 +103,16 @@ def force_band_check(
 
 
 def corpus_force_bands(frame: pd.DataFrame, *, seed: int) -> ForceBandCheck | None:
-    """`force_band_check` of a corpus edge's rows, or None when the corpus records no true
-    force: a real corpus's edge has no force columns, or fewer than 2 rows hold one."""
+    """`force_band_check` of a corpus edge's rows, or None when there is nothing to check: a
+    real corpus's edge has no force columns, fewer than 2 rows hold one, or no row has a band
+    (a scene without press_jitter presses once: p05 = p50 = p95 = the nominal force, which
+    would "cover" it trivially)."""
     if not set(FORCE_BAND_COLUMNS) <= set(frame.columns):
         return None
     cols = [frame[c].to_numpy(dtype=np.float64) for c in FORCE_BAND_COLUMNS]
-    if int(np.all([np.isfinite(c) for c in cols], axis=0).sum()) < 2:
+    finite = np.all([np.isfinite(c) for c in cols], axis=0)
+    if int(finite.sum()) < 2:
+        return None
+    if np.all(cols[1][finite] == cols[3][finite]):
         return None
     return force_band_check(*cols, seed=seed)

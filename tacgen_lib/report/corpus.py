@@ -13,11 +13,19 @@ __all__ = ["force_band_table"]
 
 def force_band_table(corpus: str, check: ForceBandCheck | None) -> pd.DataFrame:
     """One row per measure: the bands against each sample's own true force, beside the same
-    measure against another sample's (the chance level). `check` None: the corpus records no
-    true force (a real corpus), said in the table."""
+    measure against another sample's (the chance level). `check` None: nothing to check (a
+    real corpus records no true force; a scene without press_jitter has no bands), said in the
+    table."""
     if check is None:
         return pd.DataFrame(
-            {"corpus": [corpus], "measure": ["no true contact force recorded"], "n": [0]}
+            {
+                "corpus": [corpus],
+                "measure": [
+                    "no band to check: no true contact force recorded (a real corpus), or one "
+                    "press per sample (a scene without press_jitter)"
+                ],
+                "n": [0],
+            }
         )
     cov = fmt.with_ci(check.coverage, check.coverage_low, check.coverage_high)
     shuffled = fmt.with_ci(check.shuffled_coverage, check.shuffled_low, check.shuffled_high)

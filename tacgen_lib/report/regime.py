@@ -365,11 +365,11 @@ def hypothesis_sentences(view: pd.DataFrame) -> list[str]:
         )
     # H4: no arm built on V exceeds the vision ceiling
     ceiling = view[view["arm"] == "vision_ceiling"].set_index(
-        ["corpus", "n_labelled", "n_pool", "target"]
+        ["corpus", "rho", "n_labelled", "n_pool", "target"]
     )
     exceed = []
     for r in built_on_v.itertuples():
-        c = ceiling.loc[(r.corpus, r.n_labelled, r.n_pool, r.target)]
+        c = ceiling.loc[(r.corpus, r.rho, r.n_labelled, r.n_pool, r.target)]
         if r.ci_low > c["ci_high"]:
             exceed.append(f"{ARM_LABELS[(r.arm, r.probe)]} at ρ = {r.rho:g}, N_L = {r.n_labelled}")
     out.append(

@@ -71,3 +71,6 @@ def test_a_corpus_without_true_forces_has_no_check():
     assert corpus_force_bands(frame.drop(columns=["force_normal"]), seed=0) is None
     assert corpus_force_bands(frame.assign(force_normal=float("nan")), seed=0) is None
     assert corpus_force_bands(pd.DataFrame({"sample_id": ["a", "b"]}), seed=0) is None
+    # one press per sample (a scene without press_jitter): no band, nothing to cover
+    one_press = frame.assign(force_p05=true, force_p50=true, force_p95=true)
+    assert corpus_force_bands(one_press, seed=0) is None

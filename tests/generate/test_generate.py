@@ -927,6 +927,35 @@ def test_heatmap_text_colour_follows_cell_luminance():
     assert text_colour((1.0, 0.8, 0.7)) == "black"
 
 
+def test_protocol_table_averages_guidance_per_seed_then_seeds():
+    from tacgen_lib.report import generate as rep
+
+    rows = synthetic_summary()
+    ref = {"sampler": "ddim", "steps": 10, "guidance": "1"}
+    # a third guidance value (w = 3) and a third seed: seed s, w -> 0.1 s + 0.01 w; w = 0 is
+    # unconditional and left out
+    extra = []
+    for seed in (0, 1, 2):
+        for w in (1.0, 3.0):
+            r = rows[(rows["corpus"] == "sim_paired") & (rows["seed"] == min(seed, 1))]
+            r = r[r["guidance"] == 1.0].copy()
+            r["seed"], r["guidance"] = seed, w
+            r.loc[r["input"] == "t_gen", "delta"] = 0.1 * seed + 0.01 * w
+            r["row_id"] = r["row_id"] + f"|{seed}|{w}"
+            extra.append(r)
+    rows = pd.concat([rows[rows["corpus"] != "sim_paired"], *extra], ignore_index=True)
+    rows.loc[rows["guidance"] == 0.0, "delta"] = 99.0  # w = 0 must not count
+    table = rep.protocol_table(rows, ref).set_index("corpus")
+    paired = table.loc["sim_paired"]
+    per_seed = np.array([0.02, 0.12, 0.22])  # mean over w in {1, 3} of 0.1 s + 0.01 w
+    m, lo, hi = rep.cross_seed_interval(per_seed)
+    assert paired["Δ_gen cross-seed [95% t]"] == f"{m:+.3f} [{lo:+.3f}, {hi:+.3f}]"
+    assert paired["seeds × guidance"] == "3 × 2 (1, 3)"
+    assert paired["Δ_real"] == "+0.300"
+    assert paired["real inside the interval"] == ("yes" if lo <= 0.3 <= hi else "no")
+    assert paired["Δ_gen > 0 (interval above 0)"] == ("yes" if lo > 0 else "no")
+
+
 def test_report_tables_and_figures_from_a_summary():
     import matplotlib
 

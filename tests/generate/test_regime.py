@@ -341,3 +341,36 @@ def test_appearance_check_scores_both_probes():
     assert ((out["score"] >= 0) & (out["score"] <= 1)).all()
     # V codes the class (on a circle, plus noise): both probes decode it above the majority
     assert (out["score"] > out["chance"]).all()
+
+
+def test_findings_and_report_read_the_summary():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from tacgen_lib.report import regime as rep
+    from tacgen_lib.report.findings import regime_findings
+
+    summary = pd.concat([_evaluate(0.0), _evaluate(1.0)], ignore_index=True)
+    found = regime_findings(summary)
+    assert list(found["evidence"]) == ["regime", "regime"]
+    hard = found[found["question"].str.contains("hardness")].iloc[0]
+    gen = summary[
+        (summary["rho"] == 1.0)
+        & (summary["n_labelled"] == 6)
+        & (summary["target"] == "hardness")
+        & (summary["arm"] == "v_tgen")
+        & (summary["probe"] == "linear")
+    ].iloc[0]
+    assert f"{gen['delta_vs_linear_v']:+.3f}" in hard["result"]
+    assert "ρ = 1, N_L = 6, N_P = 100" in hard["question"]
+    view = rep.seed_view(summary)
+    assert len(view) == len(summary)  # one seed: one row per cell x target x arm
+    table = rep.regime_table(view)
+    assert set(table["N_L"]) == {6, 40} and table["arm"].nunique() == len(ARMS)
+    notes = rep.findings_notes(
+        view,
+        pd.DataFrame({"rho": [0.0, 0.0], "probe": ["linear", "nonlinear"], "score": [0.3, 0.5]}),
+    )
+    assert notes[0].startswith("H1 (ρ = 0") and any(n.startswith("H4") for n in notes)
+    for fig in (rep.heatmap_figure(view), rep.curves_figure(view)):
+        assert fig.axes

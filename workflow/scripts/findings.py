@@ -22,6 +22,8 @@ if snakemake.params.policy:
             edges.read(snakemake.input.policy_sweep).frame,
         )
     )
+if snakemake.params.regime:
+    parts.append(findings.regime_findings(edges.read(snakemake.input.regime).frame))
 table = pd.concat(parts, ignore_index=True)
 write_table(
     table,
@@ -32,7 +34,8 @@ write_table(
         "Intervals are 95 %: fixed-test bootstrap for probes and policy (paired for Δ), a "
         "t-interval over generator seeds for generation. A verdict calls a difference real "
         "only when its interval excludes 0; each sentence is generated from the numbers beside "
-        "it (tacgen_lib.report.claims). The page column names the report page with the detail."
+        "it (tacgen_lib.report.claims). The page column names the report page with the detail. "
+        "Regime rows read the first seed's fixed-test bootstrap CIs."
     ],
 )
 for r in table.itertuples():
