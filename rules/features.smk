@@ -7,7 +7,7 @@ MODALITIES = ["vision", "tactile"]
 # corpora only the regime reads (its natural corpora) need the generator's tactile variant
 # alone, not the preprocessing ablation's every variant
 _REGIME_ONLY = (
-    set((config.get("regime") or {}).get("corpora") or [])
+    set(regime_corpora(config.get("regime")))
     - set(config["align"]["corpora"])
     - set(config["generate"]["corpora"])
     - {f["corpus"] for f in config["probes"]["families"].values()}

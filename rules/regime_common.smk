@@ -1,16 +1,17 @@
 """Helpers of the regime (where generated touch helps); included by regime.smk."""
 
-from tacgen_lib.generate.regime_sets import PAIRINGS, check_regime_sizes
+from tacgen_lib.generate.regime_sets import PAIRINGS, check_regime_sizes, regime_corpora
 
 # a config without the section (one given with --replace-workflow-config) runs no regime
 REGIME = config.get("regime") or {
-    "corpora": [],
+    "rhos": [],
     "targets": {},
     "n_labelled": [2],
     "n_pool": [2],
     "seeds": [0],
 }
-REGIME_CORPORA = list(REGIME["corpora"])
+# its natural corpora, one per rho (joined to the corpora by common.smk)
+REGIME_CORPORA = list(regime_corpora(REGIME))
 REGIME_DIR = "results/generate/regime"
 REGIME_CELL = f"{REGIME_DIR}/{{corpus}}/seed~{{seed}}"
 REGIME_REPORT = "results/report/regime"
@@ -32,19 +33,9 @@ def _regime_test_rows(corpus, n):
 
 
 for _c in REGIME_CORPORA:
-    if _c not in CORPORA:
-        raise ValueError(
-            f"config regime.corpora: {_c!r} is not a corpus (have {sorted(CORPORA)})"
-        )
-    if CORPORA[_c].get("design") != "natural":
-        raise ValueError(
-            f"config regime.corpora: corpus {_c!r} has design "
-            f"{CORPORA[_c].get('design', CORPORA[_c]['kind'])!r}; the regime needs design "
-            "natural (its appearance classes define the vision ceiling)"
-        )
     if _c in config["splits"].get("by_scale", {}):
         raise ValueError(
-            f"config regime.corpora: corpus {_c!r} is split by scale; the regime needs the random split"
+            f"config splits.by_scale: corpus {_c!r} is the regime's; it needs the random split"
         )
     check_regime_sizes(
         _c,

@@ -69,7 +69,7 @@ def test_dry_run_plans_the_whole_dag(cold_dry_run):
         "aggregate_regime",
     ):
         assert rule in rules, rules
-    assert rules["merge_corpus"] == 6  # 3 corpora + the regime's 3 natural ones
+    assert rules["merge_corpus"] == 5  # 3 corpora + the regime's natural ones at rho 0 and 1
 
 
 def test_full_run_makes_verified_edges_logs_and_benchmarks(run_dir):
@@ -77,7 +77,7 @@ def test_full_run_makes_verified_edges_logs_and_benchmarks(run_dir):
 
     manifest = edges.read(run_dir / "results/corpus/manifest.parquet").frame
     splits = edges.read(run_dir / "results/corpus/splits.parquet").frame
-    natural = {"sim_natural_r0", "sim_natural_r05", "sim_natural_r1"}
+    natural = {"sim_natural_r0", "sim_natural_r1"}  # config/test.yaml's regime.rhos
     assert set(manifest["corpus"]) == {"sim_paired", "sim_null", "sim_controlled"} | natural
     assert set(splits["sample_id"]) == set(manifest["sample_id"])
     ctrl = splits.merge(manifest[["sample_id", "scale"]], on="sample_id").query(
@@ -104,14 +104,19 @@ def test_regime_summary_has_every_arm_of_every_cell(run_dir):
     import yaml
 
     from tacgen_lib.generate.regime import ARMS, SUMMARY_COLUMNS
+    from tacgen_lib.generate.regime_sets import regime_corpora
     from tacgen_lib.io import edges
+
+    NATURAL = {"kind": "simulated", "design": "natural"}
 
     cfg = yaml.safe_load((run_dir / "config/test.yaml").read_text())["regime"]
     summary = edges.read(run_dir / "results/generate/regime/summary.parquet").frame
     assert list(summary.columns) == list(SUMMARY_COLUMNS)
+    regime_names = list(regime_corpora({**cfg, "corpus": NATURAL}))
+    assert regime_names == ["sim_natural_r0", "sim_natural_r1"]
     cells = {
         (c, n_l, n_p, s, t, a, p)
-        for c in cfg["corpora"]
+        for c in regime_names
         for n_l in cfg["n_labelled"]
         for n_p in cfg["n_pool"]
         for s in cfg["seeds"]
@@ -130,7 +135,7 @@ def test_regime_summary_has_every_arm_of_every_cell(run_dir):
     from tacgen_lib.generate.regime_sets import draw_regime_sets
 
     splits = edges.read(run_dir / "results/corpus/splits.parquet").frame
-    corpus, seed = cfg["corpora"][0], cfg["seeds"][0]
+    corpus, seed = regime_names[0], cfg["seeds"][0]
     sets = draw_regime_sets(
         splits,
         corpus,
@@ -330,7 +335,7 @@ def test_real_corpus_path_runs_on_fixtures(tmp_path):
     cfg["features"]["pretrained_vs_random"]["corpus"] = "ssvtp"
     cfg["align"]["corpora"] = ["ssvtp"]
     cfg["generate"]["corpora"] = {"ssvtp": {"hardness": "logistic"}}  # generate
-    cfg["regime"]["corpora"] = []  # the regime needs simulated natural corpora
+    cfg["regime"]["rhos"] = []  # the regime needs simulated natural corpora
     # the official-checkpoint path: a ViT-S/14 state dict in DINOv2's key format (random
     # weights, 518-px position grid as released), loaded and interpolated instead of pretraining
     import torch

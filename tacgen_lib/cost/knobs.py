@@ -38,6 +38,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from tacgen_lib.features.archs import ARCHS
+from tacgen_lib.generate.regime_sets import regime_corpora
 
 __all__ = [
     "KNOBS",
@@ -270,13 +271,13 @@ def _same(a: Any, b: Any) -> bool:
 
 def _without_regime(cfg: dict[str, Any]) -> None:
     """A simulation setting simulates every corpus of its manifest again; the regime's
-    natural corpora feed none of the sweep corpus's probes, so the setting drops them (and
-    the regime) instead of simulating them once per setting."""
+    natural corpora feed none of the sweep corpus's probes, so the setting drops them (no
+    rho left in the regime) instead of simulating them once per setting."""
     regime = cfg.get("regime") or {}
-    for corpus in regime.get("corpora") or []:
+    for corpus in regime_corpora(regime):
         cfg["corpora"].pop(corpus, None)
     if regime:
-        cfg["regime"] = {**regime, "corpora": []}
+        cfg["regime"] = {**regime, "rhos": []}
 
 
 def knob_settings(name: str, entry: Mapping[str, Any], config: Mapping[str, Any]) -> list[Setting]:

@@ -21,13 +21,52 @@ from tacgen_lib.corpus.splits import LeakageError, assert_trainable
 from tacgen_lib.io.config import settings_from
 
 __all__ = [
+    "NATURAL_PREFIX",
     "PAIRINGS",
+    "natural_corpus_name",
+    "regime_corpora",
     "RegimeSets",
     "RegimeSettings",
     "assert_regime_disjoint",
     "check_regime_sizes",
     "draw_regime_sets",
 ]
+
+#: The name of the regime's natural corpus at rho: this prefix and rho's digits.
+NATURAL_PREFIX = "sim_natural_r"
+
+
+def natural_corpus_name(rho: float) -> str:
+    """The corpus the regime draws at `rho` (0 -> sim_natural_r0, 0.5 -> sim_natural_r05,
+    0.25 -> sim_natural_r025, 1 -> sim_natural_r1): a valid {corpus} wildcard."""
+    rho = float(rho)
+    if not 0.0 <= rho <= 1.0:
+        raise ValueError(f"regime.rhos: {rho} is not in [0, 1]")
+    return NATURAL_PREFIX + f"{rho:g}".replace(".", "")
+
+
+def regime_corpora(regime: Mapping[str, Any] | None) -> dict[str, dict[str, Any]]:
+    """Corpus name -> declaration of every natural corpus of config ``regime``: its
+    ``corpus`` declaration once per value of ``rhos`` (with that ``rho``), in rhos order.
+    The physics of a sample does not depend on rho (same seed), only what it looks like.
+    Empty when the section is absent or ``rhos`` is empty."""
+    if not regime or not regime.get("rhos"):
+        return {}
+    base = dict(regime["corpus"])
+    if base.get("design") != "natural" or base.get("kind") != "simulated":
+        raise ValueError(
+            "regime.corpus: the regime draws a simulated corpus of design natural (its "
+            f"appearance classes define the vision ceiling), got kind {base.get('kind')!r}, "
+            f"design {base.get('design')!r}"
+        )
+    out: dict[str, dict[str, Any]] = {}
+    for rho in regime["rhos"]:
+        name = natural_corpus_name(rho)
+        if name in out:
+            raise ValueError(f"regime.rhos: {rho} and another value both name corpus {name!r}")
+        out[name] = {**base, "rho": float(rho)}
+    return out
+
 
 #: The two generators of each pool: trained on its real pairs, or on re-paired ones.
 PAIRINGS = ("real", "shuffled")
@@ -67,7 +106,7 @@ class RegimeSettings:
 
     @classmethod
     def from_config(cls, regime: Mapping[str, Any]) -> RegimeSettings:
-        return settings_from(cls, regime, where="regime", ignore=("targets", "corpora"))
+        return settings_from(cls, regime, where="regime", ignore=("targets", "corpus", "rhos"))
 
 
 @dataclass(frozen=True)

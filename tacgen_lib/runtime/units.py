@@ -365,7 +365,7 @@ UNITS: dict[str, UnitRule] = {
     ),
     "aggregate_regime": UnitRule(
         "corpus × seed",
-        lambda c, w: ("", len(c["regime"]["corpora"]) * len(c["regime"]["seeds"])),
+        lambda c, w: ("", len(c["regime"]["rhos"]) * len(c["regime"]["seeds"])),
     ),
     # probes
     "probe": UnitRule("row × fit (inputs × CV grid + control refits)", _probe_work),

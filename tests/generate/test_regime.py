@@ -31,6 +31,7 @@ from tacgen_lib.generate.regime import (
     generalised_distillation,
 )
 from tacgen_lib.generate.regime_generators import pool_pairs
+from tacgen_lib.generate.regime_sets import natural_corpus_name, regime_corpora
 from tacgen_lib.probes.rows import family_rows
 from tacgen_lib.probes.settings import ProbeSettings
 
@@ -374,3 +375,20 @@ def test_findings_and_report_read_the_summary():
     assert notes[0].startswith("H1 (ρ = 0") and any(n.startswith("H4") for n in notes)
     for fig in (rep.heatmap_figure(view), rep.curves_figure(view)):
         assert fig.axes
+
+
+def test_one_natural_corpus_per_rho_named_by_its_digits():
+    assert [natural_corpus_name(r) for r in (0, 0.25, 0.5, 1)] == [
+        "sim_natural_r0",
+        "sim_natural_r025",
+        "sim_natural_r05",
+        "sim_natural_r1",
+    ]
+    base = {"kind": "simulated", "design": "natural", "n": 60, "seed": 13}
+    got = regime_corpora({"corpus": base, "rhos": [0, 0.5]})
+    assert got == {"sim_natural_r0": {**base, "rho": 0.0}, "sim_natural_r05": {**base, "rho": 0.5}}
+    assert regime_corpora({"corpus": base, "rhos": []}) == {} == regime_corpora(None)
+    with pytest.raises(ValueError, match="design natural"):
+        regime_corpora({"corpus": {**base, "design": "paired"}, "rhos": [0]})
+    with pytest.raises(ValueError, match="not in"):
+        natural_corpus_name(1.5)
