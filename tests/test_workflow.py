@@ -157,6 +157,25 @@ def test_regime_summary_has_every_arm_of_every_cell(run_dir):
     assert "no band to check" in bands
 
 
+def test_language_evidence_reads_every_generator_corpus(run_dir):
+    import yaml
+
+    from tacgen_lib.io import edges
+    from tacgen_lib.language.adapter import EVIDENCE_COLUMNS, INPUTS
+
+    corpora = yaml.safe_load((run_dir / "config/config.yaml").read_text())["generate"]["corpora"]
+    rows = edges.read(run_dir / "results/language/evidence.parquet").frame
+    assert list(rows.columns) == list(EVIDENCE_COLUMNS)
+    assert set(rows["corpus"]) == set(corpora)
+    for _, g in rows.groupby(["corpus", "attribute"]):
+        assert sorted(g["input"]) == sorted(INPUTS)
+    assert rows["accuracy"].between(0, 1).all()
+    page = (run_dir / "results/report/language/table.html").read_text()
+    assert "generated − shuffled" in page
+    findings = (run_dir / "results/report/findings.html").read_text()
+    assert "Where generated touch helps" in findings  # the regime's rows
+
+
 def test_second_run_has_nothing_to_do(run_dir):
     assert planned_rules(run_dir) == {}
 

@@ -31,11 +31,8 @@ nonlinear V are paired on the same resamples (drawn once per target and shared b
 ``gap_closed`` = (arm - nonlinear V) / (real - nonlinear V); ``delta_vs_distilled`` = arm -
 generalised distillation with the same probe (linear for the linear, oracle and real arms).
 
-Sets (`draw_regime_sets`): the corpus's test split is the fixed, object-level test set; the
-non-test rows are permuted with the cell seed; the first max(N_L) form the labelled order
-(N_L = n takes its first n: the labelled sets are nested) and the next max(N_P) the pool
-order (nested likewise). Labelled, pool and test rows are disjoint by construction and
-`assert_regime_disjoint` checks it again against the split edge in every job.
+The sets (labelled, pool, test) and the settings live in `regime_sets`, which the DAG and the
+generator jobs import without scikit-learn; this module re-exports them.
 """
 
 from __future__ import annotations
@@ -56,7 +53,7 @@ from tacgen_lib.generate.regime_sets import (
     check_regime_sizes,
     draw_regime_sets,
 )
-from tacgen_lib.probes.bootstrap import fixed_test_bootstrap, resample_indices, score_resamples
+from tacgen_lib.probes.bootstrap import fixed_test_bootstrap, resample_indices, score_interval
 from tacgen_lib.probes.fit import fit_probe
 from tacgen_lib.probes.logistic import FixedLogistic
 from tacgen_lib.probes.metrics import score
@@ -320,12 +317,6 @@ class RegimeTarget:
     manifest: pd.DataFrame  # sample_id-indexed: appearance_id, shape, scale
 
 
-def _score_ci(metric: str, y: np.ndarray, pred: np.ndarray, idx: np.ndarray) -> tuple[float, float]:
-    (s,), _ = score_resamples(metric, y, [pred], idx)
-    lo, hi = np.quantile(s, [0.025, 0.975])
-    return float(lo), float(hi)
-
-
 def evaluate_regime(
     targets: Sequence[RegimeTarget],
     sets: RegimeSets,
@@ -466,7 +457,7 @@ def _cell_rows(
     rows = []
     for arm, probe in ARMS:
         fit = fits[(arm, probe)]
-        lo, hi = _score_ci(metric, y_test, fit.pred, idx)
+        lo, hi = score_interval(metric, y_test, fit.pred, idx)
         vs_lin = fixed_test_bootstrap(y_test, v_lin, fit.pred, metric, indices=idx)
         vs_nl = fixed_test_bootstrap(y_test, v_nl, fit.pred, metric, indices=idx)
         distilled = fits[("distilled", "nonlinear" if probe == "nonlinear" else "linear")]
@@ -529,7 +520,7 @@ def appearance_check(
             fit = fit_small_probe(v_tr, y_tr, v_te, settings)
         else:
             fit = _nonlinear(v_tr, y_tr, v_te, settings, gammas=gammas, n_components=v_tr.shape[1])
-        lo, hi = _score_ci("accuracy", y_te, fit.pred, idx)
+        lo, hi = score_interval("accuracy", y_te, fit.pred, idx)
         out.append(
             {
                 "row_id": f"{corpus}|{seed}|appearance_class|{probe}",

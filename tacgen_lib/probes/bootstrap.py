@@ -23,7 +23,13 @@ import numpy as np
 
 from tacgen_lib.probes.metrics import Metric, check_metric, score
 
-__all__ = ["fixed_test_bootstrap", "resample_counts", "resample_indices", "score_resamples"]
+__all__ = [
+    "fixed_test_bootstrap",
+    "resample_counts",
+    "resample_indices",
+    "score_interval",
+    "score_resamples",
+]
 
 _CHUNK = 1024  # resamples per vectorised block (bounds memory at ~CHUNK * n floats)
 
@@ -104,6 +110,22 @@ def score_resamples(
             r = 1.0 - ss_res / ss_tot
         scores.append(np.where(const, np.where(ss_res == 0.0, 1.0, 0.0), r))
     return scores, const
+
+
+def score_interval(
+    metric: Metric,
+    y_true: np.ndarray,
+    pred: np.ndarray,
+    indices: np.ndarray,
+    *,
+    confidence_level: float = 0.95,
+) -> tuple[float, float]:
+    """Percentile interval of one probe's test score over the fixed-test resamples
+    `indices` (B, n) (the probe held fixed, as in `fixed_test_bootstrap`)."""
+    (scores,), _ = score_resamples(metric, np.asarray(y_true), [np.asarray(pred)], indices)
+    alpha = (1.0 - confidence_level) / 2.0
+    lo, hi = np.quantile(scores, [alpha, 1.0 - alpha])
+    return float(lo), float(hi)
 
 
 def fixed_test_bootstrap(

@@ -367,6 +367,11 @@ UNITS: dict[str, UnitRule] = {
         "corpus × seed",
         lambda c, w: ("", len(c["regime"]["rhos"]) * len(c["regime"]["seeds"])),
     ),
+    # language
+    "language_evidence": UnitRule("sample of the corpus", lambda c, w: ("", _n(c, w["corpus"]))),
+    "aggregate_language": UnitRule(
+        "generator corpus", lambda c, w: ("", float(len(c["generate"]["corpora"])))
+    ),
     # probes
     "probe": UnitRule("row × fit (inputs × CV grid + control refits)", _probe_work),
     "probe_training_size": UnitRule(

@@ -1,0 +1,1 @@
+"""Tactile-to-language evidence: captions, an offline text encoder and a tactile adapter."""
