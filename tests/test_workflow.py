@@ -207,8 +207,11 @@ def test_changed_probe_param_reruns_only_the_probes(run_dir, tmp_path):
     # findings page reads the probe summary
     cost = {"cost_generate_points", "cost_of_accuracy"}
     report = {"findings", "edge_manifest", "all"}
+    # the regime's probes read the probes subtree (their grids and folds) and the language
+    # evidence its bootstrap count
+    regime = {"regime_evaluate", "aggregate_regime", "language_evidence", "aggregate_language"}
     assert set(planned_rules(work)) == {"probe", "aggregate_probes"} | (
-        robustness | generate | cost | report
+        robustness | generate | cost | report | regime
     )
 
 
