@@ -307,6 +307,13 @@ def read_vectors(path: str | os.PathLike, column: str) -> tuple[np.ndarray, np.n
     return ids, _read_vector(table, column, ids, where, meta)
 
 
+def read_vector_map(path: str | os.PathLike, column: str) -> dict[str, np.ndarray]:
+    """Key -> row of vector column `column` of a verified edge (`read_vectors`: the same
+    checks, no pandas): the lookup the stages that pick rows by sample_id read."""
+    ids, vectors = read_vectors(path, column)
+    return dict(zip(ids, vectors, strict=True))
+
+
 _TYPE_CHECKS = {
     "str": lambda v: isinstance(v, str),
     "float": lambda v: (

@@ -205,6 +205,11 @@ def test_vectors_only_edge_is_the_same_file_without_pandas(tmp_path):
     got_ids, got = edges.read_vectors(a, "v")
     assert list(got_ids) == ids and got.dtype == np.float32
     np.testing.assert_array_equal(got, edges.read(a).vectors["v"])
+    # the key -> vector lookup: the same rows, by key
+    lookup = edges.read_vector_map(a, "v")
+    assert list(lookup) == ids
+    for i, key in enumerate(ids):
+        np.testing.assert_array_equal(lookup[key], got[i])
 
 
 def test_vectors_only_path_refuses_what_the_frame_path_refuses(tmp_path):

@@ -41,15 +41,10 @@ baselines = baselines_from_frame(
 )
 
 
-def vectors(path, column):
-    edge = edges.read(path, columns=[column], require={column: "vector"})
-    return dict(zip(edge.ids, edge.vectors[column], strict=True))
-
-
-vision = vectors(snakemake.input.v, "vit")
-t_real = vectors(snakemake.input.t, "vit")
+vision = edges.read_vector_map(snakemake.input.v, "vit")
+t_real = edges.read_vector_map(snakemake.input.t, "vit")
 t_gen = {
-    tuple(cell): vectors(path, "t_gen")
+    tuple(cell): edges.read_vector_map(path, "t_gen")
     for cell, path in zip(params.cells, snakemake.input.t_gen, strict=True)
 }
 with threadpool_limits(snakemake.threads):

@@ -27,12 +27,10 @@ specs = target_specs(
 )
 
 
-def vectors(path):
-    edge = edges.read(path, columns=["vit"], require={"vit": "vector"})
-    return dict(zip(edge.ids, edge.vectors["vit"], strict=True))
-
-
-vision, t_real = vectors(snakemake.input.v), vectors(snakemake.input.t)
+vision, t_real = (
+    edges.read_vector_map(snakemake.input.v, "vit"),
+    edges.read_vector_map(snakemake.input.t, "vit"),
+)
 fits = []
 with threadpool_limits(snakemake.threads):
     for spec in specs:

@@ -17,18 +17,13 @@ test_ids = sorted(ids_in_split(splits, "test", w.corpus))
 assert_trainable(train_ids, splits, rule=snakemake.rule, allowed=("train", "val"))
 
 
-def vectors(path, column):
-    edge = edges.read(path, columns=[column], require={column: "vector"})
-    return dict(zip(edge.ids, edge.vectors[column], strict=True))
-
-
 with threadpool_limits(snakemake.threads):
     rows = language_evidence(
         edges.read(snakemake.input.manifest).frame,
         train_ids,
         test_ids,
-        vectors(snakemake.input.t, "vit"),
-        vectors(snakemake.input.t_gen, "t_gen"),
+        edges.read_vector_map(snakemake.input.t, "vit"),
+        edges.read_vector_map(snakemake.input.t_gen, "t_gen"),
         corpus=w.corpus,
         bootstrap=int(params.bootstrap),
         seed=int(params.seed),

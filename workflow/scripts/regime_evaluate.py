@@ -44,14 +44,9 @@ for target, kind in params.targets.items():
     )
 
 
-def vectors(path, column):
-    edge = edges.read(path, columns=[column], require={column: "vector"})
-    return dict(zip(edge.ids, edge.vectors[column], strict=True))
-
-
-vision = vectors(snakemake.input.v, "vit")
+vision = edges.read_vector_map(snakemake.input.v, "vit")
 t_gen = {
-    (int(n_pool), pairing): vectors(path, "t_gen")
+    (int(n_pool), pairing): edges.read_vector_map(path, "t_gen")
     for (n_pool, pairing), path in zip(params.cells, snakemake.input.t_gen, strict=True)
 }
 with threadpool_limits(snakemake.threads):
@@ -64,7 +59,7 @@ with threadpool_limits(snakemake.threads):
         n_labelled=regime.n_labelled,
         n_pool=regime.n_pool,
         vision=vision,
-        t_real=vectors(snakemake.input.t, "vit"),
+        t_real=edges.read_vector_map(snakemake.input.t, "vit"),
         t_gen=t_gen,
         gammas=params.gammas,
         bootstrap=regime.bootstrap,

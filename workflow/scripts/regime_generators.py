@@ -37,12 +37,10 @@ sets = draw_regime_sets(
 assert_regime_disjoint(sets, splits, rule=snakemake.rule)
 
 
-def vectors(path):
-    edge = edges.read(path, columns=["vit"], require={"vit": "vector"})
-    return dict(zip(edge.ids, edge.vectors["vit"], strict=True))
-
-
-vision, tactile = vectors(snakemake.input.v), vectors(snakemake.input.t)
+vision, tactile = (
+    edges.read_vector_map(snakemake.input.v, "vit"),
+    edges.read_vector_map(snakemake.input.t, "vit"),
+)
 rows = sorted(str(i) for i in [*sets.labelled, *sets.test])
 curves = []
 for (n_pool, pairing), path in zip(params.cells, snakemake.output.t_gen, strict=True):
