@@ -68,42 +68,52 @@ def _standardise(train: np.ndarray, test: np.ndarray) -> tuple[np.ndarray, np.nd
     return (train - mu) / sd, (test - mu) / sd
 
 
+@dataclass(frozen=True)
+class NonlinearFit:
+    """The nonlinear V-only baseline's fit: the probe, its RBF gamma and the multiple of the
+    median heuristic that gamma is (the multiple CV chose)."""
+
+    probe: FittedProbe
+    gamma: float
+    multiple: float
+
+
 def nonlinear_baseline(
     v_train: np.ndarray,
     v_test: np.ndarray,
-    rows: FamilyRows,
+    y_train: np.ndarray,
     settings: ProbeSettings,
     *,
     gammas: Sequence[float],
     n_components: int,
     seed: int,
-) -> tuple[FittedProbe, float]:
+    train_ids: Sequence | np.ndarray | None = None,
+    test_ids: Sequence | np.ndarray | None = None,
+) -> NonlinearFit:
     """The nonlinear V-only baseline: the family's probe on [V, phi(V)], tuned on train rows.
 
     phi: RBF Nystroem features of standardised V (fitted on the train rows), gamma =
-    multiple / median squared train distance; the multiple with the best CV score wins.
-    Returns the fitted probe and the chosen gamma.
+    multiple / median squared train distance; the multiple (among `gammas`) with the best CV
+    score wins, the first on ties. train_ids / test_ids name rows in the probe's errors.
     """
     z_tr, z_te = _standardise(np.asarray(v_train, np.float64), np.asarray(v_test, np.float64))
     sub = z_tr[: min(len(z_tr), 500)]
     # pairwise squared distances i < j (pdist: no (n, n, d) temporary)
     med = float(np.median(pdist(sub, "sqeuclidean"))) if len(sub) > 1 else 1.0
     med = med if med > 0 else 1.0
-    best: tuple[float, FittedProbe, float] | None = None
+    best: tuple[float, NonlinearFit] | None = None
     for mult in gammas:
         gamma = float(mult) / med
         k = min(n_components, len(z_tr))
         phi = Nystroem(kernel="rbf", gamma=gamma, n_components=k, random_state=seed).fit(z_tr)
         x_tr = np.hstack([v_train, phi.transform(z_tr)])
         x_te = np.hstack([v_test, phi.transform(z_te)])
-        fit = fit_probe(
-            x_tr, rows.y_train, x_te, settings, train_ids=rows.train_ids, test_ids=rows.test_ids
-        )
+        fit = fit_probe(x_tr, y_train, x_te, settings, train_ids=train_ids, test_ids=test_ids)
         cv = float(np.nanmax(fit.cv_scores))
         if best is None or cv > best[0]:
-            best = (cv, fit, gamma)
+            best = (cv, NonlinearFit(fit, gamma, float(mult)))
     assert best is not None
-    return best[1], best[2]
+    return best[1]
 
 
 #: The probes of the baselines edge, by what they fit: V alone, V + T_real, V + phi(V).
@@ -167,15 +177,23 @@ def fit_baselines(
         )
 
     v_fit, real_fit = fit(v_tr, v_te), fit(np.hstack([v_tr, t_tr]), np.hstack([v_te, t_te]))
-    nl, gamma = nonlinear_baseline(
-        v_tr, v_te, rows, ps, gammas=gammas, n_components=t_tr.shape[1], seed=ps.seed
+    nl = nonlinear_baseline(
+        v_tr,
+        v_te,
+        rows.y_train,
+        ps,
+        gammas=gammas,
+        n_components=t_tr.shape[1],
+        seed=ps.seed,
+        train_ids=rows.train_ids,
+        test_ids=rows.test_ids,
     )
-    fits = {"v": v_fit, "t_real": real_fit, "v_nonlinear": nl}
+    fits = {"v": v_fit, "t_real": real_fit, "v_nonlinear": nl.probe}
     return Baselines(
         spec.name,
         {k: f.pred_test for k, f in fits.items()},
         {k: float(f.reg) for k, f in fits.items()},
-        float(gamma),
+        float(nl.gamma),
     )
 
 

@@ -147,31 +147,38 @@ class SmallFit:
     gamma_multiple: float = math.nan  # a nonlinear probe's RBF gamma / median heuristic
 
 
+def _cv_impossible(y: np.ndarray, settings: ProbeSettings) -> str:
+    """Why the family's CV cannot run on these labels ("" when it can): a logistic probe's
+    labels holding a single class, or a class with one row (stratified CV needs two)."""
+    if settings.kind != "logistic":
+        return ""
+    classes, counts = np.unique(np.asarray(y).astype(str), return_counts=True)
+    if classes.size < 2:
+        return "single class: constant"
+    if counts.min() < 2:
+        return "fixed C (a class with < 2 rows)"
+    return ""
+
+
 def fit_small_probe(
     x_train: np.ndarray, y_train: np.ndarray, x_test: np.ndarray, settings: ProbeSettings
 ) -> SmallFit:
     """The probes stage's probe (`fit_probe`, CV over the family's grid) on possibly tiny
-    labelled sets, with the two cases CV cannot handle made explicit:
+    labelled sets, with the two cases CV cannot handle made explicit (`_cv_impossible`):
 
     - a single class among the labelled rows: the constant prediction of that class;
     - a class with one labelled row (stratified CV needs two): the logistic probe at the
       middle C of the grid, refitted on all rows (``reg_source`` says so).
     """
     y = np.asarray(y_train)
-    if settings.kind == "logistic":
-        classes, counts = np.unique(y.astype(str), return_counts=True)
-        if classes.size < 2:
-            const = y[0]
-            return SmallFit(
-                np.full(len(x_test), const, dtype=object), math.nan, "single class: constant"
-            )
-        if counts.min() < 2:
-            grid = sorted(float(c) for c in settings.C)
-            c_mid = grid[len(grid) // 2]
-            pred = FixedLogistic(c_mid).fit_predict(x_train, y, x_test)
-            return SmallFit(
-                np.asarray(pred, dtype=object), c_mid, "fixed C (a class with < 2 rows)"
-            )
+    why = _cv_impossible(y, settings)
+    if why.startswith("single class"):
+        return SmallFit(np.full(len(x_test), y[0], dtype=object), math.nan, why)
+    if why:
+        grid = sorted(float(c) for c in settings.C)
+        c_mid = grid[len(grid) // 2]
+        pred = FixedLogistic(c_mid).fit_predict(x_train, y, x_test)
+        return SmallFit(np.asarray(pred, dtype=object), c_mid, why)
     fit = fit_probe(x_train, y, x_test, settings)
     return SmallFit(np.asarray(fit.pred_test), float(fit.reg), "cv")
 
@@ -188,42 +195,12 @@ def _nonlinear(
     """The nonlinear V baseline's probe on [x, phi(x)] (`nonlinear_baseline`), or the
     `fit_small_probe` fallback where CV cannot run on these labels."""
     y = np.asarray(y_train)
-    if settings.kind == "logistic":
-        _, counts = np.unique(y.astype(str), return_counts=True)
-        if counts.size < 2 or counts.min() < 2:
-            return fit_small_probe(x_train, y, x_test, settings)
-    ids = np.arange(len(y))
-    rows = FamilyRows(
-        corpus="",
-        target="",
-        kind=settings.kind,
-        train_ids=ids,
-        test_ids=np.arange(len(x_test)),
-        y_train=y,
-        y_test=np.zeros(len(x_test)),
-        strata_test=None,
-        strata_note="none",
-        bands_test=None,
-        n_unlabelled=0,
+    if _cv_impossible(y, settings):
+        return fit_small_probe(x_train, y, x_test, settings)
+    nl = nonlinear_baseline(
+        x_train, x_test, y, settings, gammas=gammas, n_components=n_components, seed=settings.seed
     )
-    # nonlinear_baseline's own choice (the best CV score, the first on ties), one multiple at
-    # a time so the chosen multiple is known
-    best = None
-    for mult in gammas:
-        fit, _ = nonlinear_baseline(
-            x_train,
-            x_test,
-            rows,
-            settings,
-            gammas=[mult],
-            n_components=n_components,
-            seed=settings.seed,
-        )
-        cv = float(np.nanmax(fit.cv_scores))
-        if best is None or cv > best[0]:
-            best = (cv, fit, float(mult))
-    assert best is not None
-    return SmallFit(np.asarray(best[1].pred_test), float(best[1].reg), "cv", best[2])
+    return SmallFit(np.asarray(nl.probe.pred_test), float(nl.probe.reg), "cv", nl.multiple)
 
 
 def distillation_rows(
