@@ -74,7 +74,6 @@ __all__ = [
     "fit_small_probe",
     "gap_closed",
     "distillation_rows",
-    "generalised_distillation",
     "regime_test_rows",
 ]
 
@@ -223,28 +222,6 @@ def distillation_rows(
     else:
         y_all = np.concatenate([np.asarray(y_lab, dtype=object), teacher.pred.astype(object)])
     return np.vstack([v_lab, v_pool]), y_all
-
-
-def generalised_distillation(
-    v_lab: np.ndarray,
-    t_lab: np.ndarray,
-    y_lab: np.ndarray,
-    v_pool: np.ndarray,
-    t_pool: np.ndarray,
-    v_test: np.ndarray,
-    settings: ProbeSettings,
-    *,
-    nonlinear: bool,
-    gammas: Sequence[float],
-    n_components: int,
-) -> SmallFit:
-    """Generalised distillation with privileged touch: a student on V alone (the linear probe,
-    or the nonlinear V probe with gamma among `gammas`) fitted on `distillation_rows`; it
-    predicts the test rows from V only, so it uses the pool's touch without generating any."""
-    x_all, y_all = distillation_rows(v_lab, t_lab, y_lab, v_pool, t_pool, settings)
-    if nonlinear:
-        return _nonlinear(x_all, y_all, v_test, settings, gammas=gammas, n_components=n_components)
-    return fit_small_probe(x_all, y_all, v_test, settings)
 
 
 def appearance_design(

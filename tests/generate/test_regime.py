@@ -24,11 +24,11 @@ from tacgen_lib.generate.regime import (
     appearance_design,
     assert_regime_disjoint,
     check_regime_sizes,
+    distillation_rows,
     draw_regime_sets,
     evaluate_regime,
     fit_small_probe,
     gap_closed,
-    generalised_distillation,
 )
 from tacgen_lib.generate.regime_generators import pool_pairs
 from tacgen_lib.generate.regime_sets import natural_corpus_name, regime_corpora
@@ -189,18 +189,15 @@ def test_distillation_is_a_v_only_student_of_the_teachers_pool_labels():
     def block(src, ids):
         return np.stack([src[i] for i in ids])
 
-    got = generalised_distillation(
+    x_d, y_d = distillation_rows(
         block(vision, lab),
         block(tactile, lab),
         np.array([y[i] for i in lab]),
         block(vision, pool),
         block(tactile, pool),
-        block(vision, test),
         ps,
-        nonlinear=False,
-        gammas=[1.0],
-        n_components=6,
     )
+    got = fit_small_probe(x_d, y_d, block(vision, test), ps)  # the linear student
     # the pieces refitted with scikit-learn at the penalties the probes chose
     teacher = fit_small_probe(
         np.hstack([block(vision, lab), block(tactile, lab)]),
@@ -219,21 +216,20 @@ def test_distillation_is_a_v_only_student_of_the_teachers_pool_labels():
     )
     x_all = np.vstack([block(vision, lab), block(vision, pool)])
     y_all = np.concatenate([[y[i] for i in lab], teacher.pred])
+    np.testing.assert_array_equal(x_d, x_all)  # V only: the student never sees touch
+    np.testing.assert_array_equal(y_d, y_all)
     s_ref = Ridge(alpha=got.reg, solver="svd").fit(x_all, y_all).predict(block(vision, test))
     np.testing.assert_allclose(got.pred, s_ref, rtol=1e-8, atol=1e-8)
     # a pool of one row still distils
-    one = generalised_distillation(
+    x_one, y_one = distillation_rows(
         block(vision, lab),
         block(tactile, lab),
         np.array([y[i] for i in lab]),
         block(vision, pool[:1]),
         block(tactile, pool[:1]),
-        block(vision, test),
         ps,
-        nonlinear=False,
-        gammas=[1.0],
-        n_components=6,
     )
+    one = fit_small_probe(x_one, y_one, block(vision, test), ps)
     assert np.isfinite(one.pred.astype(float)).all()
 
 
