@@ -1,5 +1,6 @@
 """Helpers of the regime (where generated touch helps); included by regime.smk."""
 
+from tacgen_lib.corpus.splits import split_size
 from tacgen_lib.generate.regime_sets import PAIRINGS, check_regime_sizes, regime_corpora
 
 # a config without the section (one given with --replace-workflow-config) runs no regime
@@ -26,12 +27,6 @@ REGIME_ITEMS = {
 REGIME_CELLS = [(int(n), p) for n in REGIME["n_pool"] for p in PAIRINGS]
 
 
-def _regime_test_rows(corpus, n):
-    """The size of the corpus's test split (make_splits: round(test fraction x n), >= 1)."""
-    test = float(config["splits"]["fractions"].get("test", 0.0))
-    return max(1, round(test * n)) if test > 0 else 0
-
-
 for _c in REGIME_CORPORA:
     if _c in config["splits"].get("by_scale", {}):
         raise ValueError(
@@ -40,7 +35,8 @@ for _c in REGIME_CORPORA:
     check_regime_sizes(
         _c,
         int(CORPORA[_c]["n"]),
-        _regime_test_rows(_c, int(CORPORA[_c]["n"])),
+        # the corpus's test split as make_splits draws it
+        split_size(int(CORPORA[_c]["n"]), config["splits"]["fractions"].get("test", 0.0)),
         REGIME["n_labelled"],
         REGIME["n_pool"],
     )

@@ -20,13 +20,26 @@ from collections.abc import Iterable, Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-__all__ = ["SPLITS", "LeakageError", "make_splits", "assert_trainable", "ids_in_split"]
+__all__ = [
+    "SPLITS",
+    "LeakageError",
+    "make_splits",
+    "assert_trainable",
+    "ids_in_split",
+    "split_size",
+]
 
 SPLITS = ("train", "val", "test")
 
 
 class LeakageError(RuntimeError):
     """A training rule was handed rows that are held out."""
+
+
+def split_size(n: int, fraction: float) -> int:
+    """Rows a split of `fraction` takes from a stratified corpus of n rows (`make_splits`):
+    round(fraction x n), at least 1; 0 when the fraction is 0."""
+    return max(1, round(float(fraction) * int(n))) if fraction > 0 else 0
 
 
 def _stratified_split(
@@ -55,13 +68,13 @@ def _stratified_split(
     rest, test = idx, np.array([], dtype=int)
     if test_frac > 0:
         strat = pooled(strata, 2)
-        n_test = max(1, round(test_frac * n))
+        n_test = split_size(n, test_frac)
         if strat is not None and n_test < len(set(strat)):
             strat = None
         rest, test = train_test_split(idx, test_size=n_test, random_state=seed, stratify=strat)
     val = np.array([], dtype=int)
     if val_frac > 0 and len(rest) > 1:
-        n_val = max(1, round(val_frac * n))
+        n_val = split_size(n, val_frac)
         strat = pooled(strata[rest], 2)
         if strat is not None and n_val < len(set(strat)):
             strat = None

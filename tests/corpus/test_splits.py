@@ -7,7 +7,13 @@ import pandas as pd
 import pytest
 
 from tacgen_lib.corpus.manifest import fuse_manifest
-from tacgen_lib.corpus.splits import LeakageError, assert_trainable, ids_in_split, make_splits
+from tacgen_lib.corpus.splits import (
+    LeakageError,
+    assert_trainable,
+    ids_in_split,
+    make_splits,
+    split_size,
+)
 
 
 def _manifest(n: int = 200) -> pd.DataFrame:
@@ -35,6 +41,14 @@ def test_stratified_split_is_fixed_and_proportional():
     share = merged.groupby("stratum")["split"].apply(lambda s: (s == "test").mean())
     assert share.between(0.15, 0.25).all(), share  # every stratum is represented in test
     assert not make_splits(m, seed=7)["split"].equals(s1["split"])
+
+
+@pytest.mark.parametrize("n", [7, 60, 200, 1801])
+def test_split_size_is_the_count_make_splits_draws(n):
+    """The regime's parse-time size check reads the test count from split_size."""
+    counts = make_splits(_manifest(n), seed=42)["split"].value_counts()
+    assert counts["test"] == split_size(n, 0.2) and counts["val"] == split_size(n, 0.1)
+    assert split_size(n, 0.0) == 0 and split_size(1, 0.2) == 1
 
 
 def test_by_scale_split_holds_out_the_test_scale():
