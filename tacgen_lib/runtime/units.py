@@ -22,10 +22,9 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-import yaml
-
 from tacgen_lib.features.archs import ARCHS, PATCH_SIZE
 from tacgen_lib.generate.cells import guidance_passes
+from tacgen_lib.io.config import load_yaml
 
 __all__ = [
     "UnitRule",
@@ -81,8 +80,7 @@ def _corpus(c: Config, name: str) -> Mapping[str, Any]:
 def _scene_effects(scenes_file: str) -> dict[str, tuple[str, ...]]:
     """Scene name -> its declared effects, read once from the scenes file ({} if absent)."""
     try:
-        with open(scenes_file, encoding="utf-8") as fh:
-            scenes = yaml.safe_load(fh) or {}
+        scenes = load_yaml(scenes_file) or {}
     except FileNotFoundError:
         return {}
     return {name: tuple(decl.get("effects", ())) for name, decl in scenes.items()}
