@@ -18,6 +18,7 @@ import pandas as pd
 from tacgen_lib.report import claims
 from tacgen_lib.report import format as fmt
 from tacgen_lib.report.generate import cross_seed_interval, delta_with_ci, reference_cell_rows
+from tacgen_lib.report.regime import arm_rows
 from tacgen_lib.report_pages import category
 
 __all__ = [
@@ -212,7 +213,7 @@ def policy_findings(
 
 
 def _regime_row(rows: pd.DataFrame, arm: str, probe: str = "linear") -> pd.Series:
-    return rows[(rows["arm"] == arm) & (rows["probe"] == probe)].iloc[0]
+    return arm_rows(rows, arm, probe).iloc[0]
 
 
 def _with(r: pd.Series, what: str) -> str:

@@ -21,6 +21,7 @@ from tacgen_lib.report.generate import text_colour
 __all__ = [
     "ARM_LABELS",
     "appearance_table",
+    "arm_rows",
     "curves_figure",
     "heatmap_figure",
     "hypothesis_sentences",
@@ -43,6 +44,11 @@ ARM_LABELS = {
 }
 
 _CELL = ["corpus", "rho", "n_labelled", "n_pool", "target", "arm", "probe"]
+
+
+def arm_rows(frame: pd.DataFrame, arm: str, probe: str) -> pd.DataFrame:
+    """The rows of one (arm, probe) of a regime summary or `seed_view`."""
+    return frame[(frame["arm"] == arm) & (frame["probe"] == probe)]
 
 
 def _side_counts(lo: pd.Series, hi: pd.Series) -> tuple[int, int]:
@@ -123,13 +129,11 @@ def appearance_table(appearance: pd.DataFrame) -> pd.DataFrame:
     )
 
 
-def _grid(view: pd.DataFrame, target: str, n_pool: int, col: str, arm=("v_tgen", "linear")):
-    sub = view[
-        (view["target"] == target)
-        & (view["n_pool"] == n_pool)
-        & (view["arm"] == arm[0])
-        & (view["probe"] == arm[1])
-    ]
+def _grid(view: pd.DataFrame, target: str, n_pool: int, col: str):
+    """Delta `col` of V + T_gen (linear probe) as a (N_L, rho) matrix with cell texts."""
+    sub = arm_rows(
+        view[(view["target"] == target) & (view["n_pool"] == n_pool)], "v_tgen", "linear"
+    )
     rhos = sorted(sub["rho"].unique())
     ls = sorted(sub["n_labelled"].unique())
     mat = np.full((len(ls), len(rhos)), np.nan)
@@ -225,7 +229,7 @@ def curves_figure(view: pd.DataFrame) -> plt.Figure:
             ax = axes[i][j]
             sub = view[(view["target"] == target) & (view["rho"] == rho) & (view["n_pool"] == n_p)]
             for (arm, probe), colour, style in _CURVE_ARMS:
-                s = sub[(sub["arm"] == arm) & (sub["probe"] == probe)].sort_values("n_labelled")
+                s = arm_rows(sub, arm, probe).sort_values("n_labelled")
                 if s.empty:
                     continue
                 ax.plot(
@@ -253,7 +257,11 @@ def curves_figure(view: pd.DataFrame) -> plt.Figure:
     return fig
 
 
-def _delta_words(d: float, up: int, down: int, n: int) -> str:
+def _delta_words(r: pd.Series, what: str) -> str:
+    """A `seed_view` row's mean Delta against `what` (linear_v | nonlinear_v | distilled) and
+    how many seeds' CIs lie above or below 0, in words."""
+    d, n = r[f"delta_vs_{what}"], int(r["n_seeds"])
+    up, down = int(r[f"above_vs_{what}"]), int(r[f"below_vs_{what}"])
     if up:
         side = f"CI above 0 in {up} of {n} seeds"
     elif down:
@@ -267,7 +275,7 @@ def panel_sentences(view: pd.DataFrame) -> list[str]:
     """One sentence per heatmap panel (target x pool size), read from the numbers: where V +
     T_gen gains over linear V, whether that survives nonlinear V and distillation."""
     out = []
-    gen = view[(view["arm"] == "v_tgen") & (view["probe"] == "linear")]
+    gen = arm_rows(view, "v_tgen", "linear")
     for (target, n_p), g in gen.groupby(["target", "n_pool"], sort=True):
         wins = g[g["above_vs_linear_v"] == g["n_seeds"]]
         if wins.empty:
@@ -312,26 +320,21 @@ def hypothesis_sentences(view: pd.DataFrame) -> list[str]:
     # H2: at the largest rho, smallest N_L, largest pool, V + T_gen beats linear V
     top = view[(view["rho"] == rhos[-1]) & (view["n_labelled"] == ls[0]) & (view["n_pool"] == n_p)]
     for probe in ("linear", "nonlinear"):
-        g = top[(top["arm"] == "v_tgen") & (top["probe"] == probe)]
+        g = arm_rows(top, "v_tgen", probe)
         if g.empty:
             continue
         r = g.iloc[0]
         out.append(
             f"H2 (ρ = {rhos[-1]:g}, N_L = {ls[0]}, N_P = {n_p}: V + T_gen beats linear V), "
             f"{probe} probe: Δ vs linear V "
-            f"{_delta_words(r['delta_vs_linear_v'], r['above_vs_linear_v'], r['below_vs_linear_v'], r['n_seeds'])}"
+            f"{_delta_words(r, 'linear_v')}"
             f"; vs nonlinear V "
-            f"{_delta_words(r['delta_vs_nonlinear_v'], r['above_vs_nonlinear_v'], r['below_vs_nonlinear_v'], r['n_seeds'])}"
+            f"{_delta_words(r, 'nonlinear_v')}"
             f"; vs distillation "
-            f"{_delta_words(r['delta_vs_distilled'], r['above_vs_distilled'], r['below_vs_distilled'], r['n_seeds'])}."
+            f"{_delta_words(r, 'distilled')}."
         )
     # H3: the gain shrinks as N_L grows
-    g = view[
-        (view["rho"] == rhos[-1])
-        & (view["n_pool"] == n_p)
-        & (view["arm"] == "v_tgen")
-        & (view["probe"] == "linear")
-    ]
+    g = arm_rows(view[(view["rho"] == rhos[-1]) & (view["n_pool"] == n_p)], "v_tgen", "linear")
     for target, t in g.groupby("target", sort=True):
         t = t.sort_values("n_labelled")
         d = t["delta_vs_linear_v"].to_numpy()
@@ -349,15 +352,15 @@ def hypothesis_sentences(view: pd.DataFrame) -> list[str]:
         out.append(f"H3 ({target}, ρ = {rhos[-1]:g}, N_P = {n_p}): {verdict}.")
     # the pool without generation: distillation against linear V and against V + T_gen
     for target, t in top.groupby("target", sort=True):
-        d = t[(t["arm"] == "distilled") & (t["probe"] == "linear")].iloc[0]
-        gen = t[(t["arm"] == "v_tgen") & (t["probe"] == "linear")].iloc[0]
+        d = arm_rows(t, "distilled", "linear").iloc[0]
+        gen = arm_rows(t, "v_tgen", "linear").iloc[0]
         pool_only = gen["above_vs_distilled"] < gen["n_seeds"]
         out.append(
             f"The pool without generation ({target}, ρ = {rhos[-1]:g}, N_L = {ls[0]}, N_P = "
             f"{n_p}): generalised distillation (linear student on V) vs linear V "
-            f"{_delta_words(d['delta_vs_linear_v'], d['above_vs_linear_v'], d['below_vs_linear_v'], d['n_seeds'])}"
+            f"{_delta_words(d, 'linear_v')}"
             f"; V + T_gen vs distillation "
-            f"{_delta_words(gen['delta_vs_distilled'], gen['above_vs_distilled'], gen['below_vs_distilled'], gen['n_seeds'])}"
+            f"{_delta_words(gen, 'distilled')}"
             + (
                 ": generation adds nothing the pool does not give without it."
                 if pool_only
