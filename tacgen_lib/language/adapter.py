@@ -38,6 +38,7 @@ from sklearn.linear_model import RidgeCV
 
 from tacgen_lib.corpus.derangement import sattolo_cycle
 from tacgen_lib.probes.bootstrap import fixed_test_bootstrap, resample_indices, score_interval
+from tacgen_lib.probes.rows import baseline_score
 
 __all__ = [
     "ATTRIBUTES",
@@ -177,9 +178,8 @@ def forced_choice(
     """Attribute -> the word chosen for each row: the one of its pair whose embedding has the
     higher cosine with the adapted tactile vector (ties to the first word)."""
     z = adapter.predict(np.asarray(tactile, np.float64))
-    z = z / np.where(
-        np.linalg.norm(z, axis=1, keepdims=True) > 0, np.linalg.norm(z, axis=1, keepdims=True), 1.0
-    )
+    norm = np.linalg.norm(z, axis=1, keepdims=True)
+    z = z / np.where(norm > 0, norm, 1.0)
     out = {}
     for name in attributes:
         hi, lo = ATTRIBUTES[name]
@@ -250,9 +250,8 @@ def language_evidence(
     rows = []
     for attr in attrs:
         y = words.loc[test_ids, attr].to_numpy(dtype=object)
-        majority = float(
-            pd.Series(words.loc[train_ids, attr]).value_counts().iloc[0] / len(train_ids)
-        )
+        # the test accuracy of always choosing the train rows' commoner word
+        majority = baseline_score(words.loc[train_ids, attr].to_numpy(dtype=object), y, "accuracy")
         shuffled = chosen["shuffled_generated"][attr]
         for inp in INPUTS:
             pred = chosen[inp][attr]

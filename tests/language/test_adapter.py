@@ -102,6 +102,13 @@ def test_touch_that_codes_the_words_reads_them_and_shuffled_touch_does_not():
         assert acc[(attr, "real")] > 0.9, attr
         assert acc[(attr, "generated")] == acc[(attr, "real")]  # generated = real here
         assert acc[(attr, "shuffled_generated")] < 0.75, attr
+    # the majority column: the test accuracy of always choosing the train rows' commoner word
+    words = attribute_labels(manifest, train)
+    for attr in ATTRIBUTES:
+        counts = words.loc[train, attr].value_counts()
+        common = sorted(counts.index[counts == counts.max()])[0]  # ties: the first word
+        want = float(np.mean(words.loc[test, attr] == common))
+        assert (rows.loc[rows["attribute"] == attr, "majority"] == want).all(), attr
     gen = rows[rows["input"] == "generated"]
     assert (gen["ci_low_vs_shuffled"] > 0).all()
     # the same computation twice: bit for bit
