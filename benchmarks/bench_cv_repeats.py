@@ -23,7 +23,8 @@ import numpy as np
 import yaml
 from threadpoolctl import threadpool_limits
 
-from tacgen_lib.generate.baselines import feature_block, target_specs
+from tacgen_lib.generate.baselines import target_specs
+from tacgen_lib.generate.blocks import feature_block
 from tacgen_lib.io import edges
 from tacgen_lib.probes.bootstrap import fixed_test_bootstrap
 from tacgen_lib.probes.fit import fit_probe

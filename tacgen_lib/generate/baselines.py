@@ -14,6 +14,7 @@ from scipy.spatial.distance import pdist
 from sklearn.kernel_approximation import Nystroem
 
 from tacgen_lib.corpus.splits import assert_trainable
+from tacgen_lib.generate.blocks import feature_block
 from tacgen_lib.probes.fit import FittedProbe, fit_probe
 from tacgen_lib.probes.rows import FamilyRows, family_rows, strata_for
 from tacgen_lib.probes.settings import ProbeSettings
@@ -133,11 +134,6 @@ BASELINE_COLUMNS = (
     "reg",
     "nonlinear_gamma",
 )
-
-
-def feature_block(source: Mapping[str, np.ndarray], ids: np.ndarray) -> np.ndarray:
-    """Rows `ids` of a sample_id -> vector mapping, stacked as float64."""
-    return np.stack([source[i] for i in ids]).astype(np.float64)
 
 
 @dataclass(frozen=True)

@@ -55,12 +55,8 @@ from collections.abc import Callable, Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from tacgen_lib.generate.baselines import (
-    BASELINE_INPUTS,
-    Baselines,
-    TargetSpec,
-    feature_block,
-)
+from tacgen_lib.generate.baselines import BASELINE_INPUTS, Baselines, TargetSpec
+from tacgen_lib.generate.blocks import feature_block
 from tacgen_lib.generate.fidelity import (
     PERMUTATION_COLUMNS,
     fidelity,

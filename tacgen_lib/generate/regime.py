@@ -45,7 +45,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from tacgen_lib.generate.baselines import feature_block, nonlinear_baseline
+from tacgen_lib.generate.baselines import nonlinear_baseline
+from tacgen_lib.generate.blocks import feature_block
 from tacgen_lib.generate.regime_sets import (
     RegimeSets,
     RegimeSettings,

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from tacgen_lib.corpus.derangement import sattolo_cycle
+from tacgen_lib.generate.blocks import feature_block
 from tacgen_lib.generate.regime_sets import PAIRINGS, RegimeSettings
 from tacgen_lib.generate.sampling import generate
 from tacgen_lib.generate.settings import GenerateSettings
@@ -30,11 +31,6 @@ __all__ = [
     "sample_regime",
     "train_pool_generator",
 ]
-
-
-def _rows(source: Mapping[str, np.ndarray], ids: Sequence[str]) -> np.ndarray:
-    """Rows `ids` of a sample_id -> vector mapping as float64 (n, d)."""
-    return np.stack([np.asarray(source[i], np.float64) for i in ids])
 
 
 def regime_generator_settings(
@@ -88,8 +84,8 @@ def train_pool_generator(
 
     def block(pairs: list[tuple[str, str]]) -> tuple[np.ndarray, np.ndarray]:
         return (
-            _rows(tactile, [t for _, t in pairs]),
-            _rows(vision, [v for v, _ in pairs]),
+            feature_block(tactile, [t for _, t in pairs]),
+            feature_block(vision, [v for v, _ in pairs]),
         )
 
     t_tr, v_tr = block(train)
@@ -109,7 +105,7 @@ def sample_regime(
     """Generated tactile features (float32, rows in `ids` order) by DDIM with `steps` steps at
     `guidance`, noise seeded by `seed`."""
     weights = fit.weights()
-    cond = _rows(vision, [str(i) for i in ids])
+    cond = feature_block(vision, [str(i) for i in ids])
     return generate(
         weights,
         cond,
