@@ -36,7 +36,9 @@ for _c in REGIME_CORPORA:
         _c,
         int(CORPORA[_c]["n"]),
         # the corpus's test split as make_splits draws it
-        split_size(int(CORPORA[_c]["n"]), config["splits"]["fractions"].get("test", 0.0)),
+        split_size(
+            int(CORPORA[_c]["n"]), config["splits"]["fractions"].get("test", 0.0)
+        ),
         REGIME["n_labelled"],
         REGIME["n_pool"],
     )
