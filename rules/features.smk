@@ -27,7 +27,7 @@ EDGES += ["results/features/pretrained_vs_random.parquet"]
 
 
 rule pretrain_backbone:
-    """DINO self-distillation on the pretraining corpus's train split only (or an official checkpoint)."""
+    """DINO or MAE pretraining on the pretraining corpus's train split only, an official checkpoint, or the seeded random init."""
     input:
         frames=lambda w: backbone_frames(w.modality, PRETRAIN["corpus"]),
         splits="results/corpus/splits.parquet",
@@ -52,6 +52,10 @@ rule pretrain_backbone:
     params:
         backbone=lambda w: FEAT["backbones"][w.modality],
         pretrain=PRETRAIN,
+        # MAE's settings only where a backbone is MAE-pretrained: a change reruns only those
+        mae=lambda w: (
+            FEAT["mae"] if FEAT["backbones"][w.modality]["objective"] == "mae" else {}
+        ),
         image_size=FEAT["image_size"],
     script:
         "../workflow/scripts/pretrain_backbone.py"

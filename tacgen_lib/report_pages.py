@@ -2,7 +2,7 @@
 
 Snakemake's viewer sorts categories as text, so each carries its position as a two-digit
 prefix (`category`): the reader meets the findings first, then corpus → preprocessing →
-features → alignment → probes → robustness → generation → where generated touch helps → touch to language → policy → cost → provenance. Kept
+features → alignment → probes → robustness → backbone families → generation → where generated touch helps → touch to language → policy → cost → provenance. Kept
 apart from `tacgen_lib.report` (which loads matplotlib) because the DAG reads it at parse time.
 """
 
@@ -18,6 +18,7 @@ PAGES = (
     "Alignment",
     "Probes",
     "Robustness",
+    "Backbone families",
     "Generation",
     "Where generated touch helps",
     "Touch to language",

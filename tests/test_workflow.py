@@ -176,6 +176,38 @@ def test_language_evidence_reads_every_generator_corpus(run_dir):
     assert "Where generated touch helps" in findings  # the regime's rows
 
 
+def test_backbone_families_page_has_every_family_probe_and_protocol(run_dir):
+    import yaml
+
+    from tacgen_lib.io import edges, hashed
+    from tacgen_lib.probes.backbone_families import FAMILY_COLUMNS
+
+    cfg = yaml.safe_load((run_dir / "config/test.yaml").read_text())["backbones"]
+    protocols = ["raw", "mlp2"]  # the schema's default
+    rows = edges.read(run_dir / "results/backbones/summary.parquet").frame
+    assert list(rows.columns) == list(FAMILY_COLUMNS)
+    want = {f"{f}|{p}|{q}" for f in cfg["run"] for p in cfg["probes"] for q in protocols}
+    assert set(rows["row_id"]) == want and (rows["status"] == "ok").all()
+    assert rows["null_corpus"].any() and not rows["null_corpus"].all()  # the control beside
+    # the main family's rows are the probe jobs' headline rows, not computed again
+    main = rows[rows["family"] == "dinov2"]
+    assert (main["notes"] == "the probes stage's headline row (rule probe)").all()
+    probe = edges.read(run_dir / "results/probes/hardness/protocol~raw/seed~42.parquet").frame
+    head = probe[
+        (probe["input"] == "raw") & (probe["fusion"] == "concat") & (probe["control"] == "none")
+    ]
+    assert main.set_index("row_id").loc["dinov2|hardness|raw", "delta"] == head["delta"].item()
+    # every other family made its own backbones, labelled as made
+    for family in ("resnet", "mae"):
+        for modality in ("vision", "tactile"):
+            hashed.verify(run_dir / f"results/features/families/{family}/{modality}.pt")
+    labels = dict(zip(rows["family"], rows["vision_backbone"], strict=False))
+    assert labels["resnet"] == "resnet_tiny (random init)" and labels["mae"] == "vit_tiny (MAE)"
+    page = (run_dir / "results/report/backbones/table.html").read_text()
+    for needle in ("2-layer MLP", "null", "resnet (V resnet_tiny (random init)"):
+        assert needle in page, needle
+
+
 def test_second_run_has_nothing_to_do(run_dir):
     assert planned_rules(run_dir) == {}
 
@@ -210,8 +242,11 @@ def test_changed_probe_param_reruns_only_the_probes(run_dir, tmp_path):
     # the regime's probes read the probes subtree (their grids and folds) and the language
     # evidence its bootstrap count
     regime = {"regime_evaluate", "aggregate_regime", "language_evidence", "aggregate_language"}
+    # the backbone families' probes use the probes' settings, and the main family's rows are
+    # the probe jobs' own
+    backbones = {"family_probe", "aggregate_backbones"}
     assert set(planned_rules(work)) == {"probe", "aggregate_probes"} | (
-        robustness | generate | cost | report | regime
+        robustness | generate | cost | report | regime | backbones
     )
 
 

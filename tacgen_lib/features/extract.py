@@ -17,9 +17,7 @@ import cv2
 import numpy as np
 import torch
 import torch.nn.functional as F
-from torch import Tensor
-
-from tacgen_lib.features.vit import DinoVisionTransformer
+from torch import Tensor, nn
 
 __all__ = [
     "IMAGENET_MEAN",
@@ -61,14 +59,17 @@ def to_unit_tensor(images: np.ndarray, image_size: int) -> Tensor:
 
 
 def extract_features(
-    model: DinoVisionTransformer,
+    model: nn.Module,
     images: np.ndarray,
     *,
     image_size: int,
     batch_size: int = 64,
     pool: Literal["cls", "mean_patch"] = "cls",
 ) -> np.ndarray:
-    """Frozen ViT features, one float32 row per frame: (N, embed_dim).
+    """Frozen backbone features, one float32 row per frame: (N, embed_dim).
+
+    `model` is a ViT (`vit.DinoVisionTransformer`) or a ResNet (`resnet.ResNet`, whose two pools
+    both give its global average; `patch_size` 1).
 
     pool="cls" takes the normalised CLS token (x_norm_clstoken); "mean_patch" averages the
     normalised patch tokens (x_norm_patchtokens). Runs under torch.inference_mode with the model

@@ -15,7 +15,7 @@ from typing import Any, Literal
 
 from tacgen_lib.io.config import settings_from
 
-__all__ = ["DinoSettings", "backbones_pretrained"]
+__all__ = ["DinoSettings", "MaeSettings", "backbones_pretrained"]
 
 
 @dataclass(frozen=True)
@@ -75,6 +75,39 @@ class DinoSettings:
             bottleneck_dim=16,
         )
         return replace(small, **changes)
+
+
+@dataclass(frozen=True)
+class MaeSettings:
+    """Masked-autoencoder pretraining (`mae.pretrain_mae`), from config ``features.mae``.
+
+    epochs, batch_size, lr, weight_decay, warmup_epochs, seed: the run (AdamW, betas 0.9/0.95,
+    cosine to 0 after the warm-up). `mask_ratio` of each frame's patches is hidden (MAE: 0.75).
+    Decoder: `decoder_depth` blocks of width `decoder_dim` with `decoder_heads` heads.
+    `norm_pix_loss`: targets normalised per patch (MAE's default).
+    """
+
+    epochs: int = 10
+    batch_size: int = 64
+    lr: float = 1.5e-3
+    weight_decay: float = 0.05
+    warmup_epochs: int = 1
+    seed: int = 0
+    mask_ratio: float = 0.75
+    decoder_dim: int = 96
+    decoder_depth: int = 1
+    decoder_heads: int = 3
+    norm_pix_loss: bool = True
+
+    @classmethod
+    def from_config(cls, mae: Mapping[str, Any]) -> MaeSettings:
+        """Settings from config ``features.mae``."""
+        return settings_from(cls, mae, where="features.mae")
+
+    @classmethod
+    def tiny(cls, **changes: Any) -> MaeSettings:
+        """Two epochs of a narrow decoder on small batches, for tests; `changes` override."""
+        return replace(cls(epochs=2, batch_size=8, decoder_dim=16, decoder_heads=2), **changes)
 
 
 def backbones_pretrained(features: Mapping[str, Any]) -> bool:

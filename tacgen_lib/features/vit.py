@@ -41,6 +41,8 @@ __all__ = [
     "ViTConfig",
     "DinoVisionTransformer",
     "build_vit",
+    "fit_pos_embed",
+    "state_dict_mismatch",
     "random_backbone",
     "interpolate_pos_embed",
     "load_pretrained",
@@ -290,6 +292,7 @@ def build_vit(
     cfg = ARCHS[arch]
     return DinoVisionTransformer(
         img_size=img_size,
+        patch_size=cfg.patch_size,
         embed_dim=cfg.embed_dim,
         depth=cfg.depth,
         num_heads=cfg.num_heads,
@@ -357,6 +360,40 @@ def load_tensors(path: str | Path) -> Any:
         ) from exc
 
 
+def state_dict_mismatch(own: Mapping[str, Tensor], sd: Mapping[str, Tensor]) -> str:
+    """ "" when a checkpoint's state dict `sd` fits a model's `own` key for key and shape for
+    shape; else one sentence listing every missing, unexpected and shape-mismatched key (the
+    loaders of every backbone family raise it, naming the file)."""
+    missing = sorted(set(own) - set(sd))
+    unexpected = sorted(set(sd) - set(own))
+    mismatched = sorted(
+        f"{k}: checkpoint {tuple(sd[k].shape)} vs model {tuple(own[k].shape)}"
+        for k in set(own) & set(sd)
+        if sd[k].shape != own[k].shape
+    )
+    return "; ".join(
+        f"{what} ({len(keys)}): {keys}"
+        for what, keys in (
+            ("missing keys", missing),
+            ("unexpected keys", unexpected),
+            ("shape mismatches", mismatched),
+        )
+        if keys
+    )
+
+
+def fit_pos_embed(sd: dict[str, Tensor], model: DinoVisionTransformer) -> None:
+    """Resize a checkpoint's square `pos_embed` grid (in `sd`, in place) bicubically to the
+    model's grid when the widths agree and the grids differ (exact output size)."""
+    own = model.state_dict()["pos_embed"]
+    pe = sd.get("pos_embed")
+    if pe is not None and pe.ndim == 3 and pe.shape != own.shape:
+        if pe.shape[-1] == own.shape[-1] and math.isqrt(pe.shape[1] - 1) ** 2 == (pe.shape[1] - 1):
+            g = model.grid_size
+            patch = interpolate_pos_embed(pe[:, 1:], (g, g), offset=0.0)
+            sd["pos_embed"] = torch.cat((pe[:, :1].float(), patch), dim=1).to(pe.dtype)
+
+
 def load_pretrained(model: DinoVisionTransformer, path: str | Path) -> DinoVisionTransformer:
     """Load an official-format DINOv2 checkpoint into `model` (in place; also returned).
 
@@ -369,34 +406,13 @@ def load_pretrained(model: DinoVisionTransformer, path: str | Path) -> DinoVisio
     sd = unwrap_state_dict(raw, where=str(path))
     own = model.state_dict()
 
-    pe = sd.get("pos_embed")
-    if pe is not None and pe.ndim == 3 and pe.shape != own["pos_embed"].shape:
-        if pe.shape[-1] == own["pos_embed"].shape[-1] and math.isqrt(pe.shape[1] - 1) ** 2 == (
-            pe.shape[1] - 1
-        ):
-            g = model.grid_size
-            patch = interpolate_pos_embed(pe[:, 1:], (g, g), offset=0.0)
-            sd["pos_embed"] = torch.cat((pe[:, :1].float(), patch), dim=1).to(pe.dtype)
-
-    missing = sorted(set(own) - set(sd))
-    unexpected = sorted(set(sd) - set(own))
-    mismatched = sorted(
-        f"{k}: checkpoint {tuple(sd[k].shape)} vs model {tuple(own[k].shape)}"
-        for k in set(own) & set(sd)
-        if sd[k].shape != own[k].shape
-    )
-    if missing or unexpected or mismatched:
-        parts = []
-        if missing:
-            parts.append(f"missing keys ({len(missing)}): {missing}")
-        if unexpected:
-            parts.append(f"unexpected keys ({len(unexpected)}): {unexpected}")
-        if mismatched:
-            parts.append(f"shape mismatches ({len(mismatched)}): {mismatched}")
+    fit_pos_embed(sd, model)
+    problems = state_dict_mismatch(own, sd)
+    if problems:
         raise ValueError(
             f"{path}: checkpoint does not fit the model "
             f"(embed_dim {model.embed_dim}, depth {len(model.blocks)}, "
-            f"registers {model.num_register_tokens}); " + "; ".join(parts) + ". "
+            f"registers {model.num_register_tokens}); {problems}. "
             "Build the matching arch (see tacgen_lib.features.vit.ARCHS) or use load_backbone(path)."
         )
     model.load_state_dict({k: v.to(own[k].dtype) for k, v in sd.items()}, strict=True)
@@ -425,13 +441,20 @@ def load_backbone(path: str | Path) -> DinoVisionTransformer:
         raise ValueError(f"{path}: no cls_token/pos_embed; not a DINOv2-format ViT checkpoint")
     dim = int(sd["cls_token"].shape[-1])
     depth = 1 + max(int(k.split(".")[1]) for k in sd if k.startswith("blocks."))
-    matches = [a for a, c in ARCHS.items() if c.embed_dim == dim and c.depth == depth]
+    patch = int(sd["patch_embed.proj.weight"].shape[-1]) if "patch_embed.proj.weight" in sd else 0
+    matches = [
+        a
+        for a, c in ARCHS.items()
+        if c.embed_dim == dim and c.depth == depth and c.patch_size == patch
+    ]
     if not matches:
         raise ValueError(
-            f"{path}: no known arch with embed_dim {dim} and depth {depth}; known: "
-            + ", ".join(f"{a} ({c.embed_dim}d/{c.depth}L)" for a, c in ARCHS.items())
+            f"{path}: no known arch with embed_dim {dim}, depth {depth} and patch {patch}; known: "
+            + ", ".join(
+                f"{a} ({c.embed_dim}d/{c.depth}L/p{c.patch_size})" for a, c in ARCHS.items()
+            )
         )
     grid = math.isqrt(sd["pos_embed"].shape[1] - 1)
     regs = int(sd["register_tokens"].shape[1]) if "register_tokens" in sd else 0
-    model = build_vit(matches[0], img_size=grid * PATCH_SIZE, num_register_tokens=regs)
+    model = build_vit(matches[0], img_size=grid * patch, num_register_tokens=regs)
     return load_pretrained(model, path)

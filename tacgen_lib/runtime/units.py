@@ -22,7 +22,7 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from tacgen_lib.features.archs import ARCHS, PATCH_SIZE
+from tacgen_lib.features.archs import ARCHS, RESNET_ARCHS, arch_family
 from tacgen_lib.generate.cells import guidance_passes
 from tacgen_lib.io.config import load_yaml
 
@@ -115,13 +115,85 @@ def _vit_flops(arch: str, image_size: int) -> float:
     """FLOPs of one frame through a ViT forward: 2 × depth × tokens × (12 width² + 2 tokens ×
     width) (projections and MLP, attention)."""
     width, depth = ARCHS[arch].embed_dim, ARCHS[arch].depth
-    tokens = (int(image_size) // PATCH_SIZE) ** 2 + 1
+    tokens = (int(image_size) // ARCHS[arch].patch_size) ** 2 + 1
     return 2.0 * depth * tokens * (12 * width**2 + 2 * tokens * width)
 
 
+def _resnet_flops(arch: str, image_size: int) -> float:
+    """FLOPs of one frame through a ResNet forward: 2 × output pixels × k² × C_in × C_out per
+    convolution (the 7×7 stem at 1/2, two 3×3 per block at each stage's resolution from 1/4
+    to 1/32, the first block's stride and 1×1 projection included)."""
+    cfg = RESNET_ARCHS[arch]
+    side = int(image_size) / 2.0
+    flops = 2.0 * side * side * 49 * 3 * cfg.widths[0]
+    side /= 2.0  # max-pool
+    c_in = cfg.widths[0]
+    for stage, (blocks, width) in enumerate(zip(cfg.blocks, cfg.widths, strict=True)):
+        if stage:
+            side /= 2.0
+        for b in range(blocks):
+            flops += 2.0 * side * side * 9 * (c_in * width + width * width)
+            if b == 0 and c_in != width:
+                flops += 2.0 * side * side * c_in * width
+            c_in = width
+    return flops
+
+
+def _arch_flops(arch: str, image_size: int) -> float:
+    """Forward FLOPs of one frame through a named backbone of either family."""
+    if arch_family(arch) == "resnet":
+        return _resnet_flops(arch, image_size)
+    return _vit_flops(arch, image_size)
+
+
 def _backbone(c: Config, modality: str) -> float:
-    """`_vit_flops` of a modality's backbone at the config's input size."""
-    return _vit_flops(c["features"]["backbones"][modality]["arch"], c["features"]["image_size"])
+    """`_arch_flops` of a modality's backbone at the config's input size."""
+    return _arch_flops(c["features"]["backbones"][modality]["arch"], c["features"]["image_size"])
+
+
+#: MAE pretraining per frame and epoch, in encoder forwards: the encoder sees a quarter of the
+#: patches, forward + backward (3 forwards), plus the light decoder (about one more)
+_MAE_FORWARDS = 1.75
+
+
+def _pretraining(c: Config, spec: Mapping[str, Any]) -> tuple[str, int]:
+    """(how a backbone is made, its pretraining epochs): "checkpoint" and "random" train
+    nothing; "dino" runs features.pretrain.epochs, "mae" features.mae.epochs."""
+    if spec.get("checkpoint"):
+        return "checkpoint", 0
+    objective = spec.get("objective", "dino")
+    if objective == "mae":
+        return objective, int(c["features"].get("mae", {}).get("epochs", 10))
+    if objective == "dino":
+        return objective, int(c["features"]["pretrain"]["epochs"])
+    return objective, 0
+
+
+def _family_spec(c: Config, w: Wildcards) -> Mapping[str, Any]:
+    return c["backbones"]["families"][w["family"]][w["modality"]]
+
+
+def _family_corpora(c: Config) -> list[str]:
+    fams = c["probes"]["families"]
+    return sorted({fams[p]["corpus"] for p in c["backbones"]["probes"]})
+
+
+def _family_backbone(c: Config, w: Wildcards) -> tuple[str, float]:
+    """One family backbone: its pretraining (epoch × train frame, MAE or DINO; none for the
+    random init) and the frames of the probe corpora it extracts. Class: the objective."""
+    spec = _family_spec(c, w)
+    objective, epochs = _pretraining(c, spec)
+    frames = sum(_n(c, k) for k in _family_corpora(c))
+    return objective, epochs * _train_rows(c, c["features"]["pretrain"]["corpus"]) + frames
+
+
+def _family_backbone_flops(c: Config, w: Wildcards) -> float:
+    spec = _family_spec(c, w)
+    per_frame = _arch_flops(spec["arch"], c["features"]["image_size"])
+    _objective, units = _family_backbone(c, w)
+    frames = sum(_n(c, k) for k in _family_corpora(c))
+    forwards = _MAE_FORWARDS if spec.get("objective") == "mae" else _DINO_FORWARDS
+    return per_frame * (frames + (units - frames) * forwards)
 
 
 #: DINO self-distillation per frame and epoch, in ViT forwards: 2 global crops through the
@@ -256,13 +328,17 @@ UNITS: dict[str, UnitRule] = {
         "epoch × train frame (+ ViT FLOPs)",
         lambda c, w: (
             "",
-            int(c["features"]["pretrain"]["epochs"])
+            _pretraining(c, c["features"]["backbones"][w["modality"]])[1]
             * _train_rows(c, c["features"]["pretrain"]["corpus"]),
         ),
         lambda c, w: (
-            int(c["features"]["pretrain"]["epochs"])
+            _pretraining(c, c["features"]["backbones"][w["modality"]])[1]
             * _train_rows(c, c["features"]["pretrain"]["corpus"])
-            * _DINO_FORWARDS
+            * (
+                _MAE_FORWARDS
+                if _pretraining(c, c["features"]["backbones"][w["modality"]])[0] == "mae"
+                else _DINO_FORWARDS
+            )
             * _backbone(c, w["modality"])
         ),
     ),
@@ -364,6 +440,23 @@ UNITS: dict[str, UnitRule] = {
     "aggregate_regime": UnitRule(
         "corpus × seed",
         lambda c, w: ("", len(c["regime"]["rhos"]) * len(c["regime"]["seeds"])),
+    ),
+    # backbone families
+    "family_backbone": UnitRule(
+        "epoch × train frame (pretraining) + frame extracted (+ FLOPs)",
+        _family_backbone,
+        _family_backbone_flops,
+    ),
+    "family_probe": UnitRule(
+        "row × probe family × protocol",
+        lambda c, w: (
+            "",
+            sum(_n(c, c["probes"]["families"][p]["corpus"]) for p in c["backbones"]["probes"])
+            * len(c["backbones"].get("protocols", ["raw", "mlp2"])),
+        ),
+    ),
+    "aggregate_backbones": UnitRule(
+        "family run", lambda c, w: ("", float(len(c["backbones"]["run"])))
     ),
     # language
     "language_evidence": UnitRule("sample of the corpus", lambda c, w: ("", _n(c, w["corpus"]))),

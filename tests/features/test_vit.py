@@ -221,7 +221,7 @@ def test_round_trip_save_load_gives_identical_outputs(tmp_path):
 
 def test_load_backbone_refuses_unknown_width(tmp_path):
     torch.save(random_checkpoint(official_shapes(96, 2, 4)), tmp_path / "odd.pth")
-    with pytest.raises(ValueError, match="no known arch with embed_dim 96 and depth 2"):
+    with pytest.raises(ValueError, match="no known arch with embed_dim 96, depth 2 and patch 14"):
         load_backbone(tmp_path / "odd.pth")
 
 

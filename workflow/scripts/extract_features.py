@@ -1,9 +1,10 @@
-"""Frozen ViT features and pixel features for every frame of an edge (rules extract_*_features)."""
+"""Frozen backbone features and pixel features for every frame of an edge (rules
+extract_*_features and family_features)."""
 
 import torch
 
+from tacgen_lib.features.backbones import read_backbone
 from tacgen_lib.features.extract import extract_features, pixel_features
-from tacgen_lib.features.vit import load_backbone
 from tacgen_lib.io import edges, log
 from tacgen_lib.preprocess.frames import decode_frames
 
@@ -12,7 +13,7 @@ torch.set_num_threads(snakemake.threads)
 cfg, column = snakemake.params.features, snakemake.params.column
 frames = edges.read(snakemake.input.frames, columns=[column])
 images = decode_frames(frames.frame, column, where=snakemake.input.frames)
-model = load_backbone(snakemake.input.weights)
+model = read_backbone(snakemake.input.weights)
 logger.info("%d frames %s -> %s features", len(images), images.shape[1:], cfg["pool"])
 vit = extract_features(
     model, images, image_size=cfg["image_size"], batch_size=cfg["batch_size"], pool=cfg["pool"]

@@ -1,59 +1,49 @@
-"""Pretrain one modality's backbone with DINO on the train split, or load a checkpoint (rule pretrain_backbone)."""
+"""Make one modality's frozen backbone: an official checkpoint, in-workflow pretraining (DINO or
+MAE) on the pretraining corpus's train split, or the seeded random init (rules
+pretrain_backbone and family_backbone)."""
 
 import pandas as pd
 import torch
 
 from tacgen_lib.corpus.splits import assert_trainable, ids_in_split
-from tacgen_lib.features.dino import pretrain_dino
-from tacgen_lib.features.settings import DinoSettings
-from tacgen_lib.features.vit import build_vit, load_pretrained, random_backbone, save_backbone
+from tacgen_lib.features.backbones import make_backbone
+from tacgen_lib.features.families import BackboneSpec
+from tacgen_lib.features.settings import DinoSettings, MaeSettings
+from tacgen_lib.features.vit import save_backbone
 from tacgen_lib.io import edges, hashed, log
 from tacgen_lib.preprocess.frames import decode_frames
 
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
 modality = snakemake.wildcards.modality
-backbone, pretrain = snakemake.params.backbone, snakemake.params.pretrain
-image_size = snakemake.params.image_size
-if backbone.get("checkpoint"):
-    model = build_vit(
-        backbone["arch"],
-        img_size=image_size,
-        num_register_tokens=backbone.get("num_register_tokens", 0),
-    )
-    load_pretrained(model, backbone["checkpoint"])
-    curve = pd.DataFrame({"epoch": pd.Series([], dtype="int64")})
-    logger.info("loaded official checkpoint %s (no pretraining)", backbone["checkpoint"])
-elif int(pretrain["epochs"]) == 0:
-    # features.pretrain.epochs: 0 -> the frozen backbone is the seeded random init (README,
-    # Backbones: DINO at the default budget did not beat it); no frame is read
-    model = random_backbone(backbone["arch"], image_size, seed=int(pretrain["seed"]))
-    curve = pd.DataFrame({"epoch": pd.Series([], dtype="int64")})
-    logger.info(
-        "features.pretrain.epochs is 0: random-init %s backbone (seed %d), no pretraining",
-        backbone["arch"],
-        pretrain["seed"],
-    )
-else:
+pretrain = snakemake.params.pretrain
+spec = BackboneSpec.from_config(snakemake.params.backbone)
+
+
+def train_frames():
+    """The pretraining corpus's train frames of this modality (never val or test rows)."""
     splits = edges.read(snakemake.input.splits).frame
     train_ids = ids_in_split(splits, "train", corpus=pretrain["corpus"])
     frames = edges.read(snakemake.input.frames).subset(train_ids)
     assert_trainable(frames.ids, splits, rule=snakemake.rule)
     column = "rgb" if modality == "vision" else "tactile_proc"
-    images = decode_frames(frames.frame, column, where=snakemake.input.frames)
-    logger.info(
-        "DINO pretraining of %s (%s) on %d train frames", modality, backbone["arch"], len(images)
-    )
-    result = pretrain_dino(
-        images,
-        DinoSettings.from_config(pretrain),
-        arch=backbone["arch"],
-        image_size=image_size,
-        progress=logger.info,
-    )
-    model = result.backbone()
-    # wall-clock seconds stay in the log and the benchmark file: the edge must be reproducible
-    curve = pd.DataFrame(result.curve).drop(columns=["seconds"], errors="ignore")
+    return decode_frames(frames.frame, column, where=snakemake.input.frames)
+
+
+model, curve_rows, how = make_backbone(
+    spec,
+    image_size=snakemake.params.image_size,
+    dino=DinoSettings.from_config(pretrain),
+    mae=MaeSettings.from_config(snakemake.params.mae),
+    frames=train_frames,
+    progress=logger.info,
+)
+logger.info("%s backbone: %s", modality, how)
+curve = (
+    pd.DataFrame(curve_rows)
+    if curve_rows
+    else pd.DataFrame({"epoch": pd.Series([], dtype="int64")})
+)
 curve.insert(
     0, "epoch_id", pd.Series([f"{modality}-{int(e):04d}" for e in curve["epoch"]], dtype=object)
 )

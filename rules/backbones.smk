@@ -1,0 +1,134 @@
+"""Backbone families (tacgen_lib.features.families): each family's frozen backbones, their
+features on the probe corpora, V vs V+T under the linear and the 2-layer probe, and the report
+page Backbone families. The main family (the main DAG's backbones) reads the main feature
+edges, and its rows are the probes stage's headline rows where that stage made them."""
+
+
+include: "backbones_common.smk"
+
+
+localrules:
+    aggregate_backbones,
+
+
+rule family_backbone:
+    """One family's frozen backbone of a modality (checkpoint, MAE or DINO pretraining on the pretraining corpus's train split, or the seeded random init) and its features of every frame of each probe corpus."""
+    input:
+        frames=lambda w: backbone_frames(w.modality, PRETRAIN["corpus"]),
+        splits="results/corpus/splits.parquet",
+        extract=lambda w: family_frames(w.modality),
+        code=imports_of("family_backbone"),
+    output:
+        weights="results/features/families/{family}/{modality}.pt",
+        curve="results/features/families/{family}/{modality}_curve.parquet",
+        features=[
+            f"results/features/families/{{family}}/{c}/{{modality}}.parquet"
+            for c in FAMILY_CORPORA
+        ],
+    log:
+        "results/logs/family_backbone/{family}/{modality}.log",
+    benchmark:
+        "results/benchmarks/family_backbone/{family}/{modality}.tsv"
+    wildcard_constraints:
+        family=one_of(OWN_FAMILIES or ["-"]),
+        modality="vision|tactile",
+    conda:
+        "../envs/features.yaml"
+    threads: 1
+    resources:
+        mem_mb=4000,
+        runtime=60,
+    params:
+        backbone=lambda w: FAMILIES.families[w.family][w.modality].__dict__,
+        pretrain=PRETRAIN,
+        mae=lambda w: (
+            FEAT["mae"] if family_spec(w.family, w.modality).objective == "mae" else {}
+        ),
+        image_size=FEAT["image_size"],
+        batch_size=FEAT["batch_size"],
+        pool=FEAT["pool"],
+    script:
+        "../workflow/scripts/family_backbone.py"
+
+
+rule family_probe:
+    """V vs V+T (concat) of every probe family of backbones.probes on one backbone family's features, linear and 2-layer, each with its fixed-test bootstrap CI."""
+    input:
+        manifest="results/corpus/manifest.parquet",
+        splits="results/corpus/splits.parquet",
+        vision=lambda w: [
+            family_features(w.family, c, "vision") for c in FAMILY_CORPORA
+        ],
+        tactile=lambda w: [
+            family_features(w.family, c, "tactile") for c in FAMILY_CORPORA
+        ],
+        code=imports_of("family_probe"),
+    output:
+        rows=FAMILY_PROBE,
+    log:
+        "results/logs/family_probe/{family}.log",
+    benchmark:
+        "results/benchmarks/family_probe/{family}.tsv"
+    wildcard_constraints:
+        family=one_of(COMPUTED_FAMILIES or ["-"]),
+    conda:
+        "../envs/probes.yaml"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=30,
+    params:
+        probes={p: probe_family(p) for p in FAMILIES.probes},
+        corpora={c: CORPORA[c] for c in FAMILY_CORPORA},
+        settings=PROBE_SETTINGS,
+        protocols=FAMILIES.protocols,
+        seed=PROBES["seeds"][0],
+        labels=lambda w: {
+            m: family_spec(w.family, m).label(int(PRETRAIN["epochs"]))
+            for m in MODALITIES
+        },
+    script:
+        "../workflow/scripts/family_probe.py"
+
+
+rule aggregate_backbones:
+    """Every family's probes; the report page Backbone families."""
+    input:
+        rows=[FAMILY_PROBE.format(family=f) for f in COMPUTED_FAMILIES],
+        main=[
+            f"{PROBE_DIR}/seed~{_PROBE_SEED}.parquet".format(family=p, protocol=q)
+            for f in MAIN_FROM_PROBES
+            for p in FAMILIES.probes
+            for q in FAMILIES.protocols
+        ],
+        code=imports_of("aggregate_backbones"),
+    output:
+        table=report(
+            "results/report/backbones/table.html",
+            caption="../workflow/report/backbones_table.rst",
+            category=category("Backbone families"),
+            labels={"item": "V vs V+T per family"},
+        ),
+        summary="results/backbones/summary.parquet",
+    log:
+        "results/logs/aggregate_backbones.log",
+    benchmark:
+        "results/benchmarks/aggregate_backbones.tsv"
+    conda:
+        "../envs/report.yaml"
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=5,
+    params:
+        order=list(FAMILIES.run),
+        main={
+            f: {
+                m: family_spec(f, m).label(int(PRETRAIN["epochs"])) for m in MODALITIES
+            }
+            for f in MAIN_FROM_PROBES
+        },
+        main_jobs=[(p, q) for p in FAMILIES.probes for q in FAMILIES.protocols],
+        heads_variant=FAMILY_VARIANT,
+    script:
+        "../workflow/scripts/aggregate_backbones.py"

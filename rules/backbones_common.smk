@@ -1,0 +1,65 @@
+"""Backbone families: the config (tacgen_lib.features.families) and the paths the rules of
+rules/backbones.smk read."""
+
+from tacgen_lib.features.families import FamilySettings, check_backbone
+from tacgen_lib.features.families import BackboneSpec as _Spec
+
+for _m in MODALITIES:
+    check_backbone(
+        _Spec.from_config(FEAT["backbones"][_m]),
+        where=f"features.backbones.{_m}",
+        dino_epochs=int(PRETRAIN["epochs"]),
+        mae_epochs=int(FEAT["mae"]["epochs"]),
+    )
+
+FAMILIES = FamilySettings.from_config(config)
+OWN_FAMILIES = FAMILIES.own(FEAT)
+FAMILY_VARIANT = PROBES["heads"]["variant"]  # the tactile frames the probes read
+FAMILY_PROBE = "results/backbones/{family}/probes.parquet"
+FAMILY_CORPORA = sorted({PROBES["families"][p]["corpus"] for p in FAMILIES.probes})
+_PROBE_SEED = PROBES["seeds"][0]
+# the main family's rows are the probes stage's own headline rows when it probes every
+# (probe family, protocol) asked here (nothing is computed twice); else family_probe makes them
+MAIN_FROM_PROBES = [
+    f
+    for f in FAMILIES.run
+    if f not in OWN_FAMILIES
+    and all((p, q) in PROBE_JOBS for p in FAMILIES.probes for q in FAMILIES.protocols)
+]
+COMPUTED_FAMILIES = [f for f in FAMILIES.run if f not in MAIN_FROM_PROBES]
+
+if FAMILIES.run and FAMILIES.probes:
+    TARGETS += ["results/report/backbones/table.html"]
+    EDGES += ["results/backbones/summary.parquet"]
+    EDGES += [FAMILY_PROBE.format(family=f) for f in COMPUTED_FAMILIES]
+    for _f in OWN_FAMILIES:
+        EDGES += [f"results/features/families/{_f}/{m}.pt" for m in MODALITIES]
+        EDGES += [
+            f"results/features/families/{_f}/{c}/{m}.parquet"
+            for c in FAMILY_CORPORA
+            for m in MODALITIES
+        ]
+
+
+def family_spec(family, modality):
+    return FAMILIES.families[family][modality]
+
+
+def family_weights(family, modality):
+    if family not in OWN_FAMILIES:
+        return f"results/features/backbones/{modality}.pt"
+    return f"results/features/families/{family}/{modality}.pt"
+
+
+def family_features(family, corpus, modality):
+    """A family's feature edge of a corpus (the main edge for the main family)."""
+    if family not in OWN_FAMILIES:
+        return feature_edge(corpus, modality, FAMILY_VARIANT)
+    return f"results/features/families/{family}/{corpus}/{modality}.parquet"
+
+
+def family_frames(modality):
+    """The frames a family's backbone of `modality` is extracted on, per probe corpus."""
+    if modality == "vision":
+        return [corpus_edge(c) for c in FAMILY_CORPORA]
+    return [f"results/preprocess/{c}/{FAMILY_VARIANT}.parquet" for c in FAMILY_CORPORA]

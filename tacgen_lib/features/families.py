@@ -1,0 +1,148 @@
+"""Backbone families: which frozen encoders the comparison of families runs, read from config
+``backbones`` (plain Python, no torch: the Snakefile reads it at parse time).
+
+A family names one backbone per modality (`features.backbones`' shape: an `arch`, an optional
+official `checkpoint`, and the in-workflow pretraining `objective`, "dino" or "mae"). The paper
+checks that the V+T direction holds for several encoder families (DINOv2, CLIP + MAE, Sparsh);
+here the families are the DINOv2-architecture ViT, a torchvision-shaped ResNet and an MAE-
+pretrained ViT. A family whose two backbones are the main DAG's (`features.backbones`, the same
+arch, checkpoint and objective) is the *main* family: its probes read the main feature edges,
+so nothing is computed twice.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from tacgen_lib.features.archs import arch_family
+from tacgen_lib.io.config import ConfigError
+
+__all__ = [
+    "BackboneSpec",
+    "FamilySettings",
+    "MODALITIES",
+    "check_backbone",
+]
+
+MODALITIES = ("vision", "tactile")
+OBJECTIVES = ("dino", "mae", "random")
+
+
+@dataclass(frozen=True)
+class BackboneSpec:
+    """One modality's backbone: arch, official checkpoint (or None), pretraining objective."""
+
+    arch: str
+    checkpoint: str | None = None
+    objective: str = "dino"
+    num_register_tokens: int = 0
+
+    @classmethod
+    def from_config(cls, spec: Mapping[str, Any]) -> BackboneSpec:
+        return cls(
+            arch=str(spec["arch"]),
+            checkpoint=spec.get("checkpoint") or None,
+            objective=str(spec.get("objective", "dino")),
+            num_register_tokens=int(spec.get("num_register_tokens", 0)),
+        )
+
+    @property
+    def network(self) -> str:
+        """ "vit" or "resnet" (archs.arch_family)."""
+        return arch_family(self.arch)
+
+    def label(self, dino_epochs: int) -> str:
+        """What the report says of it: arch, then how it was made (a DINO objective at 0
+        epochs of features.pretrain is the random init)."""
+        if self.checkpoint:
+            return f"{self.arch} (checkpoint)"
+        if self.objective == "random" or (self.objective == "dino" and dino_epochs == 0):
+            return f"{self.arch} (random init)"
+        return f"{self.arch} ({self.objective.upper()})"
+
+
+def check_backbone(spec: BackboneSpec, *, where: str, dino_epochs: int, mae_epochs: int) -> None:
+    """Refuse a backbone the workflow cannot make. Objectives: "dino" (a ViT; DINO with
+    features.pretrain, whose 0 epochs mean the seeded random init), "mae" (a ViT; features.mae,
+    at least 1 epoch), "random" (any arch: the seeded random init). A ResNet has no in-workflow
+    pretraining: without a checkpoint it must say "random"."""
+    if spec.objective not in OBJECTIVES:
+        raise ConfigError(f"config {where}.objective: {spec.objective!r}, choose from {OBJECTIVES}")
+    if spec.checkpoint:
+        return
+    if spec.network == "resnet" and spec.objective != "random":
+        raise ConfigError(
+            f"config {where}: a ResNet ({spec.arch}) has no in-workflow {spec.objective} "
+            "pretraining here; give it a torchvision checkpoint, or objective: random (its "
+            "seeded random init)"
+        )
+    if spec.objective == "mae" and mae_epochs < 1:
+        raise ConfigError(f"config {where}: objective mae needs features.mae.epochs >= 1")
+
+
+@dataclass(frozen=True)
+class FamilySettings:
+    """Config ``backbones``: the families compared (`run`, in order), their specs, the probe
+    families (config ``probes.families`` names) each is judged on and the probe protocols
+    (raw linear and the 2-layer MLP)."""
+
+    run: tuple[str, ...]
+    families: Mapping[str, Mapping[str, BackboneSpec]]
+    probes: tuple[str, ...]
+    protocols: tuple[str, ...]
+
+    @classmethod
+    def from_config(cls, config: Mapping[str, Any]) -> FamilySettings:
+        cfg = config.get("backbones") or {}
+        families = {
+            name: {m: BackboneSpec.from_config(spec[m]) for m in MODALITIES}
+            for name, spec in (cfg.get("families") or {}).items()
+        }
+        run = tuple(cfg.get("run", ()))
+        unknown = [f for f in run if f not in families]
+        if unknown:
+            raise ConfigError(
+                f"config backbones.run: unknown family {unknown[0]!r} (backbones.families: "
+                f"{sorted(families)})"
+            )
+        probes = tuple(cfg.get("probes", ()))
+        known = config["probes"]["families"]
+        missing = [p for p in probes if p not in known]
+        if missing:
+            raise ConfigError(
+                f"config backbones.probes: {missing[0]!r} is not a probe family "
+                f"(probes.families: {sorted(known)})"
+            )
+        flat = [p for p in probes if known[p].get("vision") == "pixel"]
+        if flat:
+            raise ConfigError(
+                f"config backbones.probes: {flat[0]!r} compares pixel V; a backbone family is "
+                "judged on families whose V is the backbone's (vision: vit)"
+            )
+        settings = cls(
+            run=run, families=families, probes=probes, protocols=tuple(cfg.get("protocols", ()))
+        )
+        feats = config["features"]
+        for name in run:
+            for m in MODALITIES:
+                check_backbone(
+                    families[name][m],
+                    where=f"backbones.families.{name}.{m}",
+                    dino_epochs=int(feats["pretrain"]["epochs"]),
+                    mae_epochs=int((feats.get("mae") or {}).get("epochs", 1)),
+                )
+        return settings
+
+    def is_main(self, family: str, features: Mapping[str, Any]) -> bool:
+        """Whether `family`'s two backbones are the main DAG's (`features.backbones`)."""
+        return all(
+            self.families[family][m] == BackboneSpec.from_config(features["backbones"][m])
+            for m in MODALITIES
+        )
+
+    def own(self, features: Mapping[str, Any]) -> list[str]:
+        """The families run that are not the main one: they get their own backbones and
+        feature edges."""
+        return [f for f in self.run if not self.is_main(f, features)]

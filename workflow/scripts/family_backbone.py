@@ -1,0 +1,65 @@
+"""One backbone family's frozen backbone of a modality, and its features of every frame of each
+probe corpus (rule family_backbone)."""
+
+import pandas as pd
+import torch
+
+from tacgen_lib.corpus.splits import assert_trainable, ids_in_split
+from tacgen_lib.features.backbones import make_backbone
+from tacgen_lib.features.extract import extract_features
+from tacgen_lib.features.families import BackboneSpec
+from tacgen_lib.features.settings import DinoSettings, MaeSettings
+from tacgen_lib.features.vit import save_backbone
+from tacgen_lib.io import edges, hashed, log
+from tacgen_lib.preprocess.frames import decode_frames
+
+logger = log.for_rule(snakemake)
+torch.set_num_threads(snakemake.threads)
+family, modality = snakemake.wildcards.family, snakemake.wildcards.modality
+pretrain = snakemake.params.pretrain
+spec = BackboneSpec.from_config(snakemake.params.backbone)
+column = "rgb" if modality == "vision" else "tactile_proc"
+
+
+def train_frames():
+    """The pretraining corpus's train frames of this modality (never val or test rows)."""
+    splits = edges.read(snakemake.input.splits).frame
+    train_ids = ids_in_split(splits, "train", corpus=pretrain["corpus"])
+    frames = edges.read(snakemake.input.frames).subset(train_ids)
+    assert_trainable(frames.ids, splits, rule=snakemake.rule)
+    return decode_frames(frames.frame, column, where=snakemake.input.frames)
+
+
+model, curve_rows, how = make_backbone(
+    spec,
+    image_size=snakemake.params.image_size,
+    dino=DinoSettings.from_config(pretrain),
+    mae=MaeSettings.from_config(snakemake.params.mae),
+    frames=train_frames,
+    progress=logger.info,
+)
+logger.info("%s %s backbone: %s", family, modality, how)
+curve = (
+    pd.DataFrame(curve_rows)
+    if curve_rows
+    else pd.DataFrame({"epoch": pd.Series([], dtype="int64")})
+)
+curve.insert(
+    0, "epoch_id", pd.Series([f"{modality}-{int(e):04d}" for e in curve["epoch"]], dtype=object)
+)
+save_backbone(model, snakemake.output.weights)
+hashed.record_file(snakemake.output.weights, producer=snakemake.rule)
+edges.write(snakemake.output.curve, curve, key="epoch_id", producer=snakemake.rule)
+for src, dest in zip(snakemake.input.extract, snakemake.output.features, strict=True):
+    frames = edges.read(src, columns=[column])
+    images = decode_frames(frames.frame, column, where=src)
+    feats = extract_features(
+        model,
+        images,
+        image_size=snakemake.params.image_size,
+        batch_size=snakemake.params.batch_size,
+        pool=snakemake.params.pool,
+    )
+    # column "vit", as in every feature edge: the backbone's feature, whatever the family
+    edges.write(dest, frames.frame[["sample_id"]], {"vit": feats}, producer=snakemake.rule)
+    logger.info("%s: %d frames -> features[%d]", dest, len(feats), feats.shape[1])
