@@ -126,6 +126,7 @@ rule findings:
     input:
         unpack(findings_policy_inputs),
         unpack(findings_regime_inputs),
+        unpack(findings_backbone_inputs),
         probes="results/probes/summary.parquet",
         generation="results/generate/evaluation.parquet",
         code=imports_of("findings"),
@@ -151,5 +152,10 @@ rule findings:
         generate_ref=generate_ref(),
         policy=POLICY_ON,
         regime=bool(REGIME_CORPORA),
+        backbones=(
+            {"main": MAIN_FROM_PROBES, "order": list(FAMILIES.run)}
+            if FAMILIES.probes and not set(FAMILIES.run) <= set(MAIN_FROM_PROBES)
+            else {}
+        ),
     script:
         "../workflow/scripts/findings.py"

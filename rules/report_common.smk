@@ -31,6 +31,14 @@ def findings_regime_inputs(wildcards):
     return {"regime": f"{REGIME_DIR}/summary.parquet"} if REGIME_CORPORA else {}
 
 
+def findings_backbone_inputs(wildcards):
+    """The backbone families' summary the findings page reads, where a family other than the
+    main DAG's runs (the main family's rows are the probe rows already on the page)."""
+    if set(FAMILIES.run) <= set(MAIN_FROM_PROBES) or not FAMILIES.probes:
+        return {}
+    return {"backbones": "results/backbones/summary.parquet"}
+
+
 def findings_policy_inputs(wildcards):
     """The policy summaries the findings page reads, where the policy stage runs."""
     if not POLICY_ON:

@@ -206,6 +206,8 @@ def test_backbone_families_page_has_every_family_probe_and_protocol(run_dir):
     page = (run_dir / "results/report/backbones/table.html").read_text()
     for needle in ("2-layer MLP", "null", "resnet (V resnet_tiny (random init)"):
         assert needle in page, needle
+    findings = (run_dir / "results/report/findings.html").read_text()
+    assert "another encoder family? (resnet" in findings and "null corpus V+T − V" in findings
 
 
 def test_second_run_has_nothing_to_do(run_dir):

@@ -10,7 +10,7 @@ vision-only ceiling). Pure functions over the stages' summary edges; none reads 
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -267,6 +267,53 @@ def regime_findings(summary: pd.DataFrame) -> pd.DataFrame:
                     what="generating",
                 ),
                 "page": category("Where generated touch helps"),
+            }
+        )
+    return pd.DataFrame(rows, columns=FINDINGS_COLUMNS)
+
+
+def backbone_findings(
+    summary: pd.DataFrame, main: Sequence[str], order: Sequence[str] = ()
+) -> pd.DataFrame:
+    """One row per backbone family other than the main DAG's (whose rows are the probes
+    stage's, already on this page): V+T − V under the linear probe on each real-corpus probe
+    family, the null corpus's probe families of the same targets as the control, and the
+    verdict of the family's sentence (`report.backbones.family_sentences`). Families in
+    `order` (config backbones.run), then any other."""
+    rows = []
+    linear = summary[(summary["protocol"] == "raw") & (summary["status"] == "ok")]
+    for family in dict.fromkeys([*order, *linear["family"]]):
+        if family in main:
+            continue
+        g = linear[linear["family"] == family]
+        if g.empty:
+            continue
+        real, null = g[~g["null_corpus"]], g[g["null_corpus"]]
+
+        def deltas(part: pd.DataFrame) -> str:
+            return "; ".join(
+                f"{x.probe} {fmt.with_ci(x.delta, x.ci_low, x.ci_high, sign=True)}"
+                for x in part.itertuples()
+            )
+
+        first = g.iloc[0]
+        verdict = (
+            "The V+T direction holds: Δ > 0 on every real-corpus probe."
+            if len(real) and bool((real["delta"] > 0).all())
+            else "The V+T direction does not hold on every real-corpus probe."
+        )
+        above = null[null["ci_low"] > 0]
+        if len(above):
+            verdict += f" UNEXPECTED: a null-corpus CI lies above 0 ({', '.join(above['probe'])})."
+        rows.append(
+            {
+                "evidence": "backbone families",
+                "question": f"does touch add to vision with another encoder family? ({family}: "
+                f"V {first['vision_backbone']}, T {first['tactile_backbone']}; linear probe)",
+                "result": f"V+T − V: {deltas(real)}" if len(real) else "no real-corpus probe",
+                "control": f"null corpus V+T − V: {deltas(null)}" if len(null) else "none",
+                "verdict": verdict,
+                "page": category("Backbone families"),
             }
         )
     return pd.DataFrame(rows, columns=FINDINGS_COLUMNS)

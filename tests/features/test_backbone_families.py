@@ -522,3 +522,37 @@ def test_main_family_rows_are_the_probe_stage_headline_rows():
             heads_variant="clip128",
             labels={"vision": "v", "tactile": "t"},
         )
+
+
+def test_findings_row_per_other_family_with_the_null_corpus_beside():
+    from tacgen_lib.report.findings import FINDINGS_COLUMNS, backbone_findings
+
+    def row(family, probe, protocol, delta, lo, null):
+        return {
+            "family": family,
+            "vision_backbone": "v",
+            "tactile_backbone": "t",
+            "probe": probe,
+            "null_corpus": null,
+            "protocol": protocol,
+            "status": "ok",
+            "delta": delta,
+            "ci_low": lo,
+            "ci_high": lo + 0.2,
+        }
+
+    summary = pd.DataFrame(
+        [
+            row("dinov2", "force", "raw", 0.5, 0.4, False),
+            row("resnet", "force", "raw", 0.3, 0.2, False),
+            row("resnet", "force", "mlp2", -0.3, -0.5, False),  # not the linear probe
+            row("resnet", "force_null", "raw", 0.2, 0.1, True),
+        ]
+    )
+    got = backbone_findings(summary, main=["dinov2"])
+    assert list(got.columns) == FINDINGS_COLUMNS and list(got["evidence"]) == ["backbone families"]
+    r = got.iloc[0]
+    assert "resnet" in r["question"] and r["result"] == "V+T − V: force +0.300 [+0.200, +0.400]"
+    assert r["control"].startswith("null corpus V+T − V: force_null +0.200")
+    assert r["verdict"].startswith("The V+T direction holds") and "UNEXPECTED" in r["verdict"]
+    assert backbone_findings(summary[summary["family"] == "dinov2"], main=["dinov2"]).empty

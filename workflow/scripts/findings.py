@@ -24,6 +24,14 @@ if snakemake.params.policy:
     )
 if snakemake.params.regime:
     parts.append(findings.regime_findings(edges.read(snakemake.input.regime).frame))
+if snakemake.params.backbones:
+    parts.append(
+        findings.backbone_findings(
+            edges.read(snakemake.input.backbones).frame,
+            snakemake.params.backbones["main"],
+            snakemake.params.backbones["order"],
+        )
+    )
 table = pd.concat(parts, ignore_index=True)
 write_table(
     table,
