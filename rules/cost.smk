@@ -82,6 +82,37 @@ rule cost_generate_points:
         "../workflow/scripts/cost_generate_points.py"
 
 
+# ------------------------------------------------------------------ backbone families
+
+
+rule cost_backbone_points:
+    """Points of the backbone-family knob from the families' summary and the benchmarks of the jobs that make each family's backbones and features."""
+    input:
+        summary="results/backbones/summary.parquet",
+        benchmarks=[path for _, path in cost_backbone_bench()],
+        code=imports_of("cost_backbone_points"),
+    output:
+        points=COST_POINTS,
+    log:
+        "results/logs/cost_backbone_points/{knob}.log",
+    benchmark:
+        "results/benchmarks/cost_backbone_points/{knob}.tsv"
+    wildcard_constraints:
+        knob=one_of([k for k in FREE_KNOBS if KNOBS[k].stage == "features"]),
+    conda:
+        "../envs/report.yaml"
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=5,
+    params:
+        order=list(FAMILIES.run),
+        default=next((f for f in FAMILIES.run if f not in OWN_FAMILIES), None),
+        bench_families=[family for family, _ in cost_backbone_bench()],
+    script:
+        "../workflow/scripts/cost_backbone_points.py"
+
+
 # ------------------------------------------------------------------ policy knobs
 
 

@@ -35,7 +35,12 @@ COST_SETTINGS = {
     name: [r for r in _RUNS if r.knob == name] for name in COST_KNOB_CONFIG
 }
 SWEPT_KNOBS = [k for k, runs in COST_SETTINGS.items() if runs]
-_STAGE_RUNS = {"generate": bool(GENERATE_CORPORA), "policy": POLICY_ON}
+# the backbone-family knob compares the families the run makes: more than one
+_STAGE_RUNS = {
+    "generate": bool(GENERATE_CORPORA),
+    "policy": POLICY_ON,
+    "features": len(FAMILIES.run) > 1 and bool(FAMILIES.probes),
+}
 FREE_KNOBS = [
     k
     for k, knob in KNOBS.items()

@@ -100,4 +100,30 @@ def cost_policy_bench(knob):
             ]
     return out
 
+
 # ------------------------------------------------------------------ the page
+
+
+# ------------------------------------------------------------------ backbone families
+
+
+def cost_backbone_bench():
+    """(family, benchmark file) of every job that makes a family's backbones and the probe
+    corpora's features: its own family_backbone jobs, or, for the main family, the main
+    backbones and the main extraction of the probe corpora. The probes' cost, alike for every
+    family, is left out."""
+    out = []
+    for family in FAMILIES.run:
+        for m in MODALITIES:
+            if family in OWN_FAMILIES:
+                out.append(
+                    (family, f"results/benchmarks/family_backbone/{family}/{m}.tsv")
+                )
+                continue
+            out.append((family, f"results/benchmarks/pretrain_backbone/{m}.tsv"))
+            what = "vision" if m == "vision" else f"tactile~{FAMILY_VARIANT}"
+            out += [
+                (family, f"results/benchmarks/extract_features/{c}/{what}.tsv")
+                for c in FAMILY_CORPORA
+            ]
+    return out

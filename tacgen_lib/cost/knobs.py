@@ -158,6 +158,7 @@ KNOBS: dict[str, Knob] = {k.name: k for k in (
          keys=("features.pretrain.epochs",),
          metrics=("vision {vision_target} Δaccuracy pretrained − random",
                   "tactile {tactile_target} Δaccuracy pretrained − random"), **_FEATURES),
+    Knob("backbones", stage="features", reads="backbones", free=True),
     Knob("generate_steps", stage="generate", reads="generate_steps", free=True),
     Knob("generate_sampler", stage="generate", reads="generate_sampler", free=True),
     Knob("policy_width", stage="policy", reads="policy_width", free=True),

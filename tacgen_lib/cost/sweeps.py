@@ -13,7 +13,9 @@ number of files), and returns rows in `points.POINT_COLUMNS` + `direction`:
   Δ_ctrl across permutation seeds;
 - `generate_points`: Δ_gen of one probe target (its fixed-test bootstrap CI, endpoints averaged
   over generator seeds) and the Fréchet distance generated–real (range over seeds);
-- `policy_points`: V-only policy success with its bootstrap CI.
+- `policy_points`: V-only policy success with its bootstrap CI;
+- `backbone_points`: per backbone family, V+T − V under the linear probe on each real-corpus
+  probe family of config backbones, with its fixed-test bootstrap CI.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ __all__ = [
     "align_points",
     "bootstrap_spread_points",
     "generate_points",
+    "backbone_points",
     "permutation_points",
     "point",
     "policy_points",
@@ -271,3 +274,36 @@ def policy_points(
             )
         )
     return _frame(rows)
+
+
+def backbone_points(
+    knob: str,
+    rows: pd.DataFrame,
+    seconds: Mapping[str, Seconds],
+    order: Sequence[str],
+    default: str | None,
+) -> pd.DataFrame:
+    """Points of the backbone-family knob. rows: the backbone families' summary (rule
+    aggregate_backbones); one point per family in `order` (its position is the setting;
+    `default`, the main DAG's family, is the run's own) and real-corpus probe family, under
+    the linear probe. seconds: per family, what making its backbones and the probe corpora's
+    features cost."""
+    out = []
+    linear = rows[(rows["protocol"] == "raw") & ~rows["null_corpus"] & (rows["status"] == "ok")]
+    for i, family in enumerate(order):
+        for r in linear[linear["family"] == family].itertuples():
+            out.append(
+                point(
+                    knob,
+                    "features",
+                    float(i),
+                    family,
+                    family == default,
+                    f"{r.probe}: Δ{r.metric} V+T − V (linear, test)",
+                    r.delta,
+                    (min(r.ci_low, r.delta), max(r.ci_high, r.delta)),
+                    "95 % fixed-test bootstrap CI",
+                    seconds[family],
+                )
+            )
+    return _frame(out)

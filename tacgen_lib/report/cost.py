@@ -226,7 +226,9 @@ def cost_figures(
             ax.tick_params(which="both", labelsize=8)
             ax.legend(fontsize=8, loc="best")
         stage = f" ({stages[knob]})" if stages and knob in stages else ""
-        fig.suptitle(f"{knob}{stage}: each point one setting (± its uncertainty)", fontsize=10)
+        # on a one-panel figure the title takes two lines, else its ends are cut off
+        sep = "\n" if len(metrics) == 1 else " "
+        fig.suptitle(f"{knob}{stage}:{sep}each point one setting (± its uncertainty)", fontsize=10)
         fig.tight_layout()
         out[str(knob)] = fig
     return out

@@ -455,6 +455,9 @@ UNITS: dict[str, UnitRule] = {
             * len(c["backbones"].get("protocols", ["raw", "mlp2"])),
         ),
     ),
+    "cost_backbone_points": UnitRule(
+        "family run", lambda c, w: ("", float(len(c["backbones"]["run"])))
+    ),
     "aggregate_backbones": UnitRule(
         "family run", lambda c, w: ("", float(len(c["backbones"]["run"])))
     ),

@@ -16,6 +16,7 @@ from tacgen_lib.cost.spread import replicate_seconds, retrieval_bootstrap, sd_in
 from tacgen_lib.cost.sweeps import (
     Seconds,
     align_points,
+    backbone_points,
     bootstrap_spread_points,
     generate_points,
     permutation_points,
@@ -286,3 +287,32 @@ def test_generate_and_policy_points_average_seeds():
     )
     q = check_points(policy_points("policy_width", pol, SEC, "b"), "pol")
     assert bool(q.iloc[0]["is_default"]) and q.iloc[0]["wall_s"] == 3.0
+
+
+def test_backbone_points_one_per_family_and_real_probe_under_the_linear_probe():
+    def row(family, probe, protocol, null, delta):
+        return {
+            "family": family,
+            "probe": probe,
+            "protocol": protocol,
+            "null_corpus": null,
+            "status": "ok",
+            "metric": "accuracy",
+            "delta": delta,
+            "ci_low": delta - 0.1,
+            "ci_high": delta + 0.1,
+        }
+
+    rows = pd.DataFrame(
+        [
+            row("a", "hardness", "raw", False, 0.2),
+            row("a", "hardness", "mlp2", False, 0.9),  # not the linear probe
+            row("a", "hardness_null", "raw", True, 0.0),  # the control, not a point
+            row("b", "hardness", "raw", False, 0.1),
+        ]
+    )
+    p = check_points(backbone_points("backbones", rows, SEC, ["b", "a"], "a"), "bb")
+    assert list(p["label"]) == ["b", "a"] and list(p["setting"]) == [0.0, 1.0]
+    assert list(p["is_default"]) == [False, True]
+    assert list(p["value"]) == [0.1, 0.2] and set(p["stage"]) == {"features"}
+    assert list(p["wall_s"]) == [3.0, 1.0]  # each family's own seconds

@@ -27,6 +27,7 @@ def test_default_config_runs_no_sweep_job(cold_dry_run):
     assert not [r for r in rules if r.startswith(("cost_align", "cost_probe"))]  # no setting
     # the free knobs (the stages' own grids) still give the page its points
     assert rules.get("cost_generate_points") == 2 and rules.get("cost_policy_points") == 2
+    assert rules.get("cost_backbone_points") == 1  # config/test.yaml runs three families
 
 
 def test_unknown_knob_stops_with_the_known_names(tmp_path):
@@ -73,6 +74,7 @@ def test_tiny_sweep_writes_points_and_the_page(reference_run: Path, tmp_path):
             "generate_sampler",
             "policy_width",
             "policy_epochs",
+            "backbones",
         )
     }
     for knob, p in points.items():
