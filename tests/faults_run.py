@@ -28,6 +28,7 @@ KILL_STAGES: dict[str, str] = {
     "corpus": "simulate_corpus",
     "preprocess": "background_subtract",
     "features": "pretrain_backbone",
+    "backbones": "family_backbone",
     "align": "train_heads",
     "generate": "train_generator",
     "probes": "probe",
