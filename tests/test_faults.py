@@ -218,7 +218,7 @@ def test_full_disk_names_the_file_leaves_no_half_edge_and_recovers(reference_run
     shutil.copytree(reference_run / ".snakemake", work / ".snakemake")
     results = work / "results"
     results.mkdir()
-    size_mb = 64
+    size_mb = 128  # the test run's results (about 80 MB) and room to fill
     mounted = subprocess.run(
         ["mount", "-t", "tmpfs", "-o", f"size={size_mb}m", "tacgen-full-disk", str(results)],
         capture_output=True,

@@ -239,7 +239,7 @@ def test_changed_probe_param_reruns_only_the_probes(run_dir, tmp_path):
     generate = {"fit_generator_baselines", "evaluate_generator", "aggregate_generate"}
     # the cost page's free generator knobs read the generation summary; the
     # findings page reads the probe summary
-    cost = {"cost_generate_points", "cost_of_accuracy"}
+    cost = {"cost_generate_points", "cost_backbone_points", "cost_of_accuracy"}
     report = {"findings", "edge_manifest", "all"}
     # the regime's probes read the probes subtree (their grids and folds) and the language
     # evidence its bootstrap count
@@ -284,15 +284,24 @@ def test_edit_to_an_indirectly_imported_module_reruns_exactly_its_users(run_dir,
     # the generator's evaluation and baselines fit probes (probes.fit, probes.rows) but run no
     # control, so they do not reach it since the protocol was split by concept
     robustness = {"probe_training_size", "probe_within_scale", "aggregate_robustness"}
+    # the backbone families compare V with V+T through probes.compare as well
+    backbones = {"family_probe", "aggregate_backbones"}
     assert direct == []
-    assert users == {"probe", "aggregate_probes"} | robustness
+    assert users == {"probe", "aggregate_probes"} | robustness | backbones
     work = copy_tree(tmp_path / "f")
     shutil.copytree(run_dir / "results", work / "results")
     shutil.copytree(run_dir / ".snakemake", work / ".snakemake")
     (work / module).write_text((work / module).read_text() + "\n# an edit\n")
     # its users rerun, then only what reads their outputs: the findings page, the edge
-    # manifest and `all` (the cost sweeps run only under config/cost.yaml: not planned here)
-    assert set(planned_rules(work)) == users | {"edge_manifest", "findings", "all"}
+    # manifest, `all` and the backbone-family knob's points with the cost page (the free knobs
+    # run in every config; the swept ones only under config/cost.yaml: not planned here)
+    assert set(planned_rules(work)) == users | {
+        "edge_manifest",
+        "findings",
+        "all",
+        "cost_backbone_points",
+        "cost_of_accuracy",
+    }
 
 
 def test_two_runs_give_identical_edges(run_dir, resumed_run):
@@ -418,6 +427,7 @@ def test_real_corpus_path_runs_on_fixtures(tmp_path):
     rob = cfg["probes"]["robustness"]
     rob["families"] = rob["training_size"]["families"] = ["hardness"]
     rob["within_scale"]["families"] = []  # no appearance-controlled corpus here
+    cfg["backbones"]["probes"] = ["hardness"]  # and so do the backbone families
     (work / "config/real.yaml").write_text(yaml.safe_dump(cfg))
     targets = [
         "results/features/ssvtp/vision.parquet",
