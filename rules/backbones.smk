@@ -17,7 +17,7 @@ rule family_backbone:
         frames=lambda w: backbone_frames(w.modality, PRETRAIN["corpus"]),
         splits="results/corpus/splits.parquet",
         extract=lambda w: family_frames(w.modality),
-        code=imports_of("family_backbone"),
+        code=imports_of("pretrain_backbone"),
     output:
         weights="results/features/families/{family}/{modality}.pt",
         curve="results/features/families/{family}/{modality}_curve.parquet",
@@ -48,7 +48,7 @@ rule family_backbone:
         batch_size=FEAT["batch_size"],
         pool=FEAT["pool"],
     script:
-        "../workflow/scripts/family_backbone.py"
+        "../workflow/scripts/pretrain_backbone.py"
 
 
 rule family_probe:

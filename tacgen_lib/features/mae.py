@@ -21,7 +21,6 @@ Official MAE releases (`mae_pretrain_vit_base.pth`: timm ViT names, patch 16) lo
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +28,7 @@ import torch
 from torch import Tensor, nn
 from torch.optim import AdamW
 
+from tacgen_lib.features.dino import PretrainResult
 from tacgen_lib.features.extract import imagenet_normalise, to_unit_tensor
 from tacgen_lib.features.settings import MaeSettings
 from tacgen_lib.features.vit import (
@@ -139,21 +139,10 @@ def mae_loss(pred: Tensor, target: Tensor, mask: Tensor, *, norm_pix: bool) -> T
     return (per_patch * mask).sum() / mask.sum()
 
 
-@dataclass
-class MaePretrainResult:
-    """Outcome of `pretrain_mae`: the encoder's weights in the official ViT key format and
-    one dict per epoch (epoch, loss: the mean masked-patch MSE of its steps, lr)."""
-
-    arch: str
-    image_size: int
-    backbone_state: dict[str, Tensor]
-    curve: list[dict[str, float]] = field(default_factory=list)
-
-    def backbone(self) -> DinoVisionTransformer:
-        """A ViT of `arch` carrying the pretrained encoder, in eval mode."""
-        model = build_vit(self.arch, img_size=self.image_size)
-        model.load_state_dict(self.backbone_state, strict=True)
-        return model.eval()
+class MaePretrainResult(PretrainResult):
+    """Outcome of `pretrain_mae`: the encoder's weights in the official ViT key format
+    (`backbone_state`; `backbone()` builds the ViT carrying them) and one dict per epoch
+    (epoch, loss: the mean masked-patch MSE of its steps, lr)."""
 
 
 def pretrain_mae(

@@ -17,7 +17,7 @@ from collections.abc import Callable, Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from tacgen_lib.probes.compare import compare
+from tacgen_lib.probes.compare import MAIN_STATISTICS, compare, comparison_frame
 from tacgen_lib.probes.rows import FamilyRows
 from tacgen_lib.probes.settings import ProbeSettings
 
@@ -108,24 +108,14 @@ def backbone_family_rows(
             say(f"{family} {probe} {protocol}: failed ({exc})")
             continue
         m = res.main
-        keep = ("v_score", "vt_score", "delta", "ci_low", "ci_high", "p_gt0", "n_resamples")
-        out.append({**base, "status": "ok", **{c: m[c] for c in keep}, "notes": m.get("notes", "")})
+        out.append(
+            {**base, "status": "ok", **{c: m[c] for c in MAIN_STATISTICS}, "notes": m["notes"]}
+        )
         say(
             f"{family} {probe} {protocol}: V {m['v_score']:.3f}, V+T {m['vt_score']:.3f}, "
             f"delta {m['delta']:+.3f} [{m['ci_low']:+.3f}, {m['ci_high']:+.3f}]"
         )
-    return _typed(pd.DataFrame(out, columns=list(FAMILY_COLUMNS)))
-
-
-def _typed(frame: pd.DataFrame) -> pd.DataFrame:
-    frame = frame.loc[:, list(FAMILY_COLUMNS)].reset_index(drop=True)
-    frame["notes"] = frame["notes"].fillna("").astype(str)
-    for col in ("v_score", "vt_score", "delta", "ci_low", "ci_high", "p_gt0"):
-        frame[col] = frame[col].astype(np.float64)
-    frame["n_resamples"] = pd.array(
-        [None if pd.isna(v) else int(v) for v in frame["n_resamples"]], dtype="Int64"
-    )
-    return frame
+    return comparison_frame(out, FAMILY_COLUMNS)
 
 
 def rows_from_probes(
@@ -177,4 +167,4 @@ def rows_from_probes(
                 "notes": "the probes stage's headline row (rule probe)",
             }
         )
-    return _typed(pd.DataFrame(out, columns=list(FAMILY_COLUMNS)))
+    return comparison_frame(out, FAMILY_COLUMNS)

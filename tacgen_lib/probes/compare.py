@@ -9,6 +9,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+import pandas as pd
 from sklearn.exceptions import ConvergenceWarning
 
 from tacgen_lib.probes.bootstrap import fixed_test_bootstrap
@@ -250,3 +251,21 @@ def confusion_counts(
     """(true, predicted, count) for every pair of classes, zeros included."""
     y_true, y_pred = np.asarray(y_true, dtype=object), np.asarray(y_pred, dtype=object)
     return [(a, b, int(np.sum((y_true == a) & (y_pred == b)))) for a in classes for b in classes]
+
+
+#: The statistics of a comparison's main row that a summary edge keeps (`Comparison.main`).
+MAIN_STATISTICS = ("v_score", "vt_score", "delta", "ci_low", "ci_high", "p_gt0", "n_resamples")
+
+
+def comparison_frame(rows: Sequence[dict], columns: Sequence[str]) -> pd.DataFrame:
+    """Rows of main-row statistics (plus their keys) as a typed edge frame with `columns`:
+    the statistics float64 and `n_resamples` nullable Int64 (a failed point has neither),
+    `notes` a string."""
+    frame = pd.DataFrame(list(rows), columns=list(columns))
+    frame["notes"] = frame["notes"].fillna("").astype(str)
+    for col in MAIN_STATISTICS[:-1]:
+        frame[col] = frame[col].astype(np.float64)
+    frame["n_resamples"] = pd.array(
+        [None if pd.isna(v) else int(v) for v in frame["n_resamples"]], dtype="Int64"
+    )
+    return frame

@@ -25,7 +25,7 @@ from dataclasses import replace
 import numpy as np
 import pandas as pd
 
-from tacgen_lib.probes.compare import compare
+from tacgen_lib.probes.compare import MAIN_STATISTICS, compare, comparison_frame
 from tacgen_lib.probes.rows import FamilyRows
 from tacgen_lib.probes.settings import ProbeSettings, RobustnessSettings
 from tacgen_lib.probes.subsets import nested_subsets
@@ -122,31 +122,6 @@ def training_size_sweep(
                 say(f"{key}: failed ({exc})")
                 continue
             m = res.main
-            out.append(
-                {
-                    **base,
-                    "status": "ok",
-                    **{
-                        c: m[c]
-                        for c in (
-                            "v_score",
-                            "vt_score",
-                            "delta",
-                            "ci_low",
-                            "ci_high",
-                            "p_gt0",
-                            "n_resamples",
-                        )
-                    },
-                    "notes": "",
-                }
-            )
+            out.append({**base, "status": "ok", **{c: m[c] for c in MAIN_STATISTICS}, "notes": ""})
             say(f"{key}: delta {m['delta']:+.3f} [{m['ci_low']:+.3f}, {m['ci_high']:+.3f}]")
-    frame = pd.DataFrame(out, columns=list(SIZE_COLUMNS))
-    frame["notes"] = frame["notes"].fillna("").astype(str)
-    for col in ("v_score", "vt_score", "delta", "ci_low", "ci_high", "p_gt0"):
-        frame[col] = frame[col].astype(np.float64)
-    frame["n_resamples"] = pd.array(
-        [None if pd.isna(v) else int(v) for v in frame["n_resamples"]], dtype="Int64"
-    )
-    return frame
+    return comparison_frame(out, SIZE_COLUMNS)

@@ -1,12 +1,14 @@
 """Make one modality's frozen backbone: an official checkpoint, in-workflow pretraining (DINO or
 MAE) on the pretraining corpus's train split, or the seeded random init (rules
-pretrain_backbone and family_backbone)."""
+pretrain_backbone and family_backbone; the latter also extracts the backbone's features of
+every frame of each probe corpus)."""
 
 import pandas as pd
 import torch
 
 from tacgen_lib.corpus.splits import assert_trainable, ids_in_split
 from tacgen_lib.features.backbones import make_backbone
+from tacgen_lib.features.extract import extract_features
 from tacgen_lib.features.families import BackboneSpec
 from tacgen_lib.features.settings import DinoSettings, MaeSettings
 from tacgen_lib.features.vit import save_backbone
@@ -18,6 +20,7 @@ torch.set_num_threads(snakemake.threads)
 modality = snakemake.wildcards.modality
 pretrain = snakemake.params.pretrain
 spec = BackboneSpec.from_config(snakemake.params.backbone)
+column = "rgb" if modality == "vision" else "tactile_proc"
 
 
 def train_frames():
@@ -26,7 +29,6 @@ def train_frames():
     train_ids = ids_in_split(splits, "train", corpus=pretrain["corpus"])
     frames = edges.read(snakemake.input.frames).subset(train_ids)
     assert_trainable(frames.ids, splits, rule=snakemake.rule)
-    column = "rgb" if modality == "vision" else "tactile_proc"
     return decode_frames(frames.frame, column, where=snakemake.input.frames)
 
 
@@ -51,3 +53,19 @@ save_backbone(model, snakemake.output.weights)
 digest = hashed.record_file(snakemake.output.weights, producer=snakemake.rule)
 edges.write(snakemake.output.curve, curve, key="epoch_id", producer=snakemake.rule)
 logger.info("saved %s backbone, sha256 %s", modality, digest)
+# family_backbone: the backbone's features of each probe corpus, column "vit" as in every
+# feature edge (the backbone's feature, whatever the family)
+for src, dest in zip(
+    snakemake.input.get("extract", []), snakemake.output.get("features", []), strict=True
+):
+    frames = edges.read(src, columns=[column])
+    images = decode_frames(frames.frame, column, where=src)
+    feats = extract_features(
+        model,
+        images,
+        image_size=snakemake.params.image_size,
+        batch_size=snakemake.params.batch_size,
+        pool=snakemake.params.pool,
+    )
+    edges.write(dest, frames.frame[["sample_id"]], {"vit": feats}, producer=snakemake.rule)
+    logger.info("%s: %d frames -> features[%d]", dest, len(feats), feats.shape[1])
