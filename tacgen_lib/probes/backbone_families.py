@@ -40,13 +40,7 @@ FAMILY_COLUMNS = (
     "dim_v",
     "dim_t",
     "status",
-    "v_score",
-    "vt_score",
-    "delta",
-    "ci_low",
-    "ci_high",
-    "p_gt0",
-    "n_resamples",
+    *MAIN_STATISTICS,
     "notes",
 )
 

@@ -56,13 +56,7 @@ SIZE_COLUMNS = (
     "n_train",
     "n_test",
     "status",
-    "v_score",
-    "vt_score",
-    "delta",
-    "ci_low",
-    "ci_high",
-    "p_gt0",
-    "n_resamples",
+    *MAIN_STATISTICS,
     "notes",
 )
 

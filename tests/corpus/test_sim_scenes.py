@@ -141,3 +141,27 @@ def test_declared_effects_do_not_depend_on_unrelated_effects():
     c = run(["rgb", "texture"])
     d = run(["rgb", "texture", "gravity", "press", "tactile"])
     assert c["rgb"].tolist() == d["rgb"].tolist()  # the RGB frame ignores all physics
+
+
+def test_a_second_sensor_differs_only_in_what_its_scene_declares():
+    """gelsight_press (config/scenes.yaml) is paired_press's objects and press on another
+    sensor: the same samples' objects, other tactile frames (its own size, markers, lights).
+    (The context camera sees the other sensor's window too, so the RGB frames differ.)"""
+    scenes = {
+        name: {**copy.deepcopy(SCENES[name]), **FAST} for name in ("paired_press", "gelsight_press")
+    }
+    cfg = {"name": "t", "design": "paired", "n": 3, "seed": 3, "presses": 2}
+    digit = corpus.simulate_shard({**cfg, "scene": "paired_press"}, scenes, 0, 1)
+    gel = corpus.simulate_shard(
+        {**cfg, "scene": "gelsight_press", "tactile_size": [96, 128]}, scenes, 0, 1
+    )
+    assert digit["shape"].tolist() == gel["shape"].tolist()
+    assert digit["mass"].tolist() == gel["mass"].tolist()
+    from tacgen_lib.io.images import decode_png
+
+    a, b = decode_png(digit["tactile"].iloc[0]), decode_png(gel["tactile"].iloc[0])
+    assert a.shape == (120, 160, 3) and b.shape == (96, 128, 3)
+    # the markers: a 9-pixel periodic darkening of the GelSight-like frame's background rows
+    row = b[2].astype(float).mean(axis=1)
+    spectrum = np.abs(np.fft.rfft(row - row.mean()))
+    assert np.argmax(spectrum[1:]) + 1 == round(128 / 9)

@@ -21,9 +21,10 @@ def shading_reference(height, background, optics, noise_rng=None):
     gx = (pad[1:-1, 2:] - pad[1:-1, :-2]) / (2 * optics.pixel_size)
     gy = -(pad[2:, 1:-1] - pad[:-2, 1:-1]) / (2 * optics.pixel_size)
     inv = 1 / np.sqrt(1 + gx**2 + gy**2)
-    ce, se = np.cos(tactile.LIGHT_ELEVATION), np.sin(tactile.LIGHT_ELEVATION)
+    elevation = np.deg2rad(optics.light_elevation)
+    ce, se = np.cos(elevation), np.sin(elevation)
     frame = background.astype(np.float64)
-    for c, az in enumerate(tactile.LIGHT_AZIMUTHS):
+    for c, az in enumerate(np.deg2rad(optics.light_azimuths)):
         lam = (-ce * np.cos(az) * gx - ce * np.sin(az) * gy + se) * inv
         frame[..., c] += tactile.SLOPE_GAIN * (np.maximum(lam, 0) - se)
         frame[..., c] += tactile.DEPTH_GAIN / optics.saturation * hc
@@ -114,3 +115,63 @@ def test_markers_move_with_indentation():
     far = (slice(0, 10), slice(0, 10))
     assert np.array_equal(flat[far], pressed[far])
     assert not np.array_equal(flat, pressed)
+
+
+#: a GelSight-like sensor's illumination (config/scenes.yaml, gelsight_press): other azimuths
+#: per colour channel and a lower elevation
+OTHER_LIGHTS = {"light_azimuths": (30.0, 150.0, 270.0), "light_elevation": 25.0}
+
+
+def test_default_lights_are_the_digit_like_constants():
+    assert np.array_equal(np.deg2rad(OPTICS.light_azimuths), tactile.LIGHT_AZIMUTHS)
+    assert np.deg2rad(OPTICS.light_elevation) == tactile.LIGHT_ELEVATION
+
+
+def test_declared_lights_match_the_float64_reference():
+    from dataclasses import replace
+
+    optics = replace(OPTICS, **OTHER_LIGHTS)
+    bg = np.full((120, 160, 3), 128, dtype=np.uint8)
+    height, _ = sphere_cap(0.0015)
+    got = tactile.tactile_shading(height, bg, optics)
+    want, _ = shading_reference(height, bg, optics)
+    assert np.abs(got.astype(int) - want.astype(int)).max() <= 1  # float32 vs float64 rounding
+    # other lights shade the same imprint otherwise: the sensors differ where it is
+    default = tactile.tactile_shading(height, bg, OPTICS)
+    assert np.abs(got.astype(int) - default.astype(int)).max() > 10
+
+
+def test_lights_rotated_by_a_third_permute_the_colour_channels():
+    """On a grey background, lights rotated by 120 degrees shade channel c as the default
+    lights shade channel c + 1: the same operations on the same numbers."""
+    from dataclasses import replace
+
+    rotated = replace(OPTICS, light_azimuths=(210.0, 330.0, 90.0))
+    bg = np.full((120, 160, 3), 128, dtype=np.uint8)
+    height, _ = sphere_cap(0.0015)
+    a = tactile.tactile_shading(height, bg, OPTICS)
+    b = tactile.tactile_shading(height, bg, rotated)
+    np.testing.assert_array_equal(b, a[..., [1, 2, 0]])
+
+
+def test_marker_grid_spacing_and_radius_are_the_declared_ones():
+    dense = tactile.marker_pattern((60, 80), spacing=9, radius=1.2)
+    assert dense[0, 0] == dense[9, 18] == 1.0  # dot centres every 9 pixels
+    assert dense[1, 0] == pytest.approx(np.exp(-1.0 / (2 * 1.2**2)), rel=1e-6)  # its radius
+    # 9-pixel period in both directions
+    np.testing.assert_allclose(dense[:-9], dense[9:], atol=1e-6)
+    np.testing.assert_allclose(dense[:, :-9], dense[:, 9:], atol=1e-6)
+
+
+@pytest.mark.parametrize(
+    ("gel", "words"),
+    [
+        ({"light_azimuths": [0, 120]}, "3 azimuths"),
+        ({"light_elevation": 95}, "light_elevation"),
+        ({"marker_spacing": 4, "marker_radius": 5}, "marker grid"),
+    ],
+)
+def test_bad_sensor_optics_name_scene_and_key(gel, words):
+    decl = {"kind": "press", "effects": ["tactile"], "gel": gel}
+    with pytest.raises(ValueError, match=words):
+        validate_scene("odd_sensor", decl)

@@ -33,12 +33,20 @@ def scene_runtime(scene: Scene, cfg: CorpusSettings) -> dict[str, Any]:
             camera_distance=scene.gel_camera_distance,
             saturation=scene.gel_saturation,
             smoothing=scene.gel_smoothing,
+            light_azimuths=scene.light_azimuths,
+            light_elevation=scene.light_elevation,
         )
         _RUNTIMES[key] = {
             "rt": rt,
             "optics": optics,
             "directions": tactile.ray_directions(optics),
-            "markers": tactile.marker_pattern(optics.image_size) if scene.has("markers") else None,
+            "markers": (
+                tactile.marker_pattern(
+                    optics.image_size, spacing=scene.marker_spacing, radius=scene.marker_radius
+                )
+                if scene.has("markers")
+                else None
+            ),
             "renderer": None,
         }
     return _RUNTIMES[key]

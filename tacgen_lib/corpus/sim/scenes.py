@@ -71,7 +71,18 @@ _OBJECT_KEYS = {"shapes", "size", "mass", "friction"}
 _SENSOR_KEYS = {"name"}
 _CAMERA_KEYS = {"name", "distance", "azimuth", "elevation", "fovy"}
 _PRESS_KEYS = {"force", "jitter_force", "jitter_xy", "jitter_yaw"}
-_GEL_KEYS = {"size", "stiffness", "plate_mass", "saturation", "smoothing", "camera_distance"}
+_GEL_KEYS = {
+    "size",
+    "stiffness",
+    "plate_mass",
+    "saturation",
+    "smoothing",
+    "camera_distance",
+    "light_azimuths",
+    "light_elevation",
+    "marker_spacing",
+    "marker_radius",
+}
 _KINDS = {"press", "grasp_lift"}
 
 TEXTURES: tuple[str, ...] = ("plain", "checkered", "striped", "speckled")
@@ -101,6 +112,12 @@ class Scene:
     gel_smoothing: float
     gel_camera_distance: float
     object: dict[str, float] = field(default_factory=dict)
+    # the sensor's illumination (degrees; red, green, blue) and marker grid (pixels), declared
+    # under `gel`; defaults: the DIGIT-like sensor
+    light_azimuths: tuple[float, float, float] = (90.0, 210.0, 330.0)
+    light_elevation: float = 35.0
+    marker_spacing: int = 12
+    marker_radius: float = 1.6
 
     def has(self, effect: str) -> bool:
         """True when the scene declares `effect` (which must be in the vocabulary)."""
@@ -158,6 +175,21 @@ def validate_scene(name: str, decl: Mapping[str, Any]) -> Scene:
     gel_size = tuple(float(v) for v in gel.get("size", [0.045, 0.06]))
     if len(gel_size) != 2 or min(gel_size) <= 0:
         raise ValueError(f"scene {name!r}: key 'gel.size' must be [height, width] in metres > 0")
+    lights = tuple(float(v) for v in gel.get("light_azimuths", [90.0, 210.0, 330.0]))
+    if len(lights) != 3:
+        raise ValueError(
+            f"scene {name!r}: key 'gel.light_azimuths' must give 3 azimuths in degrees (the "
+            f"red, green and blue lights), got {len(lights)}"
+        )
+    elevation = float(gel.get("light_elevation", 35.0))
+    if not 0.0 < elevation < 90.0:
+        raise ValueError(f"scene {name!r}: key 'gel.light_elevation': {elevation} not in (0, 90)")
+    spacing, radius = int(gel.get("marker_spacing", 12)), float(gel.get("marker_radius", 1.6))
+    if spacing < 2 or not 0.0 < radius < spacing:
+        raise ValueError(
+            f"scene {name!r}: keys 'gel.marker_spacing' ({spacing} px, at least 2) and "
+            f"'gel.marker_radius' ({radius} px, in (0, spacing)) do not make a marker grid"
+        )
     return Scene(
         name=name,
         kind=kind,
@@ -187,6 +219,10 @@ def validate_scene(name: str, decl: Mapping[str, Any]) -> Scene:
         gel_smoothing=float(gel.get("smoothing", 0.0006)),
         gel_camera_distance=float(gel.get("camera_distance", 0.05)),
         object={k: float(v) for k, v in objects.items()},
+        light_azimuths=(lights[0], lights[1], lights[2]),
+        light_elevation=elevation,
+        marker_spacing=spacing,
+        marker_radius=radius,
     )
 
 

@@ -39,6 +39,7 @@ __all__ = [
     "tactile_shading",
 ]
 
+# the DIGIT-like sensor's lights (GelOptics' defaults; a scene may declare others)
 LIGHT_ELEVATION = np.deg2rad(35.0)
 LIGHT_AZIMUTHS = np.deg2rad([90.0, 210.0, 330.0])  # red, green, blue lights
 SLOPE_GAIN = 160.0  # DN per unit of (n . l - sin(elevation))
@@ -51,13 +52,18 @@ MARKER_SHIFT = 2.5  # lateral marker shift (pixels) per unit slope
 @dataclass(frozen=True)
 class GelOptics:
     """Sensor optics: gel size (height, width) in m, image size (rows, cols), pinhole distance
-    behind the gel in m, saturation depth in m, membrane smoothing length in m."""
+    behind the gel in m, saturation depth in m, membrane smoothing length in m; the
+    illumination: the azimuth in degrees of the light shading each colour channel (red, green,
+    blue) and their elevation in degrees (defaults: the DIGIT-like sensor's GelSight layout,
+    `LIGHT_AZIMUTHS`, `LIGHT_ELEVATION`)."""
 
     gel_size: tuple[float, float]
     image_size: tuple[int, int]
     camera_distance: float
     saturation: float
     smoothing: float
+    light_azimuths: tuple[float, float, float] = (90.0, 210.0, 330.0)
+    light_elevation: float = 35.0
 
     @property
     def pixel_size(self) -> float:
@@ -250,10 +256,11 @@ def tactile_shading(
         gx = cv2.Sobel(hc, cv2.CV_32F, 1, 0, ksize=1, borderType=cv2.BORDER_REPLICATE) * scale
         gy = cv2.Sobel(hc, cv2.CV_32F, 0, 1, ksize=1, borderType=cv2.BORDER_REPLICATE) * -scale
         inv = 1.0 / np.sqrt(1.0 + gx * gx + gy * gy)
-        ce, se = np.float32(np.cos(LIGHT_ELEVATION)), np.float32(np.sin(LIGHT_ELEVATION))
+        elevation = np.deg2rad(optics.light_elevation)
+        ce, se = np.float32(np.cos(elevation)), np.float32(np.sin(elevation))
         shade = np.empty(hc.shape + (3,), dtype=np.float32)
         depth_term = np.float32(DEPTH_GAIN / optics.saturation) * hc
-        for c, az in enumerate(LIGHT_AZIMUTHS):
+        for c, az in enumerate(np.deg2rad(np.asarray(optics.light_azimuths, dtype=np.float64))):
             a, b = np.float32(-ce * np.cos(az)), np.float32(-ce * np.sin(az))
             lam = (a * gx + b * gy + se) * inv
             shade[..., c] = np.float32(SLOPE_GAIN) * (np.maximum(lam, 0) - se) + depth_term
