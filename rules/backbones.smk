@@ -83,10 +83,7 @@ rule family_probe:
         settings=PROBE_SETTINGS,
         protocols=FAMILIES.protocols,
         seed=PROBES["seeds"][0],
-        labels=lambda w: {
-            m: family_spec(w.family, m).label(int(PRETRAIN["epochs"]))
-            for m in MODALITIES
-        },
+        labels=lambda w: family_labels(w.family),
     script:
         "../workflow/scripts/family_probe.py"
 
@@ -98,8 +95,7 @@ rule aggregate_backbones:
         main=[
             f"{PROBE_DIR}/seed~{_PROBE_SEED}.parquet".format(family=p, protocol=q)
             for f in MAIN_FROM_PROBES
-            for p in FAMILIES.probes
-            for q in FAMILIES.protocols
+            for p, q in FAMILY_JOBS
         ],
         code=imports_of("aggregate_backbones"),
     output:
@@ -122,13 +118,8 @@ rule aggregate_backbones:
         runtime=5,
     params:
         order=list(FAMILIES.run),
-        main={
-            f: {
-                m: family_spec(f, m).label(int(PRETRAIN["epochs"])) for m in MODALITIES
-            }
-            for f in MAIN_FROM_PROBES
-        },
-        main_jobs=[(p, q) for p in FAMILIES.probes for q in FAMILIES.protocols],
+        main={f: family_labels(f) for f in MAIN_FROM_PROBES},
+        main_jobs=FAMILY_JOBS,
         heads_variant=FAMILY_VARIANT,
     script:
         "../workflow/scripts/aggregate_backbones.py"

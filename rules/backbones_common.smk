@@ -18,15 +18,17 @@ FAMILY_VARIANT = PROBES["heads"]["variant"]  # the tactile frames the probes rea
 FAMILY_PROBE = "results/backbones/{family}/probes.parquet"
 FAMILY_CORPORA = sorted({PROBES["families"][p]["corpus"] for p in FAMILIES.probes})
 _PROBE_SEED = PROBES["seeds"][0]
+MAIN_FAMILIES = [f for f in FAMILIES.run if f not in OWN_FAMILIES]  # at most one
+#: the (probe family, protocol) jobs a family is judged on
+FAMILY_JOBS = [(p, q) for p in FAMILIES.probes for q in FAMILIES.protocols]
 # the main family's rows are the probes stage's own headline rows when it probes every
 # (probe family, protocol) asked here (nothing is computed twice); else family_probe makes them
 MAIN_FROM_PROBES = [
-    f
-    for f in FAMILIES.run
-    if f not in OWN_FAMILIES
-    and all((p, q) in PROBE_JOBS for p in FAMILIES.probes for q in FAMILIES.protocols)
+    f for f in MAIN_FAMILIES if all(j in PROBE_JOBS for j in FAMILY_JOBS)
 ]
 COMPUTED_FAMILIES = [f for f in FAMILIES.run if f not in MAIN_FROM_PROBES]
+#: whether the findings page has backbone rows: some family is not the main one
+FAMILY_FINDINGS = bool(FAMILIES.probes) and bool(OWN_FAMILIES)
 
 if FAMILIES.run and FAMILIES.probes:
     TARGETS += ["results/report/backbones/table.html"]
@@ -45,10 +47,11 @@ def family_spec(family, modality):
     return FAMILIES.families[family][modality]
 
 
-def family_weights(family, modality):
-    if family not in OWN_FAMILIES:
-        return f"results/features/backbones/{modality}.pt"
-    return f"results/features/families/{family}/{modality}.pt"
+def family_labels(family):
+    """What the report says of a family's two backbones."""
+    return {
+        m: family_spec(family, m).label(int(PRETRAIN["epochs"])) for m in MODALITIES
+    }
 
 
 def family_features(family, corpus, modality):

@@ -107,7 +107,7 @@ rule cost_backbone_points:
         runtime=5,
     params:
         order=list(FAMILIES.run),
-        default=next((f for f in FAMILIES.run if f not in OWN_FAMILIES), None),
+        default=(MAIN_FAMILIES or [None])[0],
         bench_families=[family for family, _ in cost_backbone_bench()],
     script:
         "../workflow/scripts/cost_backbone_points.py"

@@ -101,9 +101,6 @@ def cost_policy_bench(knob):
     return out
 
 
-# ------------------------------------------------------------------ the page
-
-
 # ------------------------------------------------------------------ backbone families
 
 
@@ -127,3 +124,5 @@ def cost_backbone_bench():
                 for c in FAMILY_CORPORA
             ]
     return out
+
+# ------------------------------------------------------------------ the page

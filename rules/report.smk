@@ -153,8 +153,8 @@ rule findings:
         policy=POLICY_ON,
         regime=bool(REGIME_CORPORA),
         backbones=(
-            {"main": MAIN_FROM_PROBES, "order": list(FAMILIES.run)}
-            if FAMILIES.probes and not set(FAMILIES.run) <= set(MAIN_FROM_PROBES)
+            {"main": MAIN_FAMILIES, "order": list(FAMILIES.run)}
+            if FAMILY_FINDINGS
             else {}
         ),
     script:

@@ -34,9 +34,7 @@ def findings_regime_inputs(wildcards):
 def findings_backbone_inputs(wildcards):
     """The backbone families' summary the findings page reads, where a family other than the
     main DAG's runs (the main family's rows are the probe rows already on the page)."""
-    if set(FAMILIES.run) <= set(MAIN_FROM_PROBES) or not FAMILIES.probes:
-        return {}
-    return {"backbones": "results/backbones/summary.parquet"}
+    return {"backbones": "results/backbones/summary.parquet"} if FAMILY_FINDINGS else {}
 
 
 def findings_policy_inputs(wildcards):

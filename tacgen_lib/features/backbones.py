@@ -1,6 +1,6 @@
 """Making and reading a frozen backbone of any family: the one entry point of the rules that
-pretrain (`pretrain_backbone`, `family_backbone`) and extract (`extract_*_features`,
-`family_features`).
+make one (`pretrain_backbone`, `family_backbone`, which also extracts) and that extract
+(`extract_*_features`).
 
 `make_backbone` turns a `families.BackboneSpec` into weights: an official checkpoint (DINOv2 or
 MAE format for a ViT, torchvision format for a ResNet), or in-workflow pretraining (DINO,

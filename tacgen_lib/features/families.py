@@ -2,7 +2,7 @@
 ``backbones`` (plain Python, no torch: the Snakefile reads it at parse time).
 
 A family names one backbone per modality (`features.backbones`' shape: an `arch`, an optional
-official `checkpoint`, and the in-workflow pretraining `objective`, "dino" or "mae"). The paper
+official `checkpoint`, and how it is made without one, `objective`: "dino", "mae" or "random"). The paper
 checks that the V+T direction holds for several encoder families (DINOv2, CLIP + MAE, Sparsh);
 here the families are the DINOv2-architecture ViT, a torchvision-shaped ResNet and an MAE-
 pretrained ViT. A family whose two backbones are the main DAG's (`features.backbones`, the same

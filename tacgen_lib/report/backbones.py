@@ -12,7 +12,7 @@ import pandas as pd
 from tacgen_lib.report import claims
 from tacgen_lib.report import format as fmt
 
-__all__ = ["PROTOCOL_LABELS", "family_sentences", "family_table"]
+__all__ = ["PROTOCOL_LABELS", "direction_holds", "family_sentences", "family_table", "null_gains"]
 
 PROTOCOL_LABELS = {"raw": "linear", "standardised": "linear, standardised", "mlp2": "2-layer MLP"}
 
@@ -50,6 +50,19 @@ def family_table(rows: pd.DataFrame, order: Sequence[str]) -> pd.DataFrame:
             "n train/test": [f"{x.n_train}/{x.n_test}" for x in r.itertuples()],
         }
     )
+
+
+def direction_holds(g: pd.DataFrame) -> bool:
+    """Whether the V+T direction holds for one family's rows: every real-corpus Δ under the
+    linear probe is positive (a probe that failed is not)."""
+    linear = g[(g["protocol"] == "raw") & ~g["null_corpus"]]
+    return len(linear) > 0 and bool((linear["delta"] > 0).all())
+
+
+def null_gains(g: pd.DataFrame) -> pd.DataFrame:
+    """The null-corpus rows whose CI lies above 0: touch carries no label there, so each is a
+    defect to report (UNEXPECTED)."""
+    return g[g["null_corpus"] & (g["ci_low"] > 0)]
 
 
 def _count(g: pd.DataFrame, side: str) -> str:
@@ -93,12 +106,10 @@ def family_sentences(rows: pd.DataFrame, order: Sequence[str]) -> list[str]:
             if len(null):
                 text += f"; null corpus CI above 0 on {_count(null, 'above')}"
             parts.append(text)
-        linear = g[(g["protocol"] == "raw") & ~g["null_corpus"]]
-        holds = len(linear) > 0 and bool((linear["delta"] > 0).all())
-        unexpected = g[g["null_corpus"] & (g["ci_low"] > 0)]
+        unexpected = null_gains(g)
         verdict = (
             "The V+T direction holds"
-            if holds
+            if direction_holds(g)
             else "The V+T direction does not hold on every real-corpus probe"
         )
         if len(unexpected):

@@ -17,6 +17,7 @@ import pandas as pd
 
 from tacgen_lib.report import claims
 from tacgen_lib.report import format as fmt
+from tacgen_lib.report.backbones import direction_holds, null_gains
 from tacgen_lib.report.generate import cross_seed_interval, delta_with_ci, reference_cell_rows
 from tacgen_lib.report.regime import arm_rows
 from tacgen_lib.report_pages import category
@@ -278,8 +279,8 @@ def backbone_findings(
     """One row per backbone family other than the main DAG's (whose rows are the probes
     stage's, already on this page): V+T − V under the linear probe on each real-corpus probe
     family, the null corpus's probe families of the same targets as the control, and the
-    verdict of the family's sentence (`report.backbones.family_sentences`). Families in
-    `order` (config backbones.run), then any other."""
+    verdict of the family's sentence (`report.backbones.direction_holds`, `null_gains`).
+    Families in `order` (config backbones.run), then any other."""
     rows = []
     linear = summary[(summary["protocol"] == "raw") & (summary["status"] == "ok")]
     for family in dict.fromkeys([*order, *linear["family"]]):
@@ -299,10 +300,10 @@ def backbone_findings(
         first = g.iloc[0]
         verdict = (
             "The V+T direction holds: Δ > 0 on every real-corpus probe."
-            if len(real) and bool((real["delta"] > 0).all())
+            if direction_holds(summary[summary["family"] == family])
             else "The V+T direction does not hold on every real-corpus probe."
         )
-        above = null[null["ci_low"] > 0]
+        above = null_gains(null)
         if len(above):
             verdict += f" UNEXPECTED: a null-corpus CI lies above 0 ({', '.join(above['probe'])})."
         rows.append(

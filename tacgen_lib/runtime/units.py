@@ -169,6 +169,20 @@ def _pretraining(c: Config, spec: Mapping[str, Any]) -> tuple[str, int]:
     return objective, 0
 
 
+def _pretraining_units(c: Config, spec: Mapping[str, Any]) -> tuple[str, float]:
+    """(how a backbone is made, epoch × train frame of its pretraining)."""
+    objective, epochs = _pretraining(c, spec)
+    return objective, epochs * _train_rows(c, c["features"]["pretrain"]["corpus"])
+
+
+def _pretraining_flops(c: Config, spec: Mapping[str, Any]) -> float:
+    """FLOPs of a backbone's pretraining: its frame-epochs in forwards of its arch (DINO's or
+    MAE's count per frame and epoch)."""
+    objective, units = _pretraining_units(c, spec)
+    forwards = _MAE_FORWARDS if objective == "mae" else _DINO_FORWARDS
+    return units * forwards * _arch_flops(spec["arch"], c["features"]["image_size"])
+
+
 def _family_spec(c: Config, w: Wildcards) -> Mapping[str, Any]:
     return c["backbones"]["families"][w["family"]][w["modality"]]
 
@@ -178,22 +192,22 @@ def _family_corpora(c: Config) -> list[str]:
     return sorted({fams[p]["corpus"] for p in c["backbones"]["probes"]})
 
 
+def _family_frames(c: Config) -> float:
+    """Frames a family backbone extracts: every frame of the probe corpora."""
+    return sum(_n(c, k) for k in _family_corpora(c))
+
+
 def _family_backbone(c: Config, w: Wildcards) -> tuple[str, float]:
     """One family backbone: its pretraining (epoch × train frame, MAE or DINO; none for the
     random init) and the frames of the probe corpora it extracts. Class: the objective."""
-    spec = _family_spec(c, w)
-    objective, epochs = _pretraining(c, spec)
-    frames = sum(_n(c, k) for k in _family_corpora(c))
-    return objective, epochs * _train_rows(c, c["features"]["pretrain"]["corpus"]) + frames
+    objective, units = _pretraining_units(c, _family_spec(c, w))
+    return objective, units + _family_frames(c)
 
 
 def _family_backbone_flops(c: Config, w: Wildcards) -> float:
     spec = _family_spec(c, w)
-    per_frame = _arch_flops(spec["arch"], c["features"]["image_size"])
-    _objective, units = _family_backbone(c, w)
-    frames = sum(_n(c, k) for k in _family_corpora(c))
-    forwards = _MAE_FORWARDS if spec.get("objective") == "mae" else _DINO_FORWARDS
-    return per_frame * (frames + (units - frames) * forwards)
+    extraction = _family_frames(c) * _arch_flops(spec["arch"], c["features"]["image_size"])
+    return _pretraining_flops(c, spec) + extraction
 
 
 #: DINO self-distillation per frame and epoch, in ViT forwards: 2 global crops through the
@@ -326,21 +340,8 @@ UNITS: dict[str, UnitRule] = {
     # features
     "pretrain_backbone": UnitRule(
         "epoch × train frame (+ ViT FLOPs)",
-        lambda c, w: (
-            "",
-            _pretraining(c, c["features"]["backbones"][w["modality"]])[1]
-            * _train_rows(c, c["features"]["pretrain"]["corpus"]),
-        ),
-        lambda c, w: (
-            _pretraining(c, c["features"]["backbones"][w["modality"]])[1]
-            * _train_rows(c, c["features"]["pretrain"]["corpus"])
-            * (
-                _MAE_FORWARDS
-                if _pretraining(c, c["features"]["backbones"][w["modality"]])[0] == "mae"
-                else _DINO_FORWARDS
-            )
-            * _backbone(c, w["modality"])
-        ),
+        lambda c, w: ("", _pretraining_units(c, c["features"]["backbones"][w["modality"]])[1]),
+        lambda c, w: _pretraining_flops(c, c["features"]["backbones"][w["modality"]]),
     ),
     "extract_vision_features": UnitRule(
         "frame (+ ViT FLOPs)",

@@ -1,5 +1,5 @@
 """Frozen backbone features and pixel features for every frame of an edge (rules
-extract_*_features and family_features)."""
+extract_*_features)."""
 
 import torch
 

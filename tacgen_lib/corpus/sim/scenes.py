@@ -26,6 +26,8 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from tacgen_lib.corpus.sim import tactile
+
 __all__ = [
     "EFFECTS",
     "SHAPES",
@@ -114,10 +116,10 @@ class Scene:
     object: dict[str, float] = field(default_factory=dict)
     # the sensor's illumination (degrees; red, green, blue) and marker grid (pixels), declared
     # under `gel`; defaults: the DIGIT-like sensor
-    light_azimuths: tuple[float, float, float] = (90.0, 210.0, 330.0)
-    light_elevation: float = 35.0
-    marker_spacing: int = 12
-    marker_radius: float = 1.6
+    light_azimuths: tuple[float, float, float] = tactile.DIGIT_LIGHT_AZIMUTHS
+    light_elevation: float = tactile.DIGIT_LIGHT_ELEVATION
+    marker_spacing: int = tactile.MARKER_SPACING
+    marker_radius: float = tactile.MARKER_RADIUS
 
     def has(self, effect: str) -> bool:
         """True when the scene declares `effect` (which must be in the vocabulary)."""
@@ -175,16 +177,17 @@ def validate_scene(name: str, decl: Mapping[str, Any]) -> Scene:
     gel_size = tuple(float(v) for v in gel.get("size", [0.045, 0.06]))
     if len(gel_size) != 2 or min(gel_size) <= 0:
         raise ValueError(f"scene {name!r}: key 'gel.size' must be [height, width] in metres > 0")
-    lights = tuple(float(v) for v in gel.get("light_azimuths", [90.0, 210.0, 330.0]))
+    lights = tuple(float(v) for v in gel.get("light_azimuths", Scene.light_azimuths))
     if len(lights) != 3:
         raise ValueError(
             f"scene {name!r}: key 'gel.light_azimuths' must give 3 azimuths in degrees (the "
             f"red, green and blue lights), got {len(lights)}"
         )
-    elevation = float(gel.get("light_elevation", 35.0))
+    elevation = float(gel.get("light_elevation", Scene.light_elevation))
     if not 0.0 < elevation < 90.0:
         raise ValueError(f"scene {name!r}: key 'gel.light_elevation': {elevation} not in (0, 90)")
-    spacing, radius = int(gel.get("marker_spacing", 12)), float(gel.get("marker_radius", 1.6))
+    spacing = int(gel.get("marker_spacing", Scene.marker_spacing))
+    radius = float(gel.get("marker_radius", Scene.marker_radius))
     if spacing < 2 or not 0.0 < radius < spacing:
         raise ValueError(
             f"scene {name!r}: keys 'gel.marker_spacing' ({spacing} px, at least 2) and "

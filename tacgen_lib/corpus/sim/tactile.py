@@ -39,9 +39,15 @@ __all__ = [
     "tactile_shading",
 ]
 
-# the DIGIT-like sensor's lights (GelOptics' defaults; a scene may declare others)
-LIGHT_ELEVATION = np.deg2rad(35.0)
-LIGHT_AZIMUTHS = np.deg2rad([90.0, 210.0, 330.0])  # red, green, blue lights
+#: the DIGIT-like sensor's lights in degrees (GelOptics' and a scene's defaults; a scene may
+#: declare others): the azimuth of the light shading the red, green and blue channel, and
+#: their elevation; and its marker grid in pixels
+DIGIT_LIGHT_AZIMUTHS = (90.0, 210.0, 330.0)
+DIGIT_LIGHT_ELEVATION = 35.0
+MARKER_SPACING = 12
+MARKER_RADIUS = 1.6
+LIGHT_ELEVATION = np.deg2rad(DIGIT_LIGHT_ELEVATION)
+LIGHT_AZIMUTHS = np.deg2rad(DIGIT_LIGHT_AZIMUTHS)  # red, green, blue lights
 SLOPE_GAIN = 160.0  # DN per unit of (n . l - sin(elevation))
 DEPTH_GAIN = 28.0  # DN at full gel compression
 NOISE_SIGMA = 2.0  # DN, per pixel and channel
@@ -62,8 +68,8 @@ class GelOptics:
     camera_distance: float
     saturation: float
     smoothing: float
-    light_azimuths: tuple[float, float, float] = (90.0, 210.0, 330.0)
-    light_elevation: float = 35.0
+    light_azimuths: tuple[float, float, float] = DIGIT_LIGHT_AZIMUTHS
+    light_elevation: float = DIGIT_LIGHT_ELEVATION
 
     @property
     def pixel_size(self) -> float:
@@ -198,7 +204,9 @@ def gel_compression(height: np.ndarray, saturation: float) -> np.ndarray:
     return saturation * np.tanh(np.asarray(height, dtype=np.float64) / saturation)
 
 
-def marker_pattern(image_size: tuple[int, int], spacing: int = 12, radius: float = 1.6):
+def marker_pattern(
+    image_size: tuple[int, int], spacing: int = MARKER_SPACING, radius: float = MARKER_RADIUS
+):
     """Marker darkness map (float32 H x W in [0, 1]): a square grid of Gaussian dots."""
     h, w = image_size
     y, x = np.mgrid[0:h, 0:w].astype(np.float32)
