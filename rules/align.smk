@@ -43,7 +43,7 @@ rule train_heads:
         f"results/benchmarks/train_heads/{CELL_PATTERN}.tsv"
     wildcard_constraints:
         **CELL_CONSTRAINTS,
-        corpus=one_of(ALIGN_CORPORA),
+        corpus=one_of(HEADS_CORPORA),
         variant=one_of(ALIGN["variants"]),
     conda:
         "../envs/align.yaml"
@@ -73,7 +73,7 @@ rule project_aligned:
         f"results/benchmarks/project_aligned/{CELL_PATTERN}/{{target}}.tsv"
     wildcard_constraints:
         **CELL_CONSTRAINTS,
-        corpus=one_of(ALIGN_CORPORA),
+        corpus=one_of(HEADS_CORPORA),
         variant=one_of(ALIGN["variants"]),
         target=one_of(sorted(CORPORA)),
     conda:

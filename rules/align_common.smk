@@ -7,6 +7,13 @@ from tacgen_lib.align.cells import CELL_CONSTRAINTS, CELL_PATTERN, cell_name, ta
 
 ALIGN = config["align"]
 ALIGN_CORPORA = ALIGN["corpora"]
+#: corpora whose heads may be trained: the grid's, and the transfer corpus (its heads, at the
+#: probes' heads cell, are the transfer stage's upper reference)
+HEADS_CORPORA = ALIGN_CORPORA + (
+    [TRANSFER_CORPUS]
+    if TRANSFER_CORPUS and TRANSFER_CORPUS not in ALIGN_CORPORA
+    else []
+)
 ALIGN_REPORT = "results/report/align"
 ALIGN_CELL = f"results/align/{CELL_PATTERN}"
 
@@ -30,7 +37,7 @@ def align_grid(path):
 
 def aligned_edge(heads_from, target, variant, seed, tau, n_train):
     """Aligned projections of corpus `target` by the heads trained on `heads_from` (one cell)."""
-    if heads_from not in ALIGN_CORPORA:
+    if heads_from not in HEADS_CORPORA:
         raise ValueError(
             f"aligned_edge: heads_from={heads_from!r} is not in align.corpora {ALIGN_CORPORA}; "
             "add it there so its heads are trained"

@@ -1,5 +1,16 @@
 """Corpus stage: simulate (or ingest) corpora, fuse their manifest, fix the splits."""
 
+for _c, _shares in (config["splits"].get("by_object") or {}).items():
+    if _c not in CORPORA:
+        raise ValueError(
+            f"config splits.by_object: {_c!r} is not a corpus (have {sorted(CORPORA)})"
+        )
+    if CORPORA[_c].get("contacts", 1) < 2:
+        raise ValueError(
+            f"config splits.by_object: corpus {_c!r} has one contact per object "
+            f"(corpora.{_c}.contacts); split it by fractions instead"
+        )
+
 
 localrules:
     fuse_manifest,
@@ -129,5 +140,6 @@ rule make_splits:
         runtime=5,
     params:
         splits=config["splits"],
+        mass_classes=TRANSFER_CLASSES,
     script:
         "../workflow/scripts/make_splits.py"

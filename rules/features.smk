@@ -13,12 +13,14 @@ _REGIME_ONLY = (
     - {f["corpus"] for f in config["probes"]["families"].values()}
     - {PRETRAIN["corpus"], FEAT["pretrained_vs_random"]["corpus"]}
 )
+# and the transfer corpus only the heads' variant (config probes.heads)
+_ONE_VARIANT = {c: config["generate"]["variant"] for c in _REGIME_ONLY}
+if TRANSFER_CORPUS:
+    _ONE_VARIANT[TRANSFER_CORPUS] = config["probes"]["heads"]["variant"]
 for _corpus in sorted(CORPORA):
     TARGETS.append(feature_edge(_corpus, "vision"))
     EDGES.append(feature_edge(_corpus, "vision"))
-    for _variant in (
-        [config["generate"]["variant"]] if _corpus in _REGIME_ONLY else VARIANTS
-    ):
+    for _variant in [_ONE_VARIANT[_corpus]] if _corpus in _ONE_VARIANT else VARIANTS:
         TARGETS.append(feature_edge(_corpus, "tactile", _variant))
         EDGES.append(feature_edge(_corpus, "tactile", _variant))
 TARGETS += ["results/features/pretrained_vs_random.html"]

@@ -127,6 +127,7 @@ rule findings:
         unpack(findings_policy_inputs),
         unpack(findings_regime_inputs),
         unpack(findings_backbone_inputs),
+        unpack(findings_transfer_inputs),
         probes="results/probes/summary.parquet",
         generation="results/generate/evaluation.parquet",
         code=imports_of("findings"),
@@ -152,6 +153,7 @@ rule findings:
         generate_ref=generate_ref(),
         policy=POLICY_ON,
         regime=bool(REGIME_CORPORA),
+        transfer=bool(TRANSFER_CORPUS),
         backbones=(
             {"main": MAIN_FAMILIES, "order": list(FAMILIES.run)}
             if FAMILY_FINDINGS

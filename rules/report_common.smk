@@ -37,6 +37,11 @@ def findings_backbone_inputs(wildcards):
     return {"backbones": "results/backbones/summary.parquet"} if FAMILY_FINDINGS else {}
 
 
+def findings_transfer_inputs(wildcards):
+    """The transfer stage's summary the findings page reads, where the stage runs."""
+    return {"transfer": "results/transfer/summary.parquet"} if TRANSFER_CORPUS else {}
+
+
 def findings_policy_inputs(wildcards):
     """The policy summaries the findings page reads, where the policy stage runs."""
     if not POLICY_ON:

@@ -2,7 +2,8 @@
 
 Snakemake's viewer sorts categories as text, so each carries its position as a two-digit
 prefix (`category`): the reader meets the findings first, then corpus → preprocessing →
-features → alignment → probes → robustness → backbone families → generation → where generated touch helps → touch to language → policy → cost → provenance. Kept
+features → alignment → probes → robustness → backbone families → transfer to a second
+sensor → generation → where generated touch helps → touch to language → policy → cost → provenance. Kept
 apart from `tacgen_lib.report` (which loads matplotlib) because the DAG reads it at parse time.
 """
 
@@ -19,6 +20,7 @@ PAGES = (
     "Probes",
     "Robustness",
     "Backbone families",
+    "Transfer to a second sensor",
     "Generation",
     "Where generated touch helps",
     "Touch to language",

@@ -399,6 +399,8 @@ def test_real_corpus_path_runs_on_fixtures(tmp_path):
         "hct": {"kind": "hct", "root": str(data)},
     }
     cfg["splits"].pop("by_scale")
+    cfg["splits"].pop("by_object")  # the transfer corpus is simulated: no transfer stage here
+    cfg["transfer"]["corpus"] = None
     cfg["features"]["pretrain"]["corpus"] = "ssvtp"
     cfg["features"]["pretrained_vs_random"]["corpus"] = "ssvtp"
     cfg["align"]["corpora"] = ["ssvtp"]

@@ -8,6 +8,10 @@ edge (`sample_id`, `corpus`, `split`). Two policies:
   corpus shape | hardness | density). Strata too small to stratify are pooled into "rare".
 - `by_scale`: the appearance-controlled corpus is split by object scale (paper: train on
   s ∈ {0.15, 0.20}, test on s = 0.25); validation rows are a stratified slice of the train scales.
+- `by_object`: a corpus of repeated contacts (several rows per object, `appearance_id` the
+  object) is split by object: its objects, stratified on their mass-quantile class, are dealt
+  into train/val/test, and every row follows its object, so no object is seen in training
+  and tested.
 
 `assert_trainable` is the guard every training rule calls: it refuses any id whose split is not
 allowed for training (held-out `test` rows always; `val` unless the caller allows it).
@@ -91,6 +95,8 @@ def make_splits(
     seed: int = 42,
     fractions: Mapping[str, float] | None = None,
     by_scale: Mapping[str, Mapping[str, Sequence[float]]] | None = None,
+    by_object: Mapping[str, Mapping[str, float]] | None = None,
+    mass_classes: int = 3,
 ) -> pd.DataFrame:
     """The split edge for a fused manifest.
 
@@ -99,6 +105,9 @@ def make_splits(
     fractions: {"train", "val", "test"} shares for stratified corpora (default 0.7/0.1/0.2).
     by_scale: corpus -> {"train": [scales], "test": [scales]}; for those corpora rows are split
         by scale, and `fractions["val"]` of the train-scale rows become validation rows.
+    by_object: corpus -> {"train", "val", "test"} shares of its objects (rows grouped by
+        `appearance_id`, which the manifest must then hold with `mass`), stratified on the
+        objects' `mass_classes` mass-quantile classes; each class needs at least 2 objects.
     Returns `sample_id`, `corpus`, `split`, sorted by `sample_id`. Deterministic in `seed`.
     """
     fractions = dict(fractions or {"train": 0.7, "val": 0.1, "test": 0.2})
@@ -106,6 +115,7 @@ def make_splits(
     if any(v < 0 for v in fractions.values()) or not np.isclose(total, 1.0):
         raise ValueError(f"split fractions must be non-negative and sum to 1, got {fractions}")
     by_scale = dict(by_scale or {})
+    by_object = dict(by_object or {})
     for col in ("sample_id", "corpus", "stratum"):
         if col not in manifest.columns:
             raise ValueError(f"make_splits: the manifest has no column {col!r}")
@@ -133,12 +143,44 @@ def make_splits(
                 ids[train_s], strata[train_s], {"val": fractions.get("val", 0.0), "test": 0.0}, seed
             )
             split[train_s] = inner
+        elif corpus in by_object:
+            split = _object_split(rows, corpus, by_object[corpus], mass_classes, seed)
         else:
             split = _stratified_split(ids, strata, fractions, seed)
         parts.append(pd.DataFrame({"sample_id": ids, "corpus": corpus, "split": split}))
     if not parts:
         raise ValueError("make_splits: the manifest is empty")
     return pd.concat(parts, ignore_index=True).sort_values("sample_id", ignore_index=True)
+
+
+def _object_split(
+    rows: pd.DataFrame,
+    corpus: str,
+    fractions: Mapping[str, float],
+    n_classes: int,
+    seed: int,
+) -> np.ndarray:
+    """The split of each row of one corpus split by object (`make_splits`' by_object)."""
+    from tacgen_lib.corpus.objects import mass_quantile_classes, object_masses
+
+    where = f"make_splits: corpus {corpus!r} (split by object)"
+    total = sum(float(v) for v in fractions.values())
+    if not np.isclose(total, 1.0):
+        raise ValueError(f"{where}: object shares must sum to 1, got {dict(fractions)}")
+    masses = object_masses(rows, where=where)
+    classes = mass_quantile_classes(masses.to_numpy(), n_classes, where=where)
+    counts = np.bincount(classes, minlength=n_classes)
+    if counts.min() < 2:
+        raise ValueError(
+            f"{where}: mass class {int(np.argmin(counts))} of {n_classes} has "
+            f"{int(counts.min())} object(s) of {len(masses)}; an object-level split needs at "
+            "least 2 objects per class (one to train on, one to test), so the corpus needs "
+            "more objects (n / contacts)"
+        )
+    objects = masses.index.to_numpy()
+    labels = np.array([f"class{c}" for c in classes], dtype=object)
+    object_split = _stratified_split(objects, labels, fractions, seed)
+    return pd.Series(object_split, index=objects).reindex(rows["appearance_id"]).to_numpy()
 
 
 def ids_in_split(

@@ -318,3 +318,57 @@ def backbone_findings(
             }
         )
     return pd.DataFrame(rows, columns=FINDINGS_COLUMNS)
+
+
+def transfer_findings(summary: pd.DataFrame) -> pd.DataFrame:
+    """One row for the transfer to a second sensor (`tacgen_lib.probes.transfer`): the seeds'
+    mean Δ balanced accuracy with the first sensor's heads and with retrained heads, the null
+    corpus's heads and shuffled touch as the controls, and the verdict on the transferred
+    heads' Δ, whether it beats the shuffled control and whether it beats the floor."""
+    means = summary[summary["probe_seed"] == "mean"].set_index("heads")
+    if "source" not in means.index:
+        return pd.DataFrame(columns=FINDINGS_COLUMNS)
+
+    def delta(view: str, col: str = "delta") -> str:
+        if view not in means.index:
+            return "not run"
+        x = means.loc[view]
+        text = fmt.with_ci(x[col], x[f"{col}_ci_low"], x[f"{col}_ci_high"], sign=True)
+        return (
+            f"{text} ({int(x['positive_seeds'])}/{int(x['n_seeds'])} seeds > 0)"
+            if (col == "delta")
+            else text
+        )
+
+    src = means.loc["source"]
+    verdict = claims.delta_verdict(src["delta"], src["delta_ci_low"], src["delta_ci_high"])
+    if src["delta_ci_low"] > src["delta_shuffled_ci_high"]:
+        verdict += " It lies above the shuffled-touch control."
+    else:
+        verdict += " It does not separate from the shuffled-touch control."
+    if "floor" in means.index:
+        floor = means.loc["floor"]
+        if src["delta_ci_low"] > floor["delta"]:
+            verdict += " The transferred heads beat the null corpus's heads."
+        else:
+            verdict += (
+                " The null corpus's heads do as well (Δ "
+                f"{fmt.signed(floor['delta'])}): what touch adds here is not what alignment learnt."
+            )
+    return pd.DataFrame(
+        [
+            {
+                "evidence": "transfer to a second sensor",
+                "question": "do heads trained on one sensor make touch add to vision on unseen "
+                f"objects of another? (mass tertiles, balanced accuracy, {int(src['n_test_objects'])} "
+                f"test objects, mean of {int(src['n_seeds'])} probe seeds)",
+                "result": f"heads from {src['heads_from']}: V+T − V {delta('source')}; heads "
+                f"retrained on the second sensor (upper reference): {delta('target')}",
+                "control": f"null corpus's heads (floor): {delta('floor')}; shuffled touch with "
+                f"the transferred heads: {delta('source', 'delta_shuffled')}",
+                "verdict": verdict,
+                "page": category("Transfer to a second sensor"),
+            }
+        ],
+        columns=FINDINGS_COLUMNS,
+    )

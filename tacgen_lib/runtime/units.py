@@ -462,6 +462,14 @@ UNITS: dict[str, UnitRule] = {
     "aggregate_backbones": UnitRule(
         "family run", lambda c, w: ("", float(len(c["backbones"]["run"])))
     ),
+    # transfer to a second sensor: every probe seed fits V, V+T and shuffled V+T per heads view
+    "transfer_evaluate": UnitRule(
+        "contact × probe seed × heads view",
+        lambda c, w: (
+            "",
+            _n(c, c["transfer"]["corpus"]) * len(c["transfer"]["probe_seeds"]) * 4.0,
+        ),
+    ),
     # language
     "language_evidence": UnitRule("sample of the corpus", lambda c, w: ("", _n(c, w["corpus"]))),
     "aggregate_language": UnitRule(

@@ -149,3 +149,52 @@ def test_bad_corpus_configs_are_refused():
         corpus.simulate_shard(PAIRED, SCENES, 2, 2)
     with pytest.raises(ValueError, match="grasp_lift"):
         corpus.simulate_shard(dict(PAIRED, scene="grasp_lift"), SCENES, 0, 1)
+
+
+def test_repeated_contacts_share_their_object_and_nothing_else():
+    """contacts = 3: rows 3o..3o+2 are one object (shape, size, physics, appearance, the
+    appearance_id o), each with its own presses, sensor and pixel noise; contacts = 1 draws
+    exactly the single-contact corpus."""
+    scene = corpus.validate_scene("paired_press", SCENES["paired_press"])
+    cfg = corpus.CorpusSettings.from_config(dict(PAIRED, n=9, contacts=3))
+    specs = [corpus.sample_spec(cfg, scene, i) for i in range(9)]
+    for o in range(3):
+        group = specs[3 * o : 3 * o + 3]
+        assert {s.appearance_id for s in group} == {o}
+        assert len({(s.obj.shape, s.obj.size, s.obj.density, s.obj.stiffness) for s in group}) == 1
+        assert (
+            len({(s.obj.friction, s.obj.yaw, s.colour, s.texture, s.hardness) for s in group}) == 1
+        )
+        assert len({s.pixel_seed for s in group}) == 3
+        assert not np.array_equal(group[0].jitter, group[1].jitter)
+    assert len({(s.obj.shape, s.obj.size) for s in specs[::3]}) == 3  # three objects
+    single = corpus.CorpusSettings.from_config(PAIRED)
+    one = corpus.CorpusSettings.from_config(dict(PAIRED, contacts=1))
+    for i in range(4):
+        a, b = corpus.sample_spec(single, scene, i), corpus.sample_spec(one, scene, i)
+        assert (a.obj, a.appearance_id, a.sensor, a.pixel_seed) == (
+            b.obj,
+            b.appearance_id,
+            b.sensor,
+            b.pixel_seed,
+        )
+        assert a.appearance_id == i
+
+
+def test_repeated_contacts_frames_and_labels(paired):
+    frame = corpus.simulate_shard(dict(PAIRED, n=6, contacts=2), SCENES, 0, 1)
+    assert frame["appearance_id"].tolist() == [0, 0, 1, 1, 2, 2]
+    per_object = frame.groupby("appearance_id")
+    assert (per_object["mass"].nunique() == 1).all()
+    assert (per_object["stratum"].nunique() == 1).all()
+    # the first contact of object 0 is sample 0 of the single-contact corpus, frames and all
+    pd.testing.assert_series_equal(frame.iloc[0], paired.iloc[0], check_names=False)
+
+
+def test_bad_contacts_are_refused():
+    with pytest.raises(ValueError, match=r"corpus 'p': n=10 is not a whole number of objects"):
+        corpus.CorpusSettings.from_config(dict(PAIRED, contacts=3))
+    with pytest.raises(ValueError, match=r"corpus 'c': key 'contacts' belongs to design 'paired'"):
+        corpus.CorpusSettings.from_config(dict(CONTROLLED, contacts=2))
+    with pytest.raises(ValueError, match=r"contacts' must be >= 1"):
+        corpus.CorpusSettings.from_config(dict(PAIRED, contacts=0))

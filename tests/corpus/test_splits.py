@@ -134,3 +134,55 @@ def test_fuse_manifest_unions_columns_and_refuses_duplicate_ids():
         fuse_manifest([a, a.assign(corpus="b")])
     with pytest.raises(ValueError, match="corpus 'b': samples edge has no column 'stratum'"):
         fuse_manifest([a, b.drop(columns="stratum")])
+
+
+def _objects_manifest(n_objects: int, contacts: int, seed: int = 5) -> pd.DataFrame:
+    rng = np.random.default_rng(seed)
+    mass = rng.lognormal(-3.0, 1.0, n_objects)
+    obj = np.repeat(np.arange(n_objects), contacts)
+    return pd.DataFrame(
+        {
+            "sample_id": [f"t-{i:05d}" for i in range(n_objects * contacts)],
+            "corpus": "t",
+            "stratum": "cube|hard|500",
+            "scale": np.nan,
+            "appearance_id": obj,
+            "mass": mass[obj],
+        }
+    )
+
+
+def test_split_by_object_keeps_every_object_in_one_split_and_every_class_in_test():
+    from tacgen_lib.corpus.objects import mass_quantile_classes
+
+    m = _objects_manifest(36, 6)
+    shares = {"train": 0.5, "val": 0.1, "test": 0.4}
+    s = make_splits(pd.concat([m, _manifest()]), seed=42, by_object={"t": shares})
+    t = s[s["corpus"] == "t"].merge(m, on=["sample_id", "corpus"])
+    per_object = t.groupby("appearance_id")["split"].agg(set)
+    assert (per_object.map(len) == 1).all()
+    counts = per_object.map(lambda x: next(iter(x))).value_counts().to_dict()
+    assert counts == {"train": 18, "val": 4, "test": 14}
+    masses = m.groupby("appearance_id")["mass"].first()
+    classes = pd.Series(mass_quantile_classes(masses.to_numpy(), 3, where="t"), masses.index)
+    test_objects = per_object.index[per_object.map(lambda x: "test" in x)]
+    assert set(classes[test_objects]) == {0, 1, 2}
+    # the other corpus's split is what it is without the by-object corpus
+    alone = make_splits(_manifest(), seed=42)
+    pd.testing.assert_frame_equal(s[s["corpus"] == "a"].reset_index(drop=True), alone)
+
+
+def test_split_by_object_with_one_object_per_mass_class_is_refused():
+    m = _objects_manifest(3, 4)
+    shares = {"train": 0.5, "val": 0.1, "test": 0.4}
+    with pytest.raises(
+        ValueError, match=r"corpus 't' \(split by object\): mass class \d of 3 has 1"
+    ):
+        make_splits(m, by_object={"t": shares})
+
+
+def test_split_by_object_refuses_an_object_of_two_masses():
+    m = _objects_manifest(12, 2)
+    m.loc[1, "mass"] += 1.0
+    with pytest.raises(ValueError, match=r"rows of object 0 \(appearance_id\) have different"):
+        make_splits(m, by_object={"t": {"train": 0.5, "val": 0.1, "test": 0.4}})

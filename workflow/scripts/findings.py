@@ -32,6 +32,8 @@ if snakemake.params.backbones:
             snakemake.params.backbones["order"],
         )
     )
+if snakemake.params.transfer:
+    parts.append(findings.transfer_findings(edges.read(snakemake.input.transfer).frame))
 table = pd.concat(parts, ignore_index=True)
 write_table(
     table,
@@ -43,7 +45,8 @@ write_table(
         "t-interval over generator seeds for generation. A verdict calls a difference real "
         "only when its interval excludes 0; each sentence is generated from the numbers beside "
         "it (tacgen_lib.report.claims). The page column names the report page with the detail. "
-        "Regime rows read the first seed's fixed-test bootstrap CIs."
+        "Regime rows read the first seed's fixed-test bootstrap CIs; the transfer row's "
+        "intervals resample test objects."
     ],
 )
 for r in table.itertuples():

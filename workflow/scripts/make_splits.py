@@ -5,9 +5,18 @@ from tacgen_lib.io import edges, log
 
 logger = log.for_rule(snakemake)
 cfg = snakemake.params.splits
-manifest = edges.read(snakemake.input.manifest, columns=["corpus", "stratum", "scale"]).frame
+# corpora split by object group their rows by appearance_id and stratify on mass
+columns = ["corpus", "stratum", "scale"] + (
+    ["appearance_id", "mass"] if cfg.get("by_object") else []
+)
+manifest = edges.read(snakemake.input.manifest, columns=columns).frame
 splits = make_splits(
-    manifest, seed=cfg["seed"], fractions=cfg["fractions"], by_scale=cfg.get("by_scale")
+    manifest,
+    seed=cfg["seed"],
+    fractions=cfg["fractions"],
+    by_scale=cfg.get("by_scale"),
+    by_object=cfg.get("by_object"),
+    mass_classes=snakemake.params.mass_classes,
 )
 edges.write(snakemake.output[0], splits, producer=snakemake.rule)
 for (corpus, split), n in splits.groupby(["corpus", "split"]).size().items():

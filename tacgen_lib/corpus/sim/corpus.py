@@ -9,7 +9,8 @@ A corpus config (config/config.yaml `corpora.<name>`, plus `name`) has the keys
     size_range [min, max] (paired: object size in m, default [0.02, 0.04]),
     scales (controlled: default [0.15, 0.20, 0.25]), size_per_scale (controlled: metres of
     object size per unit of scale, default 0.15, so scale 0.20 -> 3 cm),
-    densities (default [500, 2000, 5000] kg/m^3), png_compression (default 1);
+    densities (default [500, 2000, 5000] kg/m^3), png_compression (default 1),
+    contacts (paired: samples per object, default 1);
     other keys (e.g. `shards`, used by the workflow) are ignored.
 
 Everything about sample i is drawn from `scene_seed(seed, i)` only, in five independent
@@ -29,6 +30,12 @@ colours occur in several classes, so neither decodes the class alone, and the co
 jittered per object (lighting, dye). rho = 0 reproduces the independence of the paired design;
 rho = 1 makes appearance a (nonlinear) function of material. The physics of sample i does not
 depend on rho: a rho grid changes only what the objects look like.
+
+Repeated contacts (YCB-Sight-like transfer corpora): with ``contacts`` = c > 1 (paired design),
+samples i = o * c + k for k < c are c contacts with object o. The object's geometry, physics
+and appearance come from object o's scene seed, each contact's presses, sensor and pixel noise
+from its own sample seed; ``appearance_id`` is the object index o, which object-level splits
+group on. With c = 1 every draw is the one above (the object index is the sample index).
 
 Labels: mass = density x MuJoCo geom volume; force_normal = MuJoCo contact force in the
 nominal press; force_p05/p50/p95 = percentiles over `presses` repeated presses with seeded
@@ -213,7 +220,8 @@ class CorpusSettings:
     and a material class that sets density, stiffness and friction and, with probability
     ``rho``, the appearance class (module docstring). ``null``: tactile frames from an unrelated
     sample's physics. ``presses``: repeated noisy presses per sample (the force bands);
-    ``sensors``: tactile sensors (backgrounds); ``image_size`` / ``tactile_size``: RGB and
+    ``sensors``: tactile sensors (backgrounds); ``contacts``: samples per object (paired: the
+    object's draws are shared, each contact has its own presses, sensor and noise); ``image_size`` / ``tactile_size``: RGB and
     tactile frame sizes (H, W); ``shapes``: a subset of the scene's shapes (None: all).
     ``kind`` and ``shards`` are read by the rules.
     """
@@ -237,6 +245,7 @@ class CorpusSettings:
     densities: Sequence[float] = (500.0, 2000.0, 5000.0)
     png_compression: int = 1
     rho: float = 0.0
+    contacts: int = 1
 
     def __post_init__(self) -> None:
         if self.design not in ("paired", "controlled", "natural"):
@@ -248,6 +257,18 @@ class CorpusSettings:
         if self.rho and self.design != "natural":
             raise ValueError(
                 f"corpus {self.name!r}: key 'rho' belongs to design 'natural', not {self.design!r}"
+            )
+        if int(self.contacts) < 1:
+            raise ValueError(f"corpus {self.name!r}: key 'contacts' must be >= 1")
+        if int(self.contacts) > 1 and self.design != "paired":
+            raise ValueError(
+                f"corpus {self.name!r}: key 'contacts' belongs to design 'paired', "
+                f"not {self.design!r}"
+            )
+        if int(self.n) % int(self.contacts):
+            raise ValueError(
+                f"corpus {self.name!r}: n={self.n} is not a whole number of objects of "
+                f"{self.contacts} contacts each"
             )
         if int(self.n) < 1 or int(self.sensors) < 1 or int(self.presses) < 1:
             raise ValueError(f"corpus {self.name!r}: n, sensors and presses must be >= 1")
@@ -295,6 +316,12 @@ def sample_spec(cfg: CorpusSettings, scene: Scene, i: int) -> SampleSpec:
     geo, phys, app, jit, pix = (
         np.random.default_rng(s) for s in np.random.SeedSequence(ss).spawn(5)
     )
+    obj_index = i // int(cfg.contacts)
+    if obj_index != i:  # a repeated contact: the object's draws are its object's
+        geo, phys, app = (
+            np.random.default_rng(s)
+            for s in np.random.SeedSequence(scene_seed(seed, obj_index)).spawn(5)[:3]
+        )
     shapes = _shapes(cfg, scene)
     densities = [float(d) for d in cfg.densities]
     if cfg.design == "natural":
@@ -305,7 +332,7 @@ def sample_spec(cfg: CorpusSettings, scene: Scene, i: int) -> SampleSpec:
         size = float(geo.uniform(lo, hi))
         scale = size
         density = densities[int(phys.integers(len(densities)))]
-        appearance_id = i
+        appearance_id = obj_index
     else:
         scales = [float(s) for s in cfg.scales]
         cell, d_idx = divmod(i, len(densities))  # densities vary fastest within a group

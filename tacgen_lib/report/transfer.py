@@ -1,0 +1,163 @@
+"""The report page *Transfer to a second sensor* (`tacgen_lib.probes.transfer`): balanced
+accuracy of V and V+T on the transfer corpus's test objects for every heads view, Δ with its
+object-bootstrap CI per probe seed and over the seeds, the shuffled-touch control beside each,
+and one sentence per view from the numbers."""
+
+from __future__ import annotations
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pandas as pd
+
+from tacgen_lib.probes.transfer import HEADS_VIEWS
+from tacgen_lib.report import claims
+from tacgen_lib.report import format as fmt
+
+__all__ = ["VIEW_LABELS", "transfer_figure", "transfer_sentences", "transfer_table"]
+
+#: what each heads view is, for a reader
+VIEW_LABELS = {
+    "none": "no heads (frozen features)",
+    "source": "heads from the first sensor's corpus (transfer)",
+    "target": "heads retrained on the second sensor (upper reference)",
+    "floor": "heads from the null corpus (floor)",
+}
+#: the same, short: table cells and axis ticks
+VIEW_SHORT = {
+    "none": "no heads",
+    "source": "transfer",
+    "target": "retrained (upper)",
+    "floor": "null heads (floor)",
+}
+
+
+def _label(row) -> str:
+    base = VIEW_LABELS.get(row.heads, row.heads)
+    return f"{base}: {row.heads_from}" if row.heads_from else base
+
+
+def _heads_from(rows: pd.DataFrame, view: str) -> str:
+    names = rows.loc[rows["heads"] == view, "heads_from"]
+    return f"({names.iloc[0]})" if len(names) and names.iloc[0] else "(frozen features)"
+
+
+def _ordered(rows: pd.DataFrame) -> pd.DataFrame:
+    rank = {v: i for i, v in enumerate(HEADS_VIEWS)}
+    seed_rank = rows["probe_seed"].map(lambda s: 1e9 if s == "mean" else float(s))
+    return (
+        rows.assign(_v=rows["heads"].map(rank), _s=seed_rank)
+        .sort_values(["_v", "_s"], ignore_index=True)
+        .drop(columns=["_v", "_s"])
+    )
+
+
+def transfer_table(rows: pd.DataFrame) -> pd.DataFrame:
+    """One row per heads view and probe seed (the seeds' mean last), with the shuffled-touch
+    control's Δ beside the real one."""
+    r = _ordered(rows)
+    return pd.DataFrame(
+        {
+            "heads": [VIEW_SHORT.get(x, x) for x in r["heads"]],
+            "trained on": [x or "(frozen features)" for x in r["heads_from"]],
+            "probe seed": [
+                f"mean of {x.n_seeds} ({x.positive_seeds}/{x.n_seeds} Δ > 0)"
+                if x.probe_seed == "mean"
+                else x.probe_seed
+                for x in r.itertuples()
+            ],
+            "BA V": [fmt.number(x) for x in r["ba_v"]],
+            "BA V+T": [fmt.number(x) for x in r["ba_vt"]],
+            "Δ [95% CI]": [
+                fmt.with_ci(x.delta, x.delta_ci_low, x.delta_ci_high, sign=True)
+                for x in r.itertuples()
+            ],
+            "control: V+T shuffled Δ [95% CI]": [
+                fmt.with_ci(
+                    x.delta_shuffled, x.delta_shuffled_ci_low, x.delta_shuffled_ci_high, sign=True
+                )
+                for x in r.itertuples()
+            ],
+            "objects fit/test": [f"{x.n_fit_objects}/{x.n_test_objects}" for x in r.itertuples()],
+        }
+    )
+
+
+def transfer_sentences(rows: pd.DataFrame, corpus: str) -> list[str]:
+    """A sentence per heads view from its seeds' mean row: the verdict on Δ, how many seeds
+    are positive, and whether the gain beats the shuffled-touch control."""
+    means = _ordered(rows[rows["probe_seed"] == "mean"])
+    if means.empty:
+        return []
+    first = means.iloc[0]
+    out = [
+        f"Corpus {corpus}: {first.n_test_objects} test objects ({first.n_test_rows} contacts), "
+        f"{first.n_seeds} probe seeds; chance balanced accuracy {fmt.number(first.chance)}."
+    ]
+    for x in means.itertuples():
+        verdict = claims.delta_verdict(x.delta, x.delta_ci_low, x.delta_ci_high)
+        shuffled = claims.interval_side(x.delta_shuffled_ci_low, x.delta_shuffled_ci_high)
+        beats = x.delta_ci_low > x.delta_shuffled_ci_high
+        control = (
+            "its interval lies above the shuffled-touch control's"
+            if beats
+            else "it does not separate from the shuffled-touch control "
+            f"(Δ {fmt.signed(x.delta_shuffled)}, CI {shuffled} 0)"
+        )
+        out.append(
+            f"{_label(x)}: {verdict} {x.positive_seeds}/{x.n_seeds} seeds positive; {control}."
+        )
+    return out
+
+
+def transfer_figure(rows: pd.DataFrame, corpus: str) -> plt.Figure:
+    """Δ balanced accuracy per heads view: each probe seed's point with its CI, the seeds'
+    mean (black) and the shuffled-touch control's mean (grey), with the 0 line."""
+    r = _ordered(rows)
+    views = [v for v in HEADS_VIEWS if v in set(r["heads"])]
+    fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    for i, view in enumerate(views):
+        g = r[r["heads"] == view]
+        seeds = g[g["probe_seed"] != "mean"]
+        offsets = np.linspace(-0.25, 0.05, max(len(seeds), 1))
+        for off, x in zip(offsets, seeds.itertuples(), strict=False):
+            ax.errorbar(
+                i + off,
+                x.delta,
+                yerr=[[x.delta - x.delta_ci_low], [x.delta_ci_high - x.delta]],
+                fmt="o",
+                ms=3,
+                color="tab:blue",
+                elinewidth=0.8,
+                alpha=0.7,
+            )
+        mean = g[g["probe_seed"] == "mean"].iloc[0]
+        ax.errorbar(
+            i + 0.15,
+            mean.delta,
+            yerr=[[mean.delta - mean.delta_ci_low], [mean.delta_ci_high - mean.delta]],
+            fmt="s",
+            ms=5,
+            color="black",
+            label="mean over seeds" if i == 0 else None,
+        )
+        ax.errorbar(
+            i + 0.3,
+            mean.delta_shuffled,
+            yerr=[
+                [mean.delta_shuffled - mean.delta_shuffled_ci_low],
+                [mean.delta_shuffled_ci_high - mean.delta_shuffled],
+            ],
+            fmt="D",
+            ms=4,
+            color="grey",
+            label="shuffled touch (control)" if i == 0 else None,
+        )
+    ax.axhline(0.0, color="k", lw=0.8, ls="--")
+    ax.set_xticks(range(len(views)))
+    ax.set_xticklabels([f"{VIEW_SHORT[v]}\n{_heads_from(r, v)}" for v in views], fontsize=8)
+    ax.set_ylabel("Δ balanced accuracy (V+T − V)")
+    ax.set_title(f"{corpus}: mass tertiles on unseen objects of a second sensor", fontsize=10)
+    ax.plot([], [], "o", color="tab:blue", ms=3, label="one probe seed (95 % CI)")
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.2), ncol=3, frameon=False)
+    fig.tight_layout()
+    return fig

@@ -1,0 +1,85 @@
+"""Transfer to a second sensor: the transfer corpus's mass-quantile probes per heads view and
+probe seed, the summary edge and the report page (rule transfer_evaluate)."""
+
+import numpy as np
+from threadpoolctl import threadpool_limits
+
+from tacgen_lib.corpus.objects import mass_quantile_classes, object_masses
+from tacgen_lib.io import edges, log
+from tacgen_lib.probes.transfer import (
+    TransferSettings,
+    TransferSplit,
+    check_views,
+    evaluate_transfer,
+    views_from_edges,
+)
+from tacgen_lib.report import transfer as report
+from tacgen_lib.report.write import write_figure, write_table
+
+logger = log.for_rule(snakemake)
+corpus = snakemake.params.corpus
+settings = TransferSettings.from_config(snakemake.params.settings)
+manifest = edges.read(snakemake.input.manifest, columns=["corpus", "appearance_id", "mass"]).frame
+rows = manifest[manifest["corpus"] == corpus].sort_values("sample_id", ignore_index=True)
+ids = rows["sample_id"].to_numpy(dtype=object)
+where = f"rule transfer_evaluate, corpus {corpus!r}"
+masses = object_masses(rows, where=where)
+classes = dict(
+    zip(
+        masses.index,
+        mass_quantile_classes(masses.to_numpy(), settings.classes, where=where),
+        strict=True,
+    )
+)
+split = edges.read(snakemake.input.splits).frame.set_index("sample_id")["split"].reindex(ids)
+if split.isna().any():
+    raise edges.EdgeError(
+        f"{snakemake.input.splits}: sample_id {split.index[split.isna()][0]!r} of corpus "
+        f"{corpus} has no split; rebuild the splits"
+    )
+split = split.to_numpy(dtype=object)
+
+
+def vectors(path, column):
+    got = edges.read_vector_map(path, column)
+    missing = [i for i in ids if i not in got]
+    if missing:
+        raise edges.EdgeError(f"{path}: no row for sample_id {missing[0]!r} of corpus {corpus}")
+    return np.stack([got[i] for i in ids])
+
+
+raw = (vectors(snakemake.input.v, "vit"), vectors(snakemake.input.t, "vit"))
+aligned = {
+    view: (vectors(path, "v_aligned"), vectors(path, "t_aligned"))
+    for view, path in zip(snakemake.params.views, snakemake.input.aligned, strict=True)
+}
+views = views_from_edges(raw, aligned)
+check_views(views, len(ids))
+objects = rows["appearance_id"].to_numpy()
+y = np.array([classes[o] for o in objects])
+data = TransferSplit(y=y, objects=objects, split=split)
+logger.info(
+    "%s: %d contacts of %d objects (%d test objects), %d mass classes, views %s",
+    corpus,
+    len(ids),
+    len(masses),
+    len(set(objects[split == "test"])),
+    settings.classes,
+    list(views),
+)
+with threadpool_limits(snakemake.threads):
+    summary = evaluate_transfer(
+        views, data, settings, heads_from=snakemake.params.views, progress=logger.info
+    )
+edges.write(snakemake.output.summary, summary, key="row_id", producer=snakemake.rule)
+notes = report.transfer_sentences(summary, corpus)
+write_table(
+    report.transfer_table(summary),
+    snakemake.output.table,
+    title=f"Transfer to a second sensor: mass tertiles of unseen objects ({corpus})",
+    mono=(),
+    notes=notes,
+)
+write_figure(report.transfer_figure(summary, corpus), snakemake.output.figure)
+for note in notes:
+    logger.info("%s", note)
