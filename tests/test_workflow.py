@@ -210,6 +210,40 @@ def test_backbone_families_page_has_every_family_probe_and_protocol(run_dir):
     assert "another encoder family? (resnet" in findings and "null corpus V+T − V" in findings
 
 
+def test_transfer_page_has_every_heads_view_and_probe_seed_and_objects_stay_in_one_split(
+    run_dir,
+):
+    import yaml
+
+    from tacgen_lib.io import edges
+    from tacgen_lib.probes.transfer import HEADS_VIEWS, TRANSFER_COLUMNS
+
+    cfg = yaml.safe_load((run_dir / "config/test.yaml").read_text())
+    seeds = [str(s) for s in cfg["transfer"]["probe_seeds"]]
+    rows = edges.read(run_dir / "results/transfer/summary.parquet").frame
+    assert list(rows.columns) == list(TRANSFER_COLUMNS)
+    assert set(rows["row_id"]) == {f"{v}|{s}" for v in HEADS_VIEWS for s in [*seeds, "mean"]}
+    views = rows.drop_duplicates("heads").set_index("heads")["heads_from"].to_dict()
+    assert views == {
+        "none": "",
+        "source": "sim_paired",
+        "target": "sim_transfer",
+        "floor": "sim_null",
+    }
+    assert rows[["ba_v", "ba_vt", "ba_vt_shuffled"]].stack().between(0, 1).all()
+    # the transfer corpus's contacts: every object in one split, the test objects new
+    manifest = edges.read(run_dir / "results/corpus/manifest.parquet").frame
+    splits = edges.read(run_dir / "results/corpus/splits.parquet").frame
+    t = manifest[manifest["corpus"] == "sim_transfer"].merge(splits, on=["sample_id", "corpus"])
+    assert len(t) == cfg["corpora"]["sim_transfer"]["n"]
+    assert (t.groupby("appearance_id")["split"].nunique() == 1).all()
+    assert (t.groupby("appearance_id").size() == cfg["corpora"]["sim_transfer"]["contacts"]).all()
+    page = (run_dir / "results/report/transfer/table.html").read_text()
+    assert "shuffled" in page and "retrained (upper)" in page
+    findings = (run_dir / "results/report/findings.html").read_text()
+    assert "transfer to a second sensor" in findings
+
+
 def test_second_run_has_nothing_to_do(run_dir):
     assert planned_rules(run_dir) == {}
 

@@ -140,3 +140,27 @@ def test_dtype_and_layout_errors():
         tactile_proc(f[:, :, 0], f[:, :, 0])
     with pytest.raises(ValueError, match=r"\(H, W, 3\)"):
         tactile_proc(np.zeros((4, 4, 4), np.uint8), np.zeros((4, 4, 4), np.uint8))
+
+
+def test_a_sensor_frame_of_the_wrong_size_names_the_sample_and_its_sensor():
+    """A second sensor's frame (another frame size) read against the first sensor's background:
+    the job stops naming the edge, the sample_id and the sensor, before anything is written."""
+    import pandas as pd
+
+    from tacgen_lib.io.images import encode_png
+    from tacgen_lib.preprocess.frames import subtract_backgrounds
+
+    samples = pd.DataFrame(
+        {
+            "sample_id": ["t-000000", "t-000001"],
+            "sensor_id": ["digit-0", "digit-0"],
+            "tactile": [encode_png(_frame(1)), encode_png(_frame(2, (48, 64, 3)))],
+        }
+    )
+    backgrounds = {"digit-0": _frame(3)}
+    with pytest.raises(
+        ValueError,
+        match=r"results/x\.parquet: sample_id 't-000001' column 'tactile' \(sensor 'digit-0'\): "
+        ".*differ in shape",
+    ):
+        subtract_backgrounds(samples, backgrounds, "clip128", where="results/x.parquet")
