@@ -17,7 +17,6 @@ import math
 from collections.abc import Sequence
 
 import numpy as np
-from scipy import stats
 
 from tacgen_lib.probes.bootstrap import resample_indices
 from tacgen_lib.runtime.benchmarks import Benchmark
@@ -38,6 +37,8 @@ def sd_interval(values: Sequence[float], confidence: float = 0.95) -> tuple[floa
     v = v[np.isfinite(v)]
     if v.size < 2:
         return math.nan, math.nan, math.nan
+    from scipy import stats  # here, not at the top: the knob readers that never call this skip it
+
     k = v.size - 1
     sd = float(np.std(v, ddof=1))
     alpha = 1.0 - confidence

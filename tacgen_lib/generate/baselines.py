@@ -10,8 +10,6 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 import pandas as pd
-from scipy.spatial.distance import pdist
-from sklearn.kernel_approximation import Nystroem
 
 from tacgen_lib.corpus.splits import assert_trainable
 from tacgen_lib.generate.blocks import feature_block
@@ -97,6 +95,10 @@ def nonlinear_baseline(
     multiple / median squared train distance; the multiple (among `gammas`) with the best CV
     score wins, the first on ties. train_ids / test_ids name rows in the probe's errors.
     """
+    # imported here: the regime summary's readers take this module's columns without them
+    from scipy.spatial.distance import pdist
+    from sklearn.kernel_approximation import Nystroem
+
     z_tr, z_te = _standardise(np.asarray(v_train, np.float64), np.asarray(v_test, np.float64))
     sub = z_tr[: min(len(z_tr), 500)]
     # pairwise squared distances i < j (pdist: no (n, n, d) temporary)

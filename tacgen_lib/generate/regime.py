@@ -56,7 +56,6 @@ from tacgen_lib.generate.regime_sets import (
 )
 from tacgen_lib.probes.bootstrap import fixed_test_bootstrap, resample_indices, score_interval
 from tacgen_lib.probes.fit import fit_probe
-from tacgen_lib.probes.logistic import FixedLogistic
 from tacgen_lib.probes.metrics import score
 from tacgen_lib.probes.rows import FamilyRows, visible_design
 from tacgen_lib.probes.settings import ProbeSettings
@@ -177,6 +176,8 @@ def fit_small_probe(
     if why:
         grid = sorted(float(c) for c in settings.C)
         c_mid = grid[len(grid) // 2]
+        from tacgen_lib.probes.logistic import FixedLogistic  # scikit-learn: only where fitted
+
         pred = FixedLogistic(c_mid).fit_predict(x_train, y, x_test)
         return SmallFit(np.asarray(pred, dtype=object), c_mid, why)
     fit = fit_probe(x_train, y, x_test, settings)

@@ -30,15 +30,19 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pandas as pd
-from sklearn.feature_extraction.text import TfidfVectorizer
-from sklearn.linear_model import RidgeCV
 
 from tacgen_lib.corpus.derangement import sattolo_cycle
 from tacgen_lib.probes.bootstrap import fixed_test_bootstrap, resample_indices, score_interval
 from tacgen_lib.probes.rows import baseline_score
+
+if TYPE_CHECKING:  # scikit-learn is imported where the encoder and adapter are fitted: the
+    # report's language table reads PAPER_MARGINS from here without paying for it
+    from sklearn.feature_extraction.text import TfidfVectorizer
+    from sklearn.linear_model import RidgeCV
 
 __all__ = [
     "ATTRIBUTES",
@@ -154,6 +158,8 @@ class TextEncoder:
 def fit_text_encoder(captions: Sequence[str]) -> TextEncoder:
     """Fit the encoder on the train captions. Raises ValueError when they hold fewer than two
     distinct words."""
+    from sklearn.feature_extraction.text import TfidfVectorizer
+
     tfidf = TfidfVectorizer(token_pattern=r"[a-z]+").fit(list(captions))
     vocab = len(tfidf.vocabulary_)
     if vocab < 2:
@@ -164,6 +170,8 @@ def fit_text_encoder(captions: Sequence[str]) -> TextEncoder:
 def fit_adapter(t_train: np.ndarray, e_train: np.ndarray) -> RidgeCV:
     """Ridge from tactile features (n, d_t) to caption embeddings (n, k), penalty by
     leave-one-out (one for all outputs)."""
+    from sklearn.linear_model import RidgeCV
+
     return RidgeCV(alphas=list(ADAPTER_ALPHAS)).fit(
         np.asarray(t_train, np.float64), np.asarray(e_train, np.float64)
     )

@@ -10,7 +10,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
-from sklearn.exceptions import ConvergenceWarning
 
 from tacgen_lib.probes.bootstrap import fixed_test_bootstrap
 from tacgen_lib.probes.controls import (
@@ -214,6 +213,8 @@ def compare(
             ),
         ),
     }
+    from sklearn.exceptions import ConvergenceWarning  # only where controls are run
+
     for name in CONTROLS:
         count, call = runs[name]
         if count <= 0:

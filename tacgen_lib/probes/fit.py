@@ -9,12 +9,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tacgen_lib.probes.logistic import FixedLogistic, fit_logistic
-from tacgen_lib.probes.mlp import FixedMLP, fit_mlp_probe
 from tacgen_lib.probes.refits import FixedProbe
 from tacgen_lib.probes.ridge import FixedRidge, fit_ridge_probe
-from tacgen_lib.probes.scaling import FixedStandardisedRidge, fit_standardised_ridge
 from tacgen_lib.probes.settings import ProbeSettings
+
+# The probes built on scikit-learn (logistic, MLP, standardised ridge) are imported where they
+# are fitted: a job that fits only ridge probes, or only reads the comparison tables, does not
+# import scikit-learn.
 
 #: lbfgs tolerance of the logistic refits inside controls: scikit-learn's default. The main
 #: probes use `probes.fit_logistic`'s tighter 1e-6. Controls are distributions over hundreds of
@@ -49,6 +50,8 @@ class FittedProbe:
             return self.fixed_probe
         if kind == "ridge":
             return FixedRidge(self.reg)
+        from tacgen_lib.probes.logistic import FixedLogistic
+
         return FixedLogistic(self.reg, tol=CONTROL_TOL)
 
 
@@ -71,6 +74,8 @@ def fit_probe(
     them are averaged (repeated K-fold; the ``mlp2`` probe's CV draws once).
     """
     if settings.protocol == "mlp2":
+        from tacgen_lib.probes.mlp import FixedMLP, fit_mlp_probe
+
         mlp = fit_mlp_probe(
             X_train, y_train, settings.kind, settings.mlp, settings.seed, sample_ids=train_ids
         )
@@ -90,6 +95,8 @@ def fit_probe(
             notes=f"width {mlp.width}, weight decay {mlp.weight_decay:g}",
         )
     if settings.kind == "ridge" and settings.protocol == "standardised":
+        from tacgen_lib.probes.scaling import FixedStandardisedRidge, fit_standardised_ridge
+
         sp = fit_standardised_ridge(
             X_train,
             y_train,
@@ -124,6 +131,8 @@ def fit_probe(
         pred = probe.predict(X_test, sample_ids=test_ids)
         grid = probe.predict_grid(X_test, sample_ids=test_ids)  # same decomposition as the CV
         return FittedProbe(pred, probe.lam, sel.lambdas, sel.cv_scores, True, None, grid)
+    from tacgen_lib.probes.logistic import fit_logistic
+
     probe = fit_logistic(
         X_train,
         y_train,

@@ -11,7 +11,6 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
-from tacgen_lib.probes.fit import fit_probe
 from tacgen_lib.probes.metrics import score
 from tacgen_lib.probes.settings import ProbeSettings
 from tacgen_lib.probes.subsets import within_scale_split
@@ -251,6 +250,8 @@ def visible_score(rows: FamilyRows, settings: ProbeSettings) -> float:
     the manifest has no shape and scale."""
     if rows.visible_train is None:
         return math.nan
+    from tacgen_lib.probes.fit import fit_probe  # here: most users of the rows fit no probe
+
     try:
         fit = fit_probe(rows.visible_train, rows.y_train, rows.visible_test, settings)
     except ValueError:  # e.g. a class with one training row: no CV, no ceiling

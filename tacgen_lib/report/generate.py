@@ -12,16 +12,18 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING
 
-import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
-from matplotlib.patches import Ellipse
-from scipy import stats
 
 from tacgen_lib.report import PALETTE, claims
 from tacgen_lib.report import format as fmt
 from tacgen_lib.report.write import panel_grid
+
+if TYPE_CHECKING:  # pyplot and scipy.stats are imported by the functions that use them:
+    # the Findings table reads this module's table helpers without paying for either
+    import matplotlib.pyplot as plt
 
 __all__ = [
     "cross_seed_interval",
@@ -67,6 +69,8 @@ def cross_seed_interval(values: np.ndarray) -> tuple[float, float, float]:
     m = float(v.mean())
     if v.size < 2:
         return m, math.nan, math.nan
+    from scipy import stats
+
     h = float(stats.t.ppf(0.975, v.size - 1) * v.std(ddof=1) / math.sqrt(v.size))
     return m, m - h, m + h
 
@@ -237,6 +241,8 @@ def fidelity_table(summary: pd.DataFrame) -> pd.DataFrame:
 
 
 def _panels(n: int, ncols: int = 3, size: tuple[float, float] = (3.1, 3.0)):
+    import matplotlib.pyplot as plt
+
     nrows, ncols, figsize = panel_grid(n, size, max_cols=ncols)
     fig, axes = plt.subplots(nrows, ncols, figsize=figsize, squeeze=False)
     for ax in axes.ravel()[n:]:
@@ -303,6 +309,8 @@ def guidance_seed_figure(summary: pd.DataFrame, sampler: str, steps: int) -> plt
 def steps_seconds_figure(summary: pd.DataFrame) -> plt.Figure:
     """What accuracy costs in time: sampling seconds (benchmark) against Delta_gen (mean over
     seeds and guidance, per target) and against the Frechet distance, points labelled by steps."""
+    import matplotlib.pyplot as plt
+
     s = summary[summary["input"] == "t_gen"]
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(9.5, 4))
     for (corpus, target, sampler), g in s.groupby(["corpus", "target", "sampler"], sort=True):
@@ -332,6 +340,8 @@ def steps_seconds_figure(summary: pd.DataFrame) -> plt.Figure:
 
 
 def _ellipse(ax: plt.Axes, pts: np.ndarray, color: str) -> None:
+    from matplotlib.patches import Ellipse
+
     cov = np.cov(pts, rowvar=False)
     w, v = np.linalg.eigh(cov)
     w = np.clip(w, 0, None)
@@ -352,6 +362,8 @@ def _ellipse(ax: plt.Axes, pts: np.ndarray, color: str) -> None:
 def pca_figure(real: np.ndarray, gen: np.ndarray, *, title: str) -> plt.Figure:
     """Real and generated test latents on the first two principal components of the real
     ones, each with its 2-sd covariance ellipse."""
+    import matplotlib.pyplot as plt
+
     real, gen = np.asarray(real, np.float64), np.asarray(gen, np.float64)
     mu = real.mean(0)
     _, _, vt = np.linalg.svd(real - mu, full_matrices=False)

@@ -10,13 +10,16 @@ many seeds' fixed-test CIs lie above (or below) zero.
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
-import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
 from tacgen_lib.report import format as fmt
 from tacgen_lib.report.generate import text_colour
+
+if TYPE_CHECKING:  # the figures import pyplot; the Findings table reads `arm_rows` without it
+    import matplotlib.pyplot as plt
 
 __all__ = [
     "ARM_LABELS",
@@ -153,6 +156,8 @@ def heatmap_figure(view: pd.DataFrame) -> plt.Figure:
     """Delta of V + T_gen (linear probe) against linear V and against nonlinear V over
     (rho, N_L): a row of panels per target x reference, a column per pool size; each cell:
     the mean Delta over seeds and how many seeds' CIs lie above / below 0."""
+    import matplotlib.pyplot as plt
+
     targets = sorted(view["target"].unique())
     pools = sorted(view["n_pool"].unique())
     refs = (("delta_vs_linear_v", "linear V"), ("delta_vs_nonlinear_v", "nonlinear V"))
@@ -214,6 +219,8 @@ _CURVE_ARMS = (
 def curves_figure(view: pd.DataFrame) -> plt.Figure:
     """Score against N_L per arm at the largest pool, one panel per target x rho; bands: the
     mean over seeds of each arm's fixed-test 95% CI."""
+    import matplotlib.pyplot as plt
+
     targets = sorted(view["target"].unique())
     rhos = sorted(view["rho"].unique())
     n_p = view["n_pool"].max()

@@ -10,14 +10,15 @@ from __future__ import annotations
 import io
 import os
 from collections.abc import Iterable
+from typing import TYPE_CHECKING
 
-import matplotlib
-import matplotlib.pyplot as plt
-import matplotlib.text
 import pandas as pd
 
 from tacgen_lib.io.hashed import atomic_write_bytes
 from tacgen_lib.report.tables import to_html
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
 
 __all__ = [
     "FIGURE_DPI",
@@ -40,9 +41,11 @@ MAX_FIGURE_PX = (1050, 950)
 MIN_FONT_PT = 8.0
 
 
-def figure_problems(fig: plt.Figure, *, dpi: int = FIGURE_DPI) -> list[str]:
+def figure_problems(fig: Figure, *, dpi: int = FIGURE_DPI) -> list[str]:
     """Why `fig` would not be readable in the report viewer: too large for it (so shown scaled
     down or cropped), or text smaller than `MIN_FONT_PT`. Empty when it is readable."""
+    import matplotlib.text  # a figure's caller has imported matplotlib; a table's need not
+
     w, h = (float(x) * dpi for x in fig.get_size_inches())
     problems = []
     if w > MAX_FIGURE_PX[0] + 0.5 or h > MAX_FIGURE_PX[1] + 0.5:
@@ -65,11 +68,13 @@ def figure_problems(fig: plt.Figure, *, dpi: int = FIGURE_DPI) -> list[str]:
     return problems
 
 
-def write_figure(fig: plt.Figure, path: str | os.PathLike[str], *, dpi: int = FIGURE_DPI) -> None:
+def write_figure(fig: Figure, path: str | os.PathLike[str], *, dpi: int = FIGURE_DPI) -> None:
     """Save `fig` as PNG at `path` atomically, with no varying metadata, then close it.
 
     Refuses (ValueError naming the file) a figure the report viewer could not show readably
     (`figure_problems`): nothing is written."""
+    import matplotlib.pyplot as plt  # here: the jobs that only write tables skip pyplot
+
     problems = figure_problems(fig, dpi=dpi)
     if problems:
         plt.close(fig)
