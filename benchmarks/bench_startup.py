@@ -105,6 +105,7 @@ NEEDS: dict[str, str] = {
     "train_generator": "torch pandas",
     "train_heads": "torch pandas",
     "train_policy": "torch pandas",
+    "transfer_evaluate": _TABLE_FIGURES + " sklearn",  # logistic probes, the page's figure
 }
 
 CHILD = """\
