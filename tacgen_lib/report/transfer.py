@@ -84,11 +84,15 @@ def transfer_table(rows: pd.DataFrame) -> pd.DataFrame:
 
 def transfer_sentences(rows: pd.DataFrame, corpus: str) -> list[str]:
     """A sentence per heads view from its seeds' mean row: the verdict on Δ, how many seeds
-    are positive, and whether the gain beats the shuffled-touch control."""
+    are positive, whether the gain beats the shuffled-touch control, and, for a view whose
+    projected V scores below the frozen features' V, that its Δ is measured against a weaker V
+    (its V+T against the frozen V is given beside)."""
     means = _ordered(rows[rows["probe_seed"] == "mean"])
     if means.empty:
         return []
     first = means.iloc[0]
+    raw = means[means["heads"] == "none"]
+    raw_v = float(raw["ba_v"].iloc[0]) if len(raw) else None
     out = [
         f"Corpus {corpus}: {first.n_test_objects} test objects ({first.n_test_rows} contacts), "
         f"{first.n_seeds} probe seeds; chance balanced accuracy {fmt.number(first.chance)}."
@@ -103,9 +107,16 @@ def transfer_sentences(rows: pd.DataFrame, corpus: str) -> list[str]:
             else "it does not separate from the shuffled-touch control "
             f"(Δ {fmt.signed(x.delta_shuffled)}, CI {shuffled} 0)"
         )
-        out.append(
+        sentence = (
             f"{_label(x)}: {verdict} {x.positive_seeds}/{x.n_seeds} seeds positive; {control}."
         )
+        if raw_v is not None and x.heads != "none" and x.ba_v < raw_v:
+            sentence += (
+                f" Its projected V ({fmt.number(x.ba_v)}) scores below the frozen features' V "
+                f"({fmt.number(raw_v)}), so this Δ is measured against a weaker V: its V+T "
+                f"against the frozen V is {fmt.signed(x.ba_vt - raw_v)}."
+            )
+        out.append(sentence)
     return out
 
 

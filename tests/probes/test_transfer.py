@@ -167,6 +167,11 @@ def test_the_page_reads_the_summary():
     assert len(notes) == 3 and "12 test objects" in notes[0]
     assert "V+T helps" in notes[1] and "above the shuffled-touch control" in notes[1]
     assert "sim_paired" in notes[2]
+    assert "weaker V" not in notes[2]  # the source view's V is the frozen V here
+    weaker = out.copy()
+    weaker.loc[weaker["heads"] == "source", "ba_v"] -= 0.1
+    flagged = report.transfer_sentences(weaker, "sim_transfer")[2]
+    assert "scores below the frozen features' V" in flagged and "against the frozen V" in flagged
     fig = report.transfer_figure(out, "sim_transfer")
     assert figure_problems(fig) == []
     row = findings.transfer_findings(out).iloc[0]
