@@ -43,11 +43,9 @@ CORPORA = config["corpora"]
 PROBE_SETTINGS = {
     k: v for k, v in config["probes"].items() if k not in ("families", "seeds")
 }
-#: config transfer (tacgen_lib.probes.transfer): the second sensor's corpus, None for no stage;
-#: its mass classes also stratify the object-level splits (make_splits)
+#: config transfer (tacgen_lib.probes.transfer): the second sensor's corpus, None for no stage
 TRANSFER = config.get("transfer") or {}
 TRANSFER_CORPUS = TRANSFER.get("corpus")
-TRANSFER_CLASSES = TRANSFER.get("classes", 3)
 SIM_CORPORA = sorted(n for n, c in CORPORA.items() if c["kind"] == "simulated")
 REAL_CORPORA = sorted(n for n, c in CORPORA.items() if c["kind"] != "simulated")
 NOTHING = "(?!x)x"  # a regex matching no name (no corpus of that kind)

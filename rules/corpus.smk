@@ -140,6 +140,5 @@ rule make_splits:
         runtime=5,
     params:
         splits=config["splits"],
-        mass_classes=TRANSFER_CLASSES,
     script:
         "../workflow/scripts/make_splits.py"

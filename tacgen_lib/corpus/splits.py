@@ -96,7 +96,6 @@ def make_splits(
     fractions: Mapping[str, float] | None = None,
     by_scale: Mapping[str, Mapping[str, Sequence[float]]] | None = None,
     by_object: Mapping[str, Mapping[str, float]] | None = None,
-    mass_classes: int = 3,
 ) -> pd.DataFrame:
     """The split edge for a fused manifest.
 
@@ -107,7 +106,8 @@ def make_splits(
         by scale, and `fractions["val"]` of the train-scale rows become validation rows.
     by_object: corpus -> {"train", "val", "test"} shares of its objects (rows grouped by
         `appearance_id`, which the manifest must then hold with `mass`), stratified on the
-        objects' `mass_classes` mass-quantile classes; each class needs at least 2 objects.
+        objects' mass-quantile classes ("classes" of them, default 3); each class needs at
+        least 2 objects.
     Returns `sample_id`, `corpus`, `split`, sorted by `sample_id`. Deterministic in `seed`.
     """
     fractions = dict(fractions or {"train": 0.7, "val": 0.1, "test": 0.2})
@@ -144,7 +144,7 @@ def make_splits(
             )
             split[train_s] = inner
         elif corpus in by_object:
-            split = _object_split(rows, corpus, by_object[corpus], mass_classes, seed)
+            split = _object_split(rows, corpus, by_object[corpus], seed)
         else:
             split = _stratified_split(ids, strata, fractions, seed)
         parts.append(pd.DataFrame({"sample_id": ids, "corpus": corpus, "split": split}))
@@ -154,16 +154,14 @@ def make_splits(
 
 
 def _object_split(
-    rows: pd.DataFrame,
-    corpus: str,
-    fractions: Mapping[str, float],
-    n_classes: int,
-    seed: int,
+    rows: pd.DataFrame, corpus: str, rule: Mapping[str, float], seed: int
 ) -> np.ndarray:
     """The split of each row of one corpus split by object (`make_splits`' by_object)."""
     from tacgen_lib.corpus.objects import mass_quantile_classes, object_masses
 
     where = f"make_splits: corpus {corpus!r} (split by object)"
+    n_classes = int(rule.get("classes", 3))
+    fractions = {k: float(rule.get(k, 0.0)) for k in SPLITS}
     total = sum(float(v) for v in fractions.values())
     if not np.isclose(total, 1.0):
         raise ValueError(f"{where}: object shares must sum to 1, got {dict(fractions)}")

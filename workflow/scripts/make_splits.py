@@ -16,7 +16,6 @@ splits = make_splits(
     fractions=cfg["fractions"],
     by_scale=cfg.get("by_scale"),
     by_object=cfg.get("by_object"),
-    mass_classes=snakemake.params.mass_classes,
 )
 edges.write(snakemake.output[0], splits, producer=snakemake.rule)
 for (corpus, split), n in splits.groupby(["corpus", "split"]).size().items():
