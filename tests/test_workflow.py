@@ -67,9 +67,12 @@ def test_dry_run_plans_the_whole_dag(cold_dry_run):
         "regime_generators",
         "regime_evaluate",
         "aggregate_regime",
+        # transfer to a second sensor
+        "transfer_evaluate",
     ):
         assert rule in rules, rules
-    assert rules["merge_corpus"] == 5  # 3 corpora + the regime's natural ones at rho 0 and 1
+    # 3 corpora, the regime's natural ones at rho 0 and 1, and the transfer corpus
+    assert rules["merge_corpus"] == 6
 
 
 def test_full_run_makes_verified_edges_logs_and_benchmarks(run_dir):
@@ -78,7 +81,10 @@ def test_full_run_makes_verified_edges_logs_and_benchmarks(run_dir):
     manifest = edges.read(run_dir / "results/corpus/manifest.parquet").frame
     splits = edges.read(run_dir / "results/corpus/splits.parquet").frame
     natural = {"sim_natural_r0", "sim_natural_r1"}  # config/test.yaml's regime.rhos
-    assert set(manifest["corpus"]) == {"sim_paired", "sim_null", "sim_controlled"} | natural
+    transfer = {"sim_transfer"}  # config transfer.corpus
+    assert (
+        set(manifest["corpus"]) == {"sim_paired", "sim_null", "sim_controlled"} | natural | transfer
+    )
     assert set(splits["sample_id"]) == set(manifest["sample_id"])
     ctrl = splits.merge(manifest[["sample_id", "scale"]], on="sample_id").query(
         "corpus == 'sim_controlled'"
