@@ -1,6 +1,6 @@
 """Corpus stage: simulate (or ingest) corpora, fuse their manifest, fix the splits."""
 
-for _c, _shares in (config["splits"].get("by_object") or {}).items():
+for _c in config["splits"].get("by_object") or {}:
     if _c not in CORPORA:
         raise ValueError(
             f"config splits.by_object: {_c!r} is not a corpus (have {sorted(CORPORA)})"

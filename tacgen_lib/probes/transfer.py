@@ -40,6 +40,7 @@ __all__ = [
     "TRANSFER_COLUMNS",
     "TransferSettings",
     "TransferSplit",
+    "beats_shuffled_control",
     "check_views",
     "evaluate_transfer",
     "fit_objects",
@@ -103,9 +104,7 @@ class TransferSettings:
 
     @classmethod
     def from_config(cls, section: Mapping) -> TransferSettings:
-        return settings_from(
-            cls, section, where="transfer", ignore=("corpus", "source", "floor", "enabled")
-        )
+        return settings_from(cls, section, where="transfer", ignore=("corpus", "source", "floor"))
 
 
 @dataclass(frozen=True)
@@ -208,6 +207,13 @@ def shuffled_by_object(objects: np.ndarray, seed: int) -> np.ndarray:
         donor = rows_of[sigma[a]]
         out[rows] = donor[np.arange(rows.size) % donor.size]
     return out
+
+
+def beats_shuffled_control(delta_ci_low: float, delta_shuffled_ci_high: float) -> bool:
+    """Whether a summary row's Δ interval lies wholly above the shuffled-touch control's
+    (its lower bound above the control's upper bound): the one test the page's sentence and
+    the Findings row both apply."""
+    return bool(delta_ci_low > delta_shuffled_ci_high)
 
 
 def _interval(values: np.ndarray) -> tuple[float, float]:

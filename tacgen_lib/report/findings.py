@@ -15,6 +15,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 import pandas as pd
 
+from tacgen_lib.probes.transfer import beats_shuffled_control
 from tacgen_lib.report import claims
 from tacgen_lib.report import format as fmt
 from tacgen_lib.report.backbones import direction_holds, null_gains
@@ -342,7 +343,7 @@ def transfer_findings(summary: pd.DataFrame) -> pd.DataFrame:
 
     src = means.loc["source"]
     verdict = claims.delta_verdict(src["delta"], src["delta_ci_low"], src["delta_ci_high"])
-    if src["delta_ci_low"] > src["delta_shuffled_ci_high"]:
+    if beats_shuffled_control(src["delta_ci_low"], src["delta_shuffled_ci_high"]):
         verdict += " It lies above the shuffled-touch control."
     else:
         verdict += " It does not separate from the shuffled-touch control."

@@ -9,7 +9,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
-from tacgen_lib.probes.transfer import HEADS_VIEWS
+from tacgen_lib.probes.transfer import HEADS_VIEWS, beats_shuffled_control
 from tacgen_lib.report import claims
 from tacgen_lib.report import format as fmt
 
@@ -100,10 +100,9 @@ def transfer_sentences(rows: pd.DataFrame, corpus: str) -> list[str]:
     for x in means.itertuples():
         verdict = claims.delta_verdict(x.delta, x.delta_ci_low, x.delta_ci_high)
         shuffled = claims.interval_side(x.delta_shuffled_ci_low, x.delta_shuffled_ci_high)
-        beats = x.delta_ci_low > x.delta_shuffled_ci_high
         control = (
             "its interval lies above the shuffled-touch control's"
-            if beats
+            if beats_shuffled_control(x.delta_ci_low, x.delta_shuffled_ci_high)
             else "it does not separate from the shuffled-touch control "
             f"(Δ {fmt.signed(x.delta_shuffled)}, CI {shuffled} 0)"
         )

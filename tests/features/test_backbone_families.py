@@ -8,6 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import torch
+from probe_worlds import synthetic_family_rows
 from snakemake_run import ROOT
 
 from tacgen_lib.features.archs import ARCHS, RESNET_ARCHS, arch_family, feature_dim
@@ -31,7 +32,6 @@ from tacgen_lib.features.resnet import (
 from tacgen_lib.features.settings import DinoSettings, MaeSettings
 from tacgen_lib.features.vit import build_vit, save_backbone
 from tacgen_lib.io.config import ConfigError, load_yaml
-from tacgen_lib.probes import rows as ps_rows
 from tacgen_lib.probes.backbone_families import (
     FAMILY_COLUMNS,
     backbone_family_rows,
@@ -371,19 +371,7 @@ def _world(kind, carries, n_train=90, n_test=60, seed=0):
         if kind == "ridge"
         else np.where(z > 0, "hard", "soft").astype(object)
     )
-    ids = np.array([f"s-{i:04d}" for i in range(n)], dtype=object)
-    rows = ps_rows.FamilyRows(
-        corpus="sim",
-        target="t",
-        kind=kind,
-        train_ids=ids[:n_train],
-        test_ids=ids[n_train:],
-        y_train=y[:n_train],
-        y_test=y[n_train:],
-        strata_test=None,
-        bands_test=None,
-        n_unlabelled=0,
-    )
+    rows = synthetic_family_rows(kind, y, n_train)
     return rows, (v[:n_train], v[n_train:]), (t[:n_train], t[n_train:])
 
 

@@ -14,6 +14,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import yaml
+from probe_worlds import synthetic_family_rows
 from sklearn.linear_model import Ridge
 from sklearn.metrics import r2_score
 
@@ -58,19 +59,7 @@ def world(kind, *, carries, n_train=120, n_test=60, d_v=12, d_t=8, seed=0):
         y = z + 0.3 * rng.standard_normal(n)
     else:
         y = np.where(z > 0, "hard", "soft").astype(object)
-    ids = np.array([f"s-{i:04d}" for i in range(n)], dtype=object)
-    rows = ps_rows.FamilyRows(
-        corpus="sim",
-        target="t",
-        kind=kind,
-        train_ids=ids[:n_train],
-        test_ids=ids[n_train:],
-        y_train=y[:n_train],
-        y_test=y[n_train:],
-        strata_test=None,
-        bands_test=None,
-        n_unlabelled=0,
-    )
+    rows = synthetic_family_rows(kind, y, n_train)
 
     def split(x):
         return x[:n_train], x[n_train:]

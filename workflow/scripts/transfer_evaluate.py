@@ -40,17 +40,17 @@ if split.isna().any():
 split = split.to_numpy(dtype=object)
 
 
-def vectors(path, column):
-    got = edges.read_vector_map(path, column)
-    missing = [i for i in ids if i not in got]
-    if missing:
-        raise edges.EdgeError(f"{path}: no row for sample_id {missing[0]!r} of corpus {corpus}")
-    return np.stack([got[i] for i in ids])
+def vectors(path, *columns):
+    """The vector columns of an edge, rows in the order of `ids` (an absent id is an error
+    naming the file and the id: `Edge.subset`)."""
+    edge = edges.read(path, columns=columns, require=dict.fromkeys(columns, "vector"))
+    rows = edge.subset(ids)
+    return tuple(rows.vectors[c] for c in columns)
 
 
-raw = (vectors(snakemake.input.v, "vit"), vectors(snakemake.input.t, "vit"))
+raw = (*vectors(snakemake.input.v, "vit"), *vectors(snakemake.input.t, "vit"))
 aligned = {
-    view: (vectors(path, "v_aligned"), vectors(path, "t_aligned"))
+    view: vectors(path, "v_aligned", "t_aligned")
     for view, path in zip(snakemake.params.views, snakemake.input.aligned, strict=True)
 }
 views = views_from_edges(raw, aligned)
