@@ -18,6 +18,7 @@ import pandas as pd
 import pytest
 import torch
 import yaml
+from generate_worlds import toy_specs, toy_world, train_ids
 from scipy import linalg
 from snakemake.utils import update_config
 from snakemake_run import ROOT
@@ -560,29 +561,6 @@ def test_shuffled_rows_break_every_pairing(n):
     assert sorted(perm) == list(range(n)) and not np.any(perm == np.arange(n))
 
 
-def toy_world(n=240, seed=0):
-    """V sees a visible attribute; touch sees a hidden one that V cannot; labels need both."""
-    rng = np.random.default_rng(seed)
-    visible = rng.normal(size=n)
-    hidden = rng.normal(size=n)
-    ids = [f"s{i:04d}" for i in range(n)]
-    v = np.column_stack([visible, rng.normal(size=(n, 3))]).astype(np.float32)
-    t = np.column_stack(
-        [hidden, visible + 0.1 * rng.normal(size=n), rng.normal(size=(n, 2))]
-    ).astype(np.float32)
-    manifest = pd.DataFrame(
-        {"sample_id": ids, "corpus": "toy", "force_p50": visible + 2.0 * hidden}
-    )
-    split = np.where(np.arange(n) % 5 == 0, "test", np.where(np.arange(n) % 5 == 1, "val", "train"))
-    splits = pd.DataFrame({"sample_id": ids, "corpus": "toy", "split": split})
-    return ids, v, t, manifest, splits
-
-
-def train_ids(splits: pd.DataFrame) -> list[str]:
-    """The toy world's generator train rows."""
-    return splits.loc[splits["split"] == "train", "sample_id"].tolist()
-
-
 def test_evaluation_real_touch_helps_where_generated_touch_cannot():
     """The label depends on an attribute only touch sees: V+T_real gains, V+T_gen (a function
     of V) does not, and the summary has every input with its CI."""
@@ -648,35 +626,10 @@ def test_evaluation_real_touch_helps_where_generated_touch_cannot():
         assert np.isfinite(by[col]).all()
 
 
-def _toy_specs():
-    """A ridge and a logistic target on the toy world, with small probe grids."""
-    ids, v, t, manifest, splits = toy_world()
-    manifest["hardness"] = np.where(manifest["force_p50"] > 0, "hard", "soft")
-    cfg = {
-        "lambdas": [0.1, 1, 10],
-        "C": [0.1, 10],
-        "folds": 3,
-        "bootstrap": 200,
-        "train_resamples": 0,
-        "permutations": 0,
-        "label_permutations": 0,
-        "random_draws": 0,
-    }
-    specs = [
-        TargetSpec(
-            name,
-            family_rows(manifest, splits, corpus="toy", target=name, kind=kind),
-            ProbeSettings.from_config(cfg, kind, 0),
-        )
-        for name, kind in (("force_p50", "ridge"), ("hardness", "logistic"))
-    ]
-    return ids, dict(zip(ids, v, strict=True)), dict(zip(ids, t, strict=True)), specs
-
-
 def test_baselines_edge_round_trip_is_exact_and_checked():
     """The baselines edge gives back the fitted predictions bit for bit (floats) and as the
     training labels (logistic); rows of other splits or unknown labels are refused by name."""
-    ids, vision, t_real, specs = _toy_specs()
+    ids, vision, t_real, specs = toy_specs()
     fits = [fit_baselines(s, vision, t_real, gammas=(0.5, 2.0)) for s in specs]
     frame = baselines_frame("toy", specs, fits)
     assert frame["row_id"].is_unique
@@ -709,7 +662,7 @@ def test_baselines_edge_round_trip_is_exact_and_checked():
 def test_evaluation_of_two_seeds_shares_the_baselines():
     """V, V+T_real and the nonlinear V rows do not depend on the generator seed: both seeds'
     rows equal, and the baselines read from the edge give the same summary as the fits."""
-    ids, vision, t_real, specs = _toy_specs()
+    ids, vision, t_real, specs = toy_specs()
     fits = {s.name: fit_baselines(s, vision, t_real, gammas=(1.0,)) for s in specs}
     edge = baselines_from_frame(baselines_frame("toy", specs, list(fits.values())), specs)
     rng = np.random.default_rng(5)

@@ -1,0 +1,59 @@
+"""Synthetic worlds shared by the generator tests: V sees a visible attribute, touch a hidden
+one that V cannot, and the labels need both."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from tacgen_lib.generate.baselines import TargetSpec
+from tacgen_lib.probes.rows import family_rows
+from tacgen_lib.probes.settings import ProbeSettings
+
+
+def toy_world(n=240, seed=0):
+    """V sees a visible attribute; touch sees a hidden one that V cannot; labels need both."""
+    rng = np.random.default_rng(seed)
+    visible = rng.normal(size=n)
+    hidden = rng.normal(size=n)
+    ids = [f"s{i:04d}" for i in range(n)]
+    v = np.column_stack([visible, rng.normal(size=(n, 3))]).astype(np.float32)
+    t = np.column_stack(
+        [hidden, visible + 0.1 * rng.normal(size=n), rng.normal(size=(n, 2))]
+    ).astype(np.float32)
+    manifest = pd.DataFrame(
+        {"sample_id": ids, "corpus": "toy", "force_p50": visible + 2.0 * hidden}
+    )
+    split = np.where(np.arange(n) % 5 == 0, "test", np.where(np.arange(n) % 5 == 1, "val", "train"))
+    splits = pd.DataFrame({"sample_id": ids, "corpus": "toy", "split": split})
+    return ids, v, t, manifest, splits
+
+
+def train_ids(splits: pd.DataFrame) -> list[str]:
+    """The toy world's generator train rows."""
+    return splits.loc[splits["split"] == "train", "sample_id"].tolist()
+
+
+def toy_specs():
+    """A ridge and a logistic target on the toy world, with small probe grids."""
+    ids, v, t, manifest, splits = toy_world()
+    manifest["hardness"] = np.where(manifest["force_p50"] > 0, "hard", "soft")
+    cfg = {
+        "lambdas": [0.1, 1, 10],
+        "C": [0.1, 10],
+        "folds": 3,
+        "bootstrap": 200,
+        "train_resamples": 0,
+        "permutations": 0,
+        "label_permutations": 0,
+        "random_draws": 0,
+    }
+    specs = [
+        TargetSpec(
+            name,
+            family_rows(manifest, splits, corpus="toy", target=name, kind=kind),
+            ProbeSettings.from_config(cfg, kind, 0),
+        )
+        for name, kind in (("force_p50", "ridge"), ("hardness", "logistic"))
+    ]
+    return ids, dict(zip(ids, v, strict=True)), dict(zip(ids, t, strict=True)), specs
