@@ -65,6 +65,7 @@ NEEDS: dict[str, str] = {
     "aggregate_backbones": "pandas",
     "aggregate_generate": _TABLE_FIGURES + " scipy.stats",  # cross_seed_interval: t quantile
     "aggregate_language": "pandas",
+    "aggregate_pixel": _TABLE_FIGURES + " cv2 scipy",  # PNG frames; the filmstrip's Laplacian
     "aggregate_policy": _TABLE_FIGURES,  # the oracle's sweep samples episodes in numpy
     "aggregate_probes": _TABLE_FIGURES + " scipy.stats",  # Benjamini-Hochberg
     "aggregate_regime": _TABLE_FIGURES,
@@ -79,6 +80,7 @@ NEEDS: dict[str, str] = {
     "cost_policy_points": "pandas",
     "edge_manifest": "pandas",
     "evaluate_generator": "pandas sklearn",
+    "evaluate_pixel_generators": "torch pandas sklearn cv2 scipy",  # ViT, probes, SSIM
     "extract_features": "torch pandas cv2",
     "family_probe": "pandas sklearn",
     "findings": "pandas scipy.stats",  # cross_seed_interval
@@ -89,6 +91,7 @@ NEEDS: dict[str, str] = {
     "make_splits": "pandas sklearn",  # train_test_split
     "merge_corpus": "pandas",
     "palpate": "torch " + _SIM,
+    "pixel_curve_point": "torch pandas sklearn",  # heads, then the probes
     "policy_regression": "pandas sklearn",
     "pretrain_backbone": "torch pandas cv2",
     "pretrain_curve": _TABLE_FIGURES,
@@ -101,9 +104,11 @@ NEEDS: dict[str, str] = {
     "regime_generators": "torch pandas",
     "rollout_policy": "torch " + _SIM,
     "sample_generator": "",
+    "sample_pixel_generator": "torch pandas cv2",  # + diffusers for the DDPM's arms
     "simulate_corpus": _SIM,
     "train_generator": "torch pandas",
     "train_heads": "torch pandas",
+    "train_pixel_generator": "torch pandas cv2",  # + diffusers for the DDPM
     "train_policy": "torch pandas",
     "transfer_evaluate": _TABLE_FIGURES + " sklearn",  # logistic probes, the page's figure
 }

@@ -14,7 +14,7 @@ include: "generate_common.smk"
 TARGETS += ["results/generate/summary.parquet"]
 TARGETS += [f"{GENERATE_REPORT}/{n}.{e}" for n, e in GENERATE_ITEMS.items()]
 EDGES += ["results/generate/evaluation.parquet"]
-EDGES += [BASELINES.format(corpus=c) for c in GENERATE_CORPORA]
+EDGES += [BASELINES.format(corpus=c) for c in BASELINE_CORPORA]
 EDGES += generator_files(f"{GENERATOR}/generator.arrow")
 EDGES += generator_files(f"{GENERATOR}/curve.parquet")
 EDGES += generator_files(f"{GENERATOR}/evaluation.parquet")
@@ -86,7 +86,7 @@ rule sample_generator:
 
 
 rule fit_generator_baselines:
-    """V alone, V+T_real and the nonlinear V baseline of one corpus: the probes every generator seed shares."""
+    """V alone, V+T_real and the nonlinear V baseline of one corpus: the probes every generator seed (latent or pixel) shares."""
     input:
         manifest="results/corpus/manifest.parquet",
         splits="results/corpus/splits.parquet",
@@ -100,7 +100,7 @@ rule fit_generator_baselines:
     benchmark:
         "results/benchmarks/fit_generator_baselines/{corpus}.tsv"
     wildcard_constraints:
-        corpus=one_of(GENERATE_CORPORA),
+        corpus=one_of(BASELINE_CORPORA),
     conda:
         "../envs/probes.yaml"
     threads: 1
@@ -111,7 +111,7 @@ rule fit_generator_baselines:
         # only what these probes read: a generator knob must not refit them
         gammas=GENERATE["nonlinear_gammas"],
         cv_repeats=GENERATE["cv_repeats"],
-        targets=lambda w: GENERATE["corpora"][w.corpus],
+        targets=lambda w: BASELINE_TARGETS[w.corpus],
         corpus=lambda w: CORPORA[w.corpus],
         probes=PROBE_SETTINGS,
         probe_seed=config["probes"]["seeds"][0],

@@ -15,6 +15,12 @@ GENERATE = config["generate"]
 GENERATE_CORPORA = list(GENERATE["corpora"])
 GENERATE_REPORT = "results/report/generate"
 GENERATE_CELLS = sample_cells(GENERATE["guidance"], GENERATE["samplers"])
+# the probes no generator changes (fit_generator_baselines) serve the latent generator's
+# corpora and the pixel generators' judged ones: per corpus, the targets of both
+BASELINE_TARGETS = {c: dict(t) for c, t in GENERATE["corpora"].items()}
+for _c, _t in ((config.get("pixel") or {}).get("corpora") or {}).items():
+    BASELINE_TARGETS[_c] = {**BASELINE_TARGETS.get(_c, {}), **_t}
+BASELINE_CORPORA = list(BASELINE_TARGETS)
 GENERATE_ITEMS = {
     "headline": "html",
     "honesty": "html",

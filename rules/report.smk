@@ -128,6 +128,7 @@ rule findings:
         unpack(findings_regime_inputs),
         unpack(findings_backbone_inputs),
         unpack(findings_transfer_inputs),
+        unpack(findings_pixel_inputs),
         probes="results/probes/summary.parquet",
         generation="results/generate/evaluation.parquet",
         code=imports_of("findings"),
@@ -154,6 +155,7 @@ rule findings:
         policy=POLICY_ON,
         regime=bool(REGIME_CORPORA),
         transfer=bool(TRANSFER_CORPUS),
+        pixel=bool(PIXEL_CORPORA),
         backbones=(
             {"main": MAIN_FAMILIES, "order": list(FAMILIES.run)}
             if FAMILY_FINDINGS

@@ -42,6 +42,11 @@ def findings_transfer_inputs(wildcards):
     return {"transfer": "results/transfer/summary.parquet"} if TRANSFER_CORPUS else {}
 
 
+def findings_pixel_inputs(wildcards):
+    """The pixel generators' summary the findings page reads, where they are judged."""
+    return {"pixel": "results/pixel/summary.parquet"} if PIXEL_CORPORA else {}
+
+
 def findings_policy_inputs(wildcards):
     """The policy summaries the findings page reads, where the policy stage runs."""
     if not POLICY_ON:

@@ -23,6 +23,7 @@ PAGES = (
     "Transfer to a second sensor",
     "Generation",
     "Where generated touch helps",
+    "Pixel generators",
     "Touch to language",
     "Policy",
     "Cost of accuracy",

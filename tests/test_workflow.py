@@ -69,6 +69,12 @@ def test_dry_run_plans_the_whole_dag(cold_dry_run):
         "aggregate_regime",
         # transfer to a second sensor
         "transfer_evaluate",
+        # pixel generators
+        "train_pixel_generator",
+        "sample_pixel_generator",
+        "evaluate_pixel_generators",
+        "pixel_curve_point",
+        "aggregate_pixel",
     ):
         assert rule in rules, rules
     # 3 corpora, the regime's natural ones at rho 0 and 1, and the transfer corpus
@@ -248,6 +254,44 @@ def test_transfer_page_has_every_heads_view_and_probe_seed_and_objects_stay_in_o
     assert "shuffled" in page and "retrained (upper)" in page
     findings = (run_dir / "results/report/findings.html").read_text()
     assert "transfer to a second sensor" in findings
+
+
+def test_pixel_page_judges_every_arm_on_both_axes_and_the_curve_has_every_point(run_dir):
+    import pandas as pd
+    import yaml
+
+    from tacgen_lib.generate.pixel.curve import CURVE_COLUMNS
+    from tacgen_lib.generate.pixel.utility import ddpm_arm
+    from tacgen_lib.io import edges
+
+    cfg = yaml.safe_load((run_dir / "config/test.yaml").read_text())["pixel"]
+    cells = cfg["ddpm_cells"]
+    arms = ["pix2pix"] + [ddpm_arm(w, s) for w in cells["guidance"] for s in cells["steps"]]
+    judged = {a for arm in arms for a in (arm, f"{arm}_cal")}
+    summary = pd.read_parquet(run_dir / "results/pixel/summary.parquet")
+    assert judged | {"real_lowres", "t_real", "t_ridge", "latent"} == set(summary["arm"])
+    gen = summary[summary["arm"].isin(judged)]
+    # both axes on every arm: reconstruction with its interval, utility with its CI and control
+    for col in ("pixel_l2", "ssim", "std_ratio", "highpass_ratio", "delta", "ci_low", "ci_high"):
+        assert gen[col].notna().all(), col
+    assert gen["shuffled_delta"].notna().all() and (gen["ssim"] <= 1).all()
+    assert (gen["pixel_l2_low"] <= gen["pixel_l2"]).all()
+    # the frames the ViT read: uint8 PNGs at pixel.size, for every row of the corpus
+    frames = edges.read(run_dir / "results/pixel/sim_paired/arms/pix2pix/seed~0/frames.parquet")
+    assert len(frames) == 24 and frames.vectors["vit"].shape == frames.vectors["vit_cal"].shape
+    points = pd.concat(
+        edges.read(p).frame for p in (run_dir / "results/pixel/curve").rglob("p~*.parquet")
+    )
+    assert list(points.columns) == list(CURVE_COLUMNS)
+    fractions = sorted(float(p) for p in cfg["curve"]["fractions"])
+    assert sorted(set(points["fraction"])) == fractions
+    # p = 0 once (both pairings share the real-only heads); every p > 0 both pairings
+    assert set(points.loc[points["fraction"] > 0, "pairing"]) == {"generated", "shuffled"}
+    assert set(points.loc[points["fraction"] == 0, "pairing"]) == {"generated"}
+    page = (run_dir / "results/report/pixel/architecture.html").read_text()
+    assert "Pix2Pix" in page and "shuffled" in page and "LPIPS" in page
+    findings = (run_dir / "results/report/findings.html").read_text()
+    assert "pixel generators" in findings
 
 
 def test_second_run_has_nothing_to_do(run_dir):

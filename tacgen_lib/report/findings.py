@@ -373,3 +373,60 @@ def transfer_findings(summary: pd.DataFrame) -> pd.DataFrame:
         ],
         columns=FINDINGS_COLUMNS,
     )
+
+
+def pixel_findings(summary: pd.DataFrame) -> pd.DataFrame:
+    """One row per judged corpus for the pixel generators (`tacgen_lib.generate.pixel`): per
+    target the best raw generator arm's Δ (first seed) against real touch at the generators'
+    frame size, the shuffled pairing as the control, and the verdict: which arms are
+    utility-positive (Δ CI above 0 and above the shuffled control's interval)."""
+    from tacgen_lib.report.pixel import arm_label, utility_positive
+
+    out = []
+    s = summary[summary["seed"] == summary["seed"].min()]
+    for corpus, g in s.groupby("corpus", sort=True):
+        arm = g["arm"].astype(str)
+        gens = g[(arm == "pix2pix") | arm.str.startswith("ddpm_")]
+        gens = gens[~gens["arm"].str.endswith("_cal")]
+        results, controls, positive, real_helps = [], [], [], []
+        for target, t in gens.groupby("target", sort=True):
+            best = t.loc[t["delta"].idxmax()]
+            results.append(
+                f"{target}: {arm_label(best['arm'])} "
+                f"{fmt.with_ci(best['delta'], best['ci_low'], best['ci_high'], sign=True)}"
+            )
+            ref = g[(g["target"] == target) & (g["arm"] == "real_lowres")]
+            if len(ref):
+                r = ref.iloc[0]
+                real_helps.append(bool(r["ci_low"] > 0))
+                controls.append(
+                    f"{target}: real frames at the generators' size "
+                    f"{fmt.with_ci(r['delta'], r['ci_low'], r['ci_high'], sign=True)}, shuffled "
+                    f"pairing {fmt.signed(best['shuffled_delta'])}"
+                )
+            positive += [
+                f"{arm_label(x.arm)} ({target})" for x in t.itertuples() if utility_positive(x)
+            ]
+        verdict = (
+            "Utility-positive: " + ", ".join(positive) + "."
+            if positive
+            else "No pixel generator adds to vision here (no Δ CI above 0 and above its "
+            "shuffled control)"
+            + (
+                ", while real touch at the same frame size does: what is missing is not resolution."
+                if real_helps and all(real_helps)
+                else "."
+            )
+        )
+        out.append(
+            {
+                "evidence": "pixel generators",
+                "question": f"does a generated tactile frame add to vision? ({corpus}, Pix2Pix "
+                "and pixel DDPM, V + T_gen − V, the best arm per target)",
+                "result": "; ".join(results),
+                "control": "; ".join(controls),
+                "verdict": verdict,
+                "page": category("Pixel generators"),
+            }
+        )
+    return pd.DataFrame(out, columns=FINDINGS_COLUMNS)

@@ -245,6 +245,54 @@ def _generator_mlp(c: Config) -> float:
     return 2.0 * (int(g["blocks"]) * 2 * h * h + 3 * 768 * h)
 
 
+def _baseline_targets(c: Config, corpus: str) -> set[str]:
+    """The targets of a corpus's generator baselines: the latent generator's and the pixel
+    generators' (rules/generate_common.smk, BASELINE_TARGETS)."""
+    pixel = ((c.get("pixel") or {}).get("corpora") or {}).get(corpus, {})
+    return set(c["generate"]["corpora"].get(corpus, {})) | set(pixel)
+
+
+def _pixel_frame(c: Config) -> float:
+    """Pixels of the pixel generators' frames (`pixel.size`)."""
+    h, w = c["pixel"]["size"]
+    return float(h) * float(w)
+
+
+def _pixel_forward(c: Config, generator: str) -> float:
+    """Approximate FLOPs of one frame through a pixel generator's forward: per U-Net level of
+    the frame's 1/4**level pixels, its convolutions (Pix2Pix: a 4 x 4 down and up convolution
+    per width; the DDPM's U-Net: two 3 x 3 convolutions per ResNet block, layers_per_block
+    down and one more up, a skip concatenation doubling the up blocks' inputs), multiply-add
+    = 2. An estimate for pricing bigger models, not a count of every operation."""
+    px = _pixel_frame(c)
+    if generator == "pix2pix":
+        ch = [3, *(int(x) for x in c["pixel"]["pix2pix"]["channels"])]
+        enc = sum(px / 4 ** (i + 1) * 16 * ch[i] * ch[i + 1] for i in range(len(ch) - 1))
+        disc = [6, *(int(x) for x in c["pixel"]["pix2pix"]["disc_channels"])]
+        d = sum(px / 4 ** (i + 1) * 16 * disc[i] * disc[i + 1] for i in range(len(disc) - 1))
+        return 2.0 * (3 * enc + d)  # decoder ~ 2 x encoder (skip inputs), + the discriminator
+    d = c["pixel"]["ddpm"]
+    ch, lpb = [int(x) for x in d["channels"]], int(d["layers_per_block"])
+    total = 0.0
+    for level, width in enumerate(ch):
+        per_block = 2 * 9 * width * width * px / 4**level
+        total += per_block * (lpb + (lpb + 1) * 1.5)  # down blocks; up blocks with skips
+    return 2.0 * total
+
+
+def _pixel_steps(w: Wildcards) -> float:
+    """Sampling steps of a pixel arm: its DDIM steps, 1 for Pix2Pix."""
+    arm = w["arm"]
+    return 1.0 if arm == "pix2pix" else float(arm.removesuffix("_cal").rsplit("_s", 1)[1])
+
+
+def _pixel_passes(w: Wildcards) -> int:
+    arm = w["arm"]
+    if arm == "pix2pix":
+        return 1
+    return len(guidance_passes(arm.removeprefix("ddpm_w").rsplit("_s", 1)[0]))
+
+
 def _generate_cells(c: Config) -> float:
     g = c["generate"]
     return float(len(g["guidance"]) * sum(len(s) for s in g["samplers"].values()))
@@ -393,7 +441,7 @@ UNITS: dict[str, UnitRule] = {
         lambda c, w: (
             "",
             _n(c, w["corpus"])
-            * len(c["generate"]["corpora"][w["corpus"]])
+            * len(_baseline_targets(c, w["corpus"]))
             * (2 + len(c["generate"]["nonlinear_gammas"])),
         ),
     ),
@@ -463,6 +511,66 @@ UNITS: dict[str, UnitRule] = {
         "family run", lambda c, w: ("", float(len(c["backbones"]["run"])))
     ),
     # transfer to a second sensor: every probe seed fits V, V+T and shuffled V+T per heads view
+    # pixel generators
+    "train_pixel_generator": UnitRule(
+        "optimiser step × batch × frame pixel (at most; + conv FLOPs), per generator",
+        lambda c, w: (
+            w["generator"],
+            float(c["pixel"][w["generator"]]["steps"])
+            * int(c["pixel"][w["generator"]]["batch_size"])
+            * _pixel_frame(c),
+        ),
+        lambda c, w: (
+            3.0
+            * int(c["pixel"][w["generator"]]["steps"])
+            * int(c["pixel"][w["generator"]]["batch_size"])
+            * _pixel_forward(c, w["generator"])
+        ),
+    ),
+    "sample_pixel_generator": UnitRule(
+        "sample × sampling step (Pix2Pix: 1) × frame pixel (+ conv FLOPs × guidance passes)",
+        lambda c, w: (
+            "pix2pix" if w["arm"] == "pix2pix" else "ddpm",
+            _n(c, w["corpus"]) * _pixel_steps(w) * _pixel_frame(c),
+        ),
+        lambda c, w: (
+            _pixel_passes(w)
+            * _n(c, w["corpus"])
+            * _pixel_steps(w)
+            * _pixel_forward(c, "pix2pix" if w["arm"] == "pix2pix" else "ddpm")
+        ),
+    ),
+    "evaluate_pixel_generators": UnitRule(
+        "sample × (arm, calibrated or not, + the real reference) × target",
+        lambda c, w: (
+            "",
+            _n(c, w["corpus"])
+            * (
+                2
+                * (
+                    1
+                    + len(c["pixel"]["ddpm_cells"]["guidance"])
+                    * len(c["pixel"]["ddpm_cells"]["steps"])
+                )
+                + 1
+            )
+            * len(c["pixel"]["corpora"][w["corpus"]]),
+        ),
+    ),
+    "pixel_curve_point": UnitRule(
+        "sample × heads trained (1 at p = 0, else generated + shuffled)",
+        lambda c, w: ("", _n(c, w["corpus"]) * (1.0 if float(w["fraction"]) == 0 else 2.0)),
+    ),
+    "aggregate_pixel": UnitRule(
+        "judged corpus × seed + curve point",
+        lambda c, w: (
+            "",
+            float(
+                len(c["pixel"]["corpora"]) * len(c["pixel"]["seeds"])
+                + len(c["pixel"]["curve"]["corpora"]) * len(c["pixel"]["curve"]["fractions"])
+            ),
+        ),
+    ),
     "transfer_evaluate": UnitRule(
         "contact × probe seed × heads view",
         lambda c, w: (

@@ -11,6 +11,7 @@ from snakemake_run import ROOT, validated
 from tacgen_lib.align.settings import AlignSettings
 from tacgen_lib.corpus.sim.corpus import CorpusSettings
 from tacgen_lib.features.settings import DinoSettings
+from tacgen_lib.generate.pixel.settings import Pix2PixSettings, PixelDDPMSettings
 from tacgen_lib.io.config import ConfigError, settings_from
 
 SCHEMA = ROOT / "config" / "config.schema.yaml"
@@ -47,6 +48,28 @@ def test_dino_defaults_filled_by_the_schema_equal_the_dataclass_defaults():
     for f in dataclasses.fields(DinoSettings):
         if f.name not in ("epochs", "batch_size", "lr", "seed"):  # set by config.yaml itself
             assert filled[f.name] == f.default, f.name
+
+
+@pytest.mark.parametrize("overlay", [None, "test.yaml", "paper.yaml"])
+def test_every_config_builds_the_pixel_generators_settings(overlay):
+    cfg = validated(overlay)["pixel"]
+    assert Pix2PixSettings.from_config(cfg["pix2pix"]).steps == cfg["pix2pix"]["steps"]
+    assert PixelDDPMSettings.from_config(cfg["ddpm"]).channels == tuple(cfg["ddpm"]["channels"])
+
+
+@pytest.mark.parametrize(
+    ("cls", "key"), [(Pix2PixSettings, "pix2pix"), (PixelDDPMSettings, "ddpm")]
+)
+def test_pixel_settings_are_the_schema_keys_with_the_schema_defaults(cls, key):
+    """Every field of the pixel generators' settings is a config key, and every schema default
+    equals the dataclass default (an empty section gets the code's own settings)."""
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    node = yaml.safe_load(SCHEMA.read_text())["properties"]["pixel"]["properties"][key]
+    assert set(fields) == set(node["properties"])
+    for name, spec in node["properties"].items():
+        default = fields[name].default
+        want = list(default) if isinstance(default, tuple) else default
+        assert spec["default"] == want, f"pixel.{key}.{name}"
 
 
 def test_settings_refuse_bad_values_naming_the_key():

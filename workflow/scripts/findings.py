@@ -24,6 +24,9 @@ if snakemake.params.policy:
     )
 if snakemake.params.regime:
     parts.append(findings.regime_findings(edges.read(snakemake.input.regime).frame))
+if snakemake.params.pixel:
+    # a report table with wall times, not an edge (rule aggregate_pixel)
+    parts.append(findings.pixel_findings(pd.read_parquet(snakemake.input.pixel)))
 if snakemake.params.backbones:
     parts.append(
         findings.backbone_findings(

@@ -1,0 +1,80 @@
+"""Train one pixel generator (Pix2Pix or the pixel DDPM) on a corpus's train rows, early-stopped
+on its val rows (rule train_pixel_generator)."""
+
+import torch
+
+from tacgen_lib.corpus.splits import assert_trainable, ids_in_split
+from tacgen_lib.generate.pixel.frames import paired_frames, rgb_units, tactile_units
+from tacgen_lib.generate.pixel.settings import Pix2PixSettings, PixelDDPMSettings
+from tacgen_lib.generate.pixel.weights import save_pixel_generator
+from tacgen_lib.io import edges, log
+
+logger = log.for_rule(snakemake)
+torch.set_num_threads(snakemake.threads)
+w, cfg = snakemake.wildcards, snakemake.params.settings
+size = tuple(cfg["size"])
+splits = edges.read(snakemake.input.splits).frame
+train_ids = sorted(ids_in_split(splits, "train", w.corpus))
+val_ids = sorted(ids_in_split(splits, "val", w.corpus))
+assert_trainable(train_ids, splits, rule=snakemake.rule, allowed=("train",))
+assert_trainable(val_ids, splits, rule=snakemake.rule, allowed=("val",))
+
+samples = edges.read(snakemake.input.samples, columns=["rgb"])
+tactile = edges.read(snakemake.input.tactile, columns=["tactile_proc"])
+
+
+def units(ids):
+    rgb, tac = paired_frames(
+        samples.subset(ids).frame,
+        tactile.subset(ids).frame,
+        size,
+        rgb_where=snakemake.input.samples,
+        tactile_where=snakemake.input.tactile,
+    )
+    return rgb_units(rgb), tactile_units(tac)
+
+
+(rgb_tr, tac_tr), (rgb_val, tac_val) = units(train_ids), units(val_ids)
+logger.info(
+    "%s %s seed %s: %d train / %d val frames at %s",
+    w.corpus,
+    w.generator,
+    w.seed,
+    len(train_ids),
+    len(val_ids),
+    size,
+)
+if w.generator == "pix2pix":
+    from tacgen_lib.generate.pixel.pix2pix import fit_pix2pix
+
+    fit = fit_pix2pix(
+        rgb_tr,
+        tac_tr,
+        rgb_val,
+        tac_val,
+        Pix2PixSettings.from_config(cfg["pix2pix"]),
+        seed=int(w.seed),
+        progress=logger.info,
+    )
+else:
+    from tacgen_lib.generate.pixel.ddpm import fit_pixel_ddpm
+
+    fit = fit_pixel_ddpm(
+        rgb_tr,
+        tac_tr,
+        rgb_val,
+        tac_val,
+        PixelDDPMSettings.from_config(cfg["ddpm"]),
+        seed=int(w.seed),
+        progress=logger.info,
+    )
+save_pixel_generator(fit, snakemake.output.weights, kind=w.generator, producer=snakemake.rule)
+curve = fit.curve.assign(eval=[f"step~{int(s)}" for s in fit.curve["step"]])
+edges.write(snakemake.output.curve, curve, key="eval", producer=snakemake.rule)
+logger.info(
+    "best step %d of %d (stopped early: %s), best val %.5f",
+    fit.best_step,
+    fit.steps_run,
+    fit.stopped_early,
+    fit.best_val,
+)
