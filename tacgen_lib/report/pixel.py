@@ -12,6 +12,7 @@ import pandas as pd
 
 from tacgen_lib.generate.pixel.utility import REAL_LOWRES
 from tacgen_lib.report import format as fmt
+from tacgen_lib.report.write import FIGURE_DPI, MAX_FIGURE_PX, panel_grid
 
 __all__ = [
     "architecture_sentences",
@@ -131,9 +132,14 @@ def architecture_table(view: pd.DataFrame, reconstruction: pd.DataFrame) -> pd.D
                         sign=True,
                     ),
                     "control: shuffled pairing Δ": fmt.signed(getattr(x, "shuffled_delta", np.nan)),
+                    "seconds (train + sample)": _seconds(getattr(x, "seconds", np.nan)),
                 }
             )
     return pd.DataFrame(out)
+
+
+def _seconds(x: float) -> str:
+    return "" if fmt.is_missing(x) else f"{x:.0f}"
 
 
 def utility_positive(x) -> bool:
@@ -290,10 +296,8 @@ def curve_figure(points: pd.DataFrame) -> plt.Figure:
     seed = points["seed"].min()
     p = points[points["seed"] == seed]
     panels = sorted(set(zip(p["corpus"], p["target"], strict=True)))
-    n = max(len(panels), 1)
-    ncols = min(n, 3)
-    nrows = -(-n // ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(4.0 * ncols, 3.2 * nrows), squeeze=False)
+    nrows, ncols, size = panel_grid(max(len(panels), 1), (4.5, 3.2), max_cols=2)
+    fig, axes = plt.subplots(nrows, ncols, figsize=size, squeeze=False)
     for ax, (corpus, target) in zip(axes.ravel(), panels, strict=False):
         g = p[(p["corpus"] == corpus) & (p["target"] == target)]
         p0 = g[g["fraction"] == 0]
@@ -320,9 +324,9 @@ def scatter_figure(view: pd.DataFrame, reconstruction: pd.DataFrame) -> plt.Figu
     v = view[view["seed"] == seed]
     rec = reconstruction[reconstruction["seed"] == seed].set_index(["corpus", "arm"])
     panels = sorted(set(zip(v["corpus"], v["target"], strict=True)))
-    ncols = min(max(len(panels), 1), 3)
-    nrows = -(-max(len(panels), 1) // ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(4.4 * ncols, 5.0 * nrows), squeeze=False)
+    nrows, ncols, size = panel_grid(max(len(panels), 1), (4.5, 3.0), max_cols=2)
+    height = min(size[1] + 1.0, MAX_FIGURE_PX[1] / FIGURE_DPI)  # + a row for the legend
+    fig, axes = plt.subplots(nrows, ncols, figsize=(size[0], height), squeeze=False)
     for ax, (corpus, target) in zip(axes.ravel(), panels, strict=False):
         g = v[(v["corpus"] == corpus) & (v["target"] == target)]
         arms = sorted(
@@ -348,10 +352,11 @@ def scatter_figure(view: pd.DataFrame, reconstruction: pd.DataFrame) -> plt.Figu
         ax.set_xlabel("SSIM to the real frame (reconstruction)")
         ax.set_ylabel("Δ vs V (utility)")
         ax.set_title(f"{corpus}: {target}", fontsize=9)
-        ax.legend(fontsize=8, frameon=False, loc="upper center", bbox_to_anchor=(0.5, -0.22))
+    handles, labels = axes.ravel()[0].get_legend_handles_labels()
     for ax in axes.ravel()[len(panels) :]:
         ax.axis("off")
-    fig.tight_layout()
+    fig.legend(handles, labels, fontsize=8, frameon=False, loc="lower center", ncol=3)
+    fig.tight_layout(rect=(0, 1.0 / height, 1, 1))
     return fig
 
 
