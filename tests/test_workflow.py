@@ -331,8 +331,11 @@ def test_changed_probe_param_reruns_only_the_probes(run_dir, tmp_path):
     # the backbone families' probes use the probes' settings, and the main family's rows are
     # the probe jobs' own
     backbones = {"family_probe", "aggregate_backbones"}
+    # the pixel generators' utility and scale curve are judged by the same probes (their
+    # training and sampling are not)
+    pixel = {"evaluate_pixel_generators", "pixel_curve_point", "aggregate_pixel"}
     assert set(planned_rules(work)) == {"probe", "aggregate_probes"} | (
-        robustness | generate | cost | report | regime | backbones
+        robustness | generate | cost | report | regime | backbones | pixel
     )
 
 
@@ -490,6 +493,9 @@ def test_real_corpus_path_runs_on_fixtures(tmp_path):
     cfg["align"]["corpora"] = ["ssvtp"]
     cfg["generate"]["corpora"] = {"ssvtp": {"hardness": "logistic"}}  # generate
     cfg["regime"]["rhos"] = []  # the regime needs simulated natural corpora
+    # the pixel generators judge and retrain heads on the real corpus
+    cfg["pixel"]["corpora"] = {"ssvtp": {"hardness": "logistic"}}
+    cfg["pixel"]["curve"]["corpora"] = {"ssvtp": {"hardness": "logistic"}}
     # the official-checkpoint path: a ViT-S/14 state dict in DINOv2's key format (random
     # weights, 518-px position grid as released), loaded and interpolated instead of pretraining
     import torch
