@@ -69,6 +69,7 @@ _STYLE = (
     "td,th{border:1px solid #ccc;padding:3px 5px;vertical-align:top;overflow-wrap:anywhere}"
     "th{background:#eee}td.mono{font-family:monospace;font-size:11px;word-break:break-all}"
     "td.num{text-align:right;white-space:nowrap}p.note{color:#444;max-width:70em}"
+    "p.lead{max-width:70em;margin:4px 0 8px}"
 )
 
 # a column of differences: its numbers are written with their sign
@@ -82,10 +83,13 @@ def to_html(
     mono: Iterable[str] = ("sha256", "edge"),
     missing: str = "not defined for this row",
     notes: Iterable[str] = (),
+    lead: Iterable[str] = (),
 ) -> str:
     """A standalone HTML page with the table (escaped), every cell written by
     `tacgen_lib.report.format` (3 decimals, signed deltas, integers as integers, a dash for a
-    missing value with `missing` as its footnote), and `notes` as paragraphs below it."""
+    missing value with `missing` as its footnote), `lead` as paragraphs between the title and
+    the table (what a reader takes from a long table, before it) and `notes` as paragraphs
+    below it."""
     mono = set(mono)
     columns = [str(c) for c in table.columns]
     cells = {c: fmt.column_cells(table[c], sign=str(c).startswith(_SIGNED)) for c in table.columns}
@@ -103,9 +107,10 @@ def to_html(
     if any(fmt.MISSING in v for v in cells.values()):
         notes.append(f"{fmt.MISSING}: {missing}.")
     foot = "".join(f"<p class='note'>{html.escape(n)}</p>" for n in notes)
+    top = "".join(f"<p class='lead'>{html.escape(n)}</p>" for n in lead)
     return (
         f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(title)}</title>"
-        f"<style>{_STYLE}</style></head><body><h3>{html.escape(title)}</h3>"
+        f"<style>{_STYLE}</style></head><body><h3>{html.escape(title)}</h3>{top}"
         f"<table><thead><tr>{head}</tr></thead><tbody>{''.join(body)}</tbody></table>{foot}"
         "</body></html>\n"
     )

@@ -93,9 +93,10 @@ def write_table(
     mono: Iterable[str] = ("sha256", "edge"),
     missing: str = "not defined for this row",
     notes: Iterable[str] = (),
+    lead: Iterable[str] = (),
 ) -> None:
     """Write `table` as a standalone HTML page (`tables.to_html`) at `path`, atomically."""
-    page = to_html(table, title=title, mono=mono, missing=missing, notes=notes)
+    page = to_html(table, title=title, mono=mono, missing=missing, notes=notes, lead=lead)
     atomic_write_bytes(path, page.encode())
 
 

@@ -67,6 +67,9 @@ def test_tables_write_no_nan_and_footnote_the_dash():
     assert "+0.000" in page and "-0.000" not in page and "+0.250" in page
     assert f"{fmt.MISSING}: not run for this row." in page
     assert "0.123" in page and "0.12345" not in page
+    # a lead paragraph comes before the table, a note after it
+    page = to_html(table, title="t", lead=["What it says."], notes=["How it was made."])
+    assert page.index("What it says.") < page.index("<table>") < page.index("How it was made.")
 
 
 @given(st.floats(allow_nan=True, allow_infinity=True, width=64))

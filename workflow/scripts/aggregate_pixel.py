@@ -77,9 +77,8 @@ write_table(
     out.architecture,
     title="Pixel generators: reconstruction and utility on the same test rows",
     mono=(),
-    notes=notes
-    + [f"Scale curve (figure curve): {c}" for c in curve_notes]
-    + [
+    lead=notes + [f"Scale curve (figure curve): {c}" for c in curve_notes],
+    notes=[
         "Perceptual distance: LPIPS needs ImageNet-trained weights that cannot be downloaded "
         "here; the frozen tactile ViT's matched-pair cosine (centred on the real train mean, "
         "beside the off-diagonal mean) stands in for it."
