@@ -1,7 +1,8 @@
 """Pixel generators' training steps and DDIM sampling against a GEMM and a conv roofline.
 
 At the default settings (`Pix2PixSettings()`, `PixelDDPMSettings()` = config ``pixel``) on
-(24, 32) frames, batch 32, for 1 and 2 torch threads:
+the embedded default's frame size (config/config.yaml ``pixel.size``; `--size H,W` for
+another), batch 32, for 1 and 2 torch threads:
 
 - pix2pix step: `pix2pix.pix2pix_step` (G and D forward, backward, both Adam steps), what
   `fit_pix2pix` runs per step;
@@ -16,18 +17,24 @@ rooflines measured in the same run at the same thread count: one 1024^3 float32 
 one large float32 conv2d (32 x 64 x 64 x 64 input, 64 3x3 filters). Times are the best of
 several rounds (the machine is shared). No figure here is a pass/fail threshold.
 
-    .venv/bin/python benchmarks/bench_pixel.py [--rounds 3] [--steps 10] [--rows 256]
+    .venv/bin/python benchmarks/bench_pixel.py [--rounds 3] [--steps 10] [--rows 256] [--size H,W]
+
+Run it under the environment of `tools/kernel_variants.py`'s ``avx2-2threads`` variant
+(ATEN_CPU_CAPABILITY=avx2, ONEDNN_MAX_CPU_ISA=AVX2, ...) to see the same code on the kernels of
+a CPU without AVX-512.
 """
 
 from __future__ import annotations
 
 import argparse
 import subprocess
+from pathlib import Path
 
 import machine
 import numpy as np
 import torch
 import torch.nn.functional as F
+import yaml
 from machine import best_of
 from torch.utils.flop_counter import FlopCounterMode
 
@@ -42,7 +49,11 @@ from tacgen_lib.generate.pixel.settings import Pix2PixSettings, PixelDDPMSetting
 from tacgen_lib.generate.schedules import make_schedule
 from tacgen_lib.generate.train import make_optimiser, training_step
 
-SIZE = (24, 32)
+ROOT = Path(__file__).resolve().parents[1]
+#: the generators' frame size: the embedded default's (`--size` replaces it)
+SIZE = tuple(
+    int(x) for x in yaml.safe_load((ROOT / "config/config.yaml").read_text())["pixel"]["size"]
+)
 BATCH = 32
 
 
@@ -159,7 +170,11 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=10, help="training steps per timed round")
     ap.add_argument("--rows", type=int, default=256, help="frames sampled (DDIM-10, w = 1)")
     ap.add_argument("--threads", default="1,2", help="torch thread counts, comma-separated")
+    ap.add_argument("--size", default=None, help="frame size H,W (default: pixel.size)")
     args = ap.parse_args()
+    if args.size:
+        global SIZE
+        SIZE = tuple(int(x) for x in args.size.split(","))
     for line in lscpu_lines():
         print(line)
     print(machine.describe())
