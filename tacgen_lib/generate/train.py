@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 import torch
-from torch import Tensor
+from torch import Tensor, nn
 
 from tacgen_lib.generate.inference import (
     GeneratorRecord,
@@ -32,6 +32,7 @@ from tacgen_lib.generate.inference import (
 from tacgen_lib.generate.model import Denoiser
 from tacgen_lib.generate.schedules import make_schedule
 from tacgen_lib.generate.settings import GenerateSettings
+from tacgen_lib.generate.stopping import EarlyStopping
 from tacgen_lib.io import hashed
 from tacgen_lib.optim import AdamW
 
@@ -41,6 +42,7 @@ __all__ = [
     "fit_generator",
     "load_generator",
     "make_optimiser",
+    "run_training_steps",
     "save_generator",
     "training_step",
 ]
@@ -106,6 +108,68 @@ def training_step(
     return loss
 
 
+def run_training_steps(
+    model: nn.Module,
+    opt: AdamW,
+    ema: nn.Module,
+    train: tuple[Tensor, Tensor],
+    schedule: tuple[Tensor, Tensor],
+    settings: Any,
+    *,
+    gen: torch.Generator,
+    val_loss: Callable[[], float],
+    stopper: EarlyStopping,
+    curve: list[dict],
+    progress: Callable[[str], Any],
+) -> int:
+    """The minibatch loop every diffusion generator trains with (the latent generator here, the
+    pixel DDPM in `tacgen_lib.generate.pixel.ddpm`); returns the last step run.
+
+    Per step: ``batch_size`` train pairs (x0, cond) drawn with replacement, t uniform in
+    0..T-1, eps ~ N(0, I) and the condition dropped with probability ``p_uncond``, all from
+    `gen` in that order; then `training_step` (loss, clipping, AdamW, the EMA of `ema`). Every
+    ``eval_every`` steps and at the last: `val_loss` of the EMA model, one row appended to
+    `curve` (step, mean train loss since the last row, val loss), and `stopper` told the val
+    loss (the train loss where there are no val rows); training ends when it says so.
+    `schedule`: (sqrt(abar_t), sqrt(1 - abar_t)) over the T steps.
+    """
+    x_tr, c_tr = train
+    sqrt_abar, sqrt_1m = schedule
+    n, T = x_tr.shape[0], sqrt_abar.shape[0]
+    bs = min(settings.batch_size, n)
+    ema_params = list(ema.parameters())
+    running: list[float] = []
+    step = 0
+    for step in range(1, settings.steps + 1):
+        model.train()
+        idx = torch.randint(0, n, (bs,), generator=gen)
+        t = torch.randint(0, T, (bs,), generator=gen)
+        noise = torch.randn(bs, x_tr.shape[1], generator=gen)
+        drop = torch.rand(bs, generator=gen) < settings.p_uncond
+        loss = training_step(
+            model,
+            opt,
+            ema_params,
+            (x_tr[idx], c_tr[idx], t, noise, drop),
+            sqrt_abar,
+            sqrt_1m,
+            settings,
+        )
+        running.append(loss.item())
+        if step % settings.eval_every == 0 or step == settings.steps:
+            vl = val_loss()
+            curve.append({"step": step, "train_loss": float(np.mean(running)), "val_loss": vl})
+            running = []
+            progress(
+                f"step {step}/{settings.steps}: train loss {curve[-1]['train_loss']:.4f} "
+                f"val loss {vl:.4f}"
+            )
+            score = vl if np.isfinite(vl) else curve[-1]["train_loss"]
+            if stopper.update(score, step, ema):
+                break
+    return step
+
+
 @dataclass(frozen=True)
 class GeneratorFit(GeneratorRecord):
     """A trained generator with its torch EMA denoiser (eval mode), for training-side use."""
@@ -161,7 +225,7 @@ def fit_generator(
     )
     ema = copy.deepcopy(model)
     ema.requires_grad_(False)
-    params, ema_params = list(model.parameters()), list(ema.parameters())
+    params = list(model.parameters())
     opt = make_optimiser(params, settings)
     gen = torch.Generator().manual_seed(int(seed))
     # Fixed validation draws: every evaluation scores the same (t, noise) for each val row.
@@ -191,46 +255,34 @@ def fit_generator(
             ]
         return float(np.mean(losses))
 
-    n = x_tr.shape[0]
-    bs = min(settings.batch_size, n)
     curve: list[dict] = []
-    best = (float("inf"), 0, copy.deepcopy(ema.state_dict()))
-    bad, stopped, running, step = 0, False, [], 0
-    for step in range(1, settings.steps + 1):
-        model.train()
-        idx = torch.randint(0, n, (bs,), generator=gen)
-        t = torch.randint(0, T, (bs,), generator=gen)
-        noise = torch.randn(bs, x_tr.shape[1], generator=gen)
-        drop = torch.rand(bs, generator=gen) < settings.p_uncond
-        loss = training_step(
-            model,
-            opt,
-            ema_params,
-            (x_tr[idx], c_tr[idx], t, noise, drop),
-            sqrt_abar,
-            sqrt_1m,
-            settings,
-        )
-        running.append(loss.item())
-        if step % settings.eval_every == 0 or step == settings.steps:
-            vl = val_loss()
-            curve.append({"step": step, "train_loss": float(np.mean(running)), "val_loss": vl})
-            running = []
-            say(
-                f"step {step}/{settings.steps}: train loss {curve[-1]['train_loss']:.4f} "
-                f"val loss {vl:.4f}"
-            )
-            score = vl if np.isfinite(vl) else curve[-1]["train_loss"]
-            if score < best[0]:
-                best, bad = (score, step, copy.deepcopy(ema.state_dict())), 0
-            else:
-                bad += 1
-                if settings.patience and bad >= settings.patience:
-                    stopped = True
-                    break
-    ema.load_state_dict(best[2])
+    stopper = EarlyStopping(ema, settings.patience)
+    step = run_training_steps(
+        model,
+        opt,
+        ema,
+        (x_tr, c_tr),
+        (sqrt_abar, sqrt_1m),
+        settings,
+        gen=gen,
+        val_loss=val_loss,
+        stopper=stopper,
+        curve=curve,
+        progress=say,
+    )
+    ema.load_state_dict(stopper.state)
     ema.eval()
-    return GeneratorFit(std, settings, int(seed), curve, best[1], best[0], step, stopped, model=ema)
+    return GeneratorFit(
+        std,
+        settings,
+        int(seed),
+        curve,
+        stopper.step,
+        stopper.score,
+        step,
+        stopper.stopped,
+        model=ema,
+    )
 
 
 def save_generator(fit: GeneratorFit, path: str | os.PathLike[str], *, producer: str = "") -> str:

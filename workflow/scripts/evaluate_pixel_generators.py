@@ -60,6 +60,7 @@ arms = {REAL_LOWRES: dict(zip(ids, real_lowres, strict=True))}
 position = {sid: k for k, sid in enumerate(ids)}
 test_pos = np.array([position[i] for i in test_ids])
 real_test = real_u8[test_pos]
+real_test_units = tactile_units(real_test)
 recon = []
 for arm, path in zip(params.arms, snakemake.input.arms, strict=True):
     edge = edges.read(path, require={"frame": "bytes", "frame_cal": "bytes"})
@@ -69,9 +70,9 @@ for arm, path in zip(params.arms, snakemake.input.arms, strict=True):
             f"{path}: sample_id {odd!r} is not in both this arm's frames and "
             f"{snakemake.input.tactile}; rebuild the arm"
         )
+    sub = edge.subset(test_ids)
     for column, vectors, name in (("frame", "vit", arm), ("frame_cal", "vit_cal", f"{arm}_cal")):
         arms[name] = dict(zip(edge.ids, edge.vectors[vectors], strict=True))
-        sub = edge.subset(test_ids)
         gen_test = decode_frames(sub.frame, column, where=path)
         if gen_test.shape[1:3] != size:
             raise ValueError(
@@ -82,7 +83,7 @@ for arm, path in zip(params.arms, snakemake.input.arms, strict=True):
         row = reconstruction_row(
             real_test,
             gen_test,
-            tactile_units(real_test),
+            real_test_units,
             tactile_units(gen_test),
             n_resamples=int(cfg["bootstrap"]),
             seed=params.probe_seed,

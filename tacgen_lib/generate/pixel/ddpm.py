@@ -7,7 +7,8 @@ concat(x_t, RGB), `unet_output`: how the condition enters and is dropped), its t
 
 What the latent generator already defines is reused, not re-derived: the schedule
 (`schedules.make_schedule`), the loss (`train.diffusion_loss`, on frames flattened to rows),
-the optimiser step with its EMA (`train.make_optimiser`, `train.training_step`), the DDIM
+the training loop with its EMA and early stopping (`train.make_optimiser`,
+`train.run_training_steps`, `stopping.EarlyStopping`), the DDIM
 arithmetic (`sampling.predicted_x0_eps`, `sampling.ddim_step`, `sampling.ddim_timesteps`) and
 which guidance passes run (`cells.guidance_passes`). Nothing is clipped: x0 is never clamped
 and the frames come out in the target's units, so a bad model shows.
@@ -43,7 +44,8 @@ from tacgen_lib.generate.cells import guidance_passes
 from tacgen_lib.generate.pixel.settings import PixelDDPMSettings, frames_tensor
 from tacgen_lib.generate.sampling import ddim_step, ddim_timesteps, predicted_x0_eps
 from tacgen_lib.generate.schedules import Schedule, make_schedule
-from tacgen_lib.generate.train import diffusion_loss, make_optimiser, training_step
+from tacgen_lib.generate.stopping import EarlyStopping
+from tacgen_lib.generate.train import diffusion_loss, make_optimiser, run_training_steps
 
 __all__ = [
     "CURVE_COLUMNS",
@@ -177,7 +179,7 @@ def fit_pixel_ddpm(
 ) -> PixelDDPMFit:
     """Train the eps- (or v-) prediction U-Net on train pairs, early-stopped on val pairs.
 
-    Per step (`train.training_step`): a minibatch of ``batch_size`` pairs drawn with
+    The latent generator's loop (`train.run_training_steps`): a minibatch of ``batch_size`` pairs drawn with
     replacement, t uniform in 0..T-1, eps ~ N(0, I), the RGB condition dropped with
     probability ``p_uncond``; the denoising loss (`train.diffusion_loss`, DDPM eq. 14 or
     its v-target), fused AdamW, then the EMA. Every ``eval_every`` steps (and at the last)
@@ -203,7 +205,7 @@ def fit_pixel_ddpm(
     ema = copy.deepcopy(unet)
     ema.requires_grad_(False)
     model, ema_rows = RowDenoiser(unet, size), RowDenoiser(ema, size)
-    params, ema_params = list(unet.parameters()), list(ema.parameters())
+    params = list(unet.parameters())
     opt = make_optimiser(params, settings)
     gen = torch.Generator().manual_seed(int(seed))
     # Fixed validation draws: every evaluation scores the same (t, noise) for each val row.
@@ -235,44 +237,23 @@ def fit_pixel_ddpm(
                     total += loss.item() * x_va[rows].shape[0]
         return total / (_VAL_REPEATS * n_va)
 
-    n, bs = x_tr.shape[0], min(settings.batch_size, x_tr.shape[0])
     vl0 = val_loss()
     curve: list[dict] = [{"step": 0, "train_loss": math.nan, "val_loss": vl0}]
-    best = (vl0 if np.isfinite(vl0) else math.inf, 0, copy.deepcopy(ema.state_dict()))
-    bad, stopped, running, step = 0, False, [], 0
-    for step in range(1, settings.steps + 1):
-        unet.train()
-        idx = torch.randint(0, n, (bs,), generator=gen)
-        t = torch.randint(0, T, (bs,), generator=gen)
-        noise = torch.randn(bs, d, generator=gen)
-        drop = torch.rand(bs, generator=gen) < settings.p_uncond
-        loss = training_step(
-            model,
-            opt,
-            ema_params,
-            (x_tr[idx], c_tr[idx], t, noise, drop),
-            sqrt_abar,
-            sqrt_1m,
-            settings,
-        )
-        running.append(loss.item())
-        if step % settings.eval_every == 0 or step == settings.steps:
-            vl = val_loss()
-            curve.append({"step": step, "train_loss": float(np.mean(running)), "val_loss": vl})
-            running = []
-            say(
-                f"step {step}/{settings.steps}: train loss {curve[-1]['train_loss']:.4f} "
-                f"val loss {vl:.4f}"
-            )
-            score = vl if np.isfinite(vl) else curve[-1]["train_loss"]
-            if score < best[0]:
-                best, bad = (score, step, copy.deepcopy(ema.state_dict())), 0
-            else:
-                bad += 1
-                if settings.patience and bad >= settings.patience:
-                    stopped = True
-                    break
-    ema.load_state_dict(best[2])
+    stopper = EarlyStopping(ema, settings.patience, vl0 if np.isfinite(vl0) else math.inf)
+    step = run_training_steps(
+        model,
+        opt,
+        ema,
+        (x_tr, c_tr),
+        (sqrt_abar, sqrt_1m),
+        settings,
+        gen=gen,
+        val_loss=val_loss,
+        stopper=stopper,
+        curve=curve,
+        progress=say,
+    )
+    ema.load_state_dict(stopper.state)
     ema.eval()
     return PixelDDPMFit(
         model=ema,
@@ -280,10 +261,10 @@ def fit_pixel_ddpm(
         seed=int(seed),
         size=size,
         curve=pd.DataFrame(curve, columns=list(CURVE_COLUMNS)),
-        best_step=best[1],
-        best_val=float(best[0]),
+        best_step=stopper.step,
+        best_val=float(stopper.score),
         steps_run=step,
-        stopped_early=stopped,
+        stopped_early=stopper.stopped,
         scale=scale,
     )
 

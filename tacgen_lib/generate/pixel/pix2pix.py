@@ -20,7 +20,6 @@ with `seed` (the initial weights and the dropout masks), minibatches come from a
 
 from __future__ import annotations
 
-import copy
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -33,6 +32,7 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from tacgen_lib.generate.pixel.settings import Pix2PixSettings, frames_tensor
+from tacgen_lib.generate.stopping import EarlyStopping
 from tacgen_lib.optim import AdamW
 
 __all__ = [
@@ -316,8 +316,8 @@ def fit_pix2pix(
         curve: list[dict] = [
             {"step": 0, "g_loss": math.nan, "d_loss": math.nan, "l1_train": math.nan, "val_l1": vl0}
         ]
-        best = (vl0 if np.isfinite(vl0) else math.inf, 0, copy.deepcopy(g.state_dict()))
-        bad, stopped, running, step = 0, False, [], 0
+        stopper = EarlyStopping(g, settings.patience, vl0 if np.isfinite(vl0) else math.inf)
+        running, step = [], 0
         for step in range(1, settings.steps + 1):
             g.train()
             d.train()
@@ -336,15 +336,9 @@ def fit_pix2pix(
                     f"step {step}/{settings.steps}: G loss {gl:.4f} D loss {dl:.4f} "
                     f"train L1 {l1m:.4f} val L1 {vl:.4f}"
                 )
-                score = vl if np.isfinite(vl) else l1m
-                if score < best[0]:
-                    best, bad = (score, step, copy.deepcopy(g.state_dict())), 0
-                else:
-                    bad += 1
-                    if settings.patience and bad >= settings.patience:
-                        stopped = True
-                        break
-    g.load_state_dict(best[2])
+                if stopper.update(vl if np.isfinite(vl) else l1m, step, g):
+                    break
+    g.load_state_dict(stopper.state)
     g.eval()
     return Pix2PixFit(
         model=g,
@@ -352,8 +346,8 @@ def fit_pix2pix(
         seed=int(seed),
         size=size,
         curve=pd.DataFrame(curve, columns=list(CURVE_COLUMNS)),
-        best_step=best[1],
-        best_val=float(best[0]),
+        best_step=stopper.step,
+        best_val=float(stopper.score),
         steps_run=step,
-        stopped_early=stopped,
+        stopped_early=stopper.stopped,
     )
