@@ -16,6 +16,7 @@ report: "workflow/report/workflow.rst"
 
 
 include: "rules/common.smk"
+include: "rules/preload.smk"
 include: "rules/report_common.smk"
 
 

@@ -37,7 +37,7 @@ rule train_generator:
         weights=f"{GENERATOR}/generator.arrow",
         curve=f"{GENERATOR}/curve.parquet",
     log:
-        "results/logs/train_generator/{corpus}/seed~{seed}.log",
+        "results/logs/train_generator/{corpus}/{seed}.log",
     benchmark:
         "results/benchmarks/train_generator/{corpus}/{seed}.tsv"
     wildcard_constraints:
@@ -135,7 +135,7 @@ rule evaluate_generator:
         rows=f"{GENERATOR}/evaluation.parquet",
         permutations=f"{GENERATOR}/permutations.parquet",
     log:
-        "results/logs/evaluate_generator/{corpus}/seed~{seed}.log",
+        "results/logs/evaluate_generator/{corpus}/{seed}.log",
     benchmark:
         "results/benchmarks/evaluate_generator/{corpus}/{seed}.tsv"
     wildcard_constraints:

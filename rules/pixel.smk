@@ -23,7 +23,7 @@ rule train_pixel_generator:
         weights=f"{PIXEL_GENERATOR}/generator.safetensors",
         curve=f"{PIXEL_GENERATOR}/curve.parquet",
     log:
-        "results/logs/train_pixel_generator/{corpus}/{generator}/seed~{seed}.log",
+        "results/logs/train_pixel_generator/{corpus}/{generator}/{seed}.log",
     benchmark:
         "results/benchmarks/train_pixel_generator/{corpus}/{generator}/{seed}.tsv"
     wildcard_constraints:
@@ -57,7 +57,7 @@ rule sample_pixel_generator:
     output:
         frames=PIXEL_ARM,
     log:
-        "results/logs/sample_pixel_generator/{corpus}/{arm}/seed~{seed}.log",
+        "results/logs/sample_pixel_generator/{corpus}/{arm}/{seed}.log",
     benchmark:
         "results/benchmarks/sample_pixel_generator/{corpus}/{arm}/{seed}.tsv"
     wildcard_constraints:
@@ -94,7 +94,7 @@ rule evaluate_pixel_generators:
         permutations=f"{PIXEL_EVAL}/permutations.parquet",
         reconstruction=f"{PIXEL_EVAL}/reconstruction.parquet",
     log:
-        "results/logs/evaluate_pixel_generators/{corpus}/seed~{seed}.log",
+        "results/logs/evaluate_pixel_generators/{corpus}/{seed}.log",
     benchmark:
         "results/benchmarks/evaluate_pixel_generators/{corpus}/{seed}.tsv"
     wildcard_constraints:
@@ -131,7 +131,7 @@ rule pixel_curve_point:
     output:
         PIXEL_POINT,
     log:
-        "results/logs/pixel_curve_point/{corpus}/seed~{seed}/p~{fraction}.log",
+        "results/logs/pixel_curve_point/{corpus}/{seed}_{fraction}.log",
     benchmark:
         "results/benchmarks/pixel_curve_point/{corpus}/{seed}_{fraction}.tsv"
     wildcard_constraints:

@@ -25,7 +25,7 @@ rule regime_generators:
         t_gen=regime_t_gen("{corpus}", "{seed}"),
         curves=f"{REGIME_CELL}/curves.parquet",
     log:
-        "results/logs/regime_generators/{corpus}/seed~{seed}.log",
+        "results/logs/regime_generators/{corpus}/{seed}.log",
     benchmark:
         "results/benchmarks/regime_generators/{corpus}/{seed}.tsv"
     wildcard_constraints:
@@ -58,7 +58,7 @@ rule regime_evaluate:
         rows=f"{REGIME_CELL}/evaluation.parquet",
         appearance=f"{REGIME_CELL}/appearance.parquet",
     log:
-        "results/logs/regime_evaluate/{corpus}/seed~{seed}.log",
+        "results/logs/regime_evaluate/{corpus}/{seed}.log",
     benchmark:
         "results/benchmarks/regime_evaluate/{corpus}/{seed}.tsv"
     wildcard_constraints:

@@ -5,10 +5,15 @@ Snakemake samples memory and CPU sparsely (every 0.5 s for the first 30 samples,
 30 s: snakemake#851, #2147), so `cpu_time` and `max_rss` of long jobs are under-reported; wall
 `s` is reliable. Where a figure needs peak memory or CPU time, the job measures it itself and
 writes it beside the benchmark, not into an edge.
+
+A job run in the preloaded interpreter (`tacgen_lib.runtime.preload`) does its work outside the
+process tree Snakemake measures: its exact CPU time and peak RSS (from `wait4`) are in
+`<benchmark>.usage.json` beside the file, and `read_benchmark` adds them in.
 """
 
 from __future__ import annotations
 
+import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -47,12 +52,26 @@ def _mean(table: pd.DataFrame, column: str) -> float:
 
 
 def read_benchmark(path: str | os.PathLike[str]) -> Benchmark:
-    """The job's wall, CPU seconds and peak RSS from its benchmark TSV."""
+    """The job's wall, CPU seconds and peak RSS from its benchmark TSV; for a job run in the
+    preloaded interpreter, its CPU seconds are the job process's (Snakemake's sample) plus the
+    forked copy's that did the work, its peak RSS the larger of the two."""
+    from tacgen_lib.runtime.preload import usage_path
+
     table = _read(path)
+    cpu, rss = _mean(table, "cpu_time"), _mean(table, "max_rss")
+    usage_file = usage_path(path)
+    if usage_file.exists():
+        try:
+            usage = json.loads(usage_file.read_text())
+            copy_cpu, copy_rss = float(usage["cpu_s"]), float(usage["max_rss_mb"])
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise ValueError(f"{usage_file}: not a readable job usage file ({exc})") from exc
+        cpu = copy_cpu + (cpu if cpu == cpu else 0.0)
+        rss = max(copy_rss, rss) if rss == rss else copy_rss
     return Benchmark(
         wall=float(pd.to_numeric(table["s"], errors="raise").mean()),
-        cpu=_mean(table, "cpu_time"),
-        max_rss_mb=_mean(table, "max_rss"),
+        cpu=cpu,
+        max_rss_mb=rss,
     )
 
 

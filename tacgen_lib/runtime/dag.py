@@ -28,8 +28,8 @@ class DagJob:
     """One job of the DAG: `jobid` (unique in its DAG), `rule`, `wildcards` (name -> text),
     `threads` (as Snakemake resolves them for the given core count), `local` (a `localrules`
     rule: runs on the submitting host under SLURM), `benchmark` (its benchmark file, relative to
-    the working directory; None for a rule without one, e.g. the target rule `all`),
-    `runs` (False for a rule without a script/shell/run, such as `all`: it costs nothing) and
+    the working directory; None for a rule without one, e.g. the target rule `all`), `log`
+    (its first log file, likewise), `runs` (False for a rule without a script/shell/run, such as `all`: it costs nothing) and
     `deps` (jobids of the jobs it waits for)."""
 
     jobid: int
@@ -38,6 +38,7 @@ class DagJob:
     threads: int = 1
     local: bool = False
     benchmark: str | None = None
+    log: str | None = None
     runs: bool = True
     deps: tuple[int, ...] = ()
     setting: str | None = None
@@ -114,6 +115,7 @@ def dag_jobs(
                     threads=int(job.threads),
                     local=job.rule.name in local_rules,
                     benchmark=str(job.benchmark) if job.benchmark is not None else None,
+                    log=str(job.log[0]) if job.log else None,
                     runs=not job.rule.norun,
                     deps=tuple(sorted(ids[d] for d in dag.job_dependencies(job))),
                     setting=setting_of[job.rule.name][1],

@@ -276,7 +276,8 @@ def test_shipped_calibration_is_labelled_with_its_cpu():
 @pytest.mark.parametrize("configfile", ["config/test.yaml", "config/config.yaml"])
 def test_shipped_calibration_estimates_the_real_dags(configfile):
     """Snakemake's own DAG of each config (no run): every job has units and a calibrated
-    class; the schedule honours the DAG (a job never starts before what it waits for)."""
+    class; the schedule honours the DAG (a job never starts before what it waits for); every
+    benchmarked job's benchmark file is its log file's by the workflow's convention."""
     from pathlib import Path
 
     from tacgen_lib.runtime.dag import dag_jobs
@@ -289,3 +290,13 @@ def test_shipped_calibration_estimates_the_real_dags(configfile):
     assert per_rule["jobs"].sum() == sum(j.runs for j in jobs)
     assert est.total > est.makespan >= per_rule["job_seconds"].sum() / 2
     assert per_rule.loc["make_splits", "start_s"] >= per_rule.loc["fuse_manifest", "end_s"]
+    # the convention the preloaded interpreter writes a job's usage by: benchmark = log, moved
+    from tacgen_lib.runtime.preload import benchmark_of_log
+
+    wrong = {
+        j.rule: (j.log, j.benchmark)
+        for j in jobs
+        if j.benchmark is not None
+        and (j.log is None or benchmark_of_log(j.log) != Path(j.benchmark))
+    }
+    assert not wrong, wrong

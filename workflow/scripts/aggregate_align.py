@@ -1,5 +1,9 @@
 """Alignment summary (metrics ⋈ benchmark wall time) and its report items (rule aggregate_align)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import io
 
 import pandas as pd

@@ -1,6 +1,10 @@
 """Every backbone family's probes (the main family's from the probes stage's edges) and the
 report page Backbone families (rule aggregate_backbones)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import pandas as pd
 
 from tacgen_lib.io import edges, log

@@ -1,5 +1,9 @@
 """Generation summary (evaluations ⋈ benchmark wall times) and the Generation report (rule aggregate_generate)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import io
 
 import numpy as np

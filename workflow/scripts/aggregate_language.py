@@ -1,6 +1,10 @@
 """The tactile-to-language evidence of every corpus and the report page Touch to language
 (rule aggregate_language)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import pandas as pd
 
 from tacgen_lib.io import edges, log

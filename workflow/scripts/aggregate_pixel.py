@@ -1,6 +1,10 @@
 """The pixel generators' summary (utility ⋈ reconstruction ⋈ wall times) and the page Pixel
 generators (rule aggregate_pixel)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import io
 from pathlib import Path
 

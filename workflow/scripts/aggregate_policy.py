@@ -1,6 +1,10 @@
 """Summary, paired deltas, sweep and failure modes of the policy stage; its report items
 (rule aggregate_policy)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 from collections import defaultdict
 from pathlib import Path
 

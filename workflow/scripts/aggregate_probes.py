@@ -1,6 +1,10 @@
 """Probe summary over families and seeds, and the probes' report tables and figures
 (rule aggregate_probes)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 from pathlib import Path
 
 import pandas as pd

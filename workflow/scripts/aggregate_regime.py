@@ -1,6 +1,10 @@
 """The regime's summary (every corpus x seed x arm) and the report page Where generated touch
 helps (rule aggregate_regime)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import pandas as pd
 
 from tacgen_lib.generate.regime import SUMMARY_COLUMNS

@@ -1,6 +1,10 @@
 """Robustness of the headline probes: protocol variants, multiple comparisons, the training-size
 sweep and the within-scale split (rule aggregate_robustness)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import pandas as pd
 
 from tacgen_lib.io import edges, log

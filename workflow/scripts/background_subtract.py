@@ -1,5 +1,9 @@
 """Background-subtract every tactile frame of a corpus (rule background_subtract)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 from tacgen_lib.io import edges, log
 from tacgen_lib.preprocess.frames import sensor_background_map, subtract_backgrounds
 

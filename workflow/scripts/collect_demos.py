@@ -1,5 +1,9 @@
 """Simulate one shard of demonstrations or held-out episodes (rule collect_demos)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 from tacgen_lib.io import edges, log
 from tacgen_lib.io.config import load_yaml
 from tacgen_lib.policy import data

@@ -1,6 +1,10 @@
 """Example grid, label distributions and force bands of one corpus for the report (rule
 corpus_examples)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 from tacgen_lib.corpus.force_bands import corpus_force_bands
 from tacgen_lib.io import edges, log
 from tacgen_lib.report.corpus import force_band_table

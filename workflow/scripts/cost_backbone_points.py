@@ -1,6 +1,10 @@
 """Points of the backbone-family knob from the families' summary and the benchmark files of
 the jobs that made each family's backbones and features (rule cost_backbone_points)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 from tacgen_lib.cost.points import log_points, write_points
 from tacgen_lib.cost.sweeps import Seconds, backbone_points
 from tacgen_lib.io import edges, log

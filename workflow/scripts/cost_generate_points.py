@@ -1,6 +1,10 @@
 """Points of a generator knob (sampling steps, sampler) from the generation summary and the
 sample_generator benchmark files (rule cost_generate_points)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import pandas as pd
 
 from tacgen_lib.cost.points import log_points, write_points

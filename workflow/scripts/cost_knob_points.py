@@ -1,6 +1,10 @@
 """Points of one swept knob from the main-rule edges of each of its settings and the benchmark
 files of their jobs (rule cost_knob_points; the reader: tacgen_lib.cost.readers)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 from tacgen_lib.cost.points import log_points, write_points
 from tacgen_lib.cost.readers import EDGE_COLUMNS, SettingRun, read_knob
 from tacgen_lib.io import edges, log

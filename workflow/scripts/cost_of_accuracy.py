@@ -1,6 +1,10 @@
 """The cost-of-accuracy page: every knob's points, sentences, Pareto fronts and the marginal
 accuracy per extra minute (rule cost_of_accuracy)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 from pathlib import Path
 
 import pandas as pd

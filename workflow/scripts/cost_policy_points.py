@@ -1,6 +1,10 @@
 """Points of a policy knob (width, epochs of the V-only policy) from the policy summary and the
 train_policy + rollout_policy benchmark files (rule cost_policy_points)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import pandas as pd
 
 from tacgen_lib.cost.points import log_points, write_points

@@ -1,6 +1,10 @@
 """Probe V+T_gen (and its controls) for every cell of one generator against the corpus's
 baselines (rule evaluate_generator)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 from threadpoolctl import threadpool_limits
 
 from tacgen_lib.corpus.splits import assert_trainable, ids_in_split

@@ -1,6 +1,10 @@
 """Reconstruction and utility of every pixel-generator arm of one corpus x seed on the same
 test rows (rule evaluate_pixel_generators)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import numpy as np
 import pandas as pd
 import torch

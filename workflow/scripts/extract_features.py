@@ -1,6 +1,10 @@
 """Frozen backbone features and pixel features for every frame of an edge (rules
 extract_*_features)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import torch
 
 from tacgen_lib.features.backbones import read_backbone

@@ -1,6 +1,10 @@
 """V vs V+T (concat) of every probe family on one backbone family's features, under the linear
 and the 2-layer protocol (rule family_probe)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import pandas as pd
 from threadpoolctl import threadpool_limits
 

@@ -1,6 +1,10 @@
 """The findings page: every evidence branch's headline with its control and a verdict
 generated from the numbers (rule findings)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import pandas as pd
 
 from tacgen_lib.io import edges, log

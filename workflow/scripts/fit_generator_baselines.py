@@ -1,6 +1,10 @@
 """V alone, V+T_real and the nonlinear V baseline of one corpus's generator targets, once for
 every generator seed (rule fit_generator_baselines)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 from threadpoolctl import threadpool_limits
 
 from tacgen_lib.generate.baselines import baselines_frame, fit_baselines, target_specs

@@ -1,5 +1,9 @@
 """Fuse every corpus's metadata into one manifest keyed by sample_id (rule fuse_manifest)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import pyarrow.parquet as pq
 
 from tacgen_lib.corpus.manifest import fuse_manifest

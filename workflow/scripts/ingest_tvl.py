@@ -1,5 +1,9 @@
 """Ingest a real TVL corpus folder, SSVTP or HCT layout (rule ingest_tvl)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 from pathlib import Path
 
 from tacgen_lib.corpus.ingest import ingest_hct, ingest_ssvtp

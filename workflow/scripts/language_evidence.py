@@ -2,6 +2,10 @@
 forced-choice accuracy of real, generated and shuffled generated touch on its test rows (rule
 language_evidence)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 from threadpoolctl import threadpool_limits
 
 from tacgen_lib.corpus.splits import assert_trainable, ids_in_split

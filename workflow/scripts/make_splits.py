@@ -1,5 +1,9 @@
 """Fix the train/val/test splits before any feature is computed (rule make_splits)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 from tacgen_lib.corpus.splits import make_splits
 from tacgen_lib.io import edges, log
 

@@ -1,5 +1,9 @@
 """Concatenate a simulated corpus's shards; write its sensor backgrounds (rule merge_corpus)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import pandas as pd
 
 from tacgen_lib.corpus.sim.corpus import CorpusSettings, sensor_backgrounds

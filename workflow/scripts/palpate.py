@@ -1,5 +1,9 @@
 """Frozen-backbone and aligned features of every episode's palpation frames (rule palpate)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import pandas as pd
 import torch
 

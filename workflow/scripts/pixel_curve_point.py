@@ -2,6 +2,10 @@
 fraction p of their rows, and with a shuffled generator, probed on real touch
 (rule pixel_curve_point)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 from functools import partial
 
 import pandas as pd

@@ -1,5 +1,9 @@
 """Ridge probes V vs V+T-aligned -> required grip force, per alignment seed (rule policy_regression)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import numpy as np
 import pandas as pd
 

@@ -3,6 +3,10 @@ MAE) on the pretraining corpus's train split, or the seeded random init (rules
 pretrain_backbone and family_backbone; the latter also extracts the backbone's features of
 every frame of each probe corpus)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import pandas as pd
 import torch
 

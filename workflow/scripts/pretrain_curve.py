@@ -2,6 +2,10 @@
 pretrain_curve). Apart from pretrain_backbone, so an edit to the report's code reruns this
 figure, not the backbone and everything downstream of it."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 from tacgen_lib.io import edges, log
 from tacgen_lib.report.figures import pretrain_curve_figure
 from tacgen_lib.report.write import write_figure

@@ -1,5 +1,9 @@
 """Pretrained vs random-init backbone, linear probe with a bootstrap CI (rule pretrained_vs_random)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import pandas as pd
 import torch
 from threadpoolctl import threadpool_limits

@@ -1,6 +1,10 @@
 """One probe family under one protocol variant at one probe seed: V vs V+T on raw and aligned
 features (rule probe)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 from threadpoolctl import threadpool_limits
 
 from tacgen_lib.corpus.splits import assert_trainable

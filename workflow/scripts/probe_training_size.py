@@ -1,6 +1,10 @@
 """One family's training-size sweep: raw V vs V+T (concat) on nested training subsets
 (rule probe_training_size)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 from threadpoolctl import threadpool_limits
 
 from tacgen_lib.corpus.splits import assert_trainable

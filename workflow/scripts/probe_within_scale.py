@@ -2,6 +2,10 @@
 random within-scale split of the training rows, under every protocol variant
 (rule probe_within_scale)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import pandas as pd
 from threadpoolctl import threadpool_limits
 

@@ -1,5 +1,9 @@
 """Aligned projections of every sample of a target corpus by one cell's heads (rule project_aligned)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import pandas as pd
 import torch
 

@@ -2,6 +2,10 @@
 shuffled pools), generalised distillation, V + real T and the vision ceiling, per labelled
 size and pool size (rule regime_evaluate)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 from threadpoolctl import threadpool_limits
 
 from tacgen_lib.generate.regime import (

@@ -2,6 +2,10 @@
 pairs, every pool size) and sample them for the labelled and test rows (rule
 regime_generators)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import pandas as pd
 import torch
 from threadpoolctl import threadpool_limits

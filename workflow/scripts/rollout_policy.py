@@ -1,5 +1,9 @@
 """Lift one shard of held-out episodes with one cell's grip forces, physics only (rule rollout_policy)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import pandas as pd
 import torch
 

@@ -3,6 +3,10 @@
 Imports no torch and no pandas: the weights are read and sampled in numpy
 (`tacgen_lib.generate.inference`), the edges read and written through pyarrow."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import numpy as np
 from threadpoolctl import threadpool_limits
 

@@ -2,6 +2,10 @@
 (gain fitted on train rows) and the frozen tactile ViT's features of both frames
 (rule sample_pixel_generator)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import numpy as np
 import pandas as pd
 import torch

@@ -1,5 +1,9 @@
 """Train the latent V->T generator of one corpus x seed on its train split (rule train_generator)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import pandas as pd
 import torch
 from threadpoolctl import threadpool_limits

@@ -1,6 +1,10 @@
 """Train one pixel generator (Pix2Pix or the pixel DDPM) on a corpus's train rows, early-stopped
 on its val rows (rule train_pixel_generator)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import torch
 
 from tacgen_lib.corpus.splits import assert_trainable, ids_in_split

@@ -1,5 +1,9 @@
 """Behaviour cloning of one condition x H x E x seed cell on the demonstrations (rule train_policy)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import pandas as pd
 import torch
 

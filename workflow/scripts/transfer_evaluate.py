@@ -1,6 +1,10 @@
 """Transfer to a second sensor: the transfer corpus's mass-quantile probes per heads view and
 probe seed, the summary edge and the report page (rule transfer_evaluate)."""
 
+from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
+
+run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
+
 import numpy as np
 from threadpoolctl import threadpool_limits
 

@@ -1,0 +1,326 @@
+"""The preloaded interpreter (tacgen_lib.runtime.preload): a job forked from the server behaves
+as the same script in a fresh interpreter (environment, directory, streams, thread pools,
+results, exit status, signals), its usage lands beside its benchmark, and nothing outlives
+what it belongs to. The workflow-level check (every edge of a run equal with and without the
+server) is in the workflow tests' determinism test: the reference run uses the server."""
+
+from __future__ import annotations
+
+import ast
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import textwrap
+import time
+import uuid
+from pathlib import Path
+
+import pytest
+
+from tacgen_lib.runtime import preload
+from tacgen_lib.runtime.benchmarks import read_benchmark
+
+ROOT = Path(__file__).resolve().parents[2]
+LOG = "results/logs/rule_x/a/1.log"
+BENCH = "results/benchmarks/rule_x/a/1.tsv"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    stat = Path(f"/proc/{pid}/stat")
+    return stat.exists() and stat.read_text().split(") ")[1][0] != "Z"
+
+
+def _wait_until(predicate, timeout: float) -> bool:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if predicate():
+            return True
+        time.sleep(0.05)
+    return predicate()
+
+
+@pytest.fixture(scope="module")
+def server():
+    """A server of this test process, as the Snakefile's onstart starts one for Snakemake."""
+    name = f"tacgen-test-{os.getpid()}-{uuid.uuid4().hex}"
+    proc = subprocess.Popen([sys.executable, "-P", "-c", preload._SERVER, name, str(os.getpid())])
+
+    def listening() -> bool:
+        with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
+            try:
+                s.connect("\0" + name)
+            except OSError:
+                return False
+            return True
+
+    assert _wait_until(listening, 120), "the server did not start listening"
+    yield name
+    proc.terminate()
+    proc.wait(timeout=30)
+
+
+def job_script(tmp_path: Path, body: str, log: str | None = LOG) -> Path:
+    """A script as Snakemake's `script:` directive runs it: a `snakemake` object (its log
+    list), then the workflow scripts' first two lines, then `body`."""
+    script = tmp_path / ".snakemake" / "scripts" / f"tmp{uuid.uuid4().hex[:8]}.job.py"
+    script.parent.mkdir(parents=True, exist_ok=True)
+    logs = [log] if log else []
+    script.write_text(
+        "import types\n"
+        f"snakemake = types.SimpleNamespace(log={logs!r})\n"
+        "import sys\n"
+        "preloaded = 'sklearn' in sys.modules\n"
+        "from tacgen_lib.runtime.preload import run_in_preloaded_interpreter\n"
+        "run_in_preloaded_interpreter(snakemake)\n" + textwrap.dedent(body)
+    )
+    return script
+
+
+def env_for(name: str | None, threads: int = 1, **extra: str) -> dict[str, str]:
+    """The environment Snakemake gives a job of `threads` threads (shell.py), and the server's
+    name if one serves the run."""
+    env = {k: v for k, v in os.environ.items() if k != preload.SOCKET_ENV}
+    for var in ("OMP_NUM_THREADS", "GOTO_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+        env[var] = str(threads)
+    if name:
+        env[preload.SOCKET_ENV] = name
+    return {**env, **extra}
+
+
+def run_job(script: Path, env: dict[str, str], timeout: float = 120) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, str(script)],
+        cwd=script.parents[2],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
+
+
+REPORT = """
+import json, os, torch
+from threadpoolctl import threadpool_info
+print(json.dumps({
+    "pid": os.getpid(), "preloaded": preloaded, "cwd": os.getcwd(), "argv": sys.argv,
+    "mark": os.environ.get("MARK"), "torch_threads": torch.get_num_threads(),
+    "pools": sorted({(p["user_api"], p["num_threads"]) for p in threadpool_info()}),
+    "path0": sys.path[0], "name": __name__,
+}))
+print("to stderr", file=sys.stderr)
+"""
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_a_job_in_the_server_sees_what_a_fresh_interpreter_gives_it(server, tmp_path, threads):
+    script = job_script(tmp_path, REPORT)
+    fresh = run_job(script, env_for(None, threads, MARK="m"))
+    forked = run_job(script, env_for(server, threads, MARK="m"))
+    assert fresh.returncode == forked.returncode == 0, (fresh.stderr, forked.stderr)
+    a, b = json.loads(fresh.stdout), json.loads(forked.stdout)
+    # where it ran: not preloaded in its own process, preloaded in the server's copy
+    assert (a["preloaded"], b["preloaded"]) == (False, True)
+    assert a["pid"] != b["pid"]
+    # what it sees is the same: directory, argv, environment, thread pools, sys.path[0]
+    for key in ("cwd", "argv", "mark", "torch_threads", "pools", "path0", "name"):
+        assert a[key] == b[key], key
+    assert a["torch_threads"] == threads
+    assert all(n == threads for _, n in map(tuple, b["pools"]))
+    assert forked.stderr.strip() == fresh.stderr.strip() == "to stderr"
+
+
+def test_results_are_bit_identical_to_a_fresh_interpreter(server, tmp_path):
+    """The same computation (same code, data, thread counts, machine) in both: bit identity is
+    the right assertion."""
+    body = """
+    import hashlib, numpy as np, torch
+    from sklearn.linear_model import Ridge
+    torch.manual_seed(0)
+    x = torch.randn(300, 200, dtype=torch.float32)
+    y = (x @ x.T).tanh().sum(1)
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=(400, 50))
+    coef = Ridge(alpha=1.0).fit(a, a @ rng.normal(size=50)).coef_
+    h = hashlib.sha256(y.numpy().tobytes() + coef.tobytes() + np.linalg.svd(a)[1].tobytes())
+    print(h.hexdigest())
+    """
+    script = job_script(tmp_path, body)
+    for threads in (1, 2):
+        fresh = run_job(script, env_for(None, threads))
+        forked = run_job(script, env_for(server, threads))
+        assert fresh.returncode == forked.returncode == 0, forked.stderr
+        assert fresh.stdout == forked.stdout
+
+
+def test_exit_status_and_traceback_come_back(server, tmp_path):
+    exits = run_job(job_script(tmp_path, "sys.exit(3)"), env_for(server))
+    assert exits.returncode == 3
+    message = run_job(job_script(tmp_path, "sys.exit('no input')"), env_for(server))
+    assert message.returncode == 1 and "no input" in message.stderr
+    raises = run_job(job_script(tmp_path, "raise ValueError('boom in rule x')"), env_for(server))
+    assert raises.returncode == 1
+    assert "Traceback" in raises.stderr and "ValueError: boom in rule x" in raises.stderr
+
+
+def test_usage_is_written_beside_the_benchmark_and_read_with_it(server, tmp_path):
+    usage = tmp_path / (BENCH + ".usage.json")
+    burn = "import numpy as np\nx = np.ones((400, 400))\nfor _ in range(60): x = x @ x * 1e-3\n"
+    assert run_job(job_script(tmp_path, burn), env_for(server)).returncode == 0
+    got = json.loads(usage.read_text())
+    assert got["exitcode"] == 0 and got["cpu_s"] > 0 and got["max_rss_mb"] > 50
+    assert not list(usage.parent.glob("*.tmp"))
+    bench = tmp_path / BENCH
+    bench.write_text("s\th:m:s\tmax_rss\tcpu_time\n1.5\t0:00:01\t30.0\t0.05\n")
+    b = read_benchmark(bench)
+    assert b.cpu == pytest.approx(got["cpu_s"] + 0.05)
+    assert b.max_rss_mb == pytest.approx(max(got["max_rss_mb"], 30.0))
+    # a failed job leaves none; a job in a fresh interpreter removes a stale one
+    assert run_job(job_script(tmp_path, "sys.exit(2)"), env_for(server)).returncode == 2
+    assert not usage.exists()
+    assert run_job(job_script(tmp_path, burn), env_for(server)).returncode == 0
+    assert usage.exists()
+    assert run_job(job_script(tmp_path, "pass"), env_for(None)).returncode == 0
+    assert not usage.exists()
+    assert read_benchmark(bench).cpu == pytest.approx(0.05)
+
+
+def test_unreadable_usage_file_is_named(tmp_path):
+    bench = tmp_path / "r.tsv"
+    bench.write_text("s\tcpu_time\n1.0\t0.5\n")
+    preload.usage_path(bench).write_text("{not json")
+    with pytest.raises(ValueError, match=r"r\.tsv\.usage\.json"):
+        read_benchmark(bench)
+
+
+def test_without_a_server_the_job_runs_in_its_own_interpreter(server, tmp_path):
+    script = job_script(tmp_path, "print(preloaded)")
+    nobody = run_job(script, env_for(f"tacgen-nobody-{uuid.uuid4().hex}"))
+    assert (nobody.returncode, nobody.stdout.strip()) == (0, "False")
+    off = run_job(script, env_for(server, **{preload.SWITCH_ENV: "0"}))
+    assert (off.returncode, off.stdout.strip()) == (0, "False")
+    on = run_job(script, env_for(server))
+    assert (on.returncode, on.stdout.strip()) == (0, "True")
+
+
+def _start(script: Path, env: dict[str, str]) -> subprocess.Popen:
+    return subprocess.Popen(
+        [sys.executable, str(script)],
+        cwd=script.parents[2],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def test_signals_to_the_job_process_reach_the_job(server, tmp_path):
+    body = f"""
+    import signal, time, pathlib
+    def stop(signum, frame):
+        pathlib.Path({str(tmp_path / "got")!r}).write_text(str(signum))
+        sys.exit(5)
+    signal.signal(signal.SIGTERM, stop)
+    pathlib.Path({str(tmp_path / "ready")!r}).write_text("")
+    time.sleep(120)
+    """
+    proc = _start(job_script(tmp_path, body), env_for(server))
+    assert _wait_until((tmp_path / "ready").exists, 60), proc.communicate(timeout=5)
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=60) == 5
+    assert (tmp_path / "got").read_text() == str(int(signal.SIGTERM))
+
+
+def test_a_killed_job_process_takes_its_copy_with_it(server, tmp_path):
+    pidfile = tmp_path / "pid"
+    body = f"""
+    import os, time, pathlib
+    pathlib.Path({str(pidfile)!r}).write_text(str(os.getpid()))
+    time.sleep(120)
+    """
+    proc = _start(job_script(tmp_path, body), env_for(server))
+    assert _wait_until(pidfile.exists, 60), proc.communicate(timeout=5)
+    copy = int(pidfile.read_text())
+    assert copy != proc.pid and _alive(copy)
+    proc.kill()
+    proc.wait(timeout=30)
+    assert _wait_until(lambda: not _alive(copy), 30), "the job's copy outlived its process"
+
+
+def test_a_job_killed_by_a_signal_exits_by_that_signal(server, tmp_path):
+    got = run_job(
+        job_script(tmp_path, "import os, signal\nos.kill(os.getpid(), signal.SIGUSR1)\n"),
+        env_for(server),
+    )
+    assert got.returncode == -signal.SIGUSR1
+
+
+def test_the_server_exits_when_its_snakemake_is_gone(tmp_path):
+    """start_preloaded_interpreter as the Snakefile's onstart calls it, in a parent that then
+    dies by SIGKILL (no onerror runs): the server notices and exits."""
+    parent = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            "import sys, time; from tacgen_lib.runtime import preload\n"
+            "p = preload.start_preloaded_interpreter(); print(p.pid, flush=True); time.sleep(600)",
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    server_pid = int(parent.stdout.readline())
+    assert _alive(server_pid)
+    parent.kill()
+    parent.wait(timeout=30)
+    assert _wait_until(lambda: not _alive(server_pid), 120), "the server outlived Snakemake"
+
+
+def test_switched_off_no_server_starts(monkeypatch):
+    monkeypatch.setenv(preload.SWITCH_ENV, "0")
+    monkeypatch.delenv(preload.SOCKET_ENV, raising=False)
+    assert preload.start_preloaded_interpreter() is None
+    assert preload.SOCKET_ENV not in os.environ
+
+
+@pytest.mark.parametrize(
+    ("log", "bench"),
+    [
+        ("results/logs/make_splits.log", "results/benchmarks/make_splits.tsv"),
+        (
+            "results/logs/probe/hardness/protocol~raw/seed~0.log",
+            "results/benchmarks/probe/hardness/protocol~raw/seed~0.tsv",
+        ),
+        (
+            "results/cost/patch/s0/logs/extract_features/sim/vision.log",
+            "results/cost/patch/s0/benchmarks/extract_features/sim/vision.tsv",
+        ),
+        ("/abs/work/results/logs/x/a.b.log", "/abs/work/results/benchmarks/x/a.b.tsv"),
+    ],
+)
+def test_benchmark_of_log(log, bench):
+    assert preload.benchmark_of_log(log) == Path(bench)
+    assert preload.usage_path(bench) == Path(bench + ".usage.json")
+
+
+@pytest.mark.parametrize("log", ["results/benchmarks/x.tsv", "results/logs/x.txt", "x.log"])
+def test_benchmark_of_a_path_that_is_no_log_is_refused(log):
+    with pytest.raises(ValueError, match="results/logs"):
+        preload.benchmark_of_log(log)
+
+
+def test_every_workflow_script_offers_itself_to_the_server_first():
+    """Each script's first statements (after its docstring) are the hook: before any import
+    that the server would have saved."""
+    for path in sorted((ROOT / "workflow/scripts").glob("*.py")):
+        body = ast.parse(path.read_text()).body
+        first, second = body[1], body[2]
+        assert isinstance(first, ast.ImportFrom), path.name
+        assert first.module == "tacgen_lib.runtime.preload", path.name
+        assert [a.name for a in first.names] == ["run_in_preloaded_interpreter"], path.name
+        assert ast.unparse(second) == "run_in_preloaded_interpreter(snakemake)", path.name
