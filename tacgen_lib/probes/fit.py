@@ -63,6 +63,7 @@ def fit_probe(
     *,
     train_ids: Sequence | np.ndarray | None = None,
     test_ids: Sequence | np.ndarray | None = None,
+    batched_cv: bool = True,
 ) -> FittedProbe:
     """Ridge (CV over ``lambdas``) or logistic (stratified CV over ``C``) on the training rows,
     under ``settings.protocol``: ``standardised`` ridge scales on the training rows first
@@ -71,7 +72,8 @@ def fit_probe(
 
     The number of folds is capped at the number of training rows (ridge) or the smallest
     class count (logistic, inside `probes.fit_logistic`); ``settings.cv_repeats`` draws of
-    them are averaged (repeated K-fold; the ``mlp2`` probe's CV draws once).
+    them are averaged (repeated K-fold; the ``mlp2`` probe's CV draws once). ``batched_cv``
+    False fits the logistic CV's folds one at a time by scikit-learn (`fit_logistic`).
     """
     if settings.protocol == "mlp2":
         from tacgen_lib.probes.mlp import FixedMLP, fit_mlp_probe
@@ -141,6 +143,7 @@ def fit_probe(
         n_folds=settings.folds,
         sample_ids=train_ids,
         repeats=settings.cv_repeats,
+        batched=batched_cv,
     )
     pred = np.asarray(probe.predict(X_test, sample_ids=test_ids), dtype=object)
     return FittedProbe(

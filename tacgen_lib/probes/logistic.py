@@ -137,6 +137,7 @@ def fit_logistic(
     tol: float = 1e-6,
     sample_ids: Sequence | np.ndarray | None = None,
     repeats: int = 1,
+    batched: bool = True,
 ) -> LogisticProbe:
     """Logistic probe (density, hardness): C by stratified K-fold CV on the training rows
     (`repeats` draws of the folds: the CV score is the mean over all of them).
@@ -147,8 +148,10 @@ def fit_logistic(
     Ties in CV accuracy go to the first C of the grid in the order given. ``tol`` is tighter
     than scikit-learn's 1e-4 default so the fitted probabilities agree with a float64
     reference optimum to ~1e-5. The CV's folds are solved together by the batched solver
-    where every fold keeps at least as many rows as features (`cv_batches`), else one
-    scikit-learn fit at a time; the final fit at the chosen C is always scikit-learn's.
+    where every fold keeps at least as many rows as features (`cv_batches`) and ``batched``
+    is True, else one scikit-learn fit at a time; the final fit at the chosen C is always
+    scikit-learn's. Pass ``batched=False`` for features on which the batched solve is known
+    not to finish within its budget (`CV_BATCH_BUDGET`), where it only adds its iterations.
     """
     X = check_features(X, sample_ids=sample_ids)
     y = check_target(y, X.shape[0], sample_ids=sample_ids, numeric=False)
@@ -165,7 +168,7 @@ def fit_logistic(
             "row(s); stratified CV needs at least 2 per class"
         )
     folds = make_folds(X.shape[0], k, seed, labels=y, repeats=repeats)
-    if cv_batches(X.shape, folds):
+    if batched and cv_batches(X.shape, folds):
         scores, all_conv, worst = _cv_scores_batched(X, y, folds, C, max_iter, max_iter_cap, tol)
     else:
         scores = np.zeros((len(folds), C.size))

@@ -340,6 +340,57 @@ def test_folds_the_batched_solve_leaves_unfinished_are_refitted_by_scikit_learn(
     assert converged
 
 
+def test_batched_false_is_the_scikit_learn_loop(monkeypatch):
+    """`batched=False` never calls the batched solver and is the loop's computation (bit for
+    bit: the same scikit-learn fits), on a shape `cv_batches` would batch."""
+    rng = np.random.default_rng(11)
+    X = rng.standard_normal((300, 12))
+    y = np.where(X[:, 0] + 0.5 * rng.standard_normal(300) > 0, "hard", "soft").astype(object)
+    assert logistic.cv_batches(X.shape, make_folds(300, 5, 3, labels=y))
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the batched solver ran")
+
+    monkeypatch.setattr(logistic, "fit_logistic_batch", refuse)
+    unbatched = fit_logistic(X, y, [0.1, 1.0, 10.0], seed=3, batched=False)
+    monkeypatch.setattr(logistic, "cv_batches", lambda shape, folds: False)
+    loop = fit_logistic(X, y, [0.1, 1.0, 10.0], seed=3)
+    np.testing.assert_array_equal(unbatched.cv_scores, loop.cv_scores)
+    assert unbatched.C == loop.C
+    np.testing.assert_array_equal(unbatched.predict_proba(X), loop.predict_proba(X))
+
+
+def test_nonlinear_baseline_fits_its_logistic_cv_one_fold_at_a_time(monkeypatch):
+    """On V + an RBF Nystroem map the batched solve rarely finishes within its budget: the
+    nonlinear baseline never starts it."""
+    from tacgen_lib.generate.baselines import nonlinear_baseline
+    from tacgen_lib.probes.settings import ProbeSettings
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("the batched solver ran")
+
+    monkeypatch.setattr(logistic, "fit_logistic_batch", refuse)
+    rng = np.random.default_rng(2)
+    v = rng.standard_normal((200, 6))
+    y = np.where(np.sin(2 * v[:, 0]) + 0.3 * rng.standard_normal(200) > 0, "a", "b").astype(object)
+    settings = ProbeSettings(
+        kind="logistic",
+        lambdas=(1.0,),
+        C=(0.1, 1.0),
+        folds=3,
+        bootstrap=10,
+        train_resamples=0,
+        permutations=0,
+        label_permutations=0,
+        random_draws=0,
+        seed=0,
+    )
+    nl = nonlinear_baseline(
+        v[:150], v[150:], y[:150], settings, gammas=[1.0], n_components=6, seed=0
+    )
+    assert len(nl.probe.pred_test) == 50
+
+
 def test_cv_with_fewer_rows_than_features_per_fold_is_not_batched():
     folds = make_folds(120, 5, 0)  # 96 training rows per fold
     assert not logistic.cv_batches((120, 960), folds)  # the density probe's shape
