@@ -172,3 +172,62 @@ def test_the_snakefile_parses_without_the_numerics_libraries():
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT
     )
     assert out.stdout.strip() == "[]", f"parse-time imports load {out.stdout.strip()}: {modules}"
+
+
+def test_import_statements_are_ast_walks_on_every_library_file_and_script():
+    """`_import_statements` visits statements only: on every file of the library and every
+    workflow script it finds the very import nodes `ast.walk` finds, plus a module that nests
+    imports in every kind of block."""
+    import ast
+
+    from tacgen_lib.io.imports import _import_statements
+
+    nested = textwrap.dedent(
+        """
+        import a
+        def f():
+            class C:
+                import b
+            if x:
+                import c
+            elif y:
+                from . import d
+            else:
+                from e import g
+            for i in r:
+                import h
+            else:
+                import i
+            while t:
+                import j
+            with m:
+                import k
+            try:
+                import l
+            except E:
+                import n
+            else:
+                import o
+            finally:
+                import p
+            match v:
+                case 1:
+                    import q
+        async def g():
+            async with m:
+                import s
+            async for i in r:
+                import t
+        """
+    )
+    files = [
+        *sorted((ROOT / "tacgen_lib").rglob("*.py")),
+        *sorted(ROOT.glob("workflow/scripts/*.py")),
+    ]
+    sources = [(str(p), p.read_text()) for p in files] + [("nested", nested)]
+    for name, source in sources:
+        tree = ast.parse(source)
+        walked = [n for n in ast.walk(tree) if isinstance(n, ast.Import | ast.ImportFrom)]
+        found = list(_import_statements(tree))
+        assert sorted(map(id, found)) == sorted(map(id, walked)), name
+    assert len(list(_import_statements(ast.parse(nested)))) == 16
