@@ -237,7 +237,9 @@ def _run_job(request: dict, fds: list[int]) -> None:
     global _worker
     _worker = True
     code = 1
+    interrupted = False
     try:
+        signal.signal(signal.SIGINT, signal.default_int_handler)  # the server ignores it
         for target, fd in enumerate(fds):
             os.dup2(fd, target)
             os.close(fd)
@@ -257,11 +259,12 @@ def _run_job(request: dict, fds: list[int]) -> None:
             code = c if isinstance(c, int) else (0 if c is None else 1)
             if c is not None and not isinstance(c, int):
                 print(c, file=sys.stderr)
-        except BaseException:
+        except BaseException as err:
             import traceback
 
             traceback.print_exc()
             code = 1
+            interrupted = isinstance(err, KeyboardInterrupt)
         import atexit
 
         atexit._run_exitfuncs()
@@ -269,6 +272,9 @@ def _run_job(request: dict, fds: list[int]) -> None:
         try:
             sys.stdout.flush()
             sys.stderr.flush()
+            if interrupted:  # as a fresh interpreter ends on an unhandled KeyboardInterrupt
+                signal.signal(signal.SIGINT, signal.SIG_DFL)
+                os.kill(os.getpid(), signal.SIGINT)
         finally:
             os._exit(code)
 
@@ -335,6 +341,9 @@ def serve(name: str, parent: int) -> None:
     for module in (*PRELOADED_MODULES, "matplotlib.pyplot"):
         importlib.import_module(module)
     signal.signal(signal.SIGCHLD, signal.SIG_IGN)  # copies are reaped by the kernel
+    # a terminal's Ctrl-C reaches the whole process group: the jobs' copies take it (as fresh
+    # interpreters would), the server and the copies' supervisors carry on until Snakemake ends
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     listener.bind("\0" + name)
     listener.listen(64)

@@ -237,6 +237,46 @@ def test_signals_to_the_job_process_reach_the_job(server, tmp_path):
     assert (tmp_path / "got").read_text() == str(int(signal.SIGTERM))
 
 
+def test_ctrl_c_interrupts_the_job_not_the_server(server, tmp_path):
+    """SIGINT (a terminal's Ctrl-C reaches the whole process group) ends the job as it ends a
+    fresh interpreter: KeyboardInterrupt, traceback, exit by SIGINT. The server ignores it and
+    serves the next job."""
+    ready = tmp_path / "ready"
+    body = f"""
+    import time, pathlib
+    pathlib.Path({str(ready)!r}).write_text("")
+    time.sleep(120)
+    """
+    script = job_script(tmp_path, body)
+    results = []
+    for name in (None, server):
+        ready.unlink(missing_ok=True)
+        proc = _start(script, env_for(name))
+        assert _wait_until(ready.exists, 60), proc.communicate(timeout=5)
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+        results.append((proc.returncode, "KeyboardInterrupt" in err))
+    assert results[0] == results[1] == (-signal.SIGINT, True)
+    servers = [
+        int(p.name)
+        for p in Path("/proc").iterdir()
+        if p.name.isdigit() and server.encode() in _cmdline(int(p.name))
+    ]
+    for pid in servers:
+        os.kill(pid, signal.SIGINT)
+    time.sleep(0.5)
+    assert servers and all(_alive(pid) for pid in servers)
+    again = run_job(job_script(tmp_path, "print(preloaded)"), env_for(server))
+    assert (again.returncode, again.stdout.strip()) == (0, "True")
+
+
+def _cmdline(pid: int) -> bytes:
+    try:
+        return Path(f"/proc/{pid}/cmdline").read_bytes()
+    except OSError:
+        return b""
+
+
 def test_a_killed_job_process_takes_its_copy_with_it(server, tmp_path):
     pidfile = tmp_path / "pid"
     body = f"""
