@@ -17,7 +17,8 @@ What a job sees is what a fresh interpreter gives it:
   `OMP_NUM_THREADS` (and BLAS) variables Snakemake sets for the job, which the server read
   before the job existed, so the copy sizes every pool (`threadpoolctl`, `torch`) from them;
 - its exit status, and its signals: the job process forwards SIGTERM, SIGINT and SIGHUP to the
-  copy, and if the job process dies (even by SIGKILL) the copy is killed.
+  copy (those it ignores, the copy ignores too, as a fresh interpreter inherits an ignored
+  signal), and if the job process dies (even by SIGKILL) the copy is killed.
 
 Snakemake's `benchmark:` measures the job's own process tree, which no longer holds the work:
 its wall time `s` is still the job's, but its CPU time and memory are not. The copy's exact
@@ -87,6 +88,8 @@ PRELOADED_MODULES = (
 )
 
 _RECV_FDS = 3  # the job's stdin, stdout and stderr
+#: what the job's process forwards to the job's copy
+_FORWARDED = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)
 _MAX_REQUEST = 1 << 24
 _worker = False  # True in the server's forked copies: a job runs its script there
 
@@ -164,7 +167,12 @@ def run_in_preloaded_interpreter(snakemake: Any) -> None:
         sock.close()
         return  # no server (yet): run here
     script = os.path.abspath(sys.argv[0])
-    request = json.dumps({"script": script, "cwd": os.getcwd(), "env": dict(os.environ)})
+    # signals this process ignores (inherited: a fresh interpreter keeps ignoring them, even
+    # SIGINT): the job's copy ignores them too, and they are not forwarded
+    ignored = [int(s) for s in _FORWARDED if signal.getsignal(s) == signal.SIG_IGN]
+    request = json.dumps(
+        {"script": script, "cwd": os.getcwd(), "env": dict(os.environ), "ignored": ignored}
+    )
     try:
         socket.send_fds(sock, [b"R"], [0, 1, 2])
         _send(sock, request.encode())
@@ -183,8 +191,9 @@ def run_in_preloaded_interpreter(snakemake: Any) -> None:
         except OSError:
             pass
 
-    for s in (signal.SIGTERM, signal.SIGINT, signal.SIGHUP):
-        signal.signal(s, forward)
+    for s in _FORWARDED:
+        if int(s) not in ignored:
+            signal.signal(s, forward)
     while True:
         try:
             result = json.loads(_recv(sock))
@@ -239,7 +248,13 @@ def _run_job(request: dict, fds: list[int]) -> None:
     code = 1
     interrupted = False
     try:
-        signal.signal(signal.SIGINT, signal.default_int_handler)  # the server ignores it
+        # a fresh interpreter's dispositions (the server ignores SIGINT), or the job process's
+        # where it ignores a signal
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+        for s in (signal.SIGTERM, signal.SIGHUP):
+            signal.signal(s, signal.SIG_DFL)
+        for s in request.get("ignored", ()):
+            signal.signal(s, signal.SIG_IGN)
         for target, fd in enumerate(fds):
             os.dup2(fd, target)
             os.close(fd)
@@ -379,11 +394,17 @@ _SERVER = (
 )
 
 
-def start_preloaded_interpreter() -> subprocess.Popen | None:
+#: Fewest jobs a run needs for the server to pay: its imports cost ~3 CPU-seconds, and the
+#: 3-4 jobs that start on 2 cores in the seconds before it listens run fresh anyway (a run of
+#: six short jobs measured none served).
+MIN_JOBS = 8
+
+
+def start_preloaded_interpreter(jobs: int = MIN_JOBS) -> subprocess.Popen | None:
     """Start the server for this Snakemake process (the Snakefile's `onstart`, local runs
     only) and tell its jobs where it listens (the `SOCKET_ENV` variable, inherited by every
-    job). None if `TACGEN_PRELOAD=0`."""
-    if os.environ.get(SWITCH_ENV) == "0":
+    job). None if `TACGEN_PRELOAD=0` or the run has fewer than `MIN_JOBS` jobs to run."""
+    if os.environ.get(SWITCH_ENV) == "0" or jobs < MIN_JOBS:
         return None
     name = f"tacgen-preload-{os.getpid()}-{uuid.uuid4().hex}"
     proc = subprocess.Popen(

@@ -209,7 +209,9 @@ def test_without_a_server_the_job_runs_in_its_own_interpreter(server, tmp_path):
     assert (on.returncode, on.stdout.strip()) == (0, "True")
 
 
-def _start(script: Path, env: dict[str, str]) -> subprocess.Popen:
+def _start(script: Path, env: dict[str, str], sigint=signal.SIG_DFL) -> subprocess.Popen:
+    """The job's process, with SIGINT as given (pytest-xdist's workers ignore it, and a child
+    inherits an ignored signal)."""
     return subprocess.Popen(
         [sys.executable, str(script)],
         cwd=script.parents[2],
@@ -217,6 +219,7 @@ def _start(script: Path, env: dict[str, str]) -> subprocess.Popen:
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, sigint),
     )
 
 
@@ -257,6 +260,18 @@ def test_ctrl_c_interrupts_the_job_not_the_server(server, tmp_path):
         _, err = proc.communicate(timeout=60)
         results.append((proc.returncode, "KeyboardInterrupt" in err))
     assert results[0] == results[1] == (-signal.SIGINT, True)
+    # a job process that ignores SIGINT (inherited) ignores it in the copy too, as fresh
+    results = []
+    for name in (None, server):
+        ready.unlink(missing_ok=True)
+        proc = _start(script, env_for(name), sigint=signal.SIG_IGN)
+        assert _wait_until(ready.exists, 60), proc.communicate(timeout=5)
+        proc.send_signal(signal.SIGINT)
+        time.sleep(1.0)
+        running = proc.poll() is None
+        proc.terminate()
+        results.append((running, proc.wait(timeout=60)))
+    assert results[0] == results[1] == (True, -signal.SIGTERM)
     servers = [
         int(p.name)
         for p in Path("/proc").iterdir()
@@ -321,10 +336,11 @@ def test_the_server_exits_when_its_snakemake_is_gone(tmp_path):
     assert _wait_until(lambda: not _alive(server_pid), 120), "the server outlived Snakemake"
 
 
-def test_switched_off_no_server_starts(monkeypatch):
-    monkeypatch.setenv(preload.SWITCH_ENV, "0")
+def test_switched_off_or_a_few_jobs_no_server_starts(monkeypatch):
     monkeypatch.delenv(preload.SOCKET_ENV, raising=False)
-    assert preload.start_preloaded_interpreter() is None
+    assert preload.start_preloaded_interpreter(preload.MIN_JOBS - 1) is None
+    monkeypatch.setenv(preload.SWITCH_ENV, "0")
+    assert preload.start_preloaded_interpreter(1000) is None
     assert preload.SOCKET_ENV not in os.environ
 
 
