@@ -13,9 +13,10 @@ PRELOAD_SERVER = {}
 
 
 onstart:
-    if workflow.local_exec:
-        # len(workflow.dag): the jobs this run will run (Snakemake's "Nothing to be done" test)
-        PRELOAD_SERVER["process"] = start_preloaded_interpreter(len(workflow.dag))
+    # len(workflow.dag): the jobs this run will run (Snakemake's "Nothing to be done" test)
+    PRELOAD_SERVER["process"] = start_preloaded_interpreter(
+        len(workflow.dag), local=workflow.local_exec
+    )
 
 
 onsuccess:

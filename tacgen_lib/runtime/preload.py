@@ -400,11 +400,16 @@ _SERVER = (
 MIN_JOBS = 8
 
 
-def start_preloaded_interpreter(jobs: int = MIN_JOBS) -> subprocess.Popen | None:
-    """Start the server for this Snakemake process (the Snakefile's `onstart`, local runs
-    only) and tell its jobs where it listens (the `SOCKET_ENV` variable, inherited by every
-    job). None if `TACGEN_PRELOAD=0` or the run has fewer than `MIN_JOBS` jobs to run."""
-    if os.environ.get(SWITCH_ENV) == "0" or jobs < MIN_JOBS:
+def start_preloaded_interpreter(
+    jobs: int = MIN_JOBS, *, local: bool = True
+) -> subprocess.Popen | None:
+    """Start the server for this Snakemake process (the Snakefile's `onstart`) and tell its
+    jobs where it listens (the `SOCKET_ENV` variable, inherited by every job). None, and no
+    variable, for a cluster executor (`local` False), `TACGEN_PRELOAD=0` or a run of fewer than
+    `MIN_JOBS` jobs: a variable inherited from an enclosing run (Snakemake started inside a job)
+    is removed, so this run's jobs never use another run's server."""
+    os.environ.pop(SOCKET_ENV, None)
+    if not local or os.environ.get(SWITCH_ENV) == "0" or jobs < MIN_JOBS:
         return None
     name = f"tacgen-preload-{os.getpid()}-{uuid.uuid4().hex}"
     proc = subprocess.Popen(

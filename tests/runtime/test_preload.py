@@ -336,10 +336,14 @@ def test_the_server_exits_when_its_snakemake_is_gone(tmp_path):
     assert _wait_until(lambda: not _alive(server_pid), 120), "the server outlived Snakemake"
 
 
-def test_switched_off_or_a_few_jobs_no_server_starts(monkeypatch):
-    monkeypatch.delenv(preload.SOCKET_ENV, raising=False)
-    assert preload.start_preloaded_interpreter(preload.MIN_JOBS - 1) is None
+def test_no_server_for_a_cluster_a_few_jobs_or_switched_off(monkeypatch):
+    """No server, and no inherited server name (an enclosing run's) left for the jobs."""
+    for kwargs in ({"jobs": preload.MIN_JOBS - 1}, {"jobs": 1000, "local": False}):
+        monkeypatch.setenv(preload.SOCKET_ENV, "tacgen-an-enclosing-run")
+        assert preload.start_preloaded_interpreter(**kwargs) is None
+        assert preload.SOCKET_ENV not in os.environ
     monkeypatch.setenv(preload.SWITCH_ENV, "0")
+    monkeypatch.setenv(preload.SOCKET_ENV, "tacgen-an-enclosing-run")
     assert preload.start_preloaded_interpreter(1000) is None
     assert preload.SOCKET_ENV not in os.environ
 
