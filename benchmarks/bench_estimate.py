@@ -38,12 +38,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from snakemake_run import SNAKEMAKE, copy_tree  # noqa: E402  (the tests' workflow copy)
 
 
-def cold_run(dest: Path, configfile: str, cores: int) -> Path:
-    """Copy the workflow into `dest` and run `configfile` there cold; returns `dest`."""
+def cold_run(dest: Path, configfile: str, cores: int, env: dict[str, str] | None = None) -> Path:
+    """Copy the workflow into `dest` and run `configfile` there cold (in environment `env`,
+    default this process's); returns `dest`."""
     copy_tree(dest)
     cmd = [*SNAKEMAKE, "--cores", str(cores), "--configfile", configfile, "--quiet"]
     print(f"running snakemake {' '.join(cmd[3:])} in {dest}", flush=True)
-    subprocess.run(cmd, cwd=dest, check=True)
+    subprocess.run(cmd, cwd=dest, env=env, check=True)
     return dest
 
 

@@ -14,30 +14,28 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
 import machine
+from bench_estimate import cold_run
 
 from tacgen_lib.runtime.benchmarks import read_benchmark
 from tacgen_lib.runtime.preload import SWITCH_ENV, usage_path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from snakemake_run import SNAKEMAKE, copy_tree, edge_hashes  # noqa: E402  (the tests' copy)
+from snakemake_run import edge_hashes  # noqa: E402  (the tests' edge hashes)
 
 
-def cold_run(dest: Path, configfile: str, cores: int, preload: bool) -> dict:
-    """Run `configfile` cold in a copy of the workflow at `dest`; wall and job seconds."""
-    copy_tree(dest)
+def timed_run(dest: Path, configfile: str, cores: int, preload: bool) -> dict:
+    """`configfile` cold in a copy of the workflow at `dest` (bench_estimate.cold_run), with
+    or without the server; its wall, job seconds, jobs served and edge hashes."""
     env = {**os.environ, SWITCH_ENV: "1" if preload else "0"}
-    cmd = [*SNAKEMAKE, "--cores", str(cores), "--configfile", configfile, "--quiet"]
     label = "preloaded" if preload else "fresh"
-    print(f"{label}: snakemake {' '.join(cmd[3:])} in {dest}", flush=True)
     t0 = time.monotonic()
-    subprocess.run(cmd, cwd=dest, env=env, check=True, capture_output=True)
+    cold_run(dest, configfile, cores, env)
     wall = time.monotonic() - t0
     benches = sorted((dest / "results" / "benchmarks").rglob("*.tsv"))
     seconds = [read_benchmark(b).wall for b in benches]
@@ -61,7 +59,7 @@ def main() -> None:
     print(f"machine: {machine.describe()}")
     with tempfile.TemporaryDirectory(prefix="tacgen-bench-preload-") as tmp:
         runs = [
-            cold_run(Path(tmp) / name, args.configfile, args.cores, preload)
+            timed_run(Path(tmp) / name, args.configfile, args.cores, preload)
             for name, preload in (("fresh", False), ("preloaded", True))
         ]
     print(f"{'run':<10} {'wall s':>8} {'jobs':>5} {'job s sum':>10} {'median':>7} {'served':>7}")

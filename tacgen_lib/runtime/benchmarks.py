@@ -20,6 +20,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from tacgen_lib.runtime.preload import usage_path
+
 __all__ = ["Benchmark", "read_benchmark", "benchmark_seconds", "benchmark_table", "cpu_label"]
 
 
@@ -55,8 +57,6 @@ def read_benchmark(path: str | os.PathLike[str]) -> Benchmark:
     """The job's wall, CPU seconds and peak RSS from its benchmark TSV; for a job run in the
     preloaded interpreter, its CPU seconds are the job process's (Snakemake's sample) plus the
     forked copy's that did the work, its peak RSS the larger of the two."""
-    from tacgen_lib.runtime.preload import usage_path
-
     table = _read(path)
     cpu, rss = _mean(table, "cpu_time"), _mean(table, "max_rss")
     usage_file = usage_path(path)
