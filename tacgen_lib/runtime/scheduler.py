@@ -1,0 +1,47 @@
+"""The local job scheduler's rate limit, which costs a local run a share of a core.
+
+Snakemake (9.x; `--max-jobs-per-timespan`, default 100/1s) limits how many jobs a run submits
+per timespan. While that limit is set, every pass of its scheduling loop
+(`JobScheduler.schedule`) ends by starting a `threading.Timer` that wakes the loop again one
+timespan later, so the limit can be re-checked; that wake-up is itself a pass, which starts
+the next timer. Each job that finishes wakes the loop once more and so starts one more such
+chain, and no chain ever ends: after n finished jobs the loop runs about n passes per second,
+and every pass checks the existence and size of every input file of every ready job. With
+the `code` inputs that every rule declares (its scripts' import closure), a local run of the
+default DAG spent about half a core in the scheduler by its 180th job, with over a hundred
+timer threads alive (measured on a 2-core machine; the note of the stop that added this
+module gives the figures).
+
+A local run needs no submission rate limit: the cores already bound what runs at once, and
+Snakemake before 8.17 had none. `drop_local_rate_limit` removes it from a local run's
+scheduler when it is Snakemake's default, before the first pass, so the loop wakes only when a
+job finishes, as it did then. A rate limit given on the command line, and any cluster or cloud
+executor's (whose submissions the limit exists to pace), are kept.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+__all__ = ["DEFAULT_RATE_LIMIT", "drop_local_rate_limit"]
+
+#: Snakemake's default `--max-jobs-per-timespan` (jobs, seconds).
+DEFAULT_RATE_LIMIT = (100, 1)
+
+
+def drop_local_rate_limit(scheduler: Any, *, local: bool) -> bool:
+    """Remove the submission rate limit from a local run's `JobScheduler` when it is
+    Snakemake's default (`DEFAULT_RATE_LIMIT`). Call it before the scheduler's first pass
+    (the workflow's `onstart`). Returns whether it was removed.
+
+    Kept: a remote executor's limit (`local` False), a limit other than the default, and a
+    scheduler without the attribute (another Snakemake version: nothing is changed)."""
+    limiter = getattr(scheduler, "job_rate_limiter", None)
+    if not local or limiter is None:
+        return False
+    if (getattr(limiter, "max_jobs", None), getattr(limiter, "timespan", None)) != (
+        DEFAULT_RATE_LIMIT
+    ):
+        return False
+    scheduler.job_rate_limiter = None
+    return True
