@@ -81,7 +81,9 @@ class RegimeSettings:
     share of the pool that only steers the generator's early stopping; ``steps``,
     ``batch_size``: the regime generators' step cap and batch (the rest of the model is
     config ``generate``'s); ``sampling_steps``, ``guidance``: the DDIM cell they are sampled
-    with; ``bootstrap``: fixed-test resamples.
+    with; ``bootstrap``: fixed-test resamples; ``appearance_gammas``: the RBF gamma multiples
+    (of the median heuristic) the nonlinear V probe of the appearance check chooses among by
+    CV (`regime.appearance_check`; the arms use config generate's nonlinear_gammas).
     """
 
     n_labelled: tuple[int, ...] = (32, 128, 384)
@@ -93,8 +95,13 @@ class RegimeSettings:
     sampling_steps: int = 25
     guidance: float = 1.0
     bootstrap: int = 5000
+    appearance_gammas: tuple[float, ...] = (1.0,)
 
     def __post_init__(self) -> None:
+        if not self.appearance_gammas or any(g <= 0 for g in self.appearance_gammas):
+            raise ValueError(
+                f"regime.appearance_gammas must be numbers > 0, got {self.appearance_gammas!r}"
+            )
         for name in ("n_labelled", "n_pool"):
             values = getattr(self, name)
             if not values or any(int(v) != v or v < 1 for v in values):

@@ -26,9 +26,10 @@ resource usage (`wait4`) is written beside the benchmark file (`usage_path`) and
 `tacgen_lib.runtime.benchmarks.read_benchmark` adds it. A job that runs in a fresh interpreter
 removes a stale file there first.
 
-If no server answers (a cluster job, the first seconds of a run while the server imports, a
-Python run outside Snakemake), the job runs in its own interpreter: the server only ever saves
-start-up time. `TACGEN_PRELOAD=0` turns it off.
+The server listens before it imports, so a job that starts during its imports waits for them
+instead of importing the same modules beside it. If no server answers (a cluster job, a Python
+run outside Snakemake, a server gone), the job runs in its own interpreter: the server only
+ever saves start-up time. `TACGEN_PRELOAD=0` turns it off.
 """
 
 from __future__ import annotations
@@ -345,9 +346,14 @@ def _peer_uid(conn: socket.socket) -> int:
 
 
 def serve(name: str, parent: int) -> None:
-    """The server: import `PRELOADED_MODULES`, then listen on the abstract socket `name` and
-    fork a copy per job; exit when the process `parent` (Snakemake) is gone. Jobs may only come
-    from this user."""
+    """The server: listen on the abstract socket `name`, import `PRELOADED_MODULES`, then fork
+    a copy per job; exit when the process `parent` (Snakemake) is gone. Jobs may only come
+    from this user. The socket listens before the imports: a job that starts while they run
+    waits in the listen queue for them instead of importing the same modules itself beside
+    them (on 2 cores, three processes importing at once)."""
+    listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    listener.bind("\0" + name)
+    listener.listen(64)
     import matplotlib
 
     matplotlib.use("Agg")  # the workflow's figures are Agg (tacgen_lib.report)
@@ -359,9 +365,6 @@ def serve(name: str, parent: int) -> None:
     # a terminal's Ctrl-C reaches the whole process group: the jobs' copies take it (as fresh
     # interpreters would), the server and the copies' supervisors carry on until Snakemake ends
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
-    listener.bind("\0" + name)
-    listener.listen(64)
     uid = os.getuid()
     while os.getppid() == parent:
         ready, _, _ = select.select([listener], [], [], 1.0)
@@ -394,10 +397,11 @@ _SERVER = (
 )
 
 
-#: Fewest jobs a run needs for the server to pay: its imports cost ~3 CPU-seconds, and the
-#: 3-4 jobs that start on 2 cores in the seconds before it listens run fresh anyway (a run of
-#: six short jobs measured none served).
+#: Fewest jobs a run needs for the server to pay: its imports cost ~3-4.5 CPU-seconds, which
+#: the first jobs wait for (a run of six short jobs measured none served when they did not).
 MIN_JOBS = 8
+#: Seconds `start_preloaded_interpreter` waits at most for the server's socket to listen.
+BIND_WAIT_S = 5.0
 
 
 def start_preloaded_interpreter(
@@ -420,7 +424,22 @@ def start_preloaded_interpreter(
         stdout=subprocess.DEVNULL,
     )
     os.environ[SOCKET_ENV] = name
+    # the socket listens before the server's imports (`serve`): once it does, a job queues
+    # for the server instead of running fresh; a server that has not bound it within the
+    # wait still serves the jobs that come later
+    deadline = time.monotonic() + BIND_WAIT_S
+    while not _listening(name) and proc.poll() is None and time.monotonic() < deadline:
+        time.sleep(0.01)
     return proc
+
+
+def _listening(name: str) -> bool:
+    """Whether the abstract Unix socket `name` is bound (Linux: /proc/net/unix)."""
+    try:
+        table = Path("/proc/net/unix").read_text()
+    except OSError:
+        return True  # cannot tell: do not wait
+    return f" @{name}\n" in table or table.endswith(f" @{name}")
 
 
 def stop_preloaded_interpreter(proc: subprocess.Popen | None) -> None:

@@ -78,7 +78,7 @@ with threadpool_limits(snakemake.threads):
         corpus=w.corpus,
         rho=float(params.rho),
         seed=seed,
-        gammas=params.gammas,
+        gammas=regime.appearance_gammas,
         bootstrap=regime.bootstrap,
     )
 edges.write(snakemake.output.rows, rows, key="row_id", producer=snakemake.rule)
