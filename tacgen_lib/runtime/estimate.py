@@ -15,8 +15,9 @@ on a SLURM cluster of K nodes, from per-unit costs fitted on benchmark files.
     .venv/bin/python -m tacgen_lib.runtime.estimate --configfile config/paper.yaml \\
         --slurm-nodes 8 --cores-per-node 32
 
-The per-unit costs hold for the calibration's CPU; on another CPU class scale them (the
-2-core class without AVX-512 runs the same code 2-3x slower: README, Speed).
+The per-unit costs hold for the calibration's CPU (the shipped one: the 2-core class without
+AVX-512, on which the budgets hold); on another CPU class scale them (`--speed-factor`: a CPU
+with AVX-512 runs the same code about twice as fast).
 """
 
 from __future__ import annotations
@@ -142,7 +143,8 @@ def estimate_run(
     The calibration's lines give seconds on idle cores (`calibration.unshared_seconds`);
     `speed` multiplies every second (jobs and workflow overhead) into this machine's wall: its
     load factor (1 on idle cores; `calibration.load_factors`) times its CPU's slowness against
-    the calibration's (~2.5 for the 2-core class without AVX-512 against an AVX-512 one)."""
+    the calibration's (~0.5 on a CPU with AVX-512 against the shipped calibration's, which
+    was measured on the 2-core class without it)."""
     if not speed > 0:
         raise ValueError(f"speed factor must be > 0, got {speed}")
     lines = fit_costs(calibration.points)
@@ -338,7 +340,7 @@ def main(argv: Sequence[str] | None = None) -> Estimate:
         "--speed-factor",
         type=float,
         default=1.0,
-        help="CPU seconds here per calibration CPU second (e.g. 2.5 on a CPU without AVX-512)",
+        help="CPU seconds here per calibration CPU second (e.g. 0.5 on a CPU with AVX-512)",
     )
     parser.add_argument("--workdir", default=".", help="the workflow's directory")
     parser.add_argument("--out", default=None, help="write the per-rule table (.parquet/.csv/.tsv)")
