@@ -113,10 +113,18 @@ def generation_verdict(
         parts.append(f"Generated touch helps (Δ_gen {g})")
     else:
         parts.append(f"Generated touch does not help (Δ_gen {g})")
-    if r_side == "above":
-        parts.append(f"real touch does (Δ_real {fmt.with_ci(*real, sign=True)})")
+    r = fmt.with_ci(*real, sign=True)
+    if r_side == "above" and g_side == "above":
+        parts.append(f"so does real touch (Δ_real {r})")
+    elif r_side == "above":
+        parts.append(f"real touch does (Δ_real {r})")
+    elif g_side == "above":
+        parts.append(
+            f"real touch does not (Δ_real {r}): a gain that real touch does not give is not "
+            "touch's information (chance, or the probe)"
+        )
     else:
-        parts.append(f"nor does real touch (Δ_real {fmt.with_ci(*real, sign=True)})")
+        parts.append(f"nor does real touch (Δ_real {r})")
     text = "; ".join(parts) + "."
     if g_side == "above" and not fmt.is_missing(nonlinear[0]):
         n_side = interval_side(*nonlinear[1:])

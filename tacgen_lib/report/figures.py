@@ -124,6 +124,11 @@ def pretrain_curve_figure(
     return fig
 
 
+#: A label column with more distinct values than this is drawn as a histogram.
+MAX_COUNT_BARS = 20
+HIST_UNITS = {"mass": "mass (kg)", "density": "density (kg/m³)", "hardness": "hardness"}
+
+
 def label_distribution_figure(samples: pd.DataFrame, *, title: str) -> plt.Figure:
     """Label distributions of a corpus and its force bands (p05–p95 around p50 against mass).
 
@@ -134,7 +139,10 @@ def label_distribution_figure(samples: pd.DataFrame, *, title: str) -> plt.Figur
     panels = []
     for col in ("shape", "density", "hardness"):
         if col in samples.columns and samples[col].notna().any():
-            panels.append(("counts", col))
+            # a continuous label (the natural design's density) is a histogram, not one bar
+            # per value
+            discrete = samples[col].nunique() <= MAX_COUNT_BARS
+            panels.append(("counts" if discrete else "hist", col))
     if "mass" in samples.columns and samples["mass"].notna().any():
         panels.append(("hist", "mass"))
     if {"force_p05", "force_p50", "force_p95", "mass"} <= set(samples.columns) and samples[
@@ -163,9 +171,9 @@ def label_distribution_figure(samples: pd.DataFrame, *, title: str) -> plt.Figur
             ax.tick_params(axis="x", labelrotation=45, labelsize=8)
             ax.set_title(f"{col} (samples)", fontsize=9)
         elif kind == "hist":
-            ax.hist(samples[col].dropna().to_numpy(), bins=30)
-            ax.set_xlabel("mass (kg)")
-            ax.set_title("mass", fontsize=9)
+            ax.hist(samples[col].dropna().to_numpy(dtype=np.float64), bins=30)
+            ax.set_xlabel(HIST_UNITS.get(col, col))
+            ax.set_title(f"{col} (samples)" if col != "mass" else "mass", fontsize=9)
         elif kind == "bands":
             d = samples.dropna(subset=["mass", "force_p50"]).sort_values("mass")
             ax.errorbar(

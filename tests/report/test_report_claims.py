@@ -408,3 +408,18 @@ def test_fusion_table_states_the_planning_rule():
             assert "raw of equal size" in f.inputs  # what the table says, what the plan does
         else:
             assert equal[name] is None and unequal[name] is None
+
+
+def test_generation_verdict_reads_right_in_all_four_cases():
+    up, flat = (0.1, 0.05, 0.15), (0.0, -0.05, 0.05)
+    none = (0.0, 0.0, 0.0)
+    assert "so does real touch" in claims.generation_verdict(up, up, none)
+    assert "; real touch does (" in claims.generation_verdict(flat, up, none)
+    both_flat = claims.generation_verdict(flat, flat, none)
+    assert (
+        both_flat.startswith("Generated touch does not help") and "nor does real touch" in both_flat
+    )
+    # a gain from generated touch where real touch gives none is flagged, not credited
+    odd = claims.generation_verdict(up, flat, none)
+    assert odd.startswith("Generated touch helps") and "real touch does not" in odd
+    assert "not touch's information" in odd and "nor" not in odd
