@@ -136,9 +136,9 @@ def generation_findings(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
                 "evidence": "generation",
                 "question": f"does touch generated from RGB add to vision on {target}? "
                 f"({corpus}, {g['metric'].iloc[0]})",
-                "result": f"Δ_gen {fmt.with_ci(*gen, sign=True)} (seed {first}; mean over "
-                f"{n} seeds {fmt.with_ci(*seeds, sign=True)}); "
-                f"Δ_real {fmt.with_ci(*real, sign=True)}",
+                "result": f"Δ_gen {fmt.with_ci(*gen, sign=True)} (seed {first}"
+                + (f"; mean over {n} seeds {fmt.with_ci(*seeds, sign=True)}" if n > 1 else "")
+                + f"); Δ_real {fmt.with_ci(*real, sign=True)}",
                 "control": f"shuffled pairs Δ {fmt.with_ci(*shuffled, sign=True)}; nonlinear "
                 f"V only Δ {fmt.with_ci(*nonlin, sign=True)}; ridge V→T generator Δ "
                 f"{fmt.with_ci(*ridge, sign=True)}",
