@@ -276,9 +276,9 @@ def _run_job(request: dict, fds: list[int]) -> None:
             if c is not None and not isinstance(c, int):
                 print(c, file=sys.stderr)
         except BaseException as err:
-            import traceback
-
-            traceback.print_exc()
+            # what the interpreter does with an unhandled exception: the script's own hook
+            # (tacgen_lib.io.log writes the failure into the rule's log) and the traceback
+            sys.excepthook(type(err), err, err.__traceback__)
             code = 1
             interrupted = isinstance(err, KeyboardInterrupt)
         import atexit

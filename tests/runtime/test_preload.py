@@ -169,6 +169,26 @@ def test_exit_status_and_traceback_come_back(server, tmp_path):
     assert "Traceback" in raises.stderr and "ValueError: boom in rule x" in raises.stderr
 
 
+HOOKED = """
+def hook(kind, err, tb):
+    print(f"hooked {kind.__name__}: {err}", file=sys.stderr)
+    sys.__excepthook__(kind, err, tb)
+sys.excepthook = hook  # as tacgen_lib.io.log.for_rule writes a failure into the rule's log
+raise ValueError("boom in rule x")
+"""
+
+
+def test_an_unhandled_exception_goes_through_the_scripts_excepthook_as_in_a_fresh_one(
+    server, tmp_path
+):
+    served = run_job(job_script(tmp_path, HOOKED), env_for(server))
+    fresh = run_job(job_script(tmp_path, HOOKED), env_for(None))
+    for proc in (served, fresh):
+        assert proc.returncode == 1
+        assert "hooked ValueError: boom in rule x" in proc.stderr
+        assert "Traceback" in proc.stderr
+
+
 def test_usage_is_written_beside_the_benchmark_and_read_with_it(server, tmp_path):
     usage = tmp_path / (BENCH + ".usage.json")
     burn = "import numpy as np\nx = np.ones((400, 400))\nfor _ in range(60): x = x @ x * 1e-3\n"
