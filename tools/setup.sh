@@ -48,9 +48,7 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   extra=()
   [ -d /opt/wheels ] && extra+=(--find-links /opt/wheels)  # local CPU torch wheel, where present
   "$VENV/bin/python" -m pip install -q --upgrade pip
-  # --no-compile: byte-compiling every installed file (torch's included) took ~80 of ~140 s
-  # on a 2-core machine; Python compiles the modules a process imports on first import instead
-  "$VENV/bin/python" -m pip install -q --no-compile "${extra[@]}" -c constraints.txt -e ".[workflow,dev]"
+  "$VENV/bin/python" -m pip install -q "${extra[@]}" -c constraints.txt -e ".[workflow,dev]"
   echo "$want" > "$stamp"
 fi
 "$VENV/bin/python" - <<'PY'
