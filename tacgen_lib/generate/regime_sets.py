@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 
 from tacgen_lib.corpus.splits import LeakageError, assert_trainable
+from tacgen_lib.generate.settings import check_gamma_multiples
 from tacgen_lib.io.config import settings_from
 
 __all__ = [
@@ -98,10 +99,7 @@ class RegimeSettings:
     appearance_gammas: tuple[float, ...] = (1.0,)
 
     def __post_init__(self) -> None:
-        if not self.appearance_gammas or any(g <= 0 for g in self.appearance_gammas):
-            raise ValueError(
-                f"regime.appearance_gammas must be numbers > 0, got {self.appearance_gammas!r}"
-            )
+        check_gamma_multiples(self.appearance_gammas, "regime.appearance_gammas")
         for name in ("n_labelled", "n_pool"):
             values = getattr(self, name)
             if not values or any(int(v) != v or v < 1 for v in values):

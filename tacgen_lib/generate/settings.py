@@ -15,10 +15,17 @@ from typing import Any, Literal
 
 from tacgen_lib.io.config import settings_from
 
-__all__ = ["GenerateSettings", "SAMPLERS", "check_grid"]
+__all__ = ["GenerateSettings", "SAMPLERS", "check_gamma_multiples", "check_grid"]
 
 #: The samplers of the grid: DDPM ancestral (over all T steps) and DDIM (any number of steps).
 SAMPLERS = ("ddim", "ddpm")
+
+
+def check_gamma_multiples(gammas: tuple[float, ...], key: str) -> None:
+    """Refuse an empty grid of RBF gamma multiples (of the median heuristic), or one with a
+    multiple <= 0; `key` names the config key in the error."""
+    if not gammas or any(g <= 0 for g in gammas):
+        raise ValueError(f"{key} must be positive numbers, got {gammas!r}")
 
 
 @dataclass(frozen=True)
@@ -93,10 +100,7 @@ class GenerateSettings:
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"generate.{name} must be a finite number >= 0, got {value!r}")
-        if not self.nonlinear_gammas or any(g <= 0 for g in self.nonlinear_gammas):
-            raise ValueError(
-                f"generate.nonlinear_gammas must be positive numbers, got {self.nonlinear_gammas!r}"
-            )
+        check_gamma_multiples(self.nonlinear_gammas, "generate.nonlinear_gammas")
 
     @classmethod
     def from_config(cls, generate: Mapping[str, Any]) -> GenerateSettings:
