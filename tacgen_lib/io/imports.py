@@ -15,6 +15,9 @@ library (numpy, torch) are not inputs: the environment pins them.
 from __future__ import annotations
 
 import ast
+import hashlib
+import itertools
+import json
 import os
 from collections.abc import Iterable
 from pathlib import Path
@@ -22,16 +25,51 @@ from pathlib import Path
 LIBRARY = "tacgen_lib"
 
 
-def _module_file(lib_root: Path, dotted: str) -> Path | None:
-    """The file of library module `dotted` ('tacgen_lib.io.edges'), or None if it is not one."""
-    parts = dotted.split(".")
-    if parts[0] != LIBRARY:
-        return None
-    base = lib_root.joinpath(*parts[1:])
-    for candidate in (base.with_suffix(".py"), base / "__init__.py"):
-        if candidate.is_file():
-            return candidate
-    return None
+#: lib_root -> (the mtime of each of its folders, dotted module name -> file): what a dotted
+#: name can resolve to. ~50 closures resolve thousands of names at every Snakemake start; a
+#: stat per candidate cost more than the rest together. Checked against the folders' mtimes
+#: once per closure, so a module added or removed (which changes its folder's mtime) is seen.
+_LISTINGS: dict[Path, tuple[dict[str, int], dict[str, Path], int]] = {}
+
+
+_GENERATIONS = itertools.count()
+
+
+def _library_modules(lib_root: Path) -> dict[str, Path]:
+    """Dotted name -> file of every module and package under `lib_root` ('tacgen_lib.io' ->
+    its `__init__.py`; a module file wins over a package of the same name, as in
+    `_module_file`)."""
+    have = _LISTINGS.get(lib_root)
+    if have is not None:
+        try:
+            if all(os.stat(d).st_mtime_ns == m for d, m in have[0].items()):
+                return have[1]
+        except OSError:
+            pass
+    folders: dict[str, int] = {}
+    modules: dict[str, Path] = {}
+    packages: dict[str, Path] = {}
+    for folder, subdirs, names in os.walk(lib_root):
+        subdirs[:] = sorted(d for d in subdirs if d != "__pycache__")
+        folders[folder] = os.stat(folder).st_mtime_ns
+        rel = os.path.relpath(folder, lib_root)
+        prefix = LIBRARY if rel == "." else ".".join([LIBRARY, *Path(rel).parts])
+        for name in names:
+            if not name.endswith(".py"):
+                continue
+            if name == "__init__.py":
+                packages[prefix] = Path(folder, name)
+            else:
+                modules[f"{prefix}.{name[:-3]}"] = Path(folder, name)
+    # a new generation for every listing: what was resolved against an older one is not reused
+    _LISTINGS[lib_root] = (folders, {**packages, **modules}, next(_GENERATIONS))
+    return _LISTINGS[lib_root][1]
+
+
+def _module_file(modules: dict[str, Path], dotted: str) -> Path | None:
+    """The file of library module `dotted` ('tacgen_lib.io.edges'), or None if it is not one
+    (modules: `_library_modules(lib_root)`)."""
+    return modules.get(dotted)
 
 
 def _package_of(lib_root: Path, path: Path) -> list[str]:
@@ -81,36 +119,95 @@ def _imported_names(tree: ast.AST, package: list[str]) -> Iterable[str]:
                     yield f"{base}.{alias.name}"
 
 
-def _with_packages(lib_root: Path, dotted: str) -> list[Path]:
+def _with_packages(modules: dict[str, Path], dotted: str) -> list[Path]:
     """The module's file and the `__init__.py` of every package above it, in import order."""
     parts = dotted.split(".")
     out = []
     for i in range(1, len(parts) + 1):
-        found = _module_file(lib_root, ".".join(parts[:i]))
+        found = _module_file(modules, ".".join(parts[:i]))
         if found is None:
             break
         out.append(found)
     return out
 
 
-#: (file, lib_root, mtime_ns, size) -> the library files its own import statements reach. The
-#: workflow derives the closures of ~50 scripts at every Snakemake start and they share most
-#: modules: each file is parsed once per process, and again only if it changes.
-_DIRECT: dict[tuple[Path, Path, int, int], tuple[Path, ...]] = {}
+#: The imported names of each parsed file, by content: parsing (`ast.parse`) was most of the
+#: closures' time at every Snakemake start, and the sources rarely change between starts. Keyed
+#: by the SHA-1 of the file's bytes and its package (relative imports depend on it), so an
+#: entry is right for any copy of the file anywhere; kept in the user's cache folder
+#: (`$XDG_CACHE_HOME/tacgen-workflow`, `TACGEN_IMPORT_CACHE` overrides it, an empty value turns
+#: it off) and in this process. Names are resolved to files afresh at every use.
+_NAMES: dict[str, list[str]] = {}
+CACHE_ENV = "TACGEN_IMPORT_CACHE"
+_CACHE_VERSION = 1
+_CACHE_MAX = 4000  # entries kept on disk: the newest (old versions of files drop out)
+_cache_state = {"loaded": None, "dirty": False}
 
 
-def _direct_imports(path: Path, root: Path) -> tuple[Path, ...]:
+def _cache_file() -> Path | None:
+    where = os.environ.get(CACHE_ENV)
+    if where is not None:
+        return Path(where) if where else None
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base, "tacgen-workflow", f"imports-v{_CACHE_VERSION}.json")
+
+
+def _load_cache() -> None:
+    path = _cache_file()
+    if _cache_state["loaded"] == path:
+        return
+    _cache_state["loaded"] = path
+    if path is None:
+        return
+    try:
+        stored = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return  # no cache yet, or a damaged one: parse
+    if isinstance(stored, dict):
+        for key, names in stored.items():
+            if isinstance(names, list) and all(isinstance(n, str) for n in names):
+                _NAMES.setdefault(key, names)
+
+
+def _save_cache() -> None:
+    """Write the cache atomically (a temporary file renamed into place); never fail a run."""
+    path = _cache_file()
+    if path is None or not _cache_state["dirty"]:
+        return
+    keep = dict(list(_NAMES.items())[-_CACHE_MAX:])
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+        tmp.write_text(json.dumps(keep))
+        os.replace(tmp, path)
+        _cache_state["dirty"] = False
+    except OSError:
+        pass
+
+
+#: (file, mtime_ns, size, the listing it was resolved against) -> its direct imports: the ~50
+#: closures of one Snakemake start share most modules; each is read and resolved once.
+_RESOLVED: dict[tuple[Path, int, int, int], tuple[Path, ...]] = {}
+
+
+def _direct_imports(path: Path, root: Path, modules: dict[str, Path]) -> tuple[Path, ...]:
     """Library files (with their packages' `__init__.py`) that `path`'s own imports reach."""
     stat = path.stat()
-    key = (path, root, stat.st_mtime_ns, stat.st_size)
-    if key not in _DIRECT:
-        package = _package_of(root, path) if path.is_relative_to(root) else []
-        tree = ast.parse(path.read_text(), filename=str(path))
-        found = dict.fromkeys(
-            f for dotted in _imported_names(tree, package) for f in _with_packages(root, dotted)
-        )
-        _DIRECT[key] = tuple(found)
-    return _DIRECT[key]
+    memo = (path, stat.st_mtime_ns, stat.st_size, _LISTINGS[root][2])
+    if memo in _RESOLVED:
+        return _RESOLVED[memo]
+    source = path.read_bytes()
+    package = _package_of(root, path) if path.is_relative_to(root) else []
+    key = f"{hashlib.sha1(source).hexdigest()}|{'.'.join(package)}"
+    names = _NAMES.get(key)
+    if names is None:
+        tree = ast.parse(source, filename=str(path))
+        names = list(dict.fromkeys(_imported_names(tree, package)))
+        _NAMES[key] = names
+        _cache_state["dirty"] = True
+    found = tuple(dict.fromkeys(f for dotted in names for f in _with_packages(modules, dotted)))
+    _RESOLVED[memo] = found
+    return found
 
 
 def import_closure(script: str | os.PathLike[str], lib_root: str | os.PathLike[str]) -> list[Path]:
@@ -125,13 +222,16 @@ def import_closure(script: str | os.PathLike[str], lib_root: str | os.PathLike[s
     start = Path(script).resolve()
     if not start.is_file():
         raise FileNotFoundError(f"import_closure: no script {start}")
+    _load_cache()
+    modules = _library_modules(root)
     seen: set[Path] = set()
     todo = [start]
     while todo:
-        for found in _direct_imports(todo.pop(), root):
+        for found in _direct_imports(todo.pop(), root, modules):
             if found not in seen:
                 seen.add(found)
                 todo.append(found)
+    _save_cache()
     return sorted(seen - {start})
 
 

@@ -146,6 +146,119 @@ def test_closure_follows_an_edit_made_after_a_first_closure_in_the_same_process(
     assert closure() == ["__init__.py", "one.py", "three.py"]
 
 
+@pytest.fixture
+def fresh_process(monkeypatch, tmp_path):
+    """The import module as a new process finds it: nothing parsed or resolved in memory, the
+    parse cache at a file of this test. Returns the cache file."""
+    import tacgen_lib.io.imports as imports
+
+    cache = tmp_path / "cache" / "imports.json"
+    monkeypatch.setenv(imports.CACHE_ENV, str(cache))
+
+    def restart() -> None:
+        imports._NAMES.clear()
+        imports._RESOLVED.clear()
+        imports._LISTINGS.clear()
+        imports._cache_state.update(loaded=None, dirty=False)
+
+    restart()
+    yield cache, restart
+    restart()
+
+
+def test_a_new_process_takes_parsed_imports_from_the_cache_and_parses_only_edits(
+    tmp_path, fresh_process, monkeypatch
+):
+    import ast
+
+    cache, restart = fresh_process
+    lib = write_library(
+        tmp_path,
+        {
+            "tacgen_lib/__init__.py": "",
+            "tacgen_lib/one.py": "from . import two\n",
+            "tacgen_lib/two.py": "",
+            "tacgen_lib/three.py": "",
+            "script.py": "from tacgen_lib import one\n",
+        },
+    )
+
+    def closure() -> list[str]:
+        return [p.name for p in import_closure(tmp_path / "script.py", lib)]
+
+    want = closure()
+    assert want == ["__init__.py", "one.py", "two.py"] and cache.is_file()
+    parsed: list[str] = []
+    real_parse = ast.parse
+
+    def counting_parse(source, filename="<unknown>", *args, **kwargs):
+        parsed.append(Path(filename).name)
+        return real_parse(source, filename, *args, **kwargs)
+
+    monkeypatch.setattr(ast, "parse", counting_parse)
+    restart()
+    assert closure() == want and parsed == []  # every file from the cache
+    (lib / "one.py").write_text("from . import three\n")
+    restart()
+    assert closure() == ["__init__.py", "one.py", "three.py"] and parsed == ["one.py"]
+
+
+def test_a_damaged_cache_is_ignored_and_rewritten(tmp_path, fresh_process):
+    import json
+
+    cache, restart = fresh_process
+    lib = write_library(
+        tmp_path,
+        {
+            "tacgen_lib/__init__.py": "",
+            "tacgen_lib/one.py": "",
+            "script.py": "import tacgen_lib.one\n",
+        },
+    )
+    cache.parent.mkdir(parents=True)
+    for damage in ("{not json", '{"x": [1, 2]}', "[]"):
+        cache.write_text(damage)
+        restart()
+        assert [p.name for p in import_closure(tmp_path / "script.py", lib)] == [
+            "__init__.py",
+            "one.py",
+        ]
+        assert all(isinstance(v, list) for v in json.loads(cache.read_text()).values())
+
+
+def test_a_module_added_after_a_first_closure_is_resolved(tmp_path, fresh_process):
+    """`from pkg import name` reaches pkg/name.py once that file exists, in the same process
+    (the listing of the library is checked against its folders at every closure)."""
+    lib = write_library(
+        tmp_path,
+        {
+            "tacgen_lib/__init__.py": "",
+            "tacgen_lib/pkg/__init__.py": "name = 1\n",
+            "script.py": "from tacgen_lib.pkg import name\n",
+        },
+    )
+
+    def closure() -> list[str]:
+        return [p.relative_to(lib).as_posix() for p in import_closure(tmp_path / "script.py", lib)]
+
+    assert closure() == ["__init__.py", "pkg/__init__.py"]
+    (lib / "pkg" / "name.py").write_text("")
+    assert closure() == ["__init__.py", "pkg/__init__.py", "pkg/name.py"]
+
+
+def test_an_empty_cache_setting_writes_no_cache(tmp_path, fresh_process, monkeypatch):
+    import tacgen_lib.io.imports as imports
+
+    cache, restart = fresh_process
+    monkeypatch.setenv(imports.CACHE_ENV, "")
+    restart()
+    lib = write_library(
+        tmp_path, {"tacgen_lib/__init__.py": "", "script.py": "import tacgen_lib\n"}
+    )
+    assert [p.name for p in import_closure(tmp_path / "script.py", lib)] == ["__init__.py"]
+    assert not cache.parent.exists()
+
+
 def test_the_snakefile_parses_without_the_numerics_libraries():
     """What every Snakemake start (and every cluster job, which parses the Snakefile again)
     imports from tacgen_lib: the modules the Snakefile and rules/*.smk import at their top

@@ -107,3 +107,56 @@ def test_non_finite_numbers_are_refused_naming_the_key(where, value):
         f"[{where[-1]}]" if isinstance(where[-1], int) else f".{where[-1]}"
     )
     assert f"bad.yaml: invalid configuration\n  {dotted}: {value!r}" in str(err.value)
+
+
+#: every YAML file the workflow reads: configs, scenes, the schema, the cluster profiles
+YAML_FILES = sorted(
+    p.relative_to(ROOT)
+    for pattern in ("config/*.yaml", "config/**/*.yaml", "profiles/**/*.yaml")
+    for p in ROOT.glob(pattern)
+)
+
+
+@pytest.mark.parametrize("path", YAML_FILES, ids=str)
+def test_load_yaml_gives_what_the_pure_python_safe_loader_gives(path):
+    from tacgen_lib.io.config import load_yaml
+
+    want = yaml.load((ROOT / path).read_text(), Loader=yaml.SafeLoader)  # noqa: S506
+    got = load_yaml(ROOT / path)
+    assert got == want
+    # the same types too (1 vs 1.0 vs "1"; == alone would let 1 == 1.0 by)
+    assert repr(got) == repr(want)
+
+
+def test_load_yaml_refuses_python_objects(tmp_path):
+    from tacgen_lib.io.config import load_yaml
+
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("x: !!python/object/apply:os.system ['true']\n")
+    with pytest.raises(yaml.constructor.ConstructorError):
+        load_yaml(bad)
+
+
+def test_filled_defaults_are_copies_not_the_cached_schemas_own(tmp_path):
+    """The schema is read once per process (`_schema`); a default list filled into one config
+    and changed there must not change the default the next config gets."""
+    first = _config()
+    first["policy"].pop("size_range", None)
+    validate_config(first, SCHEMA)
+    default = copy.deepcopy(first["policy"]["size_range"])
+    first["policy"]["size_range"][0] = 12345.0
+    second = _config()
+    second["policy"].pop("size_range", None)
+    validate_config(second, SCHEMA)
+    assert second["policy"]["size_range"] == default != first["policy"]["size_range"]
+
+
+def test_an_edited_schema_is_read_again(tmp_path):
+    schema = tmp_path / "schema.yaml"
+    text = SCHEMA.read_text()
+    schema.write_text(text)
+    validate_config(_config(), schema)
+    # a schema edit that refuses what passed: seen at once, not served from the cache
+    schema.write_text(text.replace("required: [run_name,", "required: [no_such_key, run_name,"))
+    with pytest.raises(ConfigError, match="no_such_key"):
+        validate_config(_config(), schema)
