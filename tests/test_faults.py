@@ -28,6 +28,7 @@ from __future__ import annotations
 import copy
 import json
 import os
+import re
 import shlex
 import shutil
 import signal
@@ -53,7 +54,7 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 from snakemake_run import ROOT, SNAKEMAKE, copy_run, copy_tree, edge_hashes, planned_rules, smk
 
-from tacgen_lib.io import edges
+from tacgen_lib.io import edges, hashed
 
 pytestmark = pytest.mark.workflow
 
@@ -316,9 +317,16 @@ def test_corrupt_data_in_a_well_hashed_edge_is_named(reference_run, tmp_path, ca
     edge, edit, target, column = CORRUPTIONS[case]
     work = copy_run(reference_run, tmp_path / case)
     sid = _rewrite(work / edge, edit)
-    proc = smk(work, *TARGETS, target, check=False)
+    # the consumer alone reads it: the rewritten edge and its sidecar keep the reference run's
+    # times (so no upstream job reruns first), and the target is forced
+    for path in (work / edge, (work / edge).with_name(Path(edge).name + hashed.SIDECAR_SUFFIX)):
+        before = (reference_run / path.relative_to(work)).stat()
+        os.utime(path, ns=(before.st_atime_ns, before.st_mtime_ns))
+    proc = smk(work, *TARGETS, "--force", target, check=False)
     out = proc.stdout + proc.stderr
     assert proc.returncode != 0
+    ran = re.findall(r"(?m)^(?:local)?rule (\w+):", out)
+    assert len(ran) == 1, ran  # the consumer's job, and only it
     message = next((line for line in out.splitlines() if sid in line and column in line), None)
     assert message is not None and edge in message, out[-5000:]
     print(f"\n{case}: {message.strip()[:300]}")
