@@ -30,15 +30,13 @@ LIBRARY = "tacgen_lib"
 #: stat per candidate cost more than the rest together. Checked against the folders' mtimes
 #: once per closure, so a module added or removed (which changes its folder's mtime) is seen.
 _LISTINGS: dict[Path, tuple[dict[str, int], dict[str, Path], int]] = {}
-
-
 _GENERATIONS = itertools.count()
 
 
 def _library_modules(lib_root: Path) -> dict[str, Path]:
     """Dotted name -> file of every module and package under `lib_root` ('tacgen_lib.io' ->
-    its `__init__.py`; a module file wins over a package of the same name, as in
-    `_module_file`)."""
+    its `__init__.py`; a module file wins over a package of the same name, as Python's
+    import does)."""
     have = _LISTINGS.get(lib_root)
     if have is not None:
         try:
@@ -64,12 +62,6 @@ def _library_modules(lib_root: Path) -> dict[str, Path]:
     # a new generation for every listing: what was resolved against an older one is not reused
     _LISTINGS[lib_root] = (folders, {**packages, **modules}, next(_GENERATIONS))
     return _LISTINGS[lib_root][1]
-
-
-def _module_file(modules: dict[str, Path], dotted: str) -> Path | None:
-    """The file of library module `dotted` ('tacgen_lib.io.edges'), or None if it is not one
-    (modules: `_library_modules(lib_root)`)."""
-    return modules.get(dotted)
 
 
 def _package_of(lib_root: Path, path: Path) -> list[str]:
@@ -120,11 +112,12 @@ def _imported_names(tree: ast.AST, package: list[str]) -> Iterable[str]:
 
 
 def _with_packages(modules: dict[str, Path], dotted: str) -> list[Path]:
-    """The module's file and the `__init__.py` of every package above it, in import order."""
+    """The module's file and the `__init__.py` of every package above it, in import order
+    (modules: `_library_modules(lib_root)`; a name that is no library module ends the walk)."""
     parts = dotted.split(".")
     out = []
     for i in range(1, len(parts) + 1):
-        found = _module_file(modules, ".".join(parts[:i]))
+        found = modules.get(".".join(parts[:i]))
         if found is None:
             break
         out.append(found)

@@ -11,6 +11,7 @@ import functools
 import modulefinder
 import re
 import textwrap
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -128,22 +129,27 @@ def test_closure_names_a_script_that_does_not_parse(tmp_path):
         import_closure(tmp_path / "missing.py", lib)
 
 
-def test_closure_follows_an_edit_made_after_a_first_closure_in_the_same_process(tmp_path):
-    """Parsed files are remembered per process (one parse per Snakemake start); an edited
-    file is parsed again, so the new import is followed and the dropped one is not."""
+def one_two_three_library(root: Path, one: str) -> Callable[[], list[str]]:
+    """A library whose module `one` holds the source `one` (importing `two` or `three`), and
+    a script importing `one`: returns the script's closure as file names, computed afresh."""
     lib = write_library(
-        tmp_path,
+        root,
         {
             "tacgen_lib/__init__.py": "",
-            "tacgen_lib/one.py": "from tacgen_lib import two\n",
+            "tacgen_lib/one.py": one,
             "tacgen_lib/two.py": "",
             "tacgen_lib/three.py": "",
             "script.py": "from tacgen_lib import one\n",
         },
     )
+    return lambda: [p.name for p in import_closure(root / "script.py", lib)]
 
-    def closure() -> list[str]:
-        return [p.name for p in import_closure(tmp_path / "script.py", lib)]
+
+def test_closure_follows_an_edit_made_after_a_first_closure_in_the_same_process(tmp_path):
+    """Parsed files are remembered per process (one parse per Snakemake start); an edited
+    file is parsed again, so the new import is followed and the dropped one is not."""
+    closure = one_two_three_library(tmp_path, "from tacgen_lib import two\n")
+    lib = tmp_path / "tacgen_lib"
 
     assert closure() == ["__init__.py", "one.py", "two.py"]
     (lib / "one.py").write_text("from tacgen_lib import three  # an edit of a parsed file\n")
@@ -176,19 +182,8 @@ def test_a_new_process_takes_parsed_imports_from_the_cache_and_parses_only_edits
     import ast
 
     cache, restart = fresh_process
-    lib = write_library(
-        tmp_path,
-        {
-            "tacgen_lib/__init__.py": "",
-            "tacgen_lib/one.py": "from . import two\n",
-            "tacgen_lib/two.py": "",
-            "tacgen_lib/three.py": "",
-            "script.py": "from tacgen_lib import one\n",
-        },
-    )
-
-    def closure() -> list[str]:
-        return [p.name for p in import_closure(tmp_path / "script.py", lib)]
+    closure = one_two_three_library(tmp_path, "from . import two\n")
+    lib = tmp_path / "tacgen_lib"
 
     want = closure()
     assert want == ["__init__.py", "one.py", "two.py"] and cache.is_file()
