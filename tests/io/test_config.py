@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import copy
+import subprocess
+import sys
+import textwrap
 from pathlib import Path
 
 import pytest
@@ -160,3 +163,23 @@ def test_an_edited_schema_is_read_again(tmp_path):
     schema.write_text(text.replace("required: [run_name,", "required: [no_such_key, run_name,"))
     with pytest.raises(ConfigError, match="no_such_key"):
         validate_config(_config(), schema)
+
+
+def test_reading_settings_does_not_import_jsonschema():
+    """Jobs read their settings (`settings_from`) and never validate: jsonschema (~0.1 s a
+    job) is imported by validation only, at parse time."""
+    code = textwrap.dedent(
+        """
+        import dataclasses, sys
+        from tacgen_lib.io.config import settings_from
+
+        @dataclasses.dataclass(frozen=True)
+        class S:
+            steps: int = 1
+
+        assert settings_from(S, {"steps": 3}, where="x").steps == 3
+        print("jsonschema" in sys.modules)
+        """
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "False", out.stdout + out.stderr
