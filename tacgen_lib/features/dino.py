@@ -26,8 +26,9 @@ original recipe are left out (cost on CPU; hue is meaningless for tactile shadin
 
 Determinism: weights are initialised under a forked RNG seeded with `seed`, the epoch order
 comes from numpy's Generator(seed) and augmentations from torch.Generator(seed), and the loop
-runs with torch.use_deterministic_algorithms(True) (restored afterwards). Same images + same
-arguments + same torch build and thread count => bit-identical weights and curve on CPU.
+runs in torch's deterministic-algorithms mode (`deterministic_algorithms`, restored afterwards).
+Same images + same arguments + same torch build and thread count => bit-identical weights and
+curve on CPU.
 
 The losses and the collapse diagnostics live in `dino_losses`, the multi-crop augmentation in
 `augment`; this module holds the head and the training loop (`pretrain_dino`).
@@ -35,9 +36,10 @@ The losses and the collapse diagnostics live in `dino_losses`, the multi-crop au
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -130,6 +132,31 @@ def _cosine(start: float, end: float, n: int) -> np.ndarray:
     return end + 0.5 * (start - end) * (1 + np.cos(np.pi * np.arange(n) / (n - 1)))
 
 
+@contextlib.contextmanager
+def deterministic_algorithms() -> Iterator[None]:
+    """torch's deterministic-algorithms mode inside the block, the previous mode (and its
+    warn-only setting) restored after; uninitialised memory is not NaN-filled inside (no op of
+    pretraining reads it, and filling every `torch.empty` costs ~15% of a step).
+
+    It sets the eager flag `torch.use_deterministic_algorithms` sets
+    (`torch._C._set_deterministic_algorithms`) and not the function's other effect, the
+    `deterministic` option of TorchInductor: setting that option imports torch._inductor and
+    torch._dynamo (~800 modules, ~2 s per process on the slower CPU class) for compiled graphs,
+    and nothing here is compiled. `tests/features/test_dino.py` checks the mode inside and the
+    restore, and that pretraining imports neither.
+    """
+    before = torch.are_deterministic_algorithms_enabled()
+    warn_only_before = torch.is_deterministic_algorithms_warn_only_enabled()
+    fill_before = torch.utils.deterministic.fill_uninitialized_memory
+    torch._C._set_deterministic_algorithms(True)
+    torch.utils.deterministic.fill_uninitialized_memory = False
+    try:
+        yield
+    finally:
+        torch._C._set_deterministic_algorithms(before, warn_only=warn_only_before)
+        torch.utils.deterministic.fill_uninitialized_memory = fill_before
+
+
 def pretrain_dino(
     images: np.ndarray,
     settings: DinoSettings,
@@ -210,12 +237,7 @@ def pretrain_dino(
         )
     say = progress or (lambda _msg: None)
 
-    det_before = torch.are_deterministic_algorithms_enabled()
-    fill_before = torch.utils.deterministic.fill_uninitialized_memory
-    torch.use_deterministic_algorithms(True)
-    # No op here reads uninitialised memory; NaN-filling every torch.empty costs ~15% of a step.
-    torch.utils.deterministic.fill_uninitialized_memory = False
-    try:
+    with deterministic_algorithms():
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(seed)
             backbone = build_vit(arch, img_size=image_size)
@@ -345,9 +367,6 @@ def pretrain_dino(
                 f"KL {row['kl']:.4f} KoLeo {row['koleo']:.3f} "
                 f"cos(teacher CLS) {row['teacher_cls_cosine']:.3f} ({row['seconds']:.1f}s)"
             )
-    finally:
-        torch.use_deterministic_algorithms(det_before)
-        torch.utils.deterministic.fill_uninitialized_memory = fill_before
 
     state = {k: v.detach().clone() for k, v in teacher.backbone.state_dict().items()}
     return PretrainResult(arch=arch, image_size=image_size, backbone_state=state, curve=curve)

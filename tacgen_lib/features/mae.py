@@ -26,7 +26,6 @@ from pathlib import Path
 import numpy as np
 import torch
 from torch import Tensor, nn
-from torch.optim import AdamW
 
 from tacgen_lib.features.dino import PretrainResult
 from tacgen_lib.features.extract import imagenet_normalise, to_unit_tensor
@@ -40,6 +39,7 @@ from tacgen_lib.features.vit import (
     state_dict_mismatch,
     unwrap_state_dict,
 )
+from tacgen_lib.optim import AdamW
 
 __all__ = [
     "MaeDecoder",

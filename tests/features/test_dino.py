@@ -3,13 +3,16 @@
 from __future__ import annotations
 
 import math
+import subprocess
+import sys
+import textwrap
 
 import numpy as np
 import pytest
 import torch
 
 from tacgen_lib.features.augment import multi_crop
-from tacgen_lib.features.dino import DINOHead, pretrain_dino
+from tacgen_lib.features.dino import DINOHead, deterministic_algorithms, pretrain_dino
 from tacgen_lib.features.dino_losses import (
     collapse_diagnostics,
     dino_loss,
@@ -403,3 +406,46 @@ def test_pretrain_dino_recipe_errors():
         pretrain(imgs, centering="mean", **kw)
     with pytest.raises(ValueError, match="must be >= 0"):
         pretrain(imgs, koleo_weight=-0.1, **kw)
+
+
+@pytest.mark.parametrize("before", [(False, False), (True, True), (True, False)])
+def test_deterministic_algorithms_sets_the_mode_inside_and_restores_it(before):
+    enabled, warn_only = before
+    fill = torch.utils.deterministic.fill_uninitialized_memory
+    old = (
+        torch.are_deterministic_algorithms_enabled(),
+        torch.is_deterministic_algorithms_warn_only_enabled(),
+    )
+    torch.use_deterministic_algorithms(enabled, warn_only=warn_only)
+    try:
+        with pytest.raises(KeyError), deterministic_algorithms():
+            assert torch.are_deterministic_algorithms_enabled()
+            assert not torch.is_deterministic_algorithms_warn_only_enabled()
+            assert torch.utils.deterministic.fill_uninitialized_memory is False
+            raise KeyError("restored on an error too")
+        assert torch.are_deterministic_algorithms_enabled() is enabled
+        assert torch.is_deterministic_algorithms_warn_only_enabled() is warn_only
+        assert torch.utils.deterministic.fill_uninitialized_memory is fill
+    finally:
+        torch.use_deterministic_algorithms(old[0], warn_only=old[1])
+
+
+def test_pretraining_imports_neither_dynamo_nor_inductor():
+    """DINO and MAE pretraining (in a fresh interpreter) never import torch._dynamo or
+    torch._inductor: ~2 s per process that nothing here uses (nothing is compiled)."""
+    code = textwrap.dedent(
+        """
+        import sys
+        import numpy as np
+        from tacgen_lib.features.dino import pretrain_dino
+        from tacgen_lib.features.mae import pretrain_mae
+        from tacgen_lib.features.settings import DinoSettings, MaeSettings
+
+        frames = np.random.default_rng(0).integers(0, 256, (8, 28, 28, 3), dtype=np.uint8)
+        pretrain_dino(frames, DinoSettings.tiny(epochs=1, batch_size=8), arch="vit_tiny", image_size=28)
+        pretrain_mae(frames, MaeSettings.tiny(epochs=1, batch_size=8), arch="vit_tiny", image_size=28)
+        print(sorted(m for m in ("torch._dynamo", "torch._inductor") if m in sys.modules))
+        """
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]", out.stdout + out.stderr
