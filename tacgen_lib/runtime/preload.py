@@ -26,10 +26,14 @@ resource usage (`wait4`) is written beside the benchmark file (`usage_path`) and
 `tacgen_lib.runtime.benchmarks.read_benchmark` adds it. A job that runs in a fresh interpreter
 removes a stale file there first.
 
-The server listens before it imports, so a job that starts during its imports waits for them
-instead of importing the same modules beside it. If no server answers (a cluster job, a Python
-run outside Snakemake, a server gone), the job runs in its own interpreter: the server only
-ever saves start-up time. `TACGEN_PRELOAD=0` turns it off.
+The server listens before it imports and forks the jobs waiting for it between two imports:
+it imports what a run's first jobs need first (the simulator's modules, ~2 s), so they start
+then, and the heavy rest (scikit-learn, torch, matplotlib) before the jobs that need it come;
+a job forked earlier imports what is still missing itself, as it would fresh. If no server
+answers (a cluster job, a Python
+run outside Snakemake, a server gone), or the server declines the job (its environment would
+import mujoco for another OpenGL backend: `ENVIRONMENT_PRELOADS`), the job runs in its own
+interpreter: the server only ever saves start-up time. `TACGEN_PRELOAD=0` turns it off.
 """
 
 from __future__ import annotations
@@ -63,13 +67,26 @@ SOCKET_ENV = "TACGEN_PRELOADED_INTERPRETER"
 #: Set to 0 to run every job in a fresh interpreter.
 SWITCH_ENV = "TACGEN_PRELOAD"
 
-#: What the server imports before it forks: third-party libraries whose import does not depend
-#: on a job's environment. Not mujoco (its import picks an OpenGL backend from MUJOCO_GL, which
-#: the simulator sets) and not the workflow's own modules (a job imports them as it would fresh).
+#: What the server imports, in this order: third-party libraries whose import does not depend
+#: on a job's environment (mujoco's does: `ENVIRONMENT_PRELOADS`), not the workflow's own
+#: modules (a job imports them as it would fresh). First most of what a run's first jobs import
+#: (the simulator's: corpus shards and demonstrations), then the heavy rest (scikit-learn,
+#: torch, matplotlib), which the jobs that need it come after. Between two imports the server
+#: forks the jobs waiting for it (`serve`). mujoco comes last: imported before scikit-learn and
+#: torch, beside OpenCV, it made every later scikit-learn fit in the copies slower (a 5x5
+#: Ridge: 0.26 against 0.02 CPU-s, measured; the OpenMP and BLAS libraries load in another
+#: order), so the simulator's first jobs import it themselves.
 PRELOADED_MODULES = (
     "numpy",
+    "threadpoolctl",
     "pandas",
     "pyarrow.parquet",
+    "scipy.special",
+    "cv2",
+    "yaml",
+    "snakemake.io",
+    "snakemake.iocontainers",
+    "snakemake.logging",
     "scipy.stats",
     "scipy.ndimage",
     "scipy.optimize",
@@ -78,17 +95,24 @@ PRELOADED_MODULES = (
     "sklearn.metrics",
     "sklearn.preprocessing",
     "sklearn.decomposition",
-    "threadpoolctl",
     "torch",
     "torch.nn.functional",
     "safetensors.torch",
-    "yaml",
-    "snakemake.io",
-    "snakemake.iocontainers",
-    "snakemake.logging",
+    "matplotlib.pyplot",
+    "mujoco",
 )
 
+#: Preloaded modules whose import depends on environment variables: (module, ((variable, the
+#: value it has where unset), ...)). mujoco picks its OpenGL backend from MUJOCO_GL when
+#: imported (`tacgen_lib.corpus.sim` defaults it to egl first: headless EGL), and its EGL
+#: backend needs PYOPENGL_PLATFORM unset or egl (it sets egl). The server imports mujoco with
+#: MUJOCO_GL defaulted the same way; a job whose environment gives either variable another
+#: value is declined and runs in its own interpreter (`_environment_fits`).
+ENVIRONMENT_PRELOADS = (("mujoco", (("MUJOCO_GL", "egl"), ("PYOPENGL_PLATFORM", "egl"))),)
+
 _RECV_FDS = 3  # the job's stdin, stdout and stderr
+_preload_env: dict[str, str] = {}  # the server's: {variable: value} its imports were made with
+_import_env: dict[str, str] = {}  # the server's: variables its imports set (KMP_*, ...)
 #: what the job's process forwards to the job's copy
 _FORWARDED = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)
 _MAX_REQUEST = 1 << 24
@@ -225,8 +249,9 @@ def run_in_preloaded_interpreter(snakemake: Any) -> None:
 
 def _size_thread_pools(env: dict[str, str]) -> None:
     """Size OpenMP, BLAS and torch pools as a fresh interpreter with this environment would
-    have them (Snakemake sets OMP_NUM_THREADS and the BLAS variables to the job's threads)."""
-    import torch
+    have them (Snakemake sets OMP_NUM_THREADS and the BLAS variables to the job's threads).
+    Only the libraries the server had loaded before the fork: one loaded later, by the job,
+    reads the variables itself."""
     from threadpoolctl import threadpool_limits
 
     limits: dict[str, int] = {}
@@ -237,7 +262,8 @@ def _size_thread_pools(env: dict[str, str]) -> None:
         limits["blas"] = int(blas)
     if limits:
         threadpool_limits(limits=limits)
-    if "openmp" in limits:
+    torch = sys.modules.get("torch")
+    if "openmp" in limits and torch is not None:
         torch.set_num_threads(limits["openmp"])
 
 
@@ -262,6 +288,8 @@ def _run_job(request: dict, fds: list[int]) -> None:
         os.chdir(request["cwd"])
         os.environ.clear()
         os.environ.update(request["env"])
+        for key, value in _import_env.items():  # as the imports would have set them fresh
+            os.environ.setdefault(key, value)
         _size_thread_pools(request["env"])
         sys.argv = [request["script"]]
         sys.path.insert(0, os.path.dirname(request["script"]))  # as `python script.py` does
@@ -345,30 +373,74 @@ def _peer_uid(conn: socket.socket) -> int:
     return struct.unpack("3i", creds)[1]
 
 
+def _preload(module: str) -> None:
+    """Import `module` in the server as a job would: matplotlib with the Agg backend the
+    workflow's figures use (tacgen_lib.report); an `ENVIRONMENT_PRELOADS` module with MUJOCO_GL
+    defaulted as the workflow's code defaults it, remembering the values it was imported with
+    (`_preload_env`). What an import sets in the environment itself is remembered too
+    (`_import_env`: scikit-learn's KMP_* settings, mujoco's PYOPENGL_PLATFORM): a copy's
+    environment gets them as a fresh interpreter's would (`_run_job`)."""
+    import importlib
+
+    if module == "matplotlib.pyplot":
+        import matplotlib
+
+        matplotlib.use("Agg")
+    for name, variables in ENVIRONMENT_PRELOADS:
+        if name == module:
+            first, default = variables[0]
+            os.environ.setdefault(first, default)
+            _preload_env.update({k: os.environ.get(k, d) for k, d in variables})
+    before = dict(os.environ)
+    importlib.import_module(module)
+    _import_env.update({k: v for k, v in os.environ.items() if before.get(k) != v})
+
+
+def _environment_fits(env: dict[str, str]) -> bool:
+    """Whether a job with environment `env` would have imported `ENVIRONMENT_PRELOADS` as the
+    server did: each of their variables (its default where unset) equal, in any case."""
+    defaults = {k: d for _module, variables in ENVIRONMENT_PRELOADS for k, d in variables}
+    return all(
+        env.get(k, defaults[k]).lower().strip() == v.lower().strip()
+        for k, v in _preload_env.items()
+    )
+
+
+def _reap() -> None:
+    """Collect the copies that have exited (while the server still imports, SIGCHLD is not
+    ignored: an import may wait for a subprocess of its own)."""
+    while True:
+        try:
+            pid, _status = os.waitpid(-1, os.WNOHANG)
+        except ChildProcessError:
+            return
+        if pid == 0:
+            return
+
+
 def serve(name: str, parent: int) -> None:
-    """The server: listen on the abstract socket `name`, import `PRELOADED_MODULES`, then fork
-    a copy per job; exit when the process `parent` (Snakemake) is gone. Jobs may only come
-    from this user. The socket listens before the imports: a job that starts while they run
-    waits in the listen queue for them instead of importing the same modules itself beside
-    them (on 2 cores, three processes importing at once)."""
+    """The server: listen on the abstract socket `name`, import `PRELOADED_MODULES`, fork a
+    copy per job; exit when the process `parent` (Snakemake) is gone. Jobs may only come from
+    this user. The socket listens before the imports, and between two imports the server forks
+    the jobs already waiting: a run's first jobs start once what they import is loaded (the
+    modules come in the order they need them) instead of waiting for all of it, and a job
+    forked early imports what is still missing itself, as a fresh interpreter would."""
     listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     listener.bind("\0" + name)
     listener.listen(64)
-    import matplotlib
-
-    matplotlib.use("Agg")  # the workflow's figures are Agg (tacgen_lib.report)
-    import importlib
-
-    for module in (*PRELOADED_MODULES, "matplotlib.pyplot"):
-        importlib.import_module(module)
-    signal.signal(signal.SIGCHLD, signal.SIG_IGN)  # copies are reaped by the kernel
     # a terminal's Ctrl-C reaches the whole process group: the jobs' copies take it (as fresh
     # interpreters would), the server and the copies' supervisors carry on until Snakemake ends
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    pending = list(PRELOADED_MODULES)
     uid = os.getuid()
     while os.getppid() == parent:
-        ready, _, _ = select.select([listener], [], [], 1.0)
+        ready, _, _ = select.select([listener], [], [], 0 if pending else 1.0)
         if not ready:
+            if pending:
+                _preload(pending.pop(0))
+                _reap()
+                if not pending:
+                    signal.signal(signal.SIGCHLD, signal.SIG_IGN)  # the kernel reaps copies
             continue
         conn, _ = listener.accept()
         fds: list[int] = []
@@ -379,7 +451,10 @@ def serve(name: str, parent: int) -> None:
             if len(fds) != _RECV_FDS:
                 raise ConnectionError("no streams")
             request = json.loads(_recv(conn))
-        except (OSError, ValueError):
+            if not _environment_fits(request["env"]):
+                _send(conn, b"fresh")  # the job runs in its own interpreter
+                raise ConnectionError("another environment")
+        except (OSError, ValueError, KeyError):
             for fd in fds:
                 os.close(fd)
             conn.close()

@@ -47,7 +47,7 @@ def _wait_until(predicate, timeout: float) -> bool:
 
 
 @pytest.fixture(scope="module")
-def server():
+def server(tmp_path_factory):
     """A server of this test process, as the Snakefile's onstart starts one for Snakemake."""
     name = f"tacgen-test-{os.getpid()}-{uuid.uuid4().hex}"
     proc = subprocess.Popen([sys.executable, "-P", "-c", preload._SERVER, name, str(os.getpid())])
@@ -61,6 +61,10 @@ def server():
             return True
 
     assert _wait_until(listening, 120), "the server did not start listening"
+    # the server serves jobs while it still imports: the tests want a copy of the whole
+    # preloaded interpreter, so wait until a job finds every module loaded
+    probe = job_script(tmp_path_factory.mktemp("probe"), "print(preloaded)")
+    assert _wait_until(lambda: run_job(probe, env_for(name)).stdout.strip() == "True", 120)
     yield name
     proc.terminate()
     proc.wait(timeout=30)
@@ -76,7 +80,7 @@ def job_script(tmp_path: Path, body: str, log: str | None = LOG) -> Path:
         "import types\n"
         f"snakemake = types.SimpleNamespace(log={logs!r})\n"
         "import sys\n"
-        "preloaded = 'sklearn' in sys.modules\n"
+        f"preloaded = all(m in sys.modules for m in {preload.PRELOADED_MODULES!r})\n"
         "from tacgen_lib.runtime.preload import run_in_preloaded_interpreter\n"
         "run_in_preloaded_interpreter(snakemake)\n" + textwrap.dedent(body)
     )
@@ -157,6 +161,108 @@ def test_results_are_bit_identical_to_a_fresh_interpreter(server, tmp_path):
     forked = run_job(script, env_for(server, 2))
     assert fresh.returncode == forked.returncode == 0, forked.stderr
     assert fresh.stdout == forked.stdout
+
+
+RENDER = """
+import hashlib
+import tacgen_lib.corpus.sim  # defaults MUJOCO_GL to egl before mujoco, as the simulator does
+import mujoco
+from mujoco.rendering.classic import gl_context
+model = mujoco.MjModel.from_xml_string(
+    "<mujoco><worldbody><light pos='0 0 2'/><geom type='sphere' size='0.1' rgba='1 0 0 1'/>"
+    "</worldbody></mujoco>"
+)
+data = mujoco.MjData(model)
+mujoco.mj_forward(model, data)
+with mujoco.Renderer(model, 24, 32) as renderer:
+    renderer.update_scene(data)
+    frame = renderer.render()
+print(preloaded, gl_context.GLContext.__module__, os.environ.get("MUJOCO_GL"),
+      os.environ.get("PYOPENGL_PLATFORM"), hashlib.sha256(frame.tobytes()).hexdigest())
+"""
+
+
+def test_mujoco_is_preloaded_with_the_simulators_backend_and_renders_the_same_frame(
+    server, tmp_path
+):
+    """mujoco is imported by the server as the simulator's jobs import it (EGL): same backend,
+    same environment afterwards, the same frame bit for bit (same computation, same machine)."""
+    script = job_script(tmp_path, "import os\n" + RENDER)
+    fresh = run_job(script, env_for(None))
+    forked = run_job(script, env_for(server))
+    assert fresh.returncode == forked.returncode == 0, (fresh.stderr, forked.stderr)
+    a, b = fresh.stdout.split(), forked.stdout.split()
+    assert (a[0], b[0]) == ("False", "True")
+    assert a[1:] == b[1:] and a[1:4] == ["mujoco.egl", "egl", "egl"], (a, b)
+
+
+@pytest.mark.parametrize("variable", ["MUJOCO_GL", "PYOPENGL_PLATFORM"])
+def test_a_job_asking_for_another_gl_backend_runs_in_its_own_interpreter(
+    server, tmp_path, variable
+):
+    """The server imported mujoco for EGL: a job whose environment picks OSMesa is declined
+    (it runs, in a fresh interpreter, with what it asked for)."""
+    script = job_script(tmp_path, "print(preloaded)")
+    declined = run_job(script, env_for(server, **{variable: "osmesa"}))
+    assert (declined.returncode, declined.stdout.strip()) == (0, "False"), declined.stderr
+    # the same backend in any case, and other values of what the other imports set (OpenCV's
+    # LD_LIBRARY_PATH, scikit-learn's KMP_*): served
+    other = {"LD_LIBRARY_PATH": "/elsewhere", "KMP_INIT_AT_FORK": "TRUE"}
+    served = run_job(script, env_for(server, MUJOCO_GL="EGL", **other))
+    assert (served.returncode, served.stdout.strip()) == (0, "True"), served.stderr
+
+
+def test_a_job_waiting_while_the_server_imports_is_forked_between_two_imports(tmp_path):
+    """A job that comes while the server imports is forked after the import under way, not
+    after all of them, and imports what is still missing itself. Two stand-in modules make
+    the order deterministic: the job starts once the server imports `first`, which returns
+    only once the job is queued; `second` returns only once the job has finished."""
+    (tmp_path / "lib").mkdir()
+    started, queued, done = tmp_path / "started", tmp_path / "queued", tmp_path / "done"
+    for module, gate in (("first", queued), ("second", done)):
+        (tmp_path / "lib" / f"{module}.py").write_text(
+            f"import os, pathlib, time\npathlib.Path({str(started)!r}).touch()\n"
+            f"while not os.path.exists({str(gate)!r}):\n    time.sleep(0.02)\n"
+        )
+    name = f"tacgen-test-{os.getpid()}-{uuid.uuid4().hex}"
+    code = (
+        f"import sys; sys.path.insert(0, {str(tmp_path / 'lib')!r})\n"
+        "from tacgen_lib.runtime import preload\n"
+        "preload.PRELOADED_MODULES = ('numpy', 'first', 'second')\n"
+        f"preload.serve({name!r}, {os.getpid()})"
+    )
+    server = subprocess.Popen([sys.executable, "-P", "-c", code])
+    try:
+        body = """
+        from tacgen_lib.runtime import preload
+        loaded = [m in sys.modules for m in ("numpy", "first", "second")]
+        import second  # what the server has not imported yet: the job imports it, fresh
+        print(preload._worker, loaded)
+        """
+        script = job_script(tmp_path, "import sys\n" + textwrap.dedent(body))
+        assert _wait_until(started.exists, 60), "the server did not reach `first`"
+        proc = _start(script, env_for(name))
+        # the job is queued on the socket while the server imports `first`
+        assert _wait_until(lambda: _queued_on(name), 60), "the job never reached the server"
+        queued.touch()
+        # forked after `first`, the job imports `second` itself: it cannot end before `done`
+        assert not _wait_until(lambda: proc.poll() is not None, 0.5)
+        done.touch()
+        out, err = proc.communicate(timeout=60)
+        assert proc.returncode == 0, err
+        assert out.strip() == "True [True, True, False]", out + err
+    finally:
+        queued.touch()
+        done.touch()
+        server.terminate()
+        server.wait(timeout=30)
+
+
+def _queued_on(name: str) -> bool:
+    """Whether a connection waits on the abstract socket `name` (Linux /proc/net/unix: the
+    listening socket's receive queue is not shown, a connected peer is)."""
+    table = Path("/proc/net/unix").read_text().splitlines()
+    return sum(line.endswith(f" @{name}") for line in table) >= 2
 
 
 def test_exit_status_and_traceback_come_back(server, tmp_path):
