@@ -45,6 +45,7 @@ rule train_heads:
         **CELL_CONSTRAINTS,
         corpus=one_of(HEADS_CORPORA),
         variant=one_of(ALIGN["variants"]),
+    priority: CHAIN_PRIORITY
     conda:
         "../envs/align.yaml"
     # one thread, so two cells train side by side: at the default's sizes a second thread

@@ -49,6 +49,11 @@ TRANSFER_CORPUS = TRANSFER.get("corpus")
 SIM_CORPORA = sorted(n for n, c in CORPORA.items() if c["kind"] == "simulated")
 REAL_CORPORA = sorted(n for n, c in CORPORA.items() if c["kind"] != "simulated")
 NOTHING = "(?!x)x"  # a regex matching no name (no corpus of that kind)
+# Snakemake starts ready jobs of higher priority first and does not look at what waits for a
+# job. The policy stage is the DAG's last long chain (features -> alignment heads -> palpate ->
+# train -> roll out -> aggregate): its rules go first, or the chain starts after the probes and
+# leaves a core idle at the end of a run.
+CHAIN_PRIORITY = 1
 
 
 def one_of(names):

@@ -75,9 +75,11 @@ rule extract_vision_features:
         "results/logs/extract_features/{corpus}/vision.log",
     benchmark:
         "results/benchmarks/extract_features/{corpus}/vision.tsv"
+    # features.threads: 2 by default; config/test.yaml's ~1-s jobs run two side by side at 1
+    priority: CHAIN_PRIORITY
     conda:
         "../envs/features.yaml"
-    threads: 2
+    threads: FEAT["threads"]
     resources:
         mem_mb=4000,
         runtime=30,
@@ -102,9 +104,11 @@ rule extract_tactile_features:
         "results/benchmarks/extract_features/{corpus}/tactile~{variant}.tsv"
     wildcard_constraints:
         variant=one_of(VARIANTS),
+    # features.threads: 2 by default; config/test.yaml's ~1-s jobs run two side by side at 1
+    priority: CHAIN_PRIORITY
     conda:
         "../envs/features.yaml"
-    threads: 2
+    threads: FEAT["threads"]
     resources:
         mem_mb=4000,
         runtime=30,
@@ -140,7 +144,7 @@ rule pretrained_vs_random:
         "results/benchmarks/pretrained_vs_random.tsv"
     conda:
         "../envs/features.yaml"
-    threads: 2
+    threads: FEAT["threads"]  # extracts random-init backbone features
     resources:
         mem_mb=4000,
         runtime=30,

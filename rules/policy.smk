@@ -70,9 +70,10 @@ rule palpate:
         "results/logs/palpate.log",
     benchmark:
         "results/benchmarks/palpate.tsv"
+    priority: CHAIN_PRIORITY
     conda:
         "../envs/policy.yaml"
-    threads: 2
+    threads: config["features"]["threads"]  # frozen-backbone features, as extraction
     resources:
         mem_mb=3000,
         runtime=20,
@@ -98,6 +99,7 @@ rule train_policy:
         f"results/benchmarks/train_policy/{POLICY_CELL_PATTERN}.tsv"
     wildcard_constraints:
         **{**POLICY_CELL_CONSTRAINTS, "condition": "v|vt_aligned|vt_raw|vt_null"},
+    priority: CHAIN_PRIORITY
     conda:
         "../envs/policy.yaml"
     threads: 1
@@ -126,6 +128,7 @@ rule rollout_policy:
         f"results/benchmarks/rollout_policy/{POLICY_CELL_PATTERN}/{{shard}}.tsv"
     wildcard_constraints:
         **POLICY_CELL_CONSTRAINTS,
+    priority: CHAIN_PRIORITY
     conda:
         "../envs/policy.yaml"
     threads: 1
@@ -235,6 +238,7 @@ rule aggregate_policy:
         "results/logs/aggregate_policy.log",
     benchmark:
         "results/benchmarks/aggregate_policy.tsv"
+    priority: CHAIN_PRIORITY
     conda:
         "../envs/report.yaml"
     threads: 1
