@@ -75,11 +75,10 @@ rule extract_vision_features:
         "results/logs/extract_features/{corpus}/vision.log",
     benchmark:
         "results/benchmarks/extract_features/{corpus}/vision.tsv"
-    # features.threads: 2 by default; config/test.yaml's ~1-s jobs run two side by side at 1
     priority: CHAIN_PRIORITY
     conda:
         "../envs/features.yaml"
-    threads: FEAT["threads"]
+    threads: FEAT["threads"]  # 2 by default; config/test.yaml's ~1-s jobs: 1, two side by side
     resources:
         mem_mb=4000,
         runtime=30,
@@ -104,11 +103,10 @@ rule extract_tactile_features:
         "results/benchmarks/extract_features/{corpus}/tactile~{variant}.tsv"
     wildcard_constraints:
         variant=one_of(VARIANTS),
-    # features.threads: 2 by default; config/test.yaml's ~1-s jobs run two side by side at 1
     priority: CHAIN_PRIORITY
     conda:
         "../envs/features.yaml"
-    threads: FEAT["threads"]
+    threads: FEAT["threads"]  # 2 by default; config/test.yaml's ~1-s jobs: 1, two side by side
     resources:
         mem_mb=4000,
         runtime=30,

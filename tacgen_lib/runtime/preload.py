@@ -30,10 +30,10 @@ The server listens before it imports and forks the jobs waiting for it between t
 it imports what a run's first jobs need first (the simulator's modules, ~2 s), so they start
 then, and the heavy rest (scikit-learn, torch, matplotlib) before the jobs that need it come;
 a job forked earlier imports what is still missing itself, as it would fresh. If no server
-answers (a cluster job, a Python
-run outside Snakemake, a server gone), or the server declines the job (its environment would
-import mujoco for another OpenGL backend: `ENVIRONMENT_PRELOADS`), the job runs in its own
-interpreter: the server only ever saves start-up time. `TACGEN_PRELOAD=0` turns it off.
+answers (a cluster job, a Python run outside Snakemake, a server gone), or the server declines
+the job (its environment would import mujoco for another OpenGL backend:
+`ENVIRONMENT_PRELOADS`), the job runs in its own interpreter: the server only ever saves
+start-up time. `TACGEN_PRELOAD=0` turns it off.
 """
 
 from __future__ import annotations
