@@ -10,7 +10,7 @@ include: "regime_common.smk"
 if REGIME_CORPORA:
     TARGETS += [f"{REGIME_DIR}/summary.parquet"]
     TARGETS += [f"{REGIME_REPORT}/{n}.{e}" for n, e in REGIME_ITEMS.items()]
-    EDGES += [f"{REGIME_DIR}/evaluation.parquet"]
+    EDGES += [f"{REGIME_DIR}/evaluation.parquet", f"{REGIME_DIR}/appearance.parquet"]
     EDGES += [p for c, s in regime_cells() for p in regime_t_gen(c, s)]
 
 
@@ -56,7 +56,6 @@ rule regime_evaluate:
         code=imports_of("regime_evaluate"),
     output:
         rows=f"{REGIME_CELL}/evaluation.parquet",
-        appearance=f"{REGIME_CELL}/appearance.parquet",
     log:
         "results/logs/regime_evaluate/{corpus}/{seed}.log",
     benchmark:
@@ -82,11 +81,40 @@ rule regime_evaluate:
         "../workflow/scripts/regime_evaluate.py"
 
 
+rule regime_appearance:
+    """Whether V decodes the appearance class (linear and nonlinear V probe), once per run: on the first rho's corpus at the first seed (the class -> frame process is the same at every rho)."""
+    input:
+        manifest="results/corpus/manifest.parquet",
+        splits="results/corpus/splits.parquet",
+        v=feature_edge(REGIME_APPEARANCE.get("corpus", "none"), "vision"),
+        code=imports_of("regime_appearance"),
+    output:
+        f"{REGIME_DIR}/appearance.parquet",
+    log:
+        "results/logs/regime_appearance.log",
+    benchmark:
+        "results/benchmarks/regime_appearance.tsv"
+    conda:
+        "../envs/probes.yaml"
+    threads: 1
+    resources:
+        mem_mb=3000,
+        runtime=30,
+    params:
+        **REGIME_APPEARANCE,
+        regime=REGIME,
+        rho=float(CORPORA.get(REGIME_APPEARANCE.get("corpus"), {}).get("rho", 0.0)),
+        probes=PROBE_SETTINGS,
+        probe_seed=config["probes"]["seeds"][0],
+    script:
+        "../workflow/scripts/regime_appearance.py"
+
+
 rule aggregate_regime:
     """One summary of every regime cell and arm; the report page Where generated touch helps."""
     input:
         rows=regime_files(f"{REGIME_CELL}/evaluation.parquet"),
-        appearance=regime_files(f"{REGIME_CELL}/appearance.parquet"),
+        appearance=f"{REGIME_DIR}/appearance.parquet",
         curves=regime_files(f"{REGIME_CELL}/curves.parquet"),
         code=imports_of("aggregate_regime"),
     output:

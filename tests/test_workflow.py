@@ -66,6 +66,7 @@ def test_dry_run_plans_the_whole_dag(cold_dry_run):
         # regime
         "regime_generators",
         "regime_evaluate",
+        "regime_appearance",
         "aggregate_regime",
         # transfer to a second sensor
         "transfer_evaluate",
@@ -164,6 +165,11 @@ def test_regime_summary_has_every_arm_of_every_cell(run_dir):
     for name in ("findings.html", "table.html", "appearance.html", "heatmap.png", "curves.png"):
         assert (page / name).stat().st_size > 500, name
     assert "H1 (ρ = 0" in (page / "findings.html").read_text()
+    # the appearance check runs once, on the first rho's corpus at the first seed
+    appearance = edges.read(run_dir / "results/generate/regime/appearance.parquet").frame
+    assert set(appearance["corpus"]) == {corpus} and set(appearance["seed"]) == {seed}
+    assert sorted(appearance["probe"]) == ["linear", "nonlinear"]
+    assert (appearance["n_train"] == len(sets.labelled) + len(sets.pool)).all()
     # the natural corpora's scene presses once: their force-band table says there is no band
     bands = (run_dir / "results/report/corpus/sim_natural_r1_force_bands.html").read_text()
     assert "no band to check" in bands
@@ -327,7 +333,13 @@ def test_changed_probe_param_reruns_only_the_probes(run_dir, tmp_path):
     report = {"findings", "edge_manifest", "all"}
     # the regime's probes read the probes subtree (their grids and folds) and the language
     # evidence its bootstrap count
-    regime = {"regime_evaluate", "aggregate_regime", "language_evidence", "aggregate_language"}
+    regime = {
+        "regime_evaluate",
+        "regime_appearance",
+        "aggregate_regime",
+        "language_evidence",
+        "aggregate_language",
+    }
     # the backbone families' probes use the probes' settings, and the main family's rows are
     # the probe jobs' own
     backbones = {"family_probe", "aggregate_backbones"}

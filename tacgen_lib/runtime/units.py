@@ -486,6 +486,10 @@ UNITS: dict[str, UnitRule] = {
             * len(c["regime"]["n_pool"]),
         ),
     ),
+    "regime_appearance": UnitRule(
+        "labelled + pool row (one corpus x seed)",
+        lambda c, w: ("", float(max(c["regime"]["n_labelled"]) + max(c["regime"]["n_pool"]))),
+    ),
     "aggregate_regime": UnitRule(
         "corpus × seed",
         lambda c, w: ("", len(c["regime"]["rhos"]) * len(c["regime"]["seeds"])),

@@ -366,9 +366,17 @@ def test_findings_and_report_read_the_summary():
     assert set(table["N_L"]) == {6, 40} and table["arm"].nunique() == len(ARMS)
     notes = rep.findings_notes(
         view,
-        pd.DataFrame({"rho": [0.0, 0.0], "probe": ["linear", "nonlinear"], "score": [0.3, 0.5]}),
+        pd.DataFrame(
+            {
+                "corpus": ["sim_natural_r0"] * 2,
+                "rho": [0.0, 0.0],
+                "probe": ["linear", "nonlinear"],
+                "score": [0.3, 0.5],
+            }
+        ),
     )
     assert notes[0].startswith("H1 (ρ = 0") and any(n.startswith("H4") for n in notes)
+    assert "sim_natural_r0 (ρ = 0): linear 0.300, nonlinear 0.500" in notes[-1]
     for fig in (rep.heatmap_figure(view), rep.curves_figure(view)):
         assert fig.axes
 

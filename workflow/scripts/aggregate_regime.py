@@ -21,7 +21,7 @@ def frames(paths, **kw):
 
 
 rows = frames(inp.rows, require={"row_id": "str", "score": "float"})
-appearance = frames(inp.appearance)
+appearance = edges.read(inp.appearance).frame
 curves = frames(inp.curves)
 summary = rows[list(SUMMARY_COLUMNS)].sort_values("row_id", ignore_index=True)
 edges.write(out.evaluation, summary, key="row_id", producer=snakemake.rule)

@@ -1,6 +1,6 @@
 """Every arm of the regime for one corpus x seed: linear and nonlinear V, V + T_gen (real and
 shuffled pools), generalised distillation, V + real T and the vision ceiling, per labelled
-size and pool size (rule regime_evaluate)."""
+size and pool size (rule regime_evaluate; the appearance check is rule regime_appearance)."""
 
 from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
 
@@ -11,7 +11,6 @@ from threadpoolctl import threadpool_limits
 from tacgen_lib.generate.regime import (
     RegimeSettings,
     RegimeTarget,
-    appearance_check,
     assert_regime_disjoint,
     draw_regime_sets,
     evaluate_regime,
@@ -70,19 +69,5 @@ with threadpool_limits(snakemake.threads):
         n_classes=n_classes,
         progress=logger.info,
     )
-    appearance = appearance_check(
-        vision,
-        ceiling_rows["appearance_id"],
-        sets,
-        ProbeSettings.from_config(params.probes, "logistic", params.probe_seed),
-        corpus=w.corpus,
-        rho=float(params.rho),
-        seed=seed,
-        gammas=regime.appearance_gammas,
-        bootstrap=regime.bootstrap,
-    )
 edges.write(snakemake.output.rows, rows, key="row_id", producer=snakemake.rule)
-edges.write(snakemake.output.appearance, appearance, key="row_id", producer=snakemake.rule)
-logger.info(
-    "%d regime rows; appearance class from V: %s", len(rows), appearance["score"].round(3).tolist()
-)
+logger.info("%d regime rows", len(rows))
