@@ -106,6 +106,7 @@ NEEDS: dict[str, str] = {
     "rollout_policy": "torch " + _SIM,
     "sample_generator": "",
     "sample_pixel_generator": "torch pandas cv2",  # + diffusers for the DDPM's arms
+    "share_natural_touch": "pandas",
     "simulate_corpus": _SIM,
     "train_generator": "torch pandas",
     "train_heads": "torch pandas",

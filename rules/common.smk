@@ -61,6 +61,12 @@ def one_of(names):
     return "|".join(map(re.escape, names)) if names else NOTHING
 
 
+def none_of(names):
+    """Wildcard constraint accepting any path segment except these names (no ruleorder: a
+    ruleorder breaks the cost sweep's modules that import only one of its rules)."""
+    return f"(?!(?:{one_of(names)})(?![^/]))[^/]+"
+
+
 def imports_of(script):
     """Code inputs of a rule: the tacgen_lib modules its script reaches through imports.
 

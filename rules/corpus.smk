@@ -17,6 +17,11 @@ localrules:
     make_splits,
 
 
+# the regime's natural corpora (one per rho) differ only in what their objects look like: one
+# job per shard simulates their physics and touch once (simulate_natural_grid)
+NATURAL_GRID = list(regime_corpora(config.get("regime")))
+
+
 rule simulate_corpus:
     """One shard of a MuJoCo-simulated corpus: only the effects its scene declares are computed."""
     input:
@@ -29,7 +34,7 @@ rule simulate_corpus:
     benchmark:
         "results/benchmarks/simulate_corpus/{corpus}/{shard}.tsv"
     wildcard_constraints:
-        corpus=one_of(SIM_CORPORA),
+        corpus=one_of([c for c in SIM_CORPORA if c not in NATURAL_GRID]),
     conda:
         "../envs/corpus.yaml"
     threads: 1
@@ -37,10 +42,38 @@ rule simulate_corpus:
         mem_mb=2000,
         runtime=30,
     params:
-        corpus=lambda w: {"name": w.corpus, **CORPORA[w.corpus]},
+        corpora=lambda w: [{"name": w.corpus, **CORPORA[w.corpus]}],
         n_shards=lambda w: CORPORA[w.corpus]["shards"],
     script:
         "../workflow/scripts/simulate_corpus.py"
+
+
+if NATURAL_GRID:
+
+    rule simulate_natural_grid:
+        """One shard of every natural corpus of the regime's rho grid: each sample's physics and touch simulated once (they do not depend on rho), its RGB frame rendered for each corpus."""
+        input:
+            scenes=config["scenes_file"],
+            code=imports_of("simulate_corpus"),
+        output:
+            [temp(f"results/corpus/{c}/shards/{{shard}}.parquet") for c in NATURAL_GRID],
+        log:
+            "results/logs/simulate_natural_grid/{shard}.log",
+        benchmark:
+            "results/benchmarks/simulate_natural_grid/{shard}.tsv"
+        wildcard_constraints:
+            shard=r"\d+",
+        conda:
+            "../envs/corpus.yaml"
+        threads: 1
+        resources:
+            mem_mb=2000,
+            runtime=30,
+        params:
+            corpora=[{"name": c, **CORPORA[c]} for c in NATURAL_GRID],
+            n_shards=CORPORA[NATURAL_GRID[0]]["shards"],
+        script:
+            "../workflow/scripts/simulate_corpus.py"
 
 
 rule merge_corpus:

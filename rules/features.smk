@@ -102,6 +102,8 @@ rule extract_tactile_features:
     benchmark:
         "results/benchmarks/extract_features/{corpus}/tactile~{variant}.tsv"
     wildcard_constraints:
+        # the rho grid's natural corpora after the first share its features (below)
+        corpus=none_of(NATURAL_GRID[1:]),
         variant=one_of(VARIANTS),
     priority: CHAIN_PRIORITY
     conda:
@@ -115,6 +117,35 @@ rule extract_tactile_features:
         column="tactile_proc",
     script:
         "../workflow/scripts/extract_features.py"
+
+
+rule share_natural_touch:
+    """The tactile features of a natural corpus of the regime's rho grid, shared from the grid's first corpus: their touch is simulated once, byte-identical (checked sample by sample)."""
+    input:
+        features=feature_edge(
+            NATURAL_GRID[0] if NATURAL_GRID else "none", "tactile", "{variant}"
+        ),
+        source=corpus_edge(NATURAL_GRID[0] if NATURAL_GRID else "none"),
+        target=corpus_edge("{corpus}"),
+        code=imports_of("share_natural_touch"),
+    output:
+        feature_edge("{corpus}", "tactile", "{variant}"),
+    log:
+        "results/logs/share_natural_touch/{corpus}/tactile~{variant}.log",
+    benchmark:
+        "results/benchmarks/share_natural_touch/{corpus}/tactile~{variant}.tsv"
+    wildcard_constraints:
+        corpus=one_of(NATURAL_GRID[1:]),
+        variant=one_of(VARIANTS),
+    priority: CHAIN_PRIORITY
+    conda:
+        "../envs/corpus.yaml"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    script:
+        "../workflow/scripts/share_natural_touch.py"
 
 
 rule pretrained_vs_random:

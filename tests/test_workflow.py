@@ -40,6 +40,7 @@ def test_dry_run_plans_the_whole_dag(cold_dry_run):
     rules = plan_of(cold_dry_run)  # a fresh copy of the repository (conftest)
     for rule in (
         "simulate_corpus",
+        "simulate_natural_grid",
         "merge_corpus",
         "fuse_manifest",
         "make_splits",
@@ -47,6 +48,7 @@ def test_dry_run_plans_the_whole_dag(cold_dry_run):
         "pretrain_backbone",
         "extract_vision_features",
         "extract_tactile_features",
+        "share_natural_touch",
         "pretrained_vs_random",
         "train_heads",
         "project_aligned",
@@ -97,7 +99,13 @@ def test_full_run_makes_verified_edges_logs_and_benchmarks(run_dir):
         "corpus == 'sim_controlled'"
     )
     assert set(ctrl.loc[ctrl.split == "test", "scale"].round(3)) == {0.25}
-    for rule in ("simulate_corpus", "merge_corpus", "make_splits", "edge_manifest"):
+    for rule in (
+        "simulate_corpus",
+        "simulate_natural_grid",
+        "merge_corpus",
+        "make_splits",
+        "edge_manifest",
+    ):
         assert (
             list((run_dir / "results/benchmarks" / rule).rglob("*.tsv"))
             or (run_dir / f"results/benchmarks/{rule}.tsv").exists()

@@ -24,6 +24,7 @@ from typing import Any
 
 from tacgen_lib.features.archs import ARCHS, RESNET_ARCHS, arch_family
 from tacgen_lib.generate.cells import guidance_passes
+from tacgen_lib.generate.regime_sets import regime_corpora
 from tacgen_lib.io.config import load_yaml
 
 __all__ = [
@@ -94,6 +95,16 @@ def _presses(c: Config, name: str) -> float:
         str(corpus.get("scene")), ("press_jitter",)
     )
     return float(corpus.get("presses", 8)) if "press_jitter" in effects else 1.0
+
+
+def _natural_grid_units(c: Config) -> float:
+    """A shard of the regime's rho grid (rule simulate_natural_grid): its samples × (presses ×
+    tactile pixels, once for the grid + one render per corpus of the grid)."""
+    grid = regime_corpora(c.get("regime"))
+    first = next(iter(grid))
+    c = {**c, "corpora": {**(c.get("corpora") or {}), **grid}}  # the DAG joins them too
+    per_sample = _presses(c, first) * _tactile_pixels(c, first) + len(grid)
+    return _n(c, first) / int(_corpus(c, first)["shards"]) * per_sample
 
 
 def _n(c: Config, name: str) -> float:
@@ -372,6 +383,10 @@ UNITS: dict[str, UnitRule] = {
             * _tactile_pixels(c, w["corpus"]),
         ),
     ),
+    "simulate_natural_grid": UnitRule(
+        "sample-press of the shard + an RGB render per corpus of the regime's rho grid",
+        lambda c, w: ("", _natural_grid_units(c)),
+    ),
     "merge_corpus": UnitRule("sample", lambda c, w: ("", _n(c, w["corpus"]))),
     "ingest_tvl": _const("job (real corpus; size not in config)"),
     "fuse_manifest": UnitRule(
@@ -400,6 +415,10 @@ UNITS: dict[str, UnitRule] = {
         "frame (+ ViT FLOPs)",
         lambda c, w: ("", _n(c, w["corpus"])),
         lambda c, w: _n(c, w["corpus"]) * _backbone(c, "tactile"),
+    ),
+    "share_natural_touch": UnitRule(
+        "frame (compared byte for byte; its features copied)",
+        lambda c, w: ("", _n(c, w["corpus"])),
     ),
     "pretrained_vs_random": UnitRule(
         "frame (+ FLOPs of both random-init ViTs)",

@@ -134,3 +134,25 @@ def test_rho_outside_the_natural_design_or_the_unit_interval_is_refused():
         corpus.CorpusSettings.from_config(dict(NATURAL, rho=1.5))
     with pytest.raises(ValueError, match="'rho' belongs to design 'natural', not 'paired'"):
         corpus.CorpusSettings.from_config(dict(NATURAL, design="paired"))
+
+
+def test_a_rho_grid_simulated_together_equals_each_corpus_alone():
+    # one press per sample for the whole grid: every frame and label as simulated alone
+    grid = [dict(NATURAL, name=f"nat{k}", rho=rho) for k, rho in enumerate((0.0, 0.5, 1.0))]
+    together = corpus.simulate_shards(grid, SCENES, 1, 2)
+    assert len(together) == 3
+    for cfg, got in zip(grid, together, strict=True):
+        alone = corpus.simulate_shard(cfg, SCENES, 1, 2)
+        assert got.equals(alone), cfg["name"]
+    # the touch is the same at every rho, the appearance is not
+    assert together[0]["tactile"].tolist() == together[2]["tactile"].tolist()
+    assert together[0]["rgb"].tolist() != together[2]["rgb"].tolist()
+
+
+def test_a_grid_of_corpora_with_different_physics_is_refused():
+    with pytest.raises(ValueError, match="'b' differs from 'a' in more than its name and rho"):
+        corpus.simulate_shards(
+            [dict(NATURAL, name="a"), dict(NATURAL, name="b", seed=6)], SCENES, 0, 1
+        )
+    with pytest.raises(ValueError, match="named twice"):
+        corpus.simulate_shards([NATURAL, NATURAL], SCENES, 0, 1)

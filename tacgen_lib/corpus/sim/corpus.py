@@ -454,7 +454,44 @@ def simulate_shard(
     corpus: its settings, or its config mapping (`CorpusSettings.from_config`). scenes: the scenes.yaml mapping (scene name -> declaration). Raises ValueError for bad
     configs and physics.PhysicsWarning if MuJoCo warns during any press.
     """
-    cfg = _settings(corpus)
+    return simulate_shards([corpus], scenes, shard, n_shards, progress)[0]
+
+
+def appearance_grid_key(cfg: CorpusSettings) -> CorpusSettings:
+    """What corpora of one appearance grid share: the settings but the name and rho. Corpora
+    with equal keys draw the same physics for every sample (rho changes only the appearance
+    class, `_natural_spec`) and so press the same objects into the same touch."""
+    return replace(cfg, name="", rho=0.0)
+
+
+def simulate_shards(
+    corpora: Sequence[CorpusSettings | Mapping[str, Any]],
+    scenes: dict,
+    shard: int,
+    n_shards: int,
+    progress: Callable[[str], None] | None = None,
+) -> list[pd.DataFrame]:
+    """`simulate_shard` of several corpora that differ only in name and rho (the natural
+    design's rho grid, `appearance_grid_key`) at once: each sample's physics and touch are
+    simulated once and its RGB frame rendered for each corpus. Every frame is the one
+    `simulate_shard` gives that corpus alone (the presses do not read the appearance, and a
+    render only reads the presentation pose): one MuJoCo press instead of one per corpus.
+
+    Raises ValueError if the corpora differ in anything else or name a corpus twice.
+    """
+    cfgs = [_settings(c) for c in corpora]
+    if not cfgs:
+        raise ValueError("simulate_shards: no corpus to simulate")
+    names = [str(c.name) for c in cfgs]
+    if len(set(names)) != len(names):
+        raise ValueError(f"simulate_shards: a corpus is named twice in {names}")
+    for other in cfgs[1:]:
+        if appearance_grid_key(other) != appearance_grid_key(cfgs[0]):
+            raise ValueError(
+                f"simulate_shards: corpus {other.name!r} differs from {cfgs[0].name!r} in more "
+                "than its name and rho, so their physics differ; simulate them one at a time"
+            )
+    cfg = cfgs[0]
     if not 0 <= shard < n_shards:
         raise ValueError(f"corpus {cfg.name!r}: shard {shard} not in [0, {n_shards})")
     if cfg.scene not in scenes:
@@ -467,22 +504,28 @@ def simulate_shard(
         )
     state = scene_runtime(scene, cfg)
     rt: physics.SceneRuntime = state["rt"]
-    n, name = int(cfg.n), str(cfg.name)
+    n, label = int(cfg.n), ", ".join(names)
     perm = null_sources(int(cfg.seed), n) if cfg.null else None
     press_force = scene.press_force
-    rows = []
+    rows: list[list[dict]] = [[] for _ in cfgs]
     t0 = time.perf_counter()
     indices = range(shard, n, n_shards)
     for count, i in enumerate(indices):
-        spec = sample_spec(cfg, scene, i)
-        rgba = (*(spec.rgb or PALETTE[spec.colour]), 1.0)
-        physics.apply_object(rt, spec.obj, rgba=rgba, texture=spec.texture)
-        rgb = None
-        if scene.has("rgb"):
-            physics.presentation_pose(rt)
-            rgb = encode_png(
-                render_rgb(state, cfg.image_size), compression=int(cfg.png_compression)
-            )
+        specs = [sample_spec(c, scene, i) for c in cfgs]
+        rgbs = []
+        # each corpus's look, then one press: the last corpus's appearance stays applied, which
+        # no press reads
+        for c, spec in zip(cfgs, specs, strict=True):
+            rgba = (*(spec.rgb or PALETTE[spec.colour]), 1.0)
+            physics.apply_object(rt, spec.obj, rgba=rgba, texture=spec.texture)
+            rgb = None
+            if scene.has("rgb"):
+                physics.presentation_pose(rt)
+                rgb = encode_png(
+                    render_rgb(state, c.image_size), compression=int(cfg.png_compression)
+                )
+            rgbs.append(rgb)
+        spec = specs[-1]
         tac, null_source = None, None
         if scene.has("tactile") and perm is None:
             tac, res = tactile_frame(state, spec, spec, cfg, press_force)
@@ -504,59 +547,77 @@ def simulate_shard(
             other = sample_spec(cfg, scene, j)
             physics.apply_object(rt, other.obj)
             tac, _ = tactile_frame(state, other, spec, cfg, press_force)
-            null_source = f"{name}-{j:06d}"
-        p05, p50, p95 = np.percentile(forces, [5, 50, 95])
-        adjectives = _adjectives(spec, cfg)
-        shape_word = spec.obj.shape
-        rows.append(
-            {
-                "sample_id": f"{name}-{i:06d}",
-                "corpus": name,
-                "rgb": rgb,
-                "tactile": tac,
-                "sensor_id": sensor_id(cfg, spec.sensor),
-                "caption": f"a {adjectives[0]} {adjectives[1]} {adjectives[2]} {shape_word}, "
-                f"{adjectives[3]} and {adjectives[4]}",
-                "adjectives": adjectives,
-                "shape": shape_word,
-                "scale": float(spec.scale),
-                "density": float(spec.obj.density),
-                "mass": float(spec.obj.mass),
-                "hardness": spec.hardness,
-                "stiffness": float(res.stiffness),
-                "friction": float(spec.obj.friction),
-                "force_normal": float(res.force_normal),
-                "force_p05": float(p05),
-                "force_p50": float(p50),
-                "force_p95": float(p95),
-                "appearance_id": int(spec.appearance_id),
-                "scene_seed": int(spec.scene_seed),
-                # natural: the material and appearance classes (the regime's known process)
-                "stratum": (
-                    f"{spec.material}|appearance~{spec.appearance_id}"
-                    if cfg.design == "natural"
-                    else f"{shape_word}|{spec.hardness}|{int(spec.obj.density)}"
-                ),
-                "null_source": null_source,
-                "mass_source": "density x MuJoCo geom volume (body_mass), kg",
-                "force_source": (
-                    "MuJoCo normal contact force object-gel (mj_contactForce), nominal press; "
-                    f"bands over {len(forces)} jittered presses, N"
-                ),
-                "hardness_source": (
-                    "contact-compliance class; stiffness = effective contact stiffness from "
-                    "solref (N/m)"
-                    if scene.has("contact_compliance")
-                    else "not simulated (contact_compliance not declared): rigid contact"
-                ),
-            }
-        )
+            null_source = j
+        for k, (c, spec_c) in enumerate(zip(cfgs, specs, strict=True)):
+            rows[k].append(_sample_row(c, scene, spec_c, rgbs[k], tac, res, forces, i, null_source))
         if progress is not None and (count + 1) % 50 == 0:
             dt = time.perf_counter() - t0
             progress(
-                f"{name} shard {shard}/{n_shards}: {count + 1} samples, "
+                f"{label} shard {shard}/{n_shards}: {count + 1} samples, "
                 f"{1e3 * dt / (count + 1):.1f} ms/sample"
             )
+    return [_frame(r) for r in rows]
+
+
+def _sample_row(
+    cfg: CorpusSettings,
+    scene: Scene,
+    spec: SampleSpec,
+    rgb: bytes | None,
+    tac: bytes | None,
+    res: physics.PressResult,
+    forces: np.ndarray,
+    i: int,
+    null_source: int | None,
+) -> dict:
+    """The corpus row of sample i (`COLUMNS`) from its draws, frames and presses."""
+    name = str(cfg.name)
+    p05, p50, p95 = np.percentile(forces, [5, 50, 95])
+    adjectives = _adjectives(spec, cfg)
+    shape_word = spec.obj.shape
+    return {
+        "sample_id": f"{name}-{i:06d}",
+        "corpus": name,
+        "rgb": rgb,
+        "tactile": tac,
+        "sensor_id": sensor_id(cfg, spec.sensor),
+        "caption": f"a {adjectives[0]} {adjectives[1]} {adjectives[2]} {shape_word}, "
+        f"{adjectives[3]} and {adjectives[4]}",
+        "adjectives": adjectives,
+        "shape": shape_word,
+        "scale": float(spec.scale),
+        "density": float(spec.obj.density),
+        "mass": float(spec.obj.mass),
+        "hardness": spec.hardness,
+        "stiffness": float(res.stiffness),
+        "friction": float(spec.obj.friction),
+        "force_normal": float(res.force_normal),
+        "force_p05": float(p05),
+        "force_p50": float(p50),
+        "force_p95": float(p95),
+        "appearance_id": int(spec.appearance_id),
+        "scene_seed": int(spec.scene_seed),
+        # natural: the material and appearance classes (the regime's known process)
+        "stratum": (
+            f"{spec.material}|appearance~{spec.appearance_id}"
+            if cfg.design == "natural"
+            else f"{shape_word}|{spec.hardness}|{int(spec.obj.density)}"
+        ),
+        "null_source": None if null_source is None else f"{name}-{null_source:06d}",
+        "mass_source": "density x MuJoCo geom volume (body_mass), kg",
+        "force_source": (
+            "MuJoCo normal contact force object-gel (mj_contactForce), nominal press; "
+            f"bands over {len(forces)} jittered presses, N"
+        ),
+        "hardness_source": (
+            "contact-compliance class; stiffness = effective contact stiffness from solref (N/m)"
+            if scene.has("contact_compliance")
+            else "not simulated (contact_compliance not declared): rigid contact"
+        ),
+    }
+
+
+def _frame(rows: list[dict]) -> pd.DataFrame:
     df = pd.DataFrame(rows, columns=COLUMNS)
     for col in LABEL_COLUMNS:
         df[col] = df[col].astype("float64")
