@@ -495,6 +495,7 @@ def _build_every_settings_object(cfg: dict) -> None:
 @settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(where=st.sampled_from(_PATHS), value=_HOSTILE)
 @example(where=("align", "lr"), value=float("inf"))  # found by this test once: kept as a case
+@example(where=("corpora", "sim_transfer", "n"), value=1)  # 1 object of 6 contacts: found once
 def test_fuzzed_config_validates_or_names_the_key(where, value):
     from tacgen_lib.io.config import ConfigError, validate_config
 

@@ -18,6 +18,8 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import yaml
 
+from tacgen_lib.corpus.keys import corpus_key_errors
+
 if TYPE_CHECKING:  # jsonschema is imported where a config is validated (at parse time), not by
     # the jobs, which only read their settings (`settings_from`): ~0.1 s less per job
     import jsonschema
@@ -134,6 +136,8 @@ def validate_config(config: dict, schema_path: str | Path, *, source: str = "con
     scenes = load_yaml(scenes_file) if scenes_file.exists() else None
     for name, corpus in config["corpora"].items():
         if corpus["kind"] == "simulated":
+            for key, message in corpus_key_errors(corpus):
+                raise ConfigError(f"{source}: corpora.{name}.{key}: {message}")
             if scenes is None:
                 raise ConfigError(f"{source}: scenes_file: {scenes_file} does not exist")
             if corpus["scene"] not in scenes:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import re
 import subprocess
 import sys
 import textwrap
@@ -183,3 +184,18 @@ def test_reading_settings_does_not_import_jsonschema():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False", out.stdout + out.stderr
+
+
+@pytest.mark.parametrize(
+    "change, key",
+    [
+        ({"n": 215}, "corpora.sim_transfer.n: n=215 is not a whole number of objects of 6"),
+        ({"design": "controlled"}, "corpora.sim_transfer.contacts: key 'contacts' belongs to"),
+        ({"rho": 0.5}, "corpora.sim_transfer.rho: key 'rho' belongs to design 'natural'"),
+    ],
+)
+def test_a_corpus_breaking_a_cross_key_rule_stops_validation_naming_the_key(change, key):
+    cfg = _config()
+    cfg["corpora"]["sim_transfer"].update(change)
+    with pytest.raises(ConfigError, match=re.escape(key)):
+        validate_config(cfg, SCHEMA, source="x.yaml")

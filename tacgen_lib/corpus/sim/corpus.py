@@ -54,6 +54,7 @@ import numpy as np
 import pandas as pd
 
 from tacgen_lib.corpus.derangement import sattolo_cycle
+from tacgen_lib.corpus.keys import corpus_key_errors
 from tacgen_lib.corpus.manifest import LABEL_COLUMNS
 from tacgen_lib.corpus.sim import physics
 from tacgen_lib.corpus.sim.render import (
@@ -254,22 +255,12 @@ class CorpusSettings:
             )
         if not 0.0 <= float(self.rho) <= 1.0:
             raise ValueError(f"corpus {self.name!r}: key 'rho' must be in [0, 1], got {self.rho}")
-        if self.rho and self.design != "natural":
-            raise ValueError(
-                f"corpus {self.name!r}: key 'rho' belongs to design 'natural', not {self.design!r}"
-            )
         if int(self.contacts) < 1:
             raise ValueError(f"corpus {self.name!r}: key 'contacts' must be >= 1")
-        if int(self.contacts) > 1 and self.design != "paired":
-            raise ValueError(
-                f"corpus {self.name!r}: key 'contacts' belongs to design 'paired', "
-                f"not {self.design!r}"
-            )
-        if int(self.n) % int(self.contacts):
-            raise ValueError(
-                f"corpus {self.name!r}: n={self.n} is not a whole number of objects of "
-                f"{self.contacts} contacts each"
-            )
+        for _key, message in corpus_key_errors(
+            {"design": self.design, "rho": self.rho, "contacts": self.contacts, "n": self.n}
+        ):
+            raise ValueError(f"corpus {self.name!r}: {message}")
         if int(self.n) < 1 or int(self.sensors) < 1 or int(self.presses) < 1:
             raise ValueError(f"corpus {self.name!r}: n, sensors and presses must be >= 1")
 

@@ -1,0 +1,26 @@
+"""The cross-key rules of a simulated corpus's config (`corpora.<name>`): what a JSON schema
+cannot say. Shared by `CorpusSettings` (tacgen_lib.corpus.sim.corpus) and the config's
+validation before any job runs (tacgen_lib.io.config), without importing the simulator."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+__all__ = ["corpus_key_errors"]
+
+
+def corpus_key_errors(corpus: Mapping[str, Any]) -> list[tuple[str, str]]:
+    """(key, message) for each cross-key rule `corpus` (one `corpora.<name>` mapping, defaults
+    filled or not) breaks: rho belongs to design natural, contacts > 1 to design paired, and
+    n must be a whole number of objects of `contacts` contacts each."""
+    design = corpus.get("design")
+    rho, contacts, n = corpus.get("rho", 0.0), int(corpus.get("contacts", 1)), int(corpus["n"])
+    out = []
+    if rho and design != "natural":
+        out.append(("rho", f"key 'rho' belongs to design 'natural', not {design!r}"))
+    if contacts > 1 and design != "paired":
+        out.append(("contacts", f"key 'contacts' belongs to design 'paired', not {design!r}"))
+    if contacts >= 1 and n % contacts:
+        out.append(("n", f"n={n} is not a whole number of objects of {contacts} contacts each"))
+    return out
