@@ -53,6 +53,7 @@ from tacgen_lib.generate.regime_sets import (
     assert_regime_disjoint,
     check_regime_sizes,
     draw_regime_sets,
+    job_regime_sets,
 )
 from tacgen_lib.probes.bootstrap import fixed_test_bootstrap, resample_indices, score_interval
 from tacgen_lib.probes.fit import fit_probe
@@ -71,6 +72,7 @@ __all__ = [
     "check_regime_sizes",
     "draw_regime_sets",
     "evaluate_regime",
+    "job_regime_sets",
     "fit_small_probe",
     "gap_closed",
     "distillation_rows",

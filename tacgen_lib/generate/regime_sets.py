@@ -31,6 +31,7 @@ __all__ = [
     "assert_regime_disjoint",
     "check_regime_sizes",
     "draw_regime_sets",
+    "job_regime_sets",
 ]
 
 #: The name of the regime's natural corpus at rho: this prefix and rho's digits.
@@ -198,3 +199,21 @@ def assert_regime_disjoint(sets: RegimeSets, splits: pd.DataFrame, *, rule: str)
     assert_trainable(
         list(sets.labelled) + list(sets.pool), splits, rule=rule, allowed=("train", "val")
     )
+
+
+def job_regime_sets(
+    splits: pd.DataFrame, corpus: str, regime: RegimeSettings, seed: int, *, rule: str
+) -> RegimeSets:
+    """The sets a regime job of `corpus` x `seed` reads (`draw_regime_sets` at the largest
+    labelled and pool sizes; smaller ones are their prefixes), refused by
+    `assert_regime_disjoint` if they overlap or hold a held-out row: every rule that fits on
+    them (generators on the pool, probes on labelled rows) trains on no test row."""
+    sets = draw_regime_sets(
+        splits,
+        corpus,
+        n_labelled=max(regime.n_labelled),
+        n_pool=max(regime.n_pool),
+        seed=seed,
+    )
+    assert_regime_disjoint(sets, splits, rule=rule)
+    return sets

@@ -19,6 +19,7 @@ from tacgen_lib.generate.regime import (
     ARMS,
     SUMMARY_COLUMNS,
     RegimeSets,
+    RegimeSettings,
     RegimeTarget,
     appearance_check,
     appearance_design,
@@ -29,6 +30,7 @@ from tacgen_lib.generate.regime import (
     evaluate_regime,
     fit_small_probe,
     gap_closed,
+    job_regime_sets,
 )
 from tacgen_lib.generate.regime_generators import pool_pairs
 from tacgen_lib.generate.regime_sets import natural_corpus_name, regime_corpora
@@ -106,6 +108,21 @@ def test_sets_are_disjoint_nested_and_seeded():
     assert list(a.labelled_ids(8)) == list(a.labelled[:8])
     assert set(a.pool_ids(10)) <= set(a.pool_ids(50))
     assert_regime_disjoint(a, splits, rule="test")
+
+
+def test_a_job_draws_the_largest_sets_and_refuses_overlapping_ones(monkeypatch):
+    from tacgen_lib.generate import regime_sets
+
+    _, splits, _, _ = world(rho=1.0)
+    regime = RegimeSettings(n_labelled=(8, 40), n_pool=(20, 100))
+    got = job_regime_sets(splits, "nat", regime, 3, rule="regime_evaluate")
+    want = draw_regime_sets(splits, "nat", n_labelled=40, n_pool=100, seed=3)
+    assert list(got.labelled) == list(want.labelled) and list(got.pool) == list(want.pool)
+    # a draw whose pool took a test row is refused, naming the rule
+    bad = RegimeSets(want.labelled, np.concatenate([want.pool, want.test[:1]]), want.test)
+    monkeypatch.setattr(regime_sets, "draw_regime_sets", lambda *a, **k: bad)
+    with pytest.raises(LeakageError, match="rule regime_evaluate"):
+        job_regime_sets(splits, "nat", regime, 3, rule="regime_evaluate")
 
 
 def test_sizes_that_cannot_be_drawn_disjointly_are_refused_naming_the_corpus():

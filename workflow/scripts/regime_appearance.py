@@ -12,8 +12,7 @@ from threadpoolctl import threadpool_limits
 from tacgen_lib.generate.regime import (
     RegimeSettings,
     appearance_check,
-    assert_regime_disjoint,
-    draw_regime_sets,
+    job_regime_sets,
 )
 from tacgen_lib.io import edges, log
 from tacgen_lib.probes.settings import ProbeSettings
@@ -24,11 +23,8 @@ regime = RegimeSettings.from_config(params.regime)
 seed = int(params.seed)
 splits = edges.read(snakemake.input.splits, require={"split": "str", "corpus": "str"}).frame
 manifest = edges.read(snakemake.input.manifest).frame
-sets = draw_regime_sets(
-    splits, params.corpus, n_labelled=max(regime.n_labelled), n_pool=max(regime.n_pool), seed=seed
-)
 # the check's probes fit on labelled and pool rows: never a test row
-assert_regime_disjoint(sets, splits, rule=snakemake.rule)
+sets = job_regime_sets(splits, params.corpus, regime, seed, rule=snakemake.rule)
 logger.info(
     "%s seed %d: appearance class from V on %d labelled + pool rows, %d test rows",
     params.corpus,

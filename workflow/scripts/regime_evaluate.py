@@ -11,9 +11,8 @@ from threadpoolctl import threadpool_limits
 from tacgen_lib.generate.regime import (
     RegimeSettings,
     RegimeTarget,
-    assert_regime_disjoint,
-    draw_regime_sets,
     evaluate_regime,
+    job_regime_sets,
     regime_test_rows,
 )
 from tacgen_lib.io import edges, log
@@ -26,11 +25,8 @@ regime = RegimeSettings.from_config(params.regime)
 seed = int(w.seed)
 splits = edges.read(snakemake.input.splits, require={"split": "str", "corpus": "str"}).frame
 manifest = edges.read(snakemake.input.manifest).frame
-sets = draw_regime_sets(
-    splits, w.corpus, n_labelled=max(regime.n_labelled), n_pool=max(regime.n_pool), seed=seed
-)
 # the probes fit on labelled rows, the distillation teacher labels pool rows: never a test row
-assert_regime_disjoint(sets, splits, rule=snakemake.rule)
+sets = job_regime_sets(splits, w.corpus, regime, seed, rule=snakemake.rule)
 ceiling_rows = manifest.set_index("sample_id")[["appearance_id", "shape", "scale"]]
 # the appearance classes of the natural design (0 .. k-1)
 n_classes = int(manifest.loc[manifest["corpus"] == w.corpus, "appearance_id"].max()) + 1

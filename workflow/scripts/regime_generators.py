@@ -17,8 +17,7 @@ from tacgen_lib.generate.regime_generators import (
 )
 from tacgen_lib.generate.regime_sets import (
     RegimeSettings,
-    assert_regime_disjoint,
-    draw_regime_sets,
+    job_regime_sets,
 )
 from tacgen_lib.generate.settings import GenerateSettings
 from tacgen_lib.io import edges, log
@@ -30,15 +29,8 @@ regime = RegimeSettings.from_config(params.regime)
 settings = regime_generator_settings(GenerateSettings.from_config(params.generate), regime)
 seed = int(w.seed)
 splits = edges.read(snakemake.input.splits, require={"split": "str", "corpus": "str"}).frame
-sets = draw_regime_sets(
-    splits,
-    w.corpus,
-    n_labelled=max(regime.n_labelled),
-    n_pool=max(regime.n_pool),
-    seed=seed,
-)
 # the generators learn from pool rows only: never a labelled or a test row
-assert_regime_disjoint(sets, splits, rule=snakemake.rule)
+sets = job_regime_sets(splits, w.corpus, regime, seed, rule=snakemake.rule)
 
 
 vision, tactile = (
