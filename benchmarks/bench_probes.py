@@ -10,7 +10,9 @@ by `probes.fit_logistic_batch`, against the per-refit scikit-learn loop (timed o
 ``--logistic-ref`` refits of each control and compared per refit). And the logistic probe's
 C selection on that probe's V+T (5 folds x C in {0.1, 1, 10}, tol 1e-6 as the workflow's
 probes): folds solved together (`logistic.cv_batches`) against the scikit-learn loop, with
-the CV scores compared.
+the CV scores compared. And single lbfgs fits at the workflow's sizes (32 to 1,408 rows,
+two and six classes): the probes' solver (`lbfgs.fit_lbfgs_logistic`) against scikit-learn's
+LogisticRegression on the same rows, with iterations and probabilities compared.
 
     /tmp/venv/bin/python benchmarks/bench_probes.py [--repeats 3] [--blas-threads 1]
 
@@ -27,8 +29,9 @@ from dataclasses import dataclass
 import machine
 import numpy as np
 import scipy.stats
-from sklearn.linear_model import Ridge
+from sklearn.linear_model import LogisticRegression, Ridge
 from sklearn.model_selection import GridSearchCV
+from sklearn.preprocessing import StandardScaler
 from threadpoolctl import threadpool_info, threadpool_limits
 
 from tacgen_lib.probes import logistic
@@ -40,6 +43,7 @@ from tacgen_lib.probes.controls import (
 )
 from tacgen_lib.probes.folds import make_folds
 from tacgen_lib.probes.fusion import fuse
+from tacgen_lib.probes.lbfgs import fit_lbfgs_logistic
 from tacgen_lib.probes.logistic import FixedLogistic, fit_logistic
 from tacgen_lib.probes.refits import Refits
 from tacgen_lib.probes.ridge import FixedRidge, fit_ridge_probe
@@ -139,6 +143,39 @@ def logistic_cv() -> tuple:
         f", iterations {batched.cv_max_n_iter} vs {loop.cv_max_n_iter}"
     )
     return "logistic CV 5 folds x 3 C, 960 x 384", ours, "sklearn lbfgs loop", ref, same
+
+
+def logistic_fits(repeats: int) -> list[tuple]:
+    """(name, ours, reference name, reference, how they differ) of single lbfgs fits at the
+    workflow's probe sizes: `lbfgs.fit_lbfgs_logistic` (the probes' solver) against
+    scikit-learn's ``LogisticRegression(solver="lbfgs")`` on the same standardised rows."""
+    out = []
+    for n, d, k in ((32, 384, 2), (384, 384, 2), (960, 384, 2), (1408, 192, 6)):
+        v, t, _ = hardness_like(n, d // 2)
+        x = StandardScaler().fit_transform(np.hstack([v, t]))
+        score = x[:, :6] @ np.linspace(1.0, -1.0, 6) + np.random.default_rng(n).normal(size=n)
+        y = np.digitize(score, np.quantile(score, np.linspace(0, 1, k + 1)[1:-1]))
+        ours, fit = best_of(
+            lambda x=x, y=y: fit_lbfgs_logistic(x, y, 10.0, max_iter=12800, tol=1e-6),
+            repeats,
+            f"lbfgs {n}",
+        )
+        ref, sk = best_of(
+            lambda x=x, y=y: LogisticRegression(C=10.0, max_iter=12800, tol=1e-6).fit(x, y),
+            repeats,
+            f"ref lbfgs {n}",
+        )
+        diff = np.abs(fit.model.predict_proba(x) - sk.predict_proba(x)).max()
+        out.append(
+            (
+                f"logistic fit {n} x {d}, {k} classes, C 10",
+                ours,
+                "sklearn LogisticRegression",
+                ref,
+                f"iterations {fit.n_iter} vs {int(sk.n_iter_[0])}, max |d proba| {diff:.1e}",
+            )
+        )
+    return out
 
 
 def main() -> None:
@@ -274,10 +311,11 @@ def main() -> None:
     if args.logistic_perms > 0:
         for name, ours, ref_name, ref in logistic_controls(args):
             print(f"{name:46s} {ours:9.4f} {'':8s} {ref_name:>24s} {ref:8.4f} {ref / ours:8.1f}")
-        name, ours, ref_name, ref, same = logistic_cv()
-        print(
-            f"{name:46s} {ours:9.4f} {'':8s} {ref_name:>24s} {ref:8.4f} {ref / ours:8.1f}  ({same})"
-        )
+        for name, ours, ref_name, ref, same in [logistic_cv(), *logistic_fits(args.repeats)]:
+            print(
+                f"{name:46s} {ours:9.4f} {'':8s} {ref_name:>24s} {ref:8.4f} {ref / ours:8.1f}"
+                f"  ({same})"
+            )
     print(
         f"PCG: {ctrl['solver']}; load average during run: {os.getloadavg()[0]:.1f} "
         "(CPU time sums BLAS threads)"

@@ -3,7 +3,8 @@
 This module owns:
 
 - `fit_logistic` / `LogisticProbe`: scikit-learn ``LogisticRegression`` (lbfgs; multinomial
-  for more than two classes) on standardised features, C chosen by stratified K-fold CV on
+  for more than two classes; each fit solved by `lbfgs.fit_lbfgs_logistic`, scikit-learn's
+  objective and scipy call without its per-iteration overhead) on standardised features, C chosen by stratified K-fold CV on
   the training rows (the K folds of each C solved together by `batched.fit_logistic_batch`
   where `cv_batches` allows it: the same objective and stopping rule, so the CV scores agree
   with scikit-learn's loop up to held-out rows whose decision is within the solvers'
@@ -11,8 +12,8 @@ This module owns:
   (by default the cap itself, one run: lbfgs's iterates do not depend on its iteration
   budget, so a first run at 200 that is doubled until it converges returns the same
   coefficients bit for bit after ~2x the work, measured 3.0 s against 1.35 s of CPU on the
-  default hardness CV); a ``ConvergenceWarning`` doubles a smaller ``max_iter`` and refits, up
-  to the cap; iterations and convergence are recorded, and a probe that still fails to
+  default hardness CV); an unconverged run (where scikit-learn would warn) doubles a smaller
+  ``max_iter`` and refits, up to the cap; iterations and convergence are recorded, and a probe that still fails to
   converge re-emits the warning.
 - `FixedLogistic`: the probe at its chosen C; `FixedLogistic.refit_many` solves a control's
   B refits (`refits.Refits`) together with `batched.fit_logistic_batch` where that solver
@@ -27,7 +28,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from sklearn.exceptions import ConvergenceWarning
-from sklearn.linear_model import LogisticRegression
 from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import StandardScaler
 
@@ -36,6 +36,7 @@ from tacgen_lib.probes.blas import single_blas_thread
 from tacgen_lib.probes.bootstrap import resample_counts
 from tacgen_lib.probes.folds import make_folds
 from tacgen_lib.probes.inputs import check_features, check_target
+from tacgen_lib.probes.lbfgs import fit_lbfgs_logistic
 from tacgen_lib.probes.metrics import accuracy
 from tacgen_lib.probes.objective import standardise_block
 from tacgen_lib.probes.refits import Refits, Refitted
@@ -63,30 +64,21 @@ class LogisticFit:
 def fit_logistic_once(
     X: np.ndarray, y: np.ndarray, C: float, max_iter: int, max_iter_cap: int, tol: float
 ) -> LogisticFit:
-    """Standardise + lbfgs LogisticRegression; double max_iter (up to the cap) on
-    ConvergenceWarning.
-
-    Warnings other than ConvergenceWarning are re-emitted; a fit that still fails at the
-    cap re-emits a ConvergenceWarning and is recorded as converged=False.
+    """Standardise (``StandardScaler`` on these rows) + scikit-learn's lbfgs
+    ``LogisticRegression`` (solved by `lbfgs.fit_lbfgs_logistic`: scikit-learn's objective and
+    iterates without its per-iteration overhead); double max_iter (up to the cap) where lbfgs
+    stops unconverged (where scikit-learn would warn). A fit that still fails at the cap emits
+    a ConvergenceWarning and is recorded as converged=False.
     """
     it = max_iter
+    scaler = StandardScaler().fit(X)
+    Xs = scaler.transform(X)
     while True:
-        model = Pipeline(
-            [
-                ("standardise", StandardScaler()),
-                ("logistic", LogisticRegression(C=C, solver="lbfgs", max_iter=it, tol=tol)),
-            ]
-        )
-        with warnings.catch_warnings(record=True) as caught, single_blas_thread():
-            warnings.simplefilter("always")
-            model.fit(X, y)
-        conv = [w for w in caught if issubclass(w.category, ConvergenceWarning)]
-        for w in caught:
-            if not issubclass(w.category, ConvergenceWarning):
-                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-        n_iter = int(np.max(model.named_steps["logistic"].n_iter_))
-        if not conv:
-            return LogisticFit(model, n_iter, it, True)
+        with single_blas_thread():
+            fit = fit_lbfgs_logistic(Xs, y, C, max_iter=it, tol=tol)
+        model = Pipeline([("standardise", scaler), ("logistic", fit.model)])
+        if fit.converged:
+            return LogisticFit(model, fit.n_iter, it, True)
         if it >= max_iter_cap:
             warnings.warn(
                 f"fit_logistic: lbfgs did not converge within max_iter={it} (C={C}); "
@@ -94,7 +86,7 @@ def fit_logistic_once(
                 ConvergenceWarning,
                 stacklevel=3,
             )
-            return LogisticFit(model, n_iter, it, False)
+            return LogisticFit(model, fit.n_iter, it, False)
         it = min(2 * it, max_iter_cap)
 
 
