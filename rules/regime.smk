@@ -33,7 +33,7 @@ rule regime_generators:
         seed=r"\d+",
     conda:
         "../envs/generate.yaml"
-    threads: 1
+    threads: 2  # its generators in forked one-thread workers (runtime.workers)
     resources:
         mem_mb=3000,
         runtime=30,
@@ -65,7 +65,7 @@ rule regime_evaluate:
         seed=r"\d+",
     conda:
         "../envs/probes.yaml"
-    threads: 1
+    threads: 2  # its (target, N_L) cells in forked one-thread workers (runtime.workers)
     resources:
         mem_mb=3000,
         runtime=30,
@@ -96,7 +96,7 @@ rule regime_appearance:
         "results/benchmarks/regime_appearance.tsv"
     conda:
         "../envs/probes.yaml"
-    threads: 1
+    threads: 2  # its two probes in forked one-thread workers (runtime.workers)
     resources:
         mem_mb=3000,
         runtime=30,

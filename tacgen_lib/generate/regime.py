@@ -60,6 +60,7 @@ from tacgen_lib.probes.fit import fit_probe
 from tacgen_lib.probes.metrics import score
 from tacgen_lib.probes.rows import FamilyRows, visible_design
 from tacgen_lib.probes.settings import ProbeSettings
+from tacgen_lib.runtime.workers import fork_map
 
 __all__ = [
     "ARMS",
@@ -291,98 +292,136 @@ def evaluate_regime(
     bootstrap: int,
     n_classes: int,
     progress: Any = None,
+    workers: int = 1,
 ) -> pd.DataFrame:
     """Every arm (`ARMS`) of every (N_L, N_P) cell of one corpus x seed, per target.
 
     t_gen: (n_pool, "real" | "shuffled") -> sample_id -> generated tactile vector, for at
-    least the labelled and test rows. Returns rows with `SUMMARY_COLUMNS`.
+    least the labelled and test rows. The (target, N_L) cells are independent: `workers`
+    forked processes compute them (`runtime.workers.fork_map`, the same rows for any number
+    of workers), the costliest (logistic targets, large N_L) first. Returns rows with
+    `SUMMARY_COLUMNS`, ordered by target, N_L and N_P.
     """
     say = progress or (lambda _m: None)
-    out: list[dict] = []
-    for tgt in targets:
-        rows, ps = tgt.rows, tgt.settings
-        metric = ps.metric
-        test = np.asarray(rows.test_ids, dtype=object)
-        y_test = np.asarray(rows.y_test)
-        label_of = dict(zip(map(str, rows.train_ids), rows.y_train, strict=True))
-        v_te, t_te = feature_block(vision, test), feature_block(t_real, test)
-        d_t = t_te.shape[1]
-        idx = resample_indices(len(test), int(bootstrap), ps.seed)
-        ceiling = _vision_ceiling(tgt, sets, label_of, n_classes)
-        for n_l in sorted(int(n) for n in n_labelled):
-            lab = sets.labelled_ids(n_l)
-            y_lab = np.array([label_of[str(i)] for i in lab], dtype=object)
-            if ps.kind == "ridge":
-                y_lab = y_lab.astype(np.float64)
-            v_lab, t_lab = feature_block(vision, lab), feature_block(t_real, lab)
-            fits: dict[tuple[str, str], SmallFit] = {
-                ("v", "linear"): fit_small_probe(v_lab, y_lab, v_te, ps),
-                ("v", "nonlinear"): _nonlinear(
-                    v_lab, y_lab, v_te, ps, gammas=gammas, n_components=d_t
-                ),
-                ("v_treal", "linear"): fit_small_probe(
-                    np.hstack([v_lab, t_lab]), y_lab, np.hstack([v_te, t_te]), ps
-                ),
-                ("vision_ceiling", "oracle"): ceiling,
-            }
-            for n_p in sorted(int(n) for n in n_pool):
-                pool = sets.pool_ids(n_p)
-                v_pool, t_pool = feature_block(vision, pool), feature_block(t_real, pool)
-                cell = dict(fits)
-                gen, shuf = t_gen[(n_p, "real")], t_gen[(n_p, "shuffled")]
-                g_lab, g_te = feature_block(gen, lab), feature_block(gen, test)
-                s_lab, s_te = feature_block(shuf, lab), feature_block(shuf, test)
-                x_lab, x_te = np.hstack([v_lab, g_lab]), np.hstack([v_te, g_te])
-                cell[("v_tgen", "linear")] = fit_small_probe(x_lab, y_lab, x_te, ps)
-                cell[("v_tgen", "nonlinear")] = _nonlinear(
-                    x_lab, y_lab, x_te, ps, gammas=gammas, n_components=d_t
-                )
-                cell[("v_tgen_shuffled", "linear")] = fit_small_probe(
-                    np.hstack([v_lab, s_lab]), y_lab, np.hstack([v_te, s_te]), ps
-                )
-                # the student's gamma multiple: the one CV chose for nonlinear V on these
-                # labels (all of `gammas` where that probe could not run CV)
-                x_gd, y_gd = distillation_rows(v_lab, t_lab, y_lab, v_pool, t_pool, ps)
-                g_nl = fits[("v", "nonlinear")].gamma_multiple
-                cell[("distilled", "linear")] = fit_small_probe(x_gd, y_gd, v_te, ps)
-                cell[("distilled", "nonlinear")] = _nonlinear(
-                    x_gd,
-                    y_gd,
-                    v_te,
-                    ps,
-                    gammas=[g_nl] if np.isfinite(g_nl) else gammas,
-                    n_components=d_t,
-                )
-                out += _cell_rows(
-                    cell,
-                    y_test,
-                    idx,
-                    metric,
-                    base={
-                        "corpus": corpus,
-                        "rho": float(rho),
-                        "n_labelled": n_l,
-                        "n_pool": n_p,
-                        "seed": int(seed),
-                        "target": rows.target,
-                        "kind": ps.kind,
-                        "metric": metric,
-                        "n_test": len(test),
-                        "n_labelled_classes": (
-                            len(set(map(str, y_lab))) if ps.kind == "logistic" else 0
-                        ),
-                    },
-                )
-                say(f"{corpus} seed {seed} {rows.target}: N_L={n_l} N_P={n_p} done")
+    base = {"corpus": corpus, "rho": float(rho), "seed": int(seed)}
+    # the vision ceiling of each target (fitted on every non-test row), then the cells
+    ceilings = fork_map(lambda tgt: _vision_ceiling(tgt, sets, n_classes), targets, workers)
+    cells = [(t, int(n_l)) for t in range(len(targets)) for n_l in sorted(map(int, n_labelled))]
+
+    def one_cell(cell: tuple[int, int]) -> list[dict]:
+        t, n_l = cell
+        rows = _labelled_cell(
+            targets[t],
+            ceilings[t],
+            sets,
+            n_l,
+            sorted(int(n) for n in n_pool),
+            vision=vision,
+            t_real=t_real,
+            t_gen=t_gen,
+            gammas=gammas,
+            bootstrap=bootstrap,
+            base=base,
+        )
+        say(f"{corpus} seed {seed} {targets[t].rows.target}: N_L={n_l} done")
+        return rows
+
+    def cost(cell: tuple[int, int]) -> float:  # logistic CV dominates, growing with N_L
+        return (10.0 if targets[cell[0]].settings.kind == "logistic" else 1.0) * (cell[1] + 64)
+
+    out = [row for rows in fork_map(one_cell, cells, workers, cost=cost) for row in rows]
     return pd.DataFrame(out, columns=list(SUMMARY_COLUMNS))
 
 
-def _vision_ceiling(
-    tgt: RegimeTarget, sets: RegimeSets, label_of: Mapping[str, Any], n_classes: int
-) -> SmallFit:
+def _labelled_cell(
+    tgt: RegimeTarget,
+    ceiling: SmallFit,
+    sets: RegimeSets,
+    n_l: int,
+    n_pool: Sequence[int],
+    *,
+    vision: Mapping[str, np.ndarray],
+    t_real: Mapping[str, np.ndarray],
+    t_gen: Mapping[tuple[int, str], Mapping[str, np.ndarray]],
+    gammas: Sequence[float],
+    bootstrap: int,
+    base: dict,
+) -> list[dict]:
+    """The rows of every arm of one target at one labelled size, for every pool size."""
+    rows, ps = tgt.rows, tgt.settings
+    metric = ps.metric
+    test = np.asarray(rows.test_ids, dtype=object)
+    y_test = np.asarray(rows.y_test)
+    label_of = dict(zip(map(str, rows.train_ids), rows.y_train, strict=True))
+    v_te, t_te = feature_block(vision, test), feature_block(t_real, test)
+    d_t = t_te.shape[1]
+    idx = resample_indices(len(test), int(bootstrap), ps.seed)
+    lab = sets.labelled_ids(n_l)
+    y_lab = np.array([label_of[str(i)] for i in lab], dtype=object)
+    if ps.kind == "ridge":
+        y_lab = y_lab.astype(np.float64)
+    v_lab, t_lab = feature_block(vision, lab), feature_block(t_real, lab)
+    fits: dict[tuple[str, str], SmallFit] = {
+        ("v", "linear"): fit_small_probe(v_lab, y_lab, v_te, ps),
+        ("v", "nonlinear"): _nonlinear(v_lab, y_lab, v_te, ps, gammas=gammas, n_components=d_t),
+        ("v_treal", "linear"): fit_small_probe(
+            np.hstack([v_lab, t_lab]), y_lab, np.hstack([v_te, t_te]), ps
+        ),
+        ("vision_ceiling", "oracle"): ceiling,
+    }
+    out: list[dict] = []
+    for n_p in n_pool:
+        pool = sets.pool_ids(n_p)
+        v_pool, t_pool = feature_block(vision, pool), feature_block(t_real, pool)
+        cell = dict(fits)
+        gen, shuf = t_gen[(n_p, "real")], t_gen[(n_p, "shuffled")]
+        g_lab, g_te = feature_block(gen, lab), feature_block(gen, test)
+        s_lab, s_te = feature_block(shuf, lab), feature_block(shuf, test)
+        x_lab, x_te = np.hstack([v_lab, g_lab]), np.hstack([v_te, g_te])
+        cell[("v_tgen", "linear")] = fit_small_probe(x_lab, y_lab, x_te, ps)
+        cell[("v_tgen", "nonlinear")] = _nonlinear(
+            x_lab, y_lab, x_te, ps, gammas=gammas, n_components=d_t
+        )
+        cell[("v_tgen_shuffled", "linear")] = fit_small_probe(
+            np.hstack([v_lab, s_lab]), y_lab, np.hstack([v_te, s_te]), ps
+        )
+        # the student's gamma multiple: the one CV chose for nonlinear V on these labels
+        # (all of `gammas` where that probe could not run CV)
+        x_gd, y_gd = distillation_rows(v_lab, t_lab, y_lab, v_pool, t_pool, ps)
+        g_nl = fits[("v", "nonlinear")].gamma_multiple
+        cell[("distilled", "linear")] = fit_small_probe(x_gd, y_gd, v_te, ps)
+        cell[("distilled", "nonlinear")] = _nonlinear(
+            x_gd,
+            y_gd,
+            v_te,
+            ps,
+            gammas=[g_nl] if np.isfinite(g_nl) else gammas,
+            n_components=d_t,
+        )
+        out += _cell_rows(
+            cell,
+            y_test,
+            idx,
+            metric,
+            base={
+                **base,
+                "n_labelled": n_l,
+                "n_pool": n_p,
+                "target": rows.target,
+                "kind": ps.kind,
+                "metric": metric,
+                "n_test": len(test),
+                "n_labelled_classes": (len(set(map(str, y_lab))) if ps.kind == "logistic" else 0),
+            },
+        )
+    return out
+
+
+def _vision_ceiling(tgt: RegimeTarget, sets: RegimeSets, n_classes: int) -> SmallFit:
     """The oracle probe on true appearance class + visible shape and size, fitted on every
     non-test row (labelled and pool) with its true label."""
     rows, ps = tgt.rows, tgt.settings
+    label_of = dict(zip(map(str, rows.train_ids), rows.y_train, strict=True))
     train = [str(i) for i in np.concatenate([sets.labelled, sets.pool]) if str(i) in label_of]
     test = [str(i) for i in rows.test_ids]
     x_tr, x_te = appearance_design(
@@ -459,6 +498,7 @@ def appearance_check(
     gammas: Sequence[float],
     bootstrap: int,
     progress: Any = None,
+    workers: int = 1,
 ) -> pd.DataFrame:
     """How well V decodes the appearance class: the linear and the nonlinear V probe
     (logistic, regulariser by CV) fitted on every labelled and pool row, scored on the test
@@ -468,7 +508,7 @@ def appearance_check(
     raw appearance should do worse than a nonlinear one; the report shows both. At every rho
     the class is uniform and the frame depends on the class, not on the material, so the
     accuracy is a property of the design, the same on every corpus of a rho grid (the DAG
-    checks one).
+    checks one). The two probes are fitted by `workers` forked processes (`fork_map`).
     """
     say = progress or (lambda _m: None)
     train = [str(i) for i in np.concatenate([sets.labelled, sets.pool])]
@@ -477,16 +517,18 @@ def appearance_check(
     y_te = appearance.loc[test].astype(str).to_numpy(dtype=object)
     v_tr, v_te = feature_block(vision, train), feature_block(vision, test)
     idx = resample_indices(len(test), int(bootstrap), settings.seed)
-    out = []
-    for probe in ("linear", "nonlinear"):
+
+    def fit(probe: str) -> SmallFit:
         if probe == "linear":
-            fit = fit_small_probe(v_tr, y_tr, v_te, settings)
-        else:
-            fit = _nonlinear(v_tr, y_tr, v_te, settings, gammas=gammas, n_components=v_tr.shape[1])
-        lo, hi = score_interval("accuracy", y_te, fit.pred, idx)
-        say(
-            f"appearance class, {probe} probe on V: accuracy {score('accuracy', y_te, fit.pred):.3f}"
-        )
+            return fit_small_probe(v_tr, y_tr, v_te, settings)
+        return _nonlinear(v_tr, y_tr, v_te, settings, gammas=gammas, n_components=v_tr.shape[1])
+
+    out = []
+    probes = ("linear", "nonlinear")
+    for probe, fitted in zip(probes, fork_map(fit, probes, workers), strict=True):
+        acc = score("accuracy", y_te, fitted.pred)
+        lo, hi = score_interval("accuracy", y_te, fitted.pred, idx)
+        say(f"appearance class, {probe} probe on V: accuracy {acc:.3f}")
         out.append(
             {
                 "row_id": f"{corpus}|{seed}|appearance_class|{probe}",
@@ -494,7 +536,7 @@ def appearance_check(
                 "rho": float(rho),
                 "seed": int(seed),
                 "probe": probe,
-                "score": score("accuracy", y_te, fit.pred),
+                "score": acc,
                 "ci_low": lo,
                 "ci_high": hi,
                 "chance": float(pd.Series(y_te).value_counts(normalize=True).max()),

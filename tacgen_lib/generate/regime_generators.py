@@ -12,20 +12,23 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
 
 from tacgen_lib.corpus.derangement import sattolo_cycle
 from tacgen_lib.generate.blocks import feature_block
-from tacgen_lib.generate.regime_sets import PAIRINGS, RegimeSettings
+from tacgen_lib.generate.regime_sets import PAIRINGS, RegimeSets, RegimeSettings
 from tacgen_lib.generate.sampling import generate
 from tacgen_lib.generate.settings import GenerateSettings
 from tacgen_lib.generate.train import GeneratorFit, fit_generator
+from tacgen_lib.runtime.workers import fork_map
 
 __all__ = [
     "PAIRINGS",
+    "PoolGenerator",
+    "pool_generators",
     "pool_pairs",
     "regime_generator_settings",
     "sample_regime",
@@ -116,3 +119,78 @@ def sample_regime(
         eta=weights.settings.eta,
         batch=weights.settings.batch,
     )
+
+
+@dataclass(frozen=True)
+class PoolGenerator:
+    """One trained and sampled generator of a corpus x seed: its samples and its curve."""
+
+    n_pool: int
+    pairing: str
+    t_gen: np.ndarray  # (rows, d) float32, in the order of the rows asked for
+    curve: list[dict]  # step, train_loss, val_loss per evaluation
+    best_step: int
+    steps_run: int
+    best_val_loss: float
+
+
+def pool_generators(
+    vision: Mapping[str, np.ndarray],
+    tactile: Mapping[str, np.ndarray],
+    sets: RegimeSets,
+    cells: Sequence[tuple[int, str]],
+    settings: GenerateSettings,
+    regime: RegimeSettings,
+    *,
+    rows: Sequence[str],
+    seed: int,
+    progress: Callable[[str], Any] | None = None,
+    workers: int = 1,
+) -> list[PoolGenerator]:
+    """The generator of every (pool size, pairing) cell (`train_pool_generator` on the pool
+    of that size), each sampled for `rows` (`sample_regime`, noise seeded by the seed and
+    the pool size), in the order of `cells`.
+
+    The cells are independent (each seeds its own training and sampling): `workers` forked
+    processes train them (`runtime.workers.fork_map`, the same samples for any number of
+    workers), the largest pools first.
+    """
+    say = progress or (lambda _m: None)
+
+    def one(cell: tuple[int, str]) -> PoolGenerator:
+        n_pool, pairing = int(cell[0]), cell[1]
+        pool = sets.pool_ids(n_pool)
+        say(f"seed {seed}: pool of {len(pool)} ({pairing} pairs)")
+        fit = train_pool_generator(
+            vision,
+            tactile,
+            pool,
+            settings,
+            val_fraction=regime.pool_val_fraction,
+            pairing=pairing,
+            seed=seed,
+            progress=lambda m: say(f"pool {n_pool} {pairing}: {m}"),
+        )
+        t_gen = sample_regime(
+            fit,
+            vision,
+            rows,
+            steps=regime.sampling_steps,
+            guidance=regime.guidance,
+            seed=seed * 1_000_003 + n_pool,
+        )
+        say(
+            f"pool {n_pool} {pairing}: best step {fit.best_step} of {fit.steps_run}, "
+            f"val loss {fit.best_val_loss:.4f}"
+        )
+        return PoolGenerator(
+            n_pool,
+            pairing,
+            t_gen,
+            [dict(point) for point in fit.curve],
+            int(fit.best_step),
+            int(fit.steps_run),
+            float(fit.best_val_loss),
+        )
+
+    return fork_map(one, cells, workers, cost=lambda cell: float(cell[0]))

@@ -13,6 +13,7 @@ import pandas as pd
 import pytest
 from sklearn.linear_model import LogisticRegression, Ridge
 from sklearn.preprocessing import StandardScaler
+from threadpoolctl import threadpool_limits
 
 from tacgen_lib.corpus.splits import LeakageError
 from tacgen_lib.generate.regime import (
@@ -32,8 +33,9 @@ from tacgen_lib.generate.regime import (
     gap_closed,
     job_regime_sets,
 )
-from tacgen_lib.generate.regime_generators import pool_pairs
+from tacgen_lib.generate.regime_generators import pool_generators, pool_pairs
 from tacgen_lib.generate.regime_sets import natural_corpus_name, regime_corpora
+from tacgen_lib.generate.settings import GenerateSettings
 from tacgen_lib.probes.rows import family_rows
 from tacgen_lib.probes.settings import ProbeSettings
 
@@ -163,6 +165,38 @@ def test_pool_pairs_split_in_order_and_shuffled_pairs_break_every_pair():
 # --------------------------------------------------------------------------- probes
 
 
+def test_pool_generators_in_workers_sample_what_one_process_samples():
+    """Every (pool size, pairing) generator trained in a forked worker (one torch thread)
+    samples bit for bit what it samples in this process under one torch thread."""
+    import torch
+
+    _, splits, vision, tactile = world(rho=1.0, seed=11)
+    sets = draw_regime_sets(splits, "nat", n_labelled=20, n_pool=100, seed=0)
+    settings = GenerateSettings(hidden=32, blocks=1, time_dim=16, steps=30, batch_size=32)
+    regime = RegimeSettings(n_labelled=(20,), n_pool=(60, 100), seeds=(0,), sampling_steps=5)
+    cells = [(60, "real"), (60, "shuffled"), (100, "real"), (100, "shuffled")]
+    rows = sorted(str(i) for i in [*sets.labelled, *sets.test])
+
+    def run(workers: int):
+        return pool_generators(
+            vision, tactile, sets, cells, settings, regime, rows=rows, seed=3, workers=workers
+        )
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        with threadpool_limits(1):
+            alone = run(1)
+    finally:
+        torch.set_num_threads(threads)
+    forked = run(2)
+    assert [(g.n_pool, g.pairing) for g in forked] == cells
+    for a, b in zip(alone, forked, strict=True):
+        assert a.t_gen.shape == (len(rows), 6)
+        assert np.array_equal(a.t_gen, b.t_gen) and a.curve == b.curve
+    assert not np.array_equal(forked[2].t_gen, forked[3].t_gen)  # real vs re-paired pool
+
+
 def test_a_single_labelled_class_predicts_that_class():
     x = np.random.default_rng(0).normal(size=(5, 3))
     got = fit_small_probe(
@@ -277,7 +311,7 @@ def test_vision_ceiling_is_perfect_at_rho_1_and_the_majority_at_rho_0():
     assert abs(_ceiling_accuracy(0.0) - majority) < 0.1
 
 
-def _evaluate(rho: float, *, n_labelled=(6, 40), t_gen_from_real: bool = False):
+def _evaluate(rho: float, *, n_labelled=(6, 40), t_gen_from_real: bool = False, workers=1):
     manifest, splits, vision, tactile = world(rho=rho, seed=11)
     sets = draw_regime_sets(splits, "nat", n_labelled=max(n_labelled), n_pool=100, seed=0)
     ceiling_rows = manifest.set_index("sample_id")[["appearance_id", "shape", "scale"]]
@@ -304,6 +338,7 @@ def _evaluate(rho: float, *, n_labelled=(6, 40), t_gen_from_real: bool = False):
         gammas=[0.5, 2.0],
         bootstrap=200,
         n_classes=6,
+        workers=workers,
     )
 
 
@@ -316,6 +351,14 @@ def test_every_arm_of_every_cell_is_scored_and_reproducible():
     v = a[(a["arm"] == "v") & (a["probe"] == "linear")]
     assert (v["delta_vs_linear_v"] == 0).all() and (v["ci_low_vs_linear_v"] == 0).all()
     pd.testing.assert_frame_equal(a, _evaluate(1.0))  # the same computation twice: bit for bit
+
+
+def test_forked_workers_give_the_rows_of_one_process_bit_for_bit():
+    """Each (target, N_L) cell computes the same thing in a worker (one BLAS thread) as in
+    the job's process under one BLAS thread: the rows do not depend on the workers."""
+    with threadpool_limits(1):
+        alone = _evaluate(1.0)
+    pd.testing.assert_frame_equal(_evaluate(1.0, workers=2), alone)
 
 
 def test_a_generator_that_returns_real_touch_scores_as_real_touch():
@@ -340,17 +383,24 @@ def test_a_labelled_set_with_one_class_is_scored_not_refused():
 def test_appearance_check_scores_both_probes():
     manifest, splits, vision, _ = world(n=400, rho=1.0, seed=3)
     sets = draw_regime_sets(splits, "nat", n_labelled=60, n_pool=200, seed=0)
-    out = appearance_check(
-        vision,
-        manifest.set_index("sample_id")["appearance_id"],
-        sets,
-        probe_settings("logistic"),
-        corpus="nat",
-        rho=1.0,
-        seed=0,
-        gammas=[0.5, 2.0],
-        bootstrap=200,
-    )
+
+    def check(workers: int) -> pd.DataFrame:
+        return appearance_check(
+            vision,
+            manifest.set_index("sample_id")["appearance_id"],
+            sets,
+            probe_settings("logistic"),
+            corpus="nat",
+            rho=1.0,
+            seed=0,
+            gammas=[0.5, 2.0],
+            bootstrap=200,
+            workers=workers,
+        )
+
+    with threadpool_limits(1):
+        out = check(1)
+    pd.testing.assert_frame_equal(check(2), out)  # its two probes in workers: the same rows
     assert list(out["probe"]) == ["linear", "nonlinear"]
     assert ((out["score"] >= 0) & (out["score"] <= 1)).all()
     # V codes the class (on a circle, plus noise): both probes decode it above the majority

@@ -32,7 +32,9 @@ logger.info(
     len(sets.labelled) + len(sets.pool),
     len(sets.test),
 )
-with threadpool_limits(snakemake.threads):
+# one BLAS thread in this process or in each of the job's workers (fork_map): the rows do
+# not depend on the cores Snakemake gives the job
+with threadpool_limits(1):
     appearance = appearance_check(
         edges.read_vector_map(snakemake.input.v, "vit"),
         manifest.set_index("sample_id")["appearance_id"],
@@ -44,6 +46,7 @@ with threadpool_limits(snakemake.threads):
         gammas=regime.appearance_gammas,
         bootstrap=regime.bootstrap,
         progress=logger.info,
+        workers=snakemake.threads,
     )
 edges.write(snakemake.output[0], appearance, key="row_id", producer=snakemake.rule)
 logger.info("appearance class from V: %s", appearance["score"].round(3).tolist())

@@ -48,7 +48,9 @@ t_gen = {
     (int(n_pool), pairing): edges.read_vector_map(path, "t_gen")
     for (n_pool, pairing), path in zip(params.cells, snakemake.input.t_gen, strict=True)
 }
-with threadpool_limits(snakemake.threads):
+# one BLAS thread in this process or in each of the job's workers (fork_map): the rows do
+# not depend on the cores Snakemake gives the job
+with threadpool_limits(1):
     rows = evaluate_regime(
         targets,
         sets,
@@ -64,6 +66,7 @@ with threadpool_limits(snakemake.threads):
         bootstrap=regime.bootstrap,
         n_classes=n_classes,
         progress=logger.info,
+        workers=snakemake.threads,
     )
 edges.write(snakemake.output.rows, rows, key="row_id", producer=snakemake.rule)
 logger.info("%d regime rows", len(rows))
