@@ -63,6 +63,19 @@ rule pretrain_backbone:
         "../workflow/scripts/pretrain_backbone.py"
 
 
+def extraction_threads(wildcards):
+    """An extraction job's threads: config features.threads, but one for the regime's natural
+    corpora. Their features feed only the regime's jobs, which run last, never the policy
+    chain; one thread keeps its core busy (two keep ~1.45 of 2 cores busy), and a one-thread
+    job can run beside a long one-thread job where a two-thread job waits for both cores."""
+    return 1 if wildcards.corpus in NATURAL_GRID else FEAT["threads"]
+
+
+def extraction_priority(wildcards):
+    """The policy chain's priority (CHAIN_PRIORITY), except for the regime's natural corpora."""
+    return 0 if wildcards.corpus in NATURAL_GRID else CHAIN_PRIORITY
+
+
 rule extract_vision_features:
     """Frozen vision backbone (CLS or mean-patch) and pixel-V for every RGB frame of a corpus."""
     input:
@@ -75,10 +88,10 @@ rule extract_vision_features:
         "results/logs/extract_features/{corpus}/vision.log",
     benchmark:
         "results/benchmarks/extract_features/{corpus}/vision.tsv"
-    priority: CHAIN_PRIORITY
+    priority: extraction_priority
     conda:
         "../envs/features.yaml"
-    threads: FEAT["threads"]  # 2 by default; config/test.yaml's ~1-s jobs: 1, two side by side
+    threads: extraction_threads  # 2 by default; config/test.yaml's ~1-s jobs: 1, two side by side
     resources:
         mem_mb=4000,
         runtime=30,
@@ -105,10 +118,10 @@ rule extract_tactile_features:
         # the rho grid's natural corpora after the first share its features (below)
         corpus=none_of(NATURAL_GRID[1:]),
         variant=one_of(VARIANTS),
-    priority: CHAIN_PRIORITY
+    priority: extraction_priority
     conda:
         "../envs/features.yaml"
-    threads: FEAT["threads"]  # 2 by default; config/test.yaml's ~1-s jobs: 1, two side by side
+    threads: extraction_threads  # 2 by default; config/test.yaml's ~1-s jobs: 1, two side by side
     resources:
         mem_mb=4000,
         runtime=30,

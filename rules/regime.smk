@@ -96,7 +96,9 @@ rule regime_appearance:
         "results/benchmarks/regime_appearance.tsv"
     conda:
         "../envs/probes.yaml"
-    threads: 2  # its two probes in forked one-thread workers (runtime.workers)
+    # one thread: its two probes are unequal (the nonlinear one ~1.7x the linear), so two
+    # workers keep ~1.6 of 2 cores busy; profiles/slurm gives it 2 (runtime.workers)
+    threads: 1
     resources:
         mem_mb=3000,
         runtime=30,
