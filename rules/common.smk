@@ -56,6 +56,20 @@ NOTHING = "(?!x)x"  # a regex matching no name (no corpus of that kind)
 CHAIN_PRIORITY = 1
 
 
+def extraction_threads(wildcards):
+    """An extraction job's threads: config features.threads, but one for the regime's natural
+    corpora. Their features feed only the regime's jobs, which run last, never the policy
+    chain; one thread keeps its core busy (two keep ~1.45 of 2 cores busy), and a one-thread
+    job can run beside a long one-thread job where a two-thread job waits for both cores.
+    """
+    return 1 if wildcards.corpus in NATURAL_GRID else config["features"]["threads"]
+
+
+def extraction_priority(wildcards):
+    """The policy chain's priority (CHAIN_PRIORITY), except for the regime's natural corpora."""
+    return 0 if wildcards.corpus in NATURAL_GRID else CHAIN_PRIORITY
+
+
 def one_of(names):
     """Wildcard constraint accepting exactly these names."""
     return "|".join(map(re.escape, names)) if names else NOTHING

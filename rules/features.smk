@@ -63,19 +63,6 @@ rule pretrain_backbone:
         "../workflow/scripts/pretrain_backbone.py"
 
 
-def extraction_threads(wildcards):
-    """An extraction job's threads: config features.threads, but one for the regime's natural
-    corpora. Their features feed only the regime's jobs, which run last, never the policy
-    chain; one thread keeps its core busy (two keep ~1.45 of 2 cores busy), and a one-thread
-    job can run beside a long one-thread job where a two-thread job waits for both cores."""
-    return 1 if wildcards.corpus in NATURAL_GRID else FEAT["threads"]
-
-
-def extraction_priority(wildcards):
-    """The policy chain's priority (CHAIN_PRIORITY), except for the regime's natural corpora."""
-    return 0 if wildcards.corpus in NATURAL_GRID else CHAIN_PRIORITY
-
-
 rule extract_vision_features:
     """Frozen vision backbone (CLS or mean-patch) and pixel-V for every RGB frame of a corpus."""
     input:
