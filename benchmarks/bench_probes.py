@@ -6,10 +6,11 @@ ratio against GridSearchCV(Ridge) and scipy.stats.bootstrap measured in the same
 
 Then the logistic controls of a hardness-like probe (binary, 960 x (192 + 192), C = 1,
 lbfgs tol 1e-4 as the workflow's controls): label and tactile permutations solved together
-by `probes.fit_logistic_batch`, against the per-refit scikit-learn loop (timed on
+by `probes.fit_logistic_batch`, against the per-refit loop (one lbfgs fit at a time, as
+`lbfgs.fit_lbfgs_logistic` solves it; timed on
 ``--logistic-ref`` refits of each control and compared per refit). And the logistic probe's
 C selection on that probe's V+T (5 folds x C in {0.1, 1, 10}, tol 1e-6 as the workflow's
-probes): folds solved together (`logistic.cv_batches`) against the scikit-learn loop, with
+probes): folds solved together (`logistic.cv_batches`) against the one-fit-at-a-time loop, with
 the CV scores compared. And single lbfgs fits at the workflow's sizes (32 to 1,408 rows,
 two and six classes): the probes' solver (`lbfgs.fit_lbfgs_logistic`) against scikit-learn's
 LogisticRegression on the same rows, with iterations and probabilities compared.
@@ -116,7 +117,7 @@ def logistic_controls(args) -> list[tuple]:
             (
                 f"logistic {name} permutations ({b}), per refit",
                 ours / refits,
-                f"sklearn lbfgs loop ({k})",
+                f"one-fit lbfgs loop ({k})",
                 ref / ref_refits,
             )
         )
@@ -142,7 +143,7 @@ def logistic_cv() -> tuple:
         f"C {batched.C:g} vs {loop.C:g}; CV scores differ by {rows.max():.0f} held-out row(s)"
         f", iterations {batched.cv_max_n_iter} vs {loop.cv_max_n_iter}"
     )
-    return "logistic CV 5 folds x 3 C, 960 x 384", ours, "sklearn lbfgs loop", ref, same
+    return "logistic CV 5 folds x 3 C, 960 x 384", ours, "one-fit lbfgs loop", ref, same
 
 
 def logistic_fits(repeats: int) -> list[tuple]:
