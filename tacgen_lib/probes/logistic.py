@@ -4,20 +4,20 @@ This module owns:
 
 - `fit_logistic` / `LogisticProbe`: scikit-learn ``LogisticRegression`` (lbfgs; multinomial
   for more than two classes; each fit solved by `lbfgs.fit_lbfgs_logistic`, scikit-learn's
-  objective and scipy call without its per-iteration overhead) on standardised features, C chosen by stratified K-fold CV on
-  the training rows (the K folds of each C solved together by `batched.fit_logistic_batch`
-  where `cv_batches` allows it: the same objective and stopping rule, so the CV scores agree
-  with scikit-learn's loop up to held-out rows whose decision is within the solvers'
-  tolerance of 0). Convergence is never silently assumed: lbfgs runs up to ``max_iter``
-  (by default the cap itself, one run: lbfgs's iterates do not depend on its iteration
-  budget, so a first run at 200 that is doubled until it converges returns the same
-  coefficients bit for bit after ~2x the work, measured 3.0 s against 1.35 s of CPU on the
-  default hardness CV); an unconverged run (where scikit-learn would warn) doubles a smaller
-  ``max_iter`` and refits, up to the cap; iterations and convergence are recorded, and a probe that still fails to
-  converge re-emits the warning.
+  objective and scipy call without its per-iteration overhead) on standardised features, C
+  chosen by stratified K-fold CV on the training rows (the K folds of each C solved together
+  by `batched.fit_logistic_batch` where `cv_batches` allows it: the same objective and
+  stopping rule, so the CV scores agree with scikit-learn's loop up to held-out rows whose
+  decision is within the solvers' tolerance of 0). Convergence is never silently assumed:
+  lbfgs runs up to ``max_iter`` (by default the cap itself, one run: lbfgs's iterates do not
+  depend on its iteration budget, so a first run at 200 that is doubled until it converges
+  returns the same coefficients bit for bit after ~2x the work, measured 3.0 s against
+  1.35 s of CPU on the default hardness CV); an unconverged run (where scikit-learn would
+  warn) doubles a smaller ``max_iter`` and refits, up to the cap; iterations and convergence
+  are recorded, and a probe that still fails to converge re-emits the warning.
 - `FixedLogistic`: the probe at its chosen C; `FixedLogistic.refit_many` solves a control's
   B refits (`refits.Refits`) together with `batched.fit_logistic_batch` where that solver
-  is measured faster, else one scikit-learn fit at a time.
+  is measured faster, else one `fit_logistic_once` fit at a time.
 """
 
 from __future__ import annotations
@@ -141,9 +141,10 @@ def fit_logistic(
     than scikit-learn's 1e-4 default so the fitted probabilities agree with a float64
     reference optimum to ~1e-5. The CV's folds are solved together by the batched solver
     where every fold keeps at least as many rows as features (`cv_batches`) and ``batched``
-    is True, else one scikit-learn fit at a time; the final fit at the chosen C is always
-    scikit-learn's. Pass ``batched=False`` for features on which the batched solve is known
-    not to finish within its budget (`CV_BATCH_BUDGET`), where it only adds its iterations.
+    is True, else one `fit_logistic_once` fit at a time; the final fit at the chosen C is
+    always `fit_logistic_once`'s (scikit-learn's problem and iterates). Pass
+    ``batched=False`` for features on which the batched solve is known not to finish within
+    its budget (`CV_BATCH_BUDGET`), where it only adds its iterations.
     """
     X = check_features(X, sample_ids=sample_ids)
     y = check_target(y, X.shape[0], sample_ids=sample_ids, numeric=False)
@@ -197,7 +198,10 @@ def cv_batches(shape: tuple[int, int], folds: Sequence[np.ndarray]) -> bool:
 #: preconditioning cuts the iterations several-fold: measured 48 and 109 on the paired
 #: hardness probe's V and V+T (against ~970 for scikit-learn), but 231-535 on V + an RBF
 #: Nystroem map (the generator's nonlinear baseline) and 10,619 at its largest gamma, where
-#: an unbounded batched solve took 28 s against scikit-learn's 1.4 s.
+#: an unbounded batched solve took 28 s against scikit-learn's 1.4 s. (Measured against
+#: scikit-learn's own loop; the one-fit loop now solves with `lbfgs.fit_lbfgs_logistic`, and
+#: the batched CV still pays on the ViT probes: on the default's paired hardness probe V
+#: 0.30 s against 1.98 s, V+T 0.64 s against 2.53 s, same scores and C.)
 CV_BATCH_BUDGET = 200
 
 
@@ -222,8 +226,8 @@ def _cv_scores_batched(
     0; a row that is can fall the other way, and where two C are within such a row of each
     other in CV score the C chosen can differ from the loop's (the synthetic probe of
     benchmarks/bench_probes.py: C 1 against 10; on the default config's probes no selection
-    changed). The probe's final fit at the chosen C stays scikit-learn's. A fold the batched
-    solve has not finished within `budget` iterations is refitted by scikit-learn, as the loop
+    changed). The probe's final fit at the chosen C stays `fit_logistic_once`'s. A fold the
+    batched solve has not finished within `budget` iterations is refitted by it, as the loop
     would (`CV_BATCH_BUDGET`). Measured 3.9x faster than the one-fit-at-a-time loop on the
     paired hardness probe (960 rows, 384 features, 5 folds x 3 C, one thread).
     """
@@ -268,8 +272,8 @@ def _fold_score(
     max_iter_cap: int,
     tol: float,
 ) -> tuple[float, bool, int]:
-    """(held-out accuracy, converged, iterations) of one scikit-learn fit on every row outside
-    the fold `ho`: one fold and C of the CV's loop, and the batched CV's fallback."""
+    """(held-out accuracy, converged, iterations) of one `fit_logistic_once` fit on every row
+    outside the fold `ho`: one fold and C of the CV's loop, and the batched CV's fallback."""
     tr = np.setdiff1d(np.arange(X.shape[0]), ho, assume_unique=True)
     fit = fit_logistic_once(X[tr], y[tr], C, max_iter, max_iter_cap, tol)
     return accuracy(y[ho], fit.model.predict(X[ho])), fit.converged, fit.n_iter
