@@ -147,6 +147,9 @@ def test_a_rho_grid_simulated_together_equals_each_corpus_alone():
     # the touch is the same at every rho, the appearance is not
     assert together[0]["tactile"].tolist() == together[2]["tactile"].tolist()
     assert together[0]["rgb"].tolist() != together[2]["rgb"].tolist()
+    # rho = 0.5 draws each appearance class as rho = 0 or rho = 1 does: each frame is one of theirs
+    for k, frame in enumerate(together[1]["rgb"]):
+        assert frame in (together[0]["rgb"].iloc[k], together[2]["rgb"].iloc[k])
 
 
 def test_a_grid_of_corpora_with_different_physics_is_refused():

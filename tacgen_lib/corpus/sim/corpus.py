@@ -464,9 +464,12 @@ def simulate_shards(
 ) -> list[pd.DataFrame]:
     """`simulate_shard` of several corpora that differ only in name and rho (the natural
     design's rho grid, `appearance_grid_key`) at once: each sample's physics and touch are
-    simulated once and its RGB frame rendered for each corpus. Every frame is the one
-    `simulate_shard` gives that corpus alone (the presses do not read the appearance, and a
-    render only reads the presentation pose): one MuJoCo press instead of one per corpus.
+    simulated once and its RGB frame rendered once per distinct look (object, colour,
+    texture, size) among the corpora. Every frame is the one `simulate_shard` gives that
+    corpus alone (the presses do not read the appearance, and a render only reads the look and
+    the presentation pose): one MuJoCo press instead of one per corpus, and at most two
+    renders per sample on a rho grid (its appearance class is the material's or the uniform
+    draw, `_natural_spec`).
 
     Raises ValueError if the corpora differ in anything else or name a corpus twice.
     """
@@ -503,11 +506,19 @@ def simulate_shards(
     indices = range(shard, n, n_shards)
     for count, i in enumerate(indices):
         specs = [sample_spec(c, scene, i) for c in cfgs]
-        rgbs = []
-        # each corpus's look, then one press: the last corpus's appearance stays applied, which
-        # no press reads
+        rgbs: list[bytes | None] = []
+        # each corpus's look, then one press: the last look applied stays, which no press
+        # reads. A frame reads only the object, its look and the presentation pose, so a look
+        # another corpus of the grid already rendered for this sample is that frame (a rho
+        # grid's sample has at most two looks: `_natural_spec` couples the draws)
+        looks: list[tuple] = []
         for c, spec in zip(cfgs, specs, strict=True):
             rgba = (*(spec.rgb or PALETTE[spec.colour]), 1.0)
+            look = (spec.obj, rgba, spec.texture, tuple(c.image_size))
+            if look in looks:
+                rgbs.append(rgbs[looks.index(look)])
+                looks.append(look)
+                continue
             physics.apply_object(rt, spec.obj, rgba=rgba, texture=spec.texture)
             rgb = None
             if scene.has("rgb"):
@@ -516,6 +527,7 @@ def simulate_shards(
                     render_rgb(state, c.image_size), compression=int(cfg.png_compression)
                 )
             rgbs.append(rgb)
+            looks.append(look)
         spec = specs[-1]
         tac, null_source = None, None
         if scene.has("tactile") and perm is None:
