@@ -55,7 +55,12 @@ from tacgen_lib.generate.regime_sets import (
     draw_regime_sets,
     job_regime_sets,
 )
-from tacgen_lib.probes.bootstrap import fixed_test_bootstrap, resample_indices, score_interval
+from tacgen_lib.probes.bootstrap import (
+    percentile_interval,
+    resample_indices,
+    score_interval,
+    score_resamples,
+)
 from tacgen_lib.probes.fit import fit_probe
 from tacgen_lib.probes.metrics import score
 from tacgen_lib.probes.rows import FamilyRows, visible_design
@@ -444,43 +449,66 @@ def _cell_rows(
     *,
     base: dict,
 ) -> list[dict]:
-    """One summary row per arm of a cell: score with CI, Deltas vs linear and nonlinear V."""
+    """One summary row per arm of a cell: score with CI, Deltas vs linear and nonlinear V
+    and vs generalised distillation with the same probe (linear for the other arms).
+
+    Every arm is scored on every fixed-test resample of `idx` at once (`score_resamples`:
+    one count matrix for the cell); a CI is the percentile interval of an arm's resampled
+    scores, a Delta's the interval of the paired differences, as `fixed_test_bootstrap`
+    computes them for one pair of probes.
+    """
     if metric == "r2":
         y_test = y_test.astype(np.float64)
-    v_lin, v_nl = fits[("v", "linear")].pred, fits[("v", "nonlinear")].pred
-    # each arm against generalised distillation with the same probe (linear for the rest)
-    real = score(metric, y_test, fits[("v_treal", "linear")].pred)
-    nl = score(metric, y_test, v_nl)
+    keys = list(fits)
+    for k in keys:
+        pred = np.asarray(fits[k].pred)
+        if pred.shape != y_test.shape or (
+            metric == "r2" and not np.isfinite(pred.astype(np.float64)).all()
+        ):
+            raise ValueError(
+                f"regime cell {base['corpus']} N_L={base['n_labelled']} {base['target']}: "
+                f"arm {'/'.join(k)} predicted {pred.shape} values, not {y_test.shape} finite ones"
+            )
+    resampled, _ = score_resamples(metric, y_test, [fits[k].pred for k in keys], idx)
+    on_resamples = dict(zip(keys, resampled, strict=True))
+    full = {k: score(metric, y_test, fits[k].pred) for k in keys}
+
+    def versus(ref: tuple[str, str], k: tuple[str, str]) -> tuple[float, float, float]:
+        lo, hi = percentile_interval(on_resamples[k] - on_resamples[ref])
+        return full[k] - full[ref], lo, hi
+
+    real, nl = full[("v_treal", "linear")], full[("v", "nonlinear")]
+    key = f"{base['corpus']}|{base['n_labelled']}|{base['n_pool']}|{base['seed']}|{base['target']}"
     rows = []
     for arm, probe in ARMS:
-        fit = fits[(arm, probe)]
-        lo, hi = score_interval(metric, y_test, fit.pred, idx)
-        vs_lin = fixed_test_bootstrap(y_test, v_lin, fit.pred, metric, indices=idx)
-        vs_nl = fixed_test_bootstrap(y_test, v_nl, fit.pred, metric, indices=idx)
-        distilled = fits[("distilled", "nonlinear" if probe == "nonlinear" else "linear")]
-        vs_gd = fixed_test_bootstrap(y_test, distilled.pred, fit.pred, metric, indices=idx)
-        key = f"{base['corpus']}|{base['n_labelled']}|{base['n_pool']}|{base['seed']}|{base['target']}"
+        k = (arm, probe)
+        lo, hi = percentile_interval(on_resamples[k])
+        d_lin, lo_lin, hi_lin = versus(("v", "linear"), k)
+        d_nl, lo_nl, hi_nl = versus(("v", "nonlinear"), k)
+        d_gd, lo_gd, hi_gd = versus(
+            ("distilled", "nonlinear" if probe == "nonlinear" else "linear"), k
+        )
         rows.append(
             {
                 "row_id": f"{key}|{arm}|{probe}",
                 **base,
                 "arm": arm,
                 "probe": probe,
-                "score": vs_lin["vt_score"],
+                "score": full[k],
                 "ci_low": lo,
                 "ci_high": hi,
-                "delta_vs_linear_v": vs_lin["delta"],
-                "ci_low_vs_linear_v": vs_lin["ci_low"],
-                "ci_high_vs_linear_v": vs_lin["ci_high"],
-                "delta_vs_nonlinear_v": vs_nl["delta"],
-                "ci_low_vs_nonlinear_v": vs_nl["ci_low"],
-                "ci_high_vs_nonlinear_v": vs_nl["ci_high"],
-                "gap_closed": gap_closed(vs_lin["vt_score"], nl, real),
-                "delta_vs_distilled": vs_gd["delta"],
-                "ci_low_vs_distilled": vs_gd["ci_low"],
-                "ci_high_vs_distilled": vs_gd["ci_high"],
-                "reg": fit.reg,
-                "reg_source": fit.source,
+                "delta_vs_linear_v": d_lin,
+                "ci_low_vs_linear_v": lo_lin,
+                "ci_high_vs_linear_v": hi_lin,
+                "delta_vs_nonlinear_v": d_nl,
+                "ci_low_vs_nonlinear_v": lo_nl,
+                "ci_high_vs_nonlinear_v": hi_nl,
+                "gap_closed": gap_closed(full[k], nl, real),
+                "delta_vs_distilled": d_gd,
+                "ci_low_vs_distilled": lo_gd,
+                "ci_high_vs_distilled": hi_gd,
+                "reg": fits[k].reg,
+                "reg_source": fits[k].source,
             }
         )
     return rows

@@ -25,6 +25,7 @@ from tacgen_lib.probes.metrics import Metric, check_metric, score
 
 __all__ = [
     "fixed_test_bootstrap",
+    "percentile_interval",
     "resample_counts",
     "resample_indices",
     "score_interval",
@@ -112,6 +113,18 @@ def score_resamples(
     return scores, const
 
 
+def percentile_interval(
+    values: np.ndarray, *, confidence_level: float = 0.95
+) -> tuple[float, float]:
+    """The central ``confidence_level`` percentile interval of bootstrap `values` (linear
+    interpolation, as ``numpy.quantile``): every CI of this module."""
+    if not 0.0 < confidence_level < 1.0:
+        raise ValueError(f"confidence_level must be in (0, 1), got {confidence_level}")
+    alpha = (1.0 - confidence_level) / 2.0
+    lo, hi = np.quantile(values, [alpha, 1.0 - alpha])
+    return float(lo), float(hi)
+
+
 def score_interval(
     metric: Metric,
     y_true: np.ndarray,
@@ -123,9 +136,7 @@ def score_interval(
     """Percentile interval of one probe's test score over the fixed-test resamples
     `indices` (B, n) (the probe held fixed, as in `fixed_test_bootstrap`)."""
     (scores,), _ = score_resamples(metric, np.asarray(y_true), [np.asarray(pred)], indices)
-    alpha = (1.0 - confidence_level) / 2.0
-    lo, hi = np.quantile(scores, [alpha, 1.0 - alpha])
-    return float(lo), float(hi)
+    return percentile_interval(scores, confidence_level=confidence_level)
 
 
 def fixed_test_bootstrap(
@@ -179,8 +190,7 @@ def fixed_test_bootstrap(
             raise ValueError(f"indices: expected (B, {y.size}), got {idx.shape}")
     (s_v, s_vt), c_v = score_resamples(metric, y, [pv, pvt], idx)
     deltas = s_vt - s_v
-    alpha = (1.0 - confidence_level) / 2.0
-    lo, hi = np.quantile(deltas, [alpha, 1.0 - alpha])
+    lo, hi = percentile_interval(deltas, confidence_level=confidence_level)
     v_score = score(metric, y, pv)
     vt_score = score(metric, y, pvt)
     out = {

@@ -22,6 +22,8 @@ from tacgen_lib.generate.regime import (
     RegimeSets,
     RegimeSettings,
     RegimeTarget,
+    SmallFit,
+    _cell_rows,
     appearance_check,
     appearance_design,
     assert_regime_disjoint,
@@ -36,6 +38,7 @@ from tacgen_lib.generate.regime import (
 from tacgen_lib.generate.regime_generators import pool_generators, pool_pairs
 from tacgen_lib.generate.regime_sets import natural_corpus_name, regime_corpora
 from tacgen_lib.generate.settings import GenerateSettings
+from tacgen_lib.probes.bootstrap import fixed_test_bootstrap, resample_indices, score_interval
 from tacgen_lib.probes.rows import family_rows
 from tacgen_lib.probes.settings import ProbeSettings
 
@@ -282,6 +285,53 @@ def test_distillation_is_a_v_only_student_of_the_teachers_pool_labels():
     )
     one = fit_small_probe(x_one, y_one, block(vision, test), ps)
     assert np.isfinite(one.pred.astype(float)).all()
+
+
+@pytest.mark.parametrize("metric", ["accuracy", "r2"])
+def test_cell_rows_are_the_pairwise_fixed_test_bootstrap(metric):
+    # one count matrix for the whole cell gives each pair's fixed_test_bootstrap
+    rng = np.random.default_rng(3)
+    n = 90
+    if metric == "accuracy":
+        y = rng.choice(np.array(["hard", "soft"], dtype=object), n)
+
+        def pred(p):  # right with probability p
+            return np.where(rng.random(n) < p, y, np.where(y == "hard", "soft", "hard"))
+    else:
+        y = rng.normal(size=n)
+
+        def pred(p):
+            return y + (1.5 - p) * rng.normal(size=n)
+
+    fits = {k: SmallFit(pred(0.5 + 0.05 * i), 1.0, "cv") for i, k in enumerate(ARMS)}
+    idx = resample_indices(n, 500, 11)
+    base = {"corpus": "c", "n_labelled": 32, "n_pool": 64, "seed": 0, "target": "t"}
+    rows = _cell_rows(fits, y, idx, metric, base=base)
+    assert [(r["arm"], r["probe"]) for r in rows] == list(ARMS)
+    for r in rows:
+        k = (r["arm"], r["probe"])
+        assert (r["ci_low"], r["ci_high"]) == score_interval(metric, y, fits[k].pred, idx)
+        gd = ("distilled", "nonlinear" if k[1] == "nonlinear" else "linear")
+        for ref, col in (
+            (("v", "linear"), "linear_v"),
+            (("v", "nonlinear"), "nonlinear_v"),
+            (gd, "distilled"),
+        ):
+            want = fixed_test_bootstrap(y, fits[ref].pred, fits[k].pred, metric, indices=idx)
+            assert r[f"delta_vs_{col}"] == want["delta"]
+            assert r["score"] == want["vt_score"]
+            got = (r[f"ci_low_vs_{col}"], r[f"ci_high_vs_{col}"])
+            # accuracy: integer counts, exact; R^2: sums of another shape, within rounding
+            assert got == pytest.approx((want["ci_low"], want["ci_high"]), rel=1e-12, abs=1e-14)
+
+
+def test_cell_rows_refuse_an_arm_with_a_missing_or_non_finite_prediction():
+    y = np.linspace(0.0, 1.0, 20)
+    fits = {k: SmallFit(y.copy(), 1.0, "cv") for k in ARMS}
+    fits[("v_tgen", "linear")] = SmallFit(np.where(y > 0.5, np.nan, y), 1.0, "cv")
+    base = {"corpus": "c", "n_labelled": 32, "n_pool": 64, "seed": 0, "target": "t"}
+    with pytest.raises(ValueError, match="regime cell c N_L=32 t: arm v_tgen/linear"):
+        _cell_rows(fits, y, resample_indices(20, 10, 0), "r2", base=base)
 
 
 def test_gap_closed():

@@ -8,7 +8,11 @@ import scipy.stats
 from sklearn.metrics import accuracy_score, r2_score
 
 from tacgen_lib.probes.batched import concat_ridge_permuted
-from tacgen_lib.probes.bootstrap import fixed_test_bootstrap, resample_indices
+from tacgen_lib.probes.bootstrap import (
+    fixed_test_bootstrap,
+    percentile_interval,
+    resample_indices,
+)
 from tacgen_lib.probes.controls import (
     PairedRows,
     label_permutation_control,
@@ -63,6 +67,16 @@ def test_bootstrap_equals_scipy_percentile_ci_on_identical_resamples():
     assert np.array_equal(np.concatenate(seen), idx)  # same Generator call -> same resamples
     assert got["ci_low"] == pytest.approx(ref.confidence_interval.low, rel=1e-12)
     assert got["ci_high"] == pytest.approx(ref.confidence_interval.high, rel=1e-12)
+
+
+def test_percentile_interval_is_numpys_central_quantiles():
+    values = np.random.default_rng(2).normal(size=1001)
+    assert percentile_interval(values) == pytest.approx(np.quantile(values, [0.025, 0.975]))
+    assert percentile_interval(values, confidence_level=0.5) == pytest.approx(
+        np.quantile(values, [0.25, 0.75])
+    )
+    with pytest.raises(ValueError, match="confidence_level must be in"):
+        percentile_interval(values, confidence_level=1.0)
 
 
 @pytest.mark.parametrize("metric", ["r2", "accuracy"])
