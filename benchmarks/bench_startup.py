@@ -107,6 +107,7 @@ NEEDS: dict[str, str] = {
     "sample_generator": "",
     "sample_pixel_generator": "torch pandas cv2",  # + diffusers for the DDPM's arms
     "share_natural_touch": "pandas",
+    "share_natural_vision": "pandas",
     "simulate_corpus": _SIM,
     "train_generator": "torch pandas",
     "train_heads": "torch pandas",

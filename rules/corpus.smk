@@ -20,6 +20,9 @@ localrules:
 # the regime's natural corpora (one per rho) differ only in what their objects look like: one
 # job per shard simulates their physics and touch once (simulate_natural_grid)
 NATURAL_GRID = list(regime_corpora(config.get("regime")))
+# and a corpus between the grid's ends (rho 0 and 1) looks as one of them in every sample: it
+# shares their vision features (share_natural_vision)
+NATURAL_ENDS, NATURAL_BETWEEN = natural_grid_ends(config.get("regime"))
 
 
 rule simulate_corpus:

@@ -75,6 +75,9 @@ rule extract_vision_features:
         "results/logs/extract_features/{corpus}/vision.log",
     benchmark:
         "results/benchmarks/extract_features/{corpus}/vision.tsv"
+    wildcard_constraints:
+        # natural corpora between the rho grid's ends share the ends' features (below)
+        corpus=none_of(NATURAL_BETWEEN),
     priority: extraction_priority
     conda:
         "../envs/features.yaml"
@@ -146,6 +149,31 @@ rule share_natural_touch:
         runtime=10,
     script:
         "../workflow/scripts/share_natural_touch.py"
+
+
+rule share_natural_vision:
+    """The vision features of a natural corpus between the regime's rho grid's ends, shared from the ends (rho 0 and 1): each sample looks as in one of them, its RGB frame byte-identical (checked sample by sample)."""
+    input:
+        features=[feature_edge(c, "vision") for c in NATURAL_ENDS],
+        sources=[corpus_edge(c) for c in NATURAL_ENDS],
+        target=corpus_edge("{corpus}"),
+        code=imports_of("share_natural_vision"),
+    output:
+        feature_edge("{corpus}", "vision"),
+    log:
+        "results/logs/share_natural_vision/{corpus}.log",
+    benchmark:
+        "results/benchmarks/share_natural_vision/{corpus}.tsv"
+    wildcard_constraints:
+        corpus=one_of(NATURAL_BETWEEN),
+    conda:
+        "../envs/corpus.yaml"
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    script:
+        "../workflow/scripts/share_natural_vision.py"
 
 
 rule pretrained_vs_random:

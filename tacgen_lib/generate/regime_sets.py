@@ -25,6 +25,7 @@ __all__ = [
     "NATURAL_PREFIX",
     "PAIRINGS",
     "natural_corpus_name",
+    "natural_grid_ends",
     "regime_corpora",
     "RegimeSets",
     "RegimeSettings",
@@ -68,6 +69,18 @@ def regime_corpora(regime: Mapping[str, Any] | None) -> dict[str, dict[str, Any]
             raise ValueError(f"regime.rhos: {rho} and another value both name corpus {name!r}")
         out[name] = {**base, "rho": float(rho)}
     return out
+
+
+def natural_grid_ends(regime: Mapping[str, Any] | None) -> tuple[list[str], list[str]]:
+    """(ends, between) of the regime's rho grid: its corpora at rho = 0 and rho = 1, and the
+    corpora between them, whose every frame is one of the ends' (a sample's appearance class
+    is its draw at rho = 0 or its material, the class at rho = 1). Both empty unless both
+    ends are in the grid: otherwise every corpus renders frames of its own."""
+    grid = regime_corpora(regime)
+    ends = [n for n, d in grid.items() if d["rho"] in (0.0, 1.0)]
+    if len(ends) < 2:
+        return [], []
+    return ends, [n for n in grid if n not in ends]
 
 
 #: The two generators of each pool: trained on its real pairs, or on re-paired ones.

@@ -416,6 +416,10 @@ UNITS: dict[str, UnitRule] = {
         lambda c, w: ("", _n(c, w["corpus"])),
         lambda c, w: _n(c, w["corpus"]) * _backbone(c, "tactile"),
     ),
+    "share_natural_vision": UnitRule(
+        "frame (compared byte for byte with both ends'; its features copied)",
+        lambda c, w: ("", _n(c, w["corpus"])),
+    ),
     "share_natural_touch": UnitRule(
         "frame (compared byte for byte; its features copied)",
         lambda c, w: ("", _n(c, w["corpus"])),

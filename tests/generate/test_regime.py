@@ -36,7 +36,11 @@ from tacgen_lib.generate.regime import (
     job_regime_sets,
 )
 from tacgen_lib.generate.regime_generators import pool_generators, pool_pairs
-from tacgen_lib.generate.regime_sets import natural_corpus_name, regime_corpora
+from tacgen_lib.generate.regime_sets import (
+    natural_corpus_name,
+    natural_grid_ends,
+    regime_corpora,
+)
 from tacgen_lib.generate.settings import GenerateSettings
 from tacgen_lib.probes.bootstrap import fixed_test_bootstrap, resample_indices, score_interval
 from tacgen_lib.probes.rows import family_rows
@@ -513,3 +517,13 @@ def test_one_natural_corpus_per_rho_named_by_its_digits():
         regime_corpora({"corpus": {**base, "design": "paired"}, "rhos": [0]})
     with pytest.raises(ValueError, match="not in"):
         natural_corpus_name(1.5)
+
+
+def test_the_corpora_between_the_grids_ends_are_named_only_when_both_ends_are_in_it():
+    base = {"corpus": {"kind": "simulated", "design": "natural", "n": 10}}
+    ends, between = natural_grid_ends({**base, "rhos": [0.5, 0, 0.25, 1]})
+    assert ends == ["sim_natural_r0", "sim_natural_r1"]
+    assert between == ["sim_natural_r05", "sim_natural_r025"]
+    assert natural_grid_ends({**base, "rhos": [0, 0.5]}) == ([], [])
+    assert natural_grid_ends({**base, "rhos": [0, 1]}) == (["sim_natural_r0", "sim_natural_r1"], [])
+    assert natural_grid_ends(None) == ([], [])
