@@ -28,18 +28,8 @@ def touch_twins(
     frames differ: then the corpora are not one grid, and their features cannot be shared.
     """
 
-    src, dst = _by_index(source, "tactile"), _by_index(target, "tactile")
-    _same_samples(src, dst, where)
-    out = {}
-    for k, (sid, tac) in src.items():
-        tid, ttac = dst[k]
-        if tac is None or ttac is None or bytes(tac) != bytes(ttac):
-            raise ValueError(
-                f"{where}: sample_id {tid!r} has tactile bytes other than {sid!r}: the corpora "
-                "do not share their touch, so their tactile features cannot be shared"
-            )
-        out[sid] = tid
-    return out
+    twins = frame_twins(target, [source], column="tactile", where=where)
+    return {sid: tid for tid, (_, sid) in twins.items()}
 
 
 def frame_twins(
@@ -93,11 +83,14 @@ def shared_vectors(
             raise ValueError("shared_vectors: the source corpora's feature columns differ")
     rows = [{str(i): r for r, i in enumerate(src_ids)} for src_ids, _ in sources]
     pick = [twins[str(i)] for i in ids]
+    source = np.array([k for k, _ in pick], dtype=np.int64)
+    row = np.array([rows[k][sid] for k, sid in pick], dtype=np.int64)
     out = {}
     for name, v in first.items():
         col = np.empty((len(pick), v.shape[1]), dtype=v.dtype)
-        for j, (k, sid) in enumerate(pick):
-            col[j] = sources[k][1][name][rows[k][sid]]
+        for k, (_, vectors) in enumerate(sources):
+            mine = source == k
+            col[mine] = vectors[name][row[mine]]
         out[name] = col
     return out
 

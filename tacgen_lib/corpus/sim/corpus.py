@@ -516,16 +516,15 @@ def simulate_shards(
             rgba = (*(spec.rgb or PALETTE[spec.colour]), 1.0)
             look = (spec.obj, rgba, spec.texture, tuple(c.image_size))
             if look in looks:
-                rgbs.append(rgbs[looks.index(look)])
-                looks.append(look)
-                continue
-            physics.apply_object(rt, spec.obj, rgba=rgba, texture=spec.texture)
-            rgb = None
-            if scene.has("rgb"):
-                physics.presentation_pose(rt)
-                rgb = encode_png(
-                    render_rgb(state, c.image_size), compression=int(cfg.png_compression)
-                )
+                rgb = rgbs[looks.index(look)]
+            else:
+                physics.apply_object(rt, spec.obj, rgba=rgba, texture=spec.texture)
+                rgb = None
+                if scene.has("rgb"):
+                    physics.presentation_pose(rt)
+                    rgb = encode_png(
+                        render_rgb(state, c.image_size), compression=int(cfg.png_compression)
+                    )
             rgbs.append(rgb)
             looks.append(look)
         spec = specs[-1]
