@@ -2,11 +2,14 @@
 VENV ?= .venv
 BIN := $(VENV)/bin
 CORES ?= 2
+# which torch build setup installs: cpu (default), cuda (or a backend such as cu126), auto
+# (cuda where an NVIDIA driver is loaded): tools/torch_build.py
+TORCH ?= cpu
 
 .PHONY: setup setup-test run report test test-kernels lint resume estimate
 
 setup:
-	@bash tools/setup.sh $(VENV)
+	@TORCH=$(TORCH) bash tools/setup.sh $(VENV)
 
 ## Set up, run the whole DAG on the embedded default config, build the report.
 run: setup
@@ -45,7 +48,7 @@ lint:
 ## variant fills those gaps instead of slowing the runs down. Fails if either fails.
 ## TACGEN_SLURM_TEST=0 leaves the SLURM test out (it installs slurm-wlm + munge as root).
 setup-test:
-	@bash tools/setup.sh $(VENV) --browser
+	@TORCH=$(TORCH) bash tools/setup.sh $(VENV) --browser
 
 test: setup-test lint
 	@kernels_log=$$(mktemp); \

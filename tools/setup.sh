@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
 # Set up a machine for TacGen workflow: Debian's Mesa (EGL/OSMesa) for MuJoCo rendering on the
-# CPU, then a virtual environment with the pinned CPU torch and the project installed.
+# CPU, then a virtual environment with the pinned torch (CPU build by default; TORCH=cuda for a
+# GPU: tools/torch_build.py) and the project installed.
 # Idempotent: a second run checks and returns in seconds.
 # With --browser (make test), also Debian's Chromium and its driver: the report's browser test
 # opens results/report.html in headless Chromium through Selenium.
-#   usage: tools/setup.sh [VENV_DIR] [--browser]   (default .venv)
+#   usage: [TORCH=cpu|cuda|cuNNN|auto] tools/setup.sh [VENV_DIR] [--browser]   (default .venv)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 VENV=.venv
@@ -36,34 +37,41 @@ if [ -n "$missing" ]; then
   rm -f "$aptlog"
 fi
 
-# 2. Python environment. torch is pinned to the CPU build through constraints.txt.
+# 2. Python environment. Which torch build, from where (tools/torch_build.py, tested offline):
+#    TORCH=cpu the CPU build, from a local wheel folder (/opt/wheels) where it holds one, else
+#    PyTorch's CPU index (the default); TORCH=cuda (or cuNNN) a CUDA build; TORCH=auto cuda
+#    where an NVIDIA driver is loaded, else cpu. constraints.txt pins torch's version.
+TORCH=${TORCH:-cpu}
 if [ ! -x "$VENV/bin/python" ]; then
   echo "setup: creating $VENV"
   "$PYTHON" -m venv "$VENV"
 fi
 stamp="$VENV/.tacgen-installed"
-want=$(cat pyproject.toml constraints.txt | sha256sum | cut -c1-16)
+want=$( (cat pyproject.toml constraints.txt tools/torch_build.py; echo "TORCH=$TORCH") | sha256sum | cut -c1-16)
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   echo "setup: installing the project into $VENV"
-  extra=()
-  [ -d /opt/wheels ] && extra+=(--find-links /opt/wheels)  # local CPU torch wheel, where present
+  installed=$("$VENV/bin/python" tools/torch_build.py build 2>/dev/null || true)
   # uv (from PyPI) installs and byte-compiles on every core: on a 2-core machine about half
   # pip's time, most of which was pip compiling one file at a time. pip where uv cannot come.
   if "$VENV/bin/python" -m pip install -q uv >/dev/null 2>&1 && [ -x "$VENV/bin/uv" ]; then
-    "$VENV/bin/uv" pip install -q --python "$VENV/bin/python" --compile-bytecode \
-      "${extra[@]}" -c constraints.txt -e ".[workflow,dev]"
+    "$VENV/bin/python" tools/torch_build.py plan --run --torch "$TORCH" --installer uv \
+      --uv "$VENV/bin/uv" --python "$VENV/bin/python" --installed "$installed"
   else
     echo "setup: uv unavailable; installing with pip"
     "$VENV/bin/python" -m pip install -q --upgrade pip
-    "$VENV/bin/python" -m pip install -q "${extra[@]}" -c constraints.txt -e ".[workflow,dev]"
+    "$VENV/bin/python" tools/torch_build.py plan --run --torch "$TORCH" --installer pip \
+      --python "$VENV/bin/python" --installed "$installed"
   fi
   echo "$want" > "$stamp"
 fi
+# the build installed is the one asked for, else stop naming both; envs/*.yaml (--sdm conda)
+# name the same build
+"$VENV/bin/python" tools/torch_build.py check --asked "$TORCH"
+"$VENV/bin/python" tools/torch_build.py envs "$TORCH"
 "$VENV/bin/python" - <<'PY'
 import sys
 import torch
-if not torch.__version__.endswith("+cpu"):
-    sys.exit(f"setup: torch {torch.__version__} is not the CPU build; check constraints.txt")
 import mujoco, snakemake  # noqa: F401
-print(f"setup: ok (python {sys.version.split()[0]}, torch {torch.__version__}, mujoco {mujoco.__version__})")
+build = f"cuda {torch.version.cuda}" if torch.version.cuda else "cpu"
+print(f"setup: ok (python {sys.version.split()[0]}, torch {torch.__version__} [{build}], mujoco {mujoco.__version__})")
 PY
