@@ -1,8 +1,10 @@
 """Logging for rule scripts: progress lines to the rule's `log:` file (and stderr).
 
 `for_rule(snakemake)` is the one call a script makes first. Lines carry a timestamp and the
-rule name; an uncaught exception is written to the log as `rule <name> failed: <message>`
-before Python prints the traceback, so the log alone says what went wrong and where.
+rule name; where a preloaded interpreter serves the run but the job ran fresh, the log says why
+(`tacgen_lib.runtime.preload.fresh_reason`). An uncaught exception is written to the log as
+`rule <name> failed: <message>` before Python prints the traceback, so the log alone says what
+went wrong and where.
 """
 
 from __future__ import annotations
@@ -37,6 +39,10 @@ def for_rule(smk: Any) -> logging.Logger:
     logger = to_file(smk.log[0], name=rule)
     wildcards = dict(smk.wildcards.items()) if hasattr(smk.wildcards, "items") else {}
     logger.info("start %s", " ".join(f"{k}={v}" for k, v in wildcards.items()) or "")
+    preload = sys.modules.get("tacgen_lib.runtime.preload")  # the script's first import
+    why = preload.fresh_reason() if preload is not None else None
+    if why:
+        logger.info("runs in a fresh interpreter, not the preloaded one: %s", why)
     previous = sys.excepthook
 
     def hook(exc_type, exc, tb):  # noqa: ANN001 - signature fixed by sys.excepthook

@@ -31,9 +31,34 @@ it imports what a run's first jobs need first (the simulator's modules, ~2 s), s
 then, and the heavy rest (scikit-learn, torch, matplotlib) before the jobs that need it come;
 a job forked earlier imports what is still missing itself, as it would fresh. If no server
 answers (a cluster job, a Python run outside Snakemake, a server gone), or the server declines
-the job (its environment would import mujoco for another OpenGL backend:
-`ENVIRONMENT_PRELOADS`), the job runs in its own interpreter: the server only ever saves
-start-up time. `TACGEN_PRELOAD=0` turns it off.
+the job, the job runs in its own interpreter: the server only ever saves start-up time.
+`TACGEN_PRELOAD=0` turns it off.
+
+A job runs in the server only where a fresh interpreter would be the server's own
+(`_mismatch`): the same interpreter (its real path), `sys.prefix`, `sys.exec_prefix`,
+`sys.base_prefix` and Python version (so a rule with `conda:` under `--sdm conda` runs in its
+environment's interpreter, never in the server's `.venv`), the same environment variables read
+at import time (every `PYTHON*` and `LD_*` variable, as the server started; the thread counts
+differ per job and are applied to the copy instead), and mujoco's OpenGL backend
+(`ENVIRONMENT_PRELOADS`). Otherwise the server answers why, the job runs fresh, and
+`tacgen_lib.io.log.for_rule` writes the reason into the rule's log (`fresh_reason`).
+
+Nothing is left behind and nothing waits forever:
+- the handshake is acknowledged before the fork: the server answers "ok", the job's process
+  answers "go", and only then is the copy forked (and "started" sent); a job process that died
+  while queued never gets a copy;
+- the copy gets a parent-death signal (SIGKILL when its supervisor dies, `prctl
+  PR_SET_PDEATHSIG`) and checks its parent after setting it; the supervisor kills the copy when
+  the job's process is gone;
+- each read of the handshake, on both sides, is bounded (`HANDSHAKE_TIMEOUT_S`, or the
+  `TACGEN_PRELOAD_TIMEOUT_S` variable): the server's loop never reads a client (a supervisor
+  forked per connection does), and a job whose server does not answer in time runs fresh,
+  logged;
+- the copy's random state is a fresh interpreter's: Python's `random`, numpy's legacy global
+  RandomState and torch's default CPU generator re-seeded from the OS.
+  Python's string hash seed cannot be changed in a running interpreter: a job whose
+  PYTHONHASHSEED differs from the server's runs fresh (a `PYTHON*` variable); where both leave
+  it unset the copy's seed is random, as a fresh one's.
 """
 
 from __future__ import annotations
@@ -52,9 +77,12 @@ from pathlib import Path
 from typing import Any
 
 __all__ = [
+    "HANDSHAKE_TIMEOUT_S",
     "PRELOADED_MODULES",
     "SOCKET_ENV",
     "benchmark_of_log",
+    "fresh_reason",
+    "interpreter_identity",
     "run_in_preloaded_interpreter",
     "serve",
     "start_preloaded_interpreter",
@@ -110,9 +138,34 @@ PRELOADED_MODULES = (
 #: value is declined and runs in its own interpreter (`_environment_fits`).
 ENVIRONMENT_PRELOADS = (("mujoco", (("MUJOCO_GL", "egl"), ("PYOPENGL_PLATFORM", "egl"))),)
 
+#: Environment variables a fresh interpreter or its imports read at start: by prefix. A job
+#: whose values differ from the server's (as the server started) runs fresh (`_mismatch`).
+IMPORT_TIME_PREFIXES = ("PYTHON", "LD_")
+#: ... except these: the thread counts Snakemake sets per job, applied to the copy instead
+#: (`_size_thread_pools`).
+THREAD_VARIABLES = frozenset(
+    {
+        "OMP_NUM_THREADS",
+        "GOTO_NUM_THREADS",
+        "OPENBLAS_NUM_THREADS",
+        "MKL_NUM_THREADS",
+        "VECLIB_MAXIMUM_THREADS",
+        "NUMEXPR_NUM_THREADS",
+    }
+)
+#: Seconds each side waits for the other during the handshake (the server answers between two
+#: imports: the longest, torch's, takes a few seconds on a loaded machine).
+HANDSHAKE_TIMEOUT_S = 60.0
+#: Overrides HANDSHAKE_TIMEOUT_S (seconds), on both sides.
+TIMEOUT_ENV = "TACGEN_PRELOAD_TIMEOUT_S"
+#: prctl(2)'s option number (linux/prctl.h).
+_PR_SET_PDEATHSIG = 1
+
 _RECV_FDS = 3  # the job's stdin, stdout and stderr
 _preload_env: dict[str, str] = {}  # the server's: {variable: value} its imports were made with
 _import_env: dict[str, str] = {}  # the server's: variables its imports set (KMP_*, ...)
+_start_env: dict[str, str] = {}  # the server's import-time variables as it started (`serve`)
+_fresh_reason: str | None = None  # the job's: why it runs in its own interpreter
 #: what the job's process forwards to the job's copy
 _FORWARDED = (signal.SIGTERM, signal.SIGINT, signal.SIGHUP)
 _MAX_REQUEST = 1 << 24
@@ -136,6 +189,56 @@ def benchmark_of_log(log: str | os.PathLike) -> Path:
         raise ValueError(f"{log}: not a results/logs/<job>.log path")
     i = len(parts) - 1 - parts[::-1].index("logs")
     return Path(*parts[:i], "benchmarks", *parts[i + 1 :]).with_suffix(".tsv")
+
+
+def fresh_reason() -> str | None:
+    """Why this job runs in its own interpreter although a preloaded one serves the run (None
+    where it runs in the server, or no server serves the run). `tacgen_lib.io.log.for_rule`
+    writes it into the rule's log."""
+    return _fresh_reason
+
+
+def interpreter_identity() -> dict[str, str]:
+    """What makes an interpreter the same as another for a job: its real executable, its
+    prefixes (a venv's or conda environment's) and its exact Python version."""
+    return {
+        "executable": os.path.realpath(sys.executable),
+        "prefix": sys.prefix,
+        "exec_prefix": sys.exec_prefix,
+        "base_prefix": sys.base_prefix,
+        "version": sys.version,
+    }
+
+
+def import_time_variables(env: dict[str, str]) -> dict[str, str]:
+    """The variables of `env` a fresh interpreter and its imports read at start
+    (`IMPORT_TIME_PREFIXES`), the thread counts aside."""
+    return {
+        k: v
+        for k, v in env.items()
+        if k.startswith(IMPORT_TIME_PREFIXES) and k not in THREAD_VARIABLES
+    }
+
+
+def handshake_timeout(env: dict[str, str] | None = None) -> float:
+    """Seconds a handshake read waits: `TACGEN_PRELOAD_TIMEOUT_S` where set, else
+    HANDSHAKE_TIMEOUT_S."""
+    value = (os.environ if env is None else env).get(TIMEOUT_ENV, "")
+    try:
+        return float(value) if float(value) > 0 else HANDSHAKE_TIMEOUT_S
+    except ValueError:
+        return HANDSHAKE_TIMEOUT_S
+
+
+def set_parent_death_signal(sig: int = signal.SIGKILL) -> None:
+    """Have the kernel send `sig` to this process when the thread that forked it ends
+    (prctl PR_SET_PDEATHSIG, Linux); OSError where the call fails."""
+    import ctypes
+
+    libc = ctypes.CDLL(None, use_errno=True)
+    if libc.prctl(_PR_SET_PDEATHSIG, int(sig), 0, 0, 0) != 0:
+        errno = ctypes.get_errno()
+        raise OSError(errno, f"prctl(PR_SET_PDEATHSIG): {os.strerror(errno)}")
 
 
 # ---------------------------------------------------------------- the job's side (client)
@@ -175,8 +278,10 @@ def _usage_file(snakemake: Any) -> Path | None:
 
 def run_in_preloaded_interpreter(snakemake: Any) -> None:
     """Run this script job in the preloaded interpreter, if one serves this run, and exit with
-    its status; else return at once and the script runs here. Called first by every workflow
-    script (before its imports), with the `snakemake` object of the `script:` directive."""
+    its status; else return at once and the script runs here (`fresh_reason` says why, where
+    a server serves the run). Called first by every workflow script (before its imports), with
+    the `snakemake` object of the `script:` directive."""
+    global _fresh_reason
     if _worker:
         return
     usage = _usage_file(snakemake)
@@ -185,29 +290,50 @@ def run_in_preloaded_interpreter(snakemake: Any) -> None:
     name = os.environ.get(SOCKET_ENV)
     if not name or os.environ.get(SWITCH_ENV) == "0":
         return
+    timeout = handshake_timeout()
     sock = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    sock.settimeout(timeout)
     try:
         sock.connect("\0" + name)
-    except OSError:
+    except OSError as err:
         sock.close()
-        return  # no server (yet): run here
+        _fresh_reason = f"no preloaded interpreter listens ({err})"
+        return  # no server (yet, or any more): run here
     script = os.path.abspath(sys.argv[0])
     # signals this process ignores (inherited: a fresh interpreter keeps ignoring them, even
     # SIGINT): the job's copy ignores them too, and they are not forwarded
     ignored = [int(s) for s in _FORWARDED if signal.getsignal(s) == signal.SIG_IGN]
     request = json.dumps(
-        {"script": script, "cwd": os.getcwd(), "env": dict(os.environ), "ignored": ignored}
+        {
+            "script": script,
+            "cwd": os.getcwd(),
+            "env": dict(os.environ),
+            "ignored": ignored,
+            "interpreter": interpreter_identity(),
+        }
     )
     try:
+        # 1. the request; 2. "ok" or "fresh <why>"; 3. "go": only now does the server fork
+        #    the copy; 4. "started" once it has
         socket.send_fds(sock, [b"R"], [0, 1, 2])
         _send(sock, request.encode())
-        accepted = _recv(sock)
-    except OSError:
-        sock.close()
-        return  # the server went away before it took the job: run here
-    if accepted != b"ok":
-        sock.close()
+        answer = _recv(sock)
+        if answer == b"ok":
+            _send(sock, b"go")
+            answer = _recv(sock)
+    except TimeoutError:
+        sock.close()  # a copy forked after all is killed by its supervisor on this close
+        _fresh_reason = f"the preloaded interpreter did not answer within {timeout:g} s"
         return
+    except OSError as err:
+        sock.close()
+        _fresh_reason = f"the preloaded interpreter went away before the job started ({err})"
+        return
+    if answer != b"started":
+        sock.close()
+        _fresh_reason = answer.decode(errors="replace").removeprefix("fresh ")
+        return
+    sock.settimeout(None)  # the job runs as long as it runs
     started = time.monotonic()
 
     def forward(signum: int, _frame: object) -> None:
@@ -267,14 +393,36 @@ def _size_thread_pools(env: dict[str, str]) -> None:
         torch.set_num_threads(limits["openmp"])
 
 
-def _run_job(request: dict, fds: list[int]) -> None:
-    """In the forked copy: become the job (streams, directory, environment, threads) and run
-    its script as `__main__`; never returns."""
+def _reseed_as_fresh() -> None:
+    """The random state a fresh interpreter starts with, in a copy that inherited the server's:
+    Python's `random`, numpy's legacy global RandomState and torch's default CPU generator
+    seeded from the OS, as each is at its import (a fresh torch's initial seed is random too;
+    the workflow's code seeds its own generators)."""
+    import random
+
+    random.seed()
+    numpy = sys.modules.get("numpy")
+    if numpy is not None:
+        numpy.random.seed()
+    torch = sys.modules.get("torch")
+    if torch is not None:
+        torch.default_generator.seed()
+
+
+def _run_job(request: dict, fds: list[int], supervisor: int) -> None:
+    """In the forked copy: die with the `supervisor` that forked it, become the job (streams,
+    directory, environment, threads, random state) and run its script as `__main__`; never
+    returns."""
     global _worker
     _worker = True
     code = 1
     interrupted = False
     try:
+        # killed with its supervisor (even by SIGKILL); one that died before this line is seen
+        # by the parent check
+        set_parent_death_signal(signal.SIGKILL)
+        if os.getppid() != supervisor:
+            os._exit(1)
         # a fresh interpreter's dispositions (the server ignores SIGINT), or the job process's
         # where it ignores a signal
         signal.signal(signal.SIGINT, signal.default_int_handler)
@@ -291,6 +439,7 @@ def _run_job(request: dict, fds: list[int]) -> None:
         for key, value in _import_env.items():  # as the imports would have set them fresh
             os.environ.setdefault(key, value)
         _size_thread_pools(request["env"])
+        _reseed_as_fresh()
         sys.argv = [request["script"]]
         sys.path.insert(0, os.path.dirname(request["script"]))  # as `python script.py` does
         import runpy
@@ -323,22 +472,58 @@ def _run_job(request: dict, fds: list[int]) -> None:
             os._exit(code)
 
 
-def _supervise(conn: socket.socket, request: dict, fds: list[int]) -> None:
-    """In the forked copy that holds the job's connection: fork the job, forward signals from
-    the job's process, kill the job if that process dies, report status and usage; never
-    returns."""
+def _handshake(conn: socket.socket) -> tuple[dict, list[int]] | None:
+    """The supervisor's half of the handshake, every read bounded by `handshake_timeout`: the
+    job's streams and request, "ok" or "fresh <why>", the job's "go". The request and the
+    job's streams where the job may start, else None (streams closed)."""
+    conn.settimeout(handshake_timeout())
+    fds: list[int] = []
+    try:
+        if _peer_uid(conn) != os.getuid():
+            raise ConnectionError("another user")
+        _, fds, _, _ = socket.recv_fds(conn, 1, _RECV_FDS)
+        if len(fds) != _RECV_FDS:
+            raise ConnectionError("no streams")
+        request = json.loads(_recv(conn))
+        why = _mismatch(request)
+        if why is not None:
+            _send(conn, b"fresh " + why.encode())
+            raise ConnectionError(why)
+        _send(conn, b"ok")
+        if _recv(conn) != b"go":
+            raise ConnectionError("no acknowledgement")
+    except (OSError, ValueError, KeyError, TypeError):
+        for fd in fds:
+            os.close(fd)
+        return None
+    return request, fds
+
+
+def _supervise(conn: socket.socket) -> None:
+    """In the copy the server forks per connection: the handshake (`_handshake`), then fork the
+    job, forward signals from the job's process, kill the job if that process dies, report
+    status and usage; never returns."""
     code = 1
     try:
         signal.signal(signal.SIGCHLD, signal.SIG_DFL)
+        accepted = _handshake(conn)
+        if accepted is None:
+            os._exit(0)
+        request, fds = accepted
         start = time.monotonic()
+        supervisor = os.getpid()
         pid = os.fork()
         if pid == 0:
             conn.close()
-            _run_job(request, fds)
+            _run_job(request, fds, supervisor)
         for fd in fds:
             os.close(fd)
         pidfd = os.pidfd_open(pid)
-        _send(conn, b"ok")
+        try:
+            _send(conn, b"started")
+        except OSError:
+            os.kill(pid, signal.SIGKILL)  # the job's process is gone (it timed out and left)
+        conn.settimeout(None)
         result: dict[str, Any] | None = None
         while result is None:
             ready, _, _ = select.select([pidfd, conn], [], [])
@@ -396,14 +581,35 @@ def _preload(module: str) -> None:
     _import_env.update({k: v for k, v in os.environ.items() if before.get(k) != v})
 
 
-def _environment_fits(env: dict[str, str]) -> bool:
-    """Whether a job with environment `env` would have imported `ENVIRONMENT_PRELOADS` as the
-    server did: each of their variables (its default where unset) equal, in any case."""
+def _mismatch(request: dict) -> str | None:
+    """Why the job of `request` must run in its own interpreter, or None where a fresh one would
+    be the server's: the interpreter (`interpreter_identity`), the import-time variables
+    (`import_time_variables`, against the server's as it started) and the variables of
+    `ENVIRONMENT_PRELOADS` (their defaults where unset, in any case)."""
+    theirs = request.get("interpreter") or {}
+    ours = interpreter_identity()
+    for key, value in ours.items():
+        if theirs.get(key) != value:
+            return (
+                f"another interpreter: its {key} is {theirs.get(key)!r}, the preloaded "
+                f"interpreter's {value!r}"
+            )
+    env = request["env"]
+    job = import_time_variables(env)
+    for key in sorted(set(job) | set(_start_env)):
+        if job.get(key) != _start_env.get(key):
+            return (
+                f"another environment: {key} is {job.get(key)!r} for the job, "
+                f"{_start_env.get(key)!r} for the preloaded interpreter"
+            )
     defaults = {k: d for _module, variables in ENVIRONMENT_PRELOADS for k, d in variables}
-    return all(
-        env.get(k, defaults[k]).lower().strip() == v.lower().strip()
-        for k, v in _preload_env.items()
-    )
+    for key, value in _preload_env.items():
+        if env.get(key, defaults[key]).lower().strip() != value.lower().strip():
+            return (
+                f"another OpenGL backend: {key} is {env.get(key, defaults[key])!r} for the job, "
+                f"mujoco was preloaded with {value!r}"
+            )
+    return None
 
 
 def _reap() -> None:
@@ -425,6 +631,7 @@ def serve(name: str, parent: int) -> None:
     the jobs already waiting: a run's first jobs start once what they import is loaded (the
     modules come in the order they need them) instead of waiting for all of it, and a job
     forked early imports what is still missing itself, as a fresh interpreter would."""
+    _start_env.update(import_time_variables(dict(os.environ)))  # before any import sets one
     listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     listener.bind("\0" + name)
     listener.listen(64)
@@ -432,7 +639,6 @@ def serve(name: str, parent: int) -> None:
     # interpreters would), the server and the copies' supervisors carry on until Snakemake ends
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     pending = list(PRELOADED_MODULES)
-    uid = os.getuid()
     while os.getppid() == parent:
         ready, _, _ = select.select([listener], [], [], 0 if pending else 1.0)
         if not ready:
@@ -443,27 +649,11 @@ def serve(name: str, parent: int) -> None:
                     signal.signal(signal.SIGCHLD, signal.SIG_IGN)  # the kernel reaps copies
             continue
         conn, _ = listener.accept()
-        fds: list[int] = []
-        try:
-            if _peer_uid(conn) != uid:
-                raise ConnectionError("another user")
-            _, fds, _, _ = socket.recv_fds(conn, 1, _RECV_FDS)
-            if len(fds) != _RECV_FDS:
-                raise ConnectionError("no streams")
-            request = json.loads(_recv(conn))
-            if not _environment_fits(request["env"]):
-                _send(conn, b"fresh")  # the job runs in its own interpreter
-                raise ConnectionError("another environment")
-        except (OSError, ValueError, KeyError):
-            for fd in fds:
-                os.close(fd)
-            conn.close()
-            continue
+        # the loop never reads a client: a supervisor per connection does the (time-bounded)
+        # handshake, so one stalled client holds up no other job
         if os.fork() == 0:
             listener.close()
-            _supervise(conn, request, fds)
-        for fd in fds:
-            os.close(fd)
+            _supervise(conn)
         conn.close()
 
 

@@ -23,10 +23,17 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["DEFAULT_RATE_LIMIT", "drop_local_rate_limit"]
+import warnings
+
+__all__ = ["DEFAULT_RATE_LIMIT", "RATE_LIMITER_ATTRIBUTE", "drop_local_rate_limit"]
 
 #: Snakemake's default `--max-jobs-per-timespan` (jobs, seconds).
 DEFAULT_RATE_LIMIT = (100, 1)
+#: The private attribute of Snakemake's `JobScheduler` that holds the limit (9.x). The
+#: `workflow` extra of pyproject.toml pins the Snakemake range this holds for, and
+#: tests/runtime/test_scheduler.py fails naming it if an installed release has no such
+#: attribute.
+RATE_LIMITER_ATTRIBUTE = "job_rate_limiter"
 
 
 def drop_local_rate_limit(scheduler: Any, *, local: bool) -> bool:
@@ -35,13 +42,25 @@ def drop_local_rate_limit(scheduler: Any, *, local: bool) -> bool:
     (the workflow's `onstart`). Returns whether it was removed.
 
     Kept: a remote executor's limit (`local` False), a limit other than the default, and a
-    scheduler without the attribute (another Snakemake version: nothing is changed)."""
-    limiter = getattr(scheduler, "job_rate_limiter", None)
-    if not local or limiter is None:
+    scheduler without the attribute (another Snakemake version: nothing is changed, and a
+    RuntimeWarning names the attribute)."""
+    if not local:
+        return False
+    if not hasattr(scheduler, RATE_LIMITER_ATTRIBUTE):
+        warnings.warn(
+            f"Snakemake's job scheduler has no attribute {RATE_LIMITER_ATTRIBUTE!r} (another "
+            "Snakemake release than pyproject.toml pins?): its submission rate limit is kept, "
+            "and a local run's scheduler wakes more often (tacgen_lib.runtime.scheduler)",
+            RuntimeWarning,
+            stacklevel=2,
+        )
+        return False
+    limiter = getattr(scheduler, RATE_LIMITER_ATTRIBUTE)
+    if limiter is None:
         return False
     if (getattr(limiter, "max_jobs", None), getattr(limiter, "timespan", None)) != (
         DEFAULT_RATE_LIMIT
     ):
         return False
-    scheduler.job_rate_limiter = None
+    setattr(scheduler, RATE_LIMITER_ATTRIBUTE, None)
     return True

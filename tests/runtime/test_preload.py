@@ -78,7 +78,7 @@ def job_script(tmp_path: Path, body: str, log: str | None = LOG) -> Path:
     logs = [log] if log else []
     script.write_text(
         "import types\n"
-        f"snakemake = types.SimpleNamespace(log={logs!r})\n"
+        f"snakemake = types.SimpleNamespace(log={logs!r}, rule='rule_x', wildcards={{}})\n"
         "import sys\n"
         f"preloaded = all(m in sys.modules for m in {preload.PRELOADED_MODULES!r})\n"
         "from tacgen_lib.runtime.preload import run_in_preloaded_interpreter\n"
@@ -205,9 +205,9 @@ def test_a_job_asking_for_another_gl_backend_runs_in_its_own_interpreter(
     script = job_script(tmp_path, "print(preloaded)")
     declined = run_job(script, env_for(server, **{variable: "osmesa"}))
     assert (declined.returncode, declined.stdout.strip()) == (0, "False"), declined.stderr
-    # the same backend in any case, and other values of what the other imports set (OpenCV's
-    # LD_LIBRARY_PATH, scikit-learn's KMP_*): served
-    other = {"LD_LIBRARY_PATH": "/elsewhere", "KMP_INIT_AT_FORK": "TRUE"}
+    # the same backend in any case, and another value of what an import sets itself
+    # (scikit-learn's KMP_*): served
+    other = {"KMP_INIT_AT_FORK": "TRUE"}
     served = run_job(script, env_for(server, MUJOCO_GL="EGL", **other))
     assert (served.returncode, served.stdout.strip()) == (0, "True"), served.stderr
 
@@ -510,3 +510,257 @@ def test_every_workflow_script_offers_itself_to_the_server_first():
         assert first.module == "tacgen_lib.runtime.preload", path.name
         assert [a.name for a in first.names] == ["run_in_preloaded_interpreter"], path.name
         assert ast.unparse(second) == "run_in_preloaded_interpreter(snakemake)", path.name
+
+
+WHY = """
+from tacgen_lib.runtime.preload import fresh_reason
+print(preloaded, sys.prefix, fresh_reason(), sep="\\n")
+"""
+
+
+@pytest.mark.parametrize(
+    ("variable", "value"),
+    [
+        ("PYTHONHASHSEED", "123"),  # a fresh interpreter's string hashes depend on it
+        ("LD_LIBRARY_PATH", "/elsewhere"),  # which shared libraries an import loads
+        ("LD_PRELOAD", ""),
+        ("PYTHONPATH", "/elsewhere"),
+    ],
+)
+def test_a_job_with_other_import_time_variables_runs_fresh_and_says_why(
+    server, tmp_path, variable, value
+):
+    """PYTHON* and LD_* variables are read when an interpreter starts and imports: a job whose
+    values differ from the server's runs fresh, and the reason names the variable."""
+    assert variable not in os.environ or os.environ[variable] != value
+    got = run_job(job_script(tmp_path, WHY), env_for(server, **{variable: value}))
+    assert got.returncode == 0, got.stderr
+    preloaded, _prefix, why = got.stdout.strip().split("\n")
+    assert preloaded == "False"
+    assert why.startswith("another environment") and variable in why, why
+    # the thread counts differ per job: they are applied to the copy, not declined
+    served = run_job(job_script(tmp_path, WHY), env_for(server, threads=2))
+    assert served.stdout.split("\n")[0] == "True", served.stderr
+
+
+def _tiny_venv(where: Path) -> Path:
+    """A venv of this test's base interpreter (no packages of its own) that sees this
+    project's packages through a .pth file: a stand-in for a rule's conda environment, which
+    has its own prefix and interpreter."""
+    import venv
+
+    venv.EnvBuilder(with_pip=False, symlinks=True).create(where)
+    python = where / "bin" / "python"
+    site = subprocess.run(
+        [str(python), "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout.strip()
+    ours = [p for p in sys.path if p.endswith("site-packages") and p.startswith(sys.prefix)]
+    Path(site, "tacgen_test.pth").write_text(f"import site; site.addsitedir({ours[0]!r})\n")
+    return python
+
+
+def test_a_job_in_another_environment_runs_in_it_not_in_the_server(server, tmp_path):
+    """What `--sdm conda` does for a rule with `conda:`: Snakemake starts the script with the
+    environment's `python`. The server (this project's .venv) declines it, the script runs in
+    the environment's own interpreter, and the reason names the prefix."""
+    python = _tiny_venv(tmp_path / "env")
+    script = job_script(tmp_path, WHY)
+    got = subprocess.run(
+        [str(python), str(script)],
+        cwd=script.parents[2],
+        env=env_for(server),
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert got.returncode == 0, got.stderr
+    preloaded, prefix, why = got.stdout.strip().split("\n")
+    assert preloaded == "False"
+    assert Path(prefix) == tmp_path / "env"
+    assert why.startswith("another interpreter") and "prefix" in why, why
+    # the same script with the server's interpreter: served
+    same = run_job(script, env_for(server))
+    assert same.stdout.split("\n")[:2] == ["True", sys.prefix], same.stderr
+
+
+def test_the_rule_log_says_why_a_job_ran_fresh(server, tmp_path):
+    body = """
+    from tacgen_lib.io import log
+    log.for_rule(snakemake).info("work")
+    """
+    got = run_job(job_script(tmp_path, body), env_for(server, PYTHONHASHSEED="7"))
+    assert got.returncode == 0, got.stderr
+    text = (tmp_path / LOG).read_text()
+    assert "runs in a fresh interpreter, not the preloaded one: another environment" in text
+    assert "PYTHONHASHSEED" in text and "work" in text
+    served = run_job(job_script(tmp_path, body), env_for(server))
+    assert served.returncode == 0, served.stderr
+    assert "fresh interpreter" not in (tmp_path / LOG).read_text()
+
+
+def _ppid(pid: int) -> int:
+    return int(Path(f"/proc/{pid}/stat").read_text().rsplit(") ", 1)[1].split()[1])
+
+
+def _children(pid: int) -> list[int]:
+    """Live (not zombie) processes whose parent is `pid`."""
+    out = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                if _ppid(int(entry.name)) == pid and _alive(int(entry.name)):
+                    out.append(int(entry.name))
+            except (OSError, IndexError, ValueError):
+                continue
+    return out
+
+
+def test_a_killed_supervisor_takes_the_job_with_it(server, tmp_path):
+    """The copy's parent (its supervisor, which holds the job's connection) killed as the OOM
+    killer would: the copy dies by its parent-death signal, the job's process fails."""
+    pidfile = tmp_path / "pid"
+    body = f"""
+    import os, time, pathlib
+    pathlib.Path({str(pidfile)!r}).write_text(str(os.getpid()))
+    time.sleep(120)
+    """
+    proc = _start(job_script(tmp_path, body), env_for(server))
+    assert _wait_until(pidfile.exists, 60), proc.communicate(timeout=5)
+    copy = int(pidfile.read_text())
+    supervisor = _ppid(copy)
+    assert supervisor not in (proc.pid, os.getpid())
+    os.kill(supervisor, signal.SIGKILL)
+    assert _wait_until(lambda: not _alive(copy), 10), "the copy outlived its supervisor"
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 1 and "lost the job's process" in err
+
+
+def _gated_server(tmp_path: Path, name: str) -> tuple[subprocess.Popen, Path, Path]:
+    """A server whose second import (`gate`) returns only once the file `open` exists (its
+    first, numpy, is done): a job that connects meanwhile waits in the socket's queue. Returns
+    the server, the file `gate` touches when it starts, and `open`."""
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    started, release = tmp_path / "importing", tmp_path / "open"
+    (lib / "gate.py").write_text(
+        f"import os, pathlib, time\npathlib.Path({str(started)!r}).touch()\n"
+        f"while not os.path.exists({str(release)!r}):\n    time.sleep(0.02)\n"
+    )
+    code = (
+        f"import sys; sys.path.insert(0, {str(lib)!r})\n"
+        "from tacgen_lib.runtime import preload\n"
+        "preload.PRELOADED_MODULES = ('numpy', 'gate')\n"
+        f"preload.serve({name!r}, {os.getpid()})"
+    )
+    return subprocess.Popen([sys.executable, "-P", "-c", code]), started, release
+
+
+def test_a_job_process_that_dies_while_queued_leaves_no_copy(tmp_path):
+    """The job's process is SIGKILLed while it waits for a busy server: when the server comes
+    to it, the handshake fails before the fork (no "go"), and no copy ever runs."""
+    name = f"tacgen-test-{os.getpid()}-{uuid.uuid4().hex}"
+    server, started, release = _gated_server(tmp_path, name)
+    ran = tmp_path / "ran"
+    try:
+        assert _wait_until(started.exists, 60), "the server did not reach its gated import"
+        body = f"import pathlib\npathlib.Path({str(ran)!r}).write_text('ran')\n"
+        proc = _start(job_script(tmp_path, body), env_for(name))
+        assert _wait_until(lambda: _queued_on(name), 60), "the job never reached the server"
+        time.sleep(0.3)  # its request is in the socket's buffer
+        proc.kill()
+        proc.wait(timeout=30)
+        release.touch()
+        # the server accepts the dead job's connection, forks its supervisor, which ends
+        time.sleep(3)
+        assert not ran.exists(), "a copy ran the job of a dead process"
+        assert _wait_until(lambda: not _children(server.pid), 30), _children(server.pid)
+        assert server.poll() is None
+    finally:
+        release.touch()
+        server.terminate()
+        server.wait(timeout=30)
+
+
+def test_a_stalled_server_makes_the_job_run_fresh_and_the_log_says_so(tmp_path):
+    """A server that takes the connection but never answers (here: a socket that listens and is
+    never accepted): the job waits TACGEN_PRELOAD_TIMEOUT_S, runs in its own interpreter, and
+    its rule's log says why."""
+    name = f"tacgen-test-{os.getpid()}-{uuid.uuid4().hex}"
+    body = """
+    from tacgen_lib.io import log
+    log.for_rule(snakemake).info("work")
+    print(preloaded)
+    """
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as stalled:
+        stalled.bind("\0" + name)
+        stalled.listen(8)
+        t0 = time.monotonic()
+        proc = _start(job_script(tmp_path, body), env_for(name, **{preload.TIMEOUT_ENV: "1"}))
+        code = proc.wait(timeout=60)
+        waited = time.monotonic() - t0
+    # (the job's streams sat in the unread request until the socket closed: read them now)
+    out, err = proc.communicate(timeout=30)
+    assert (code, out.strip()) == (0, "False"), err
+    assert 1.0 <= waited < 60
+    text = (tmp_path / LOG).read_text()
+    assert "the preloaded interpreter did not answer within 1 s" in text and "work" in text
+
+
+def test_a_job_that_timed_out_on_a_busy_server_runs_once(tmp_path):
+    """The job gives up on a server still importing and runs fresh; when the server comes to
+    its connection, the job's process is gone, so the server forks no second copy."""
+    name = f"tacgen-test-{os.getpid()}-{uuid.uuid4().hex}"
+    server, started, release = _gated_server(tmp_path, name)
+    runs = tmp_path / "runs"
+    try:
+        assert _wait_until(started.exists, 60), "the server did not reach its gated import"
+        body = f"""
+        with open({str(runs)!r}, "a") as f:
+            f.write(f"{{preloaded}}\\n")
+        """
+        proc = _start(job_script(tmp_path, body), env_for(name, **{preload.TIMEOUT_ENV: "1"}))
+        assert proc.wait(timeout=60) == 0
+        release.touch()
+        # (the job's streams sat in its queued request until the server took it)
+        _, err = proc.communicate(timeout=30)
+        assert proc.returncode == 0, err
+        time.sleep(3)
+        assert runs.read_text() == "False\n"
+        assert _wait_until(lambda: not _children(server.pid), 30), _children(server.pid)
+    finally:
+        release.touch()
+        server.terminate()
+        server.wait(timeout=30)
+
+
+def test_a_stalled_client_holds_up_no_other_job(server, tmp_path):
+    """A connection that sends nothing (a job process stopped mid-handshake): the server's loop
+    does not read it (its supervisor does, with a timeout), so the next job is served at once."""
+    with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as stuck:
+        stuck.connect("\0" + server)
+        t0 = time.monotonic()
+        got = run_job(job_script(tmp_path, "print(preloaded)"), env_for(server), timeout=30)
+        assert (got.returncode, got.stdout.strip()) == (0, "True"), got.stderr
+        assert time.monotonic() - t0 < 30
+
+
+RANDOM = """
+import random, numpy as np, torch
+print(random.random(), np.random.random(), torch.rand(1).item())
+"""
+
+
+def test_each_copy_starts_with_a_fresh_interpreters_random_state(server, tmp_path):
+    """Python's random, numpy's legacy global RandomState and torch's default generator are
+    seeded from the OS in a fresh interpreter: two copies of one server draw different numbers,
+    as two fresh interpreters do (inherited unchanged, they drew the same)."""
+    script = job_script(tmp_path, RANDOM)
+    served = [run_job(script, env_for(server)) for _ in range(2)]
+    fresh = run_job(script, env_for(None))
+    for got in (*served, fresh):
+        assert got.returncode == 0, got.stderr
+    (r1, n1, t1), (r2, n2, t2) = (g.stdout.split() for g in served)
+    assert r1 != r2 and n1 != n2 and t1 != t2

@@ -15,7 +15,11 @@ import pytest
 from snakemake.scheduling.job_scheduler import JobRateLimiter
 from snakemake.settings.types import MaxJobsPerTimespan
 
-from tacgen_lib.runtime.scheduler import DEFAULT_RATE_LIMIT, drop_local_rate_limit
+from tacgen_lib.runtime.scheduler import (
+    DEFAULT_RATE_LIMIT,
+    RATE_LIMITER_ATTRIBUTE,
+    drop_local_rate_limit,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 N_JOBS = 40
@@ -99,6 +103,27 @@ def test_only_a_local_runs_default_limit_is_dropped():
     assert chosen.job_rate_limiter.max_jobs == 10
 
 
-@pytest.mark.parametrize("scheduler", [SimpleNamespace(), SimpleNamespace(job_rate_limiter=None)])
-def test_a_scheduler_without_a_limit_is_left_alone(scheduler):
-    assert not drop_local_rate_limit(scheduler, local=True)
+def test_a_scheduler_without_a_limit_is_left_alone():
+    assert not drop_local_rate_limit(SimpleNamespace(job_rate_limiter=None), local=True)
+
+
+def test_a_scheduler_without_the_attribute_is_left_alone_and_named():
+    with pytest.warns(RuntimeWarning, match=RATE_LIMITER_ATTRIBUTE):
+        assert not drop_local_rate_limit(SimpleNamespace(), local=True)
+
+
+def test_the_installed_snakemake_has_the_private_attribute():
+    """drop_local_rate_limit sets a private attribute of Snakemake's JobScheduler: a release
+    that renames or removes it fails here, naming it (pyproject.toml pins the range)."""
+    import inspect
+
+    from snakemake.scheduling import job_scheduler
+
+    init = inspect.getsource(job_scheduler.JobScheduler.__init__)
+    assert f"self.{RATE_LIMITER_ATTRIBUTE} =" in init, (
+        f"snakemake's JobScheduler.__init__ no longer sets {RATE_LIMITER_ATTRIBUTE!r}"
+    )
+    reads = inspect.getsource(job_scheduler.JobScheduler)
+    assert reads.count(f"self.{RATE_LIMITER_ATTRIBUTE}") >= 3, (
+        f"snakemake's JobScheduler no longer reads {RATE_LIMITER_ATTRIBUTE!r}"
+    )
