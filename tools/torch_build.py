@@ -183,7 +183,9 @@ def check_build(version: str, cuda: str | None, asked: str, *, nvidia_driver: bo
 
 def conda_line(build: str) -> str:
     """The envs/*.yaml dependency line of the torch build (conda-forge's metapackage)."""
-    return f"  - {CONDA_PACKAGES[build]}=2.*   # {build} build, as setup's TORCH: tools/torch_build.py"
+    return (
+        f"  - {CONDA_PACKAGES[build]}=2.*   # {build} build, as setup's TORCH: tools/torch_build.py"
+    )
 
 
 def conda_env_text(text: str, build: str) -> str:
@@ -246,7 +248,9 @@ def _main(argv: Sequence[str]) -> int:
     if args.what == "check":
         import torch
 
-        message = check_build(torch.__version__, torch.version.cuda, args.asked, nvidia_driver=driver)
+        message = check_build(
+            torch.__version__, torch.version.cuda, args.asked, nvidia_driver=driver
+        )
         if message:
             print(message, file=sys.stderr)
             return 1

@@ -21,9 +21,8 @@ executor's (whose submissions the limit exists to pace), are kept.
 
 from __future__ import annotations
 
-from typing import Any
-
 import warnings
+from typing import Any
 
 __all__ = ["DEFAULT_RATE_LIMIT", "RATE_LIMITER_ATTRIBUTE", "drop_local_rate_limit"]
 
