@@ -54,6 +54,7 @@ rule train_heads:
     # Reruns are bit-identical per thread count.
     threads: 1
     params:
+        device=DEVICE,  # config device (tacgen_lib.runtime.device)
         settings=ALIGN,  # the whole subtree; tacgen_lib.align.settings reads it
     script:
         "../workflow/scripts/train_heads.py"
@@ -84,6 +85,7 @@ rule project_aligned:
         mem_mb=2000,
         runtime=10,
     params:
+        device=DEVICE,  # config device (tacgen_lib.runtime.device)
         settings=ALIGN,
     script:
         "../workflow/scripts/project_aligned.py"

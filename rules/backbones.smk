@@ -39,6 +39,7 @@ rule family_backbone:
         mem_mb=4000,
         runtime=60,
     params:
+        device=DEVICE,  # config device (tacgen_lib.runtime.device)
         backbone=lambda w: FAMILIES.families[w.family][w.modality].__dict__,
         pretrain=PRETRAIN,
         mae=lambda w: (

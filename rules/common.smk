@@ -38,6 +38,9 @@ SCENES = (
     load_yaml(config["scenes_file"]) if os.path.exists(config["scenes_file"]) else {}
 )
 CORPORA = config["corpora"]
+#: config device (cpu | cuda | auto): where every torch job computes, passed in its params
+#: (tacgen_lib.runtime.device.torch_device reads it; cpu is bit-identical to a CPU-only run)
+DEVICE = config["device"]
 #: config probes without the families and seeds the rules expand: what every rule that fits
 #: probes passes on (tacgen_lib.probes.settings.ProbeSettings.from_config reads it)
 PROBE_SETTINGS = {

@@ -52,6 +52,7 @@ rule pretrain_backbone:
         mem_mb=6000,
         runtime=120,
     params:
+        device=DEVICE,  # config device (tacgen_lib.runtime.device)
         backbone=lambda w: FEAT["backbones"][w.modality],
         pretrain=PRETRAIN,
         # MAE's settings only where a backbone is MAE-pretrained: a change reruns only those
@@ -86,6 +87,7 @@ rule extract_vision_features:
         mem_mb=4000,
         runtime=30,
     params:
+        device=DEVICE,  # config device (tacgen_lib.runtime.device)
         features=FEAT,
         column="rgb",
     script:
@@ -116,6 +118,7 @@ rule extract_tactile_features:
         mem_mb=4000,
         runtime=30,
     params:
+        device=DEVICE,  # config device (tacgen_lib.runtime.device)
         features=FEAT,
         column="tactile_proc",
     script:
@@ -206,6 +209,7 @@ rule pretrained_vs_random:
         mem_mb=4000,
         runtime=30,
     params:
+        device=DEVICE,  # config device (tacgen_lib.runtime.device)
         features=FEAT,
         C=[0.1, 1.0, 10.0],
     script:

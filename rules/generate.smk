@@ -53,6 +53,7 @@ rule train_generator:
         mem_mb=3000,
         runtime=30,
     params:
+        device=DEVICE,  # config device (tacgen_lib.runtime.device)
         settings=GENERATE,  # the whole subtree; tacgen_lib.generate.settings reads it
     script:
         "../workflow/scripts/train_generator.py"
@@ -80,6 +81,7 @@ rule sample_generator:
         mem_mb=2000,
         runtime=30,
     params:
+        device=DEVICE,  # config device (tacgen_lib.runtime.device)
         settings=GENERATE,
     script:
         "../workflow/scripts/sample_generator.py"

@@ -38,6 +38,7 @@ rule train_pixel_generator:
         mem_mb=3000,
         runtime=30,
     params:
+        device=DEVICE,  # config device (tacgen_lib.runtime.device)
         settings=PIXEL,
     script:
         "../workflow/scripts/train_pixel_generator.py"
@@ -71,6 +72,7 @@ rule sample_pixel_generator:
         mem_mb=3000,
         runtime=30,
     params:
+        device=DEVICE,  # config device (tacgen_lib.runtime.device)
         settings=PIXEL,
         features=config["features"],
     script:
@@ -107,6 +109,7 @@ rule evaluate_pixel_generators:
         mem_mb=3000,
         runtime=30,
     params:
+        device=DEVICE,  # config device (tacgen_lib.runtime.device)
         settings=PIXEL,
         arms=PIXEL_JUDGED_ARMS,  # the order of the arms inputs
         features=config["features"],
@@ -145,6 +148,7 @@ rule pixel_curve_point:
         mem_mb=2000,
         runtime=30,
     params:
+        device=DEVICE,  # config device (tacgen_lib.runtime.device)
         align=config["align"],
         tau=config["probes"]["heads"]["tau"],
         arm=PIXEL_CURVE_ARM,

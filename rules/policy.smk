@@ -78,6 +78,7 @@ rule palpate:
         mem_mb=3000,
         runtime=20,
     params:
+        device=DEVICE,  # config device (tacgen_lib.runtime.device)
         settings=POLICY,
         features=config["features"],
         align_seeds=list(policy_heads()),
@@ -107,6 +108,7 @@ rule train_policy:
         mem_mb=2000,
         runtime=20,
     params:
+        device=DEVICE,  # config device (tacgen_lib.runtime.device)
         settings=POLICY,
     script:
         "../workflow/scripts/train_policy.py"
@@ -136,6 +138,7 @@ rule rollout_policy:
         mem_mb=2000,
         runtime=30,
     params:
+        device=DEVICE,  # config device (tacgen_lib.runtime.device)
         settings=POLICY,
     script:
         "../workflow/scripts/rollout_policy.py"

@@ -105,6 +105,7 @@ def fit_cell(
     settings: AlignSettings,
     rule: str = "train_heads",
     progress: Callable[[str], Any] | None = None,
+    device: Any = "cpu",
 ) -> CellFit:
     """Train one alignment cell and evaluate it on held-out pairs (paper eq. 1, retrieval).
 
@@ -113,7 +114,7 @@ def fit_cell(
     (from `cell_ids`). The split guard runs first: `assert_trainable` refuses any train id not
     in the train split and any validation id not in the val split (validation rows only steer
     early stopping), naming the rule and the sample_id. Rows are joined on sample_id, never on
-    order. `settings` is passed on to `fit_heads`.
+    order. `settings` and `device` (a torch device or its name) are passed on to `fit_heads`.
 
     metrics: `paired_retrieval` of the projected test rows (top1/top5 both ways, median ranks,
     chance levels), n_test, n_train_rows, n_val, best-step validation loss, best_step,
@@ -150,9 +151,13 @@ def fit_cell(
         seed=seed,
         settings=settings,
         progress=progress,
+        device=device,
     )
     z_v, z_t = project(
-        result, vision.subset(test_ids).vectors[feature], tactile.subset(test_ids).vectors[feature]
+        result,
+        vision.subset(test_ids).vectors[feature],
+        tactile.subset(test_ids).vectors[feature],
+        device=device,
     )
     retrieval = paired_retrieval(z_v, z_t)
     metrics: dict[str, Any] = {

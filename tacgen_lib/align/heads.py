@@ -101,10 +101,15 @@ def project(
     t: np.ndarray | Tensor,
     *,
     chunk: int = 4096,
+    device: torch.device | str = "cpu",
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Aligned projections (float32, (N, 128), l2-normalised rows) of vision and touch features."""
+    """Aligned projections (float32, (N, 128), l2-normalised rows) of vision and touch features,
+    computed on `device` (`tacgen_lib.runtime.device`; the module is moved there and back)."""
     module = heads if isinstance(heads, AlignHeads) else heads.module()
     was_training = module.training
+    home = next(module.parameters()).device
+    dev = torch.device(device)
+    module.to(dev)
     module.eval()
     out = []
     for x, head, name in (
@@ -114,7 +119,9 @@ def project(
         xt = as_features(x, name)
         if xt.shape[1] != head.in_dim:
             raise ValueError(f"{name} have {xt.shape[1]} columns, the head expects {head.in_dim}")
+        xt = xt.to(dev)
         parts = [head(xt[i : i + chunk]) for i in range(0, xt.shape[0], chunk)]
-        out.append(torch.cat(parts).numpy().astype(np.float32, copy=False))
+        out.append(torch.cat(parts).cpu().numpy().astype(np.float32, copy=False))
     module.train(was_training)
+    module.to(home)
     return out[0], out[1]

@@ -126,9 +126,10 @@ def _as_index(idx: Sequence[int] | np.ndarray, n: int, name: str) -> np.ndarray:
 
 
 def _state_copy(heads: AlignHeads) -> dict[str, dict[str, Tensor]]:
+    """The heads' weights, copied to the CPU (where they are saved)."""
     return {
-        "vision": {k: v.detach().clone() for k, v in heads.vision.state_dict().items()},
-        "tactile": {k: v.detach().clone() for k, v in heads.tactile.state_dict().items()},
+        "vision": {k: v.detach().cpu().clone() for k, v in heads.vision.state_dict().items()},
+        "tactile": {k: v.detach().cpu().clone() for k, v in heads.tactile.state_dict().items()},
     }
 
 
@@ -147,7 +148,7 @@ def _evaluate(
         zs_v.append(z_v)
         zs_t.append(z_t)
     heads.train()
-    metrics = paired_retrieval(torch.cat(zs_v).numpy(), torch.cat(zs_t).numpy())
+    metrics = paired_retrieval(torch.cat(zs_v).cpu().numpy(), torch.cat(zs_t).cpu().numpy())
     top1 = 0.5 * (metrics["top1_v2t"] + metrics["top1_t2v"])
     return loss_sum / val_idx.size, top1
 
@@ -162,6 +163,7 @@ def fit_heads(
     seed: int,
     settings: AlignSettings,
     progress: Callable[[str], Any] | None = None,
+    device: torch.device | str = "cpu",
 ) -> AlignResult:
     """Train the two projection heads with symmetric InfoNCE (paper eq. 1).
 
@@ -183,6 +185,10 @@ def fit_heads(
     Initialisation (torch.manual_seed(seed) in a forked RNG, so global RNG state is untouched)
     and shuffling (numpy Generator(seed)) are seeded: on CPU, the same inputs, seed and
     thread count give bit-identical weights.
+
+    device: where the heads train (`tacgen_lib.runtime.device`): initialised on the CPU, then
+    moved with the features; the weights come back on the CPU. On a GPU the result agrees
+    with the CPU's within float tolerance, not bit for bit.
     """
     started = time.perf_counter()
     s = settings
@@ -231,6 +237,10 @@ def fit_heads(
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)
         heads = AlignHeads(v_t.shape[1], t_t.shape[1])
+    # on the CPU no move at all: the same tensors, the same bytes
+    dev = torch.device(device)
+    heads.to(dev)
+    v_t, t_t = v_t.to(dev), t_t.to(dev)
     heads.train()
     opt = make_optimizer(heads, lr=lr, weight_decay=weight_decay)
     rng = np.random.default_rng(seed)

@@ -14,6 +14,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+import torch
 from torch import nn
 
 from tacgen_lib.features.dino import pretrain_dino
@@ -41,12 +42,14 @@ def make_backbone(
     mae: MaeSettings,
     frames: Callable[[], np.ndarray],
     progress: Callable[[str], None] | None = None,
+    device: torch.device | str = "cpu",
 ) -> tuple[nn.Module, list[dict[str, float]], str]:
     """The frozen backbone of `spec` (eval mode), its pretraining curve (one dict per epoch;
     empty without pretraining) and a sentence saying how it was made.
 
     `frames()` returns the uint8 train frames (N, H, W, 3) to pretrain on; it is called only
     when pretraining runs. The random init's seed is `dino.seed` (as today's random ViT).
+    `device`: where pretraining runs (the backbone returned is on the CPU).
     """
     say = progress or (lambda _m: None)
     if spec.checkpoint:
@@ -69,11 +72,15 @@ def make_backbone(
     if spec.objective == "mae":
         images = frames()
         say(f"MAE pretraining of {spec.arch} on {len(images)} train frames")
-        mae_result = pretrain_mae(images, mae, arch=spec.arch, image_size=image_size, progress=say)
+        mae_result = pretrain_mae(
+            images, mae, arch=spec.arch, image_size=image_size, progress=say, device=device
+        )
         return mae_result.backbone(), mae_result.curve, f"MAE-pretrained {spec.arch}"
     images = frames()
     say(f"DINO pretraining of {spec.arch} on {len(images)} train frames")
-    result = pretrain_dino(images, dino, arch=spec.arch, image_size=image_size, progress=say)
+    result = pretrain_dino(
+        images, dino, arch=spec.arch, image_size=image_size, progress=say, device=device
+    )
     # wall-clock seconds stay in the log and the benchmark file: the edge must be reproducible
     curve = [{k: v for k, v in row.items() if k != "seconds"} for row in result.curve]
     return result.backbone(), curve, f"DINO-pretrained {spec.arch}"

@@ -133,10 +133,11 @@ def _cosine(start: float, end: float, n: int) -> np.ndarray:
 
 
 @contextlib.contextmanager
-def deterministic_algorithms() -> Iterator[None]:
+def deterministic_algorithms(warn_only: bool = False) -> Iterator[None]:
     """torch's deterministic-algorithms mode inside the block, the previous mode (and its
     warn-only setting) restored after; uninitialised memory is not NaN-filled inside (no op of
-    pretraining reads it, and filling every `torch.empty` costs ~15% of a step).
+    pretraining reads it, and filling every `torch.empty` costs ~15% of a step). `warn_only`
+    (a GPU run): an op without a deterministic kernel warns instead of stopping.
 
     It sets the eager flag `torch.use_deterministic_algorithms` sets
     (`torch._C._set_deterministic_algorithms`) and not the function's other effect, the
@@ -148,7 +149,7 @@ def deterministic_algorithms() -> Iterator[None]:
     before = torch.are_deterministic_algorithms_enabled()
     warn_only_before = torch.is_deterministic_algorithms_warn_only_enabled()
     fill_before = torch.utils.deterministic.fill_uninitialized_memory
-    torch._C._set_deterministic_algorithms(True)
+    torch._C._set_deterministic_algorithms(True, warn_only=warn_only)
     torch.utils.deterministic.fill_uninitialized_memory = False
     try:
         yield
@@ -164,8 +165,14 @@ def pretrain_dino(
     arch: str,
     image_size: int,
     progress: Callable[[str], None] | None = None,
+    device: torch.device | str = "cpu",
 ) -> PretrainResult:
     """Pretrain a backbone of `arch` on uint8 frames (N, H, W, 3) with DINO; see module doc.
+
+    device: where student and teacher train (`tacgen_lib.runtime.device`). They are built, the
+    frames resized and every crop drawn on the CPU, then moved (on the CPU no move); the
+    backbone's state comes back on the CPU. On a GPU, an op without a deterministic kernel
+    warns instead of stopping.
 
     settings: every term of the recipe (`DinoSettings`, from config ``features.pretrain``);
     the names below are its fields.
@@ -237,7 +244,8 @@ def pretrain_dino(
         )
     say = progress or (lambda _msg: None)
 
-    with deterministic_algorithms():
+    dev = torch.device(device)
+    with deterministic_algorithms(warn_only=dev.type != "cpu"):
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(seed)
             backbone = build_vit(arch, img_size=image_size)
@@ -246,6 +254,8 @@ def pretrain_dino(
         teacher = copy.deepcopy(student)
         for p in teacher.parameters():
             p.requires_grad_(False)
+        student.to(dev)
+        teacher.to(dev)
 
         # resized once, in chunks, so large raw frames never sit in memory as float32
         data = torch.cat(
@@ -300,6 +310,7 @@ def pretrain_dino(
                     n_local=n_local_crops,
                     jitter=jitter,
                 )
+                views = [v.to(dev) for v in views]
                 b = idx.shape[0]
                 t_temp = float(tt_sched[step])
                 with torch.no_grad():
@@ -368,5 +379,5 @@ def pretrain_dino(
                 f"cos(teacher CLS) {row['teacher_cls_cosine']:.3f} ({row['seconds']:.1f}s)"
             )
 
-    state = {k: v.detach().clone() for k, v in teacher.backbone.state_dict().items()}
+    state = {k: v.detach().cpu().clone() for k, v in teacher.backbone.state_dict().items()}
     return PretrainResult(arch=arch, image_size=image_size, backbone_state=state, curve=curve)

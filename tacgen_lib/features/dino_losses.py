@@ -46,8 +46,9 @@ def dino_cross_entropy(
         raise ValueError(f"dino_loss: student temperature must be > 0, got {student_temp}")
     n_s, b, _ = student_out.shape
     n_t = teacher_probs.shape[0]
-    pair_mask = torch.ones(n_t, n_s, dtype=torch.bool)
-    pair_mask[torch.arange(n_t), torch.arange(n_t)] = False
+    pair_mask = torch.ones(n_t, n_s, dtype=torch.bool, device=student_out.device)
+    diagonal = torch.arange(n_t, device=student_out.device)
+    pair_mask[diagonal, diagonal] = False
     log_p_s = F.log_softmax(student_out / student_temp, dim=-1)
     # cross-entropy for every (teacher crop, student crop) pair, averaged over the batch
     ce = -torch.einsum("tbk,sbk->ts", teacher_probs, log_p_s) / b

@@ -65,6 +65,7 @@ def extract_features(
     image_size: int,
     batch_size: int = 64,
     pool: Literal["cls", "mean_patch"] = "cls",
+    device: torch.device | str = "cpu",
 ) -> np.ndarray:
     """Frozen backbone features, one float32 row per frame: (N, embed_dim).
 
@@ -75,6 +76,9 @@ def extract_features(
     normalised patch tokens (x_norm_patchtokens). Runs under torch.inference_mode with the model
     in eval mode (its training flag is restored afterwards). Deterministic: the same weights,
     images and batch_size give identical bytes on the same machine/torch build.
+
+    device: where the backbone runs (`tacgen_lib.runtime.device`; it is moved there and back).
+    Frames are resized and normalised on the CPU either way, then moved: on the CPU no move.
     """
     _check_images(images, "extract_features")
     if pool not in ("cls", "mean_patch"):
@@ -88,21 +92,25 @@ def extract_features(
         raise ValueError(f"extract_features: batch_size must be >= 1, got {batch_size}")
     out = np.empty((images.shape[0], model.embed_dim), dtype=np.float32)
     was_training = model.training
+    home = next(model.parameters()).device
+    dev = torch.device(device)
+    model.to(dev)
     model.eval()
     try:
         with torch.inference_mode():
             for start in range(0, images.shape[0], batch_size):
                 x = imagenet_normalise(
                     to_unit_tensor(images[start : start + batch_size], image_size)
-                )
+                ).to(dev)
                 feats = model.forward_features(x)
                 if pool == "cls":
                     z = feats["x_norm_clstoken"]
                 else:
                     z = feats["x_norm_patchtokens"].mean(dim=1)
-                out[start : start + z.shape[0]] = z.float().numpy()
+                out[start : start + z.shape[0]] = z.float().cpu().numpy()
     finally:
         model.train(was_training)
+        model.to(home)
     return out
 
 

@@ -152,6 +152,7 @@ def pretrain_mae(
     arch: str,
     image_size: int,
     progress: Callable[[str], None] | None = None,
+    device: torch.device | str = "cpu",
 ) -> MaePretrainResult:
     """Pretrain a ViT of `arch` on uint8 frames (N, H, W, 3) with the MAE objective.
 
@@ -160,7 +161,9 @@ def pretrain_mae(
     as MAE; no decay on biases, norms and tokens), lr linear warm-up over `warmup_epochs`, then
     cosine to 0; the last incomplete batch of an epoch is dropped (batch capped at N). Seeded
     by `settings.seed` (weights, order, masks, flips); bit-identical reruns need the same
-    thread count.
+    thread count. `device`: where encoder and decoder train (`tacgen_lib.runtime.device`):
+    built, and every flip and mask drawn, on the CPU, then moved (on the CPU no move); the
+    encoder's state comes back on the CPU.
     """
     s = settings
     if images.ndim != 4 or images.shape[3] != 3 or images.dtype != np.uint8:
@@ -183,6 +186,9 @@ def pretrain_mae(
     data = imagenet_normalise(
         torch.cat([to_unit_tensor(images[i : i + 256], image_size) for i in range(0, n, 256)])
     )
+    dev = torch.device(device)
+    vit.to(dev)
+    decoder.to(dev)
     params = [
         *vit.named_parameters(),
         *(("decoder." + k, p) for k, p in decoder.named_parameters()),
@@ -221,9 +227,11 @@ def pretrain_mae(
             x = data[idx]
             # 1. a horizontal flip for half of the frames (the only augmentation)
             flip = torch.rand(x.shape[0], generator=gen) < 0.5
-            x = torch.where(flip.view(-1, 1, 1, 1), x.flip(-1), x)
+            x = torch.where(flip.view(-1, 1, 1, 1), x.flip(-1), x).to(dev)
             # 2. hide mask_ratio of the patches of each frame; encode the CLS and the rest
-            keep, mask, restore = random_masking(x.shape[0], grid * grid, s.mask_ratio, gen)
+            keep, mask, restore = (
+                a.to(dev) for a in random_masking(x.shape[0], grid * grid, s.mask_ratio, gen)
+            )
             latent = encode_visible(vit, x, keep)
             # 3. decode every patch; MSE on the hidden ones (normalised pixels)
             pred = decoder(latent, restore)
@@ -240,7 +248,7 @@ def pretrain_mae(
         row = {"epoch": epoch, "loss": float(np.mean(losses)), "lr": float(lr_sched[step - 1])}
         curve.append(row)
         say(f"MAE epoch {epoch + 1}/{s.epochs}: masked-patch loss {row['loss']:.4f}")
-    state = {k: v.detach().clone().contiguous() for k, v in vit.state_dict().items()}
+    state = {k: v.detach().cpu().clone().contiguous() for k, v in vit.state_dict().items()}
     return MaePretrainResult(arch=arch, image_size=image_size, backbone_state=state, curve=curve)
 
 

@@ -83,7 +83,9 @@ class Denoiser(nn.Module):
     def forward(self, x_t: Tensor, t: Tensor, cond: Tensor, drop: Tensor | None = None) -> Tensor:
         """x_t (B, d_t), t (B,) integer steps, cond (B, d_v); drop (B,) bool -> null condition."""
         cond = self.condition(cond, drop)
-        emb = self.time(sinusoidal_embedding(t, self.time_dim).to(x_t.dtype)) + self.cond(cond)
+        # the embedding is formed on the CPU (numpy); on the CPU `.to` is no move, no copy
+        time = sinusoidal_embedding(t, self.time_dim).to(device=x_t.device, dtype=x_t.dtype)
+        emb = self.time(time) + self.cond(cond)
         h = self.inp(x_t)
         for block in self.blocks:
             h = block(h, emb)

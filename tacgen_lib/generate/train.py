@@ -131,10 +131,13 @@ def run_training_steps(
     ``eval_every`` steps and at the last: `val_loss` of the EMA model, one row appended to
     `curve` (step, mean train loss since the last row, val loss), and `stopper` told the val
     loss (the train loss where there are no val rows); training ends when it says so.
-    `schedule`: (sqrt(abar_t), sqrt(1 - abar_t)) over the T steps.
+    `schedule`: (sqrt(abar_t), sqrt(1 - abar_t)) over the T steps. The draws come from `gen`
+    on the CPU and move to the device of the train tensors (on the CPU: no move), so a GPU
+    run draws the same numbers.
     """
     x_tr, c_tr = train
     sqrt_abar, sqrt_1m = schedule
+    dev = x_tr.device
     n, T = x_tr.shape[0], sqrt_abar.shape[0]
     bs = min(settings.batch_size, n)
     ema_params = list(ema.parameters())
@@ -146,6 +149,7 @@ def run_training_steps(
         t = torch.randint(0, T, (bs,), generator=gen)
         noise = torch.randn(bs, x_tr.shape[1], generator=gen)
         drop = torch.rand(bs, generator=gen) < settings.p_uncond
+        t, noise, drop = t.to(dev), noise.to(dev), drop.to(dev)
         loss = training_step(
             model,
             opt,
@@ -197,12 +201,15 @@ def fit_generator(
     *,
     seed: int,
     progress: Callable[[str], Any] | None = None,
+    device: torch.device | str = "cpu",
 ) -> GeneratorFit:
     """Train the eps- (or v-) prediction denoiser on train pairs, early-stopped on val pairs.
 
     t_*: real tactile features (n, d_t), v_*: vision features (n, d_v), row i a pair. The
     tactile features are standardised with the train rows' statistics (`fit_standardiser`).
-    Returns the EMA weights of the evaluation with the lowest validation loss.
+    Returns the EMA weights of the evaluation with the lowest validation loss (on the CPU).
+    device: where it trains (`tacgen_lib.runtime.device`); the weights are initialised and
+    every random draw made on the CPU, so only the arithmetic moves (none on the CPU).
     """
     say = progress or (lambda _m: None)
     if len(t_train) != len(v_train) or len(t_val) != len(v_val):
@@ -225,14 +232,19 @@ def fit_generator(
     )
     ema = copy.deepcopy(model)
     ema.requires_grad_(False)
+    dev = torch.device(device)  # on the CPU every `.to` below is no move
+    model.to(dev)
+    ema.to(dev)
+    x_tr, c_tr, x_va, c_va = (a.to(dev) for a in (x_tr, c_tr, x_va, c_va))
+    sqrt_abar, sqrt_1m = sqrt_abar.to(dev), sqrt_1m.to(dev)
     params = list(model.parameters())
     opt = make_optimiser(params, settings)
     gen = torch.Generator().manual_seed(int(seed))
     # Fixed validation draws: every evaluation scores the same (t, noise) for each val row.
     vgen = torch.Generator().manual_seed(int(seed) + 1)
     n_va = x_va.shape[0]
-    val_t = torch.randint(0, T, (_VAL_REPEATS, n_va), generator=vgen)
-    val_noise = torch.randn(_VAL_REPEATS, n_va, x_tr.shape[1], generator=vgen)
+    val_t = torch.randint(0, T, (_VAL_REPEATS, n_va), generator=vgen).to(dev)
+    val_noise = torch.randn(_VAL_REPEATS, n_va, x_tr.shape[1], generator=vgen).to(dev)
 
     def val_loss() -> float:
         if n_va == 0:
@@ -272,6 +284,7 @@ def fit_generator(
     )
     ema.load_state_dict(stopper.state)
     ema.eval()
+    ema.to("cpu")
     return GeneratorFit(
         std,
         settings,

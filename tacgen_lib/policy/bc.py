@@ -84,11 +84,12 @@ class BCPolicy:
     y_sd: float
 
     def grip_force(self, x: np.ndarray) -> np.ndarray:
-        """Grip force (N per pad) for feature rows x."""
-        z = torch.from_numpy(((x - self.mean) / self.sd).astype(np.float32))
+        """Grip force (N per pad) for feature rows x, computed where the network is."""
+        dev = next(self.net.parameters()).device
+        z = torch.from_numpy(((x - self.mean) / self.sd).astype(np.float32)).to(dev)
         self.net.eval()
         with torch.no_grad():
-            y = self.net(z).numpy()[:, 0].astype(np.float64)
+            y = self.net(z).cpu().numpy()[:, 0].astype(np.float64)
         return np.exp(y * self.y_sd + self.y_mean)
 
 
@@ -103,9 +104,13 @@ def fit_bc(
     weight_decay: float,
     batch_size: int,
     seed: int,
+    device: torch.device | str = "cpu",
 ) -> tuple[BCPolicy, list[float]]:
-    """Fit the MLP (AdamW, MSE on standardised log force); returns the policy and the per-epoch
-    training loss. Bit-for-bit reproducible for the same inputs, seed and thread count."""
+    """Fit the MLP (AdamW, MSE on standardised log force); returns the policy (on the CPU)
+    and the per-epoch training loss. Bit-for-bit reproducible for the same inputs, seed and
+    thread count on the CPU. `device`: where it trains (`tacgen_lib.runtime.device`); the
+    network is initialised and the batches shuffled on the CPU, so only the arithmetic moves
+    (none on the CPU)."""
     x = np.asarray(x, dtype=np.float64)
     y = np.log(np.asarray(force, dtype=np.float64))
     mean, sd = x.mean(0), x.std(0) + 1e-6
@@ -113,9 +118,11 @@ def fit_bc(
     torch.manual_seed(seed)
     gen = torch.Generator().manual_seed(seed)
     net = _mlp(x.shape[1], hidden, layers)
+    dev = torch.device(device)
+    net.to(dev)
     opt = AdamW(net.parameters(), lr=lr, weight_decay=weight_decay)
-    xt = torch.from_numpy(((x - mean) / sd).astype(np.float32))
-    yt = torch.from_numpy(((y - y_mean) / y_sd).astype(np.float32))[:, None]
+    xt = torch.from_numpy(((x - mean) / sd).astype(np.float32)).to(dev)
+    yt = torch.from_numpy(((y - y_mean) / y_sd).astype(np.float32))[:, None].to(dev)
     losses = []
     for _ in range(epochs):
         perm = torch.randperm(len(xt), generator=gen)
@@ -128,6 +135,7 @@ def fit_bc(
             opt.step()
             total += float(loss.detach()) * len(b)
         losses.append(total / len(xt))
+    net.to("cpu")
     return BCPolicy(net, mean, sd, y_mean, y_sd), losses
 
 

@@ -20,6 +20,7 @@ press gel: a different background and imprint scale), which the report states be
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -53,13 +54,17 @@ def palpation_features(
     image_size: int,
     batch_size: int,
     pool: str,
+    device: Any = "cpu",
 ) -> dict[str, np.ndarray]:
     """V (N, d_v), T raw (N, moments x d_t) and T aligned per heads key (N, moments x 128).
 
     rgb: (N, H, W, 3); frames: column 'tactile_<moment>_<pad>' -> (N, h, w, 3);
-    backgrounds: pad name -> (h, w, 3).
+    backgrounds: pad name -> (h, w, 3). `device` (a torch device or its name): where the
+    backbones and heads run (`extract_features`, `project`).
     """
-    v = extract_features(vision, rgb, image_size=image_size, batch_size=batch_size, pool=pool)
+    v = extract_features(
+        vision, rgb, image_size=image_size, batch_size=batch_size, pool=pool, device=device
+    )
     moments = tactile_moments(list(frames))
     raw, aligned = [], {k: [] for k in heads}
     for moment in moments:
@@ -71,13 +76,18 @@ def palpation_features(
             proc = np.stack([background_subtract(f, backgrounds[pad], variant) for f in imgs])
             per_pad.append(
                 extract_features(
-                    tactile, proc, image_size=image_size, batch_size=batch_size, pool=pool
+                    tactile,
+                    proc,
+                    image_size=image_size,
+                    batch_size=batch_size,
+                    pool=pool,
+                    device=device,
                 )
             )
         t = np.mean(per_pad, axis=0).astype(np.float32)
         raw.append(t)
         for key, h in heads.items():
-            aligned[key].append(project(h, v, t)[1])
+            aligned[key].append(project(h, v, t, device=device)[1])
     out = {"v": v, "t_raw": np.hstack(raw)}
     for key, parts in aligned.items():
         out[f"t_aligned~{key}"] = np.hstack(parts)

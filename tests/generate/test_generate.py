@@ -261,7 +261,7 @@ def test_sampling_modules_do_not_import_torch_or_pandas():
     start-up, paid by every sampling cell: torch ~1.2 s, pandas ~0.25 s)."""
     code = (
         "import sys; import tacgen_lib.generate.inference, tacgen_lib.generate.sampling, "
-        "tacgen_lib.io.edges, tacgen_lib.io.log, threadpoolctl; "
+        "tacgen_lib.io.edges, tacgen_lib.io.log, tacgen_lib.runtime.device, threadpoolctl; "
         "print('torch' in sys.modules, 'pandas' in sys.modules)"
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)

@@ -19,6 +19,7 @@ from tacgen_lib.generate.pixel.quality import reconstruction_row
 from tacgen_lib.generate.pixel.utility import REAL_LOWRES, arm_generator, evaluate_arms
 from tacgen_lib.io import edges, log
 from tacgen_lib.preprocess.frames import decode_frames
+from tacgen_lib.runtime.device import torch_device
 
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
@@ -59,6 +60,7 @@ real_lowres = extract_features(
     image_size=feat["image_size"],
     batch_size=feat["batch_size"],
     pool=feat["pool"],
+    device=torch_device(params.device),
 )
 arms = {REAL_LOWRES: dict(zip(ids, real_lowres, strict=True))}
 position = {sid: k for k, sid in enumerate(ids)}

@@ -11,6 +11,7 @@ from tacgen_lib.features.backbones import read_backbone
 from tacgen_lib.features.extract import extract_features, pixel_features
 from tacgen_lib.io import edges, log
 from tacgen_lib.preprocess.frames import decode_frames
+from tacgen_lib.runtime.device import torch_device
 
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
@@ -20,7 +21,12 @@ images = decode_frames(frames.frame, column, where=snakemake.input.frames)
 model = read_backbone(snakemake.input.weights)
 logger.info("%d frames %s -> %s features", len(images), images.shape[1:], cfg["pool"])
 vit = extract_features(
-    model, images, image_size=cfg["image_size"], batch_size=cfg["batch_size"], pool=cfg["pool"]
+    model,
+    images,
+    image_size=cfg["image_size"],
+    batch_size=cfg["batch_size"],
+    pool=cfg["pool"],
+    device=torch_device(snakemake.params.device),
 )
 pixel = pixel_features(images, size=tuple(cfg["pixel_size"]))
 edges.write(

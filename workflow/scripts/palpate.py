@@ -14,6 +14,7 @@ from tacgen_lib.policy.features import palpation_features
 from tacgen_lib.policy.palpation import PAD_NAMES, frame_names, pad_background
 from tacgen_lib.policy.settings import PolicySettings
 from tacgen_lib.preprocess.frames import decode_frames
+from tacgen_lib.runtime.device import torch_device
 
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
@@ -47,6 +48,7 @@ out = palpation_features(
     image_size=feat["image_size"],
     batch_size=feat["batch_size"],
     pool=feat["pool"],
+    device=torch_device(snakemake.params.device),
 )
 labels = episodes[
     [

@@ -20,11 +20,13 @@ from tacgen_lib.corpus.splits import assert_trainable
 from tacgen_lib.generate.baselines import target_specs
 from tacgen_lib.generate.pixel.curve import PAIRINGS, curve_point
 from tacgen_lib.io import edges, log
+from tacgen_lib.runtime.device import torch_device
 
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
 w, params = snakemake.wildcards, snakemake.params
 settings = AlignSettings.from_config(params.align)
+device = torch_device(params.device)
 fraction, seed = float(w.fraction), int(w.seed)
 splits = edges.read(snakemake.input.splits).frame
 head_ids = align_grid.cell_ids(splits, corpus=w.corpus, n_train="all", seed=seed)
@@ -61,8 +63,10 @@ with threadpool_limits(snakemake.threads):
             t_real=t_real,
             t_gen=t_gen,
             head_ids=head_ids,
-            fit_heads=partial(fit_heads, tau=float(params.tau), seed=seed, settings=settings),
-            project=project,
+            fit_heads=partial(
+                fit_heads, tau=float(params.tau), seed=seed, settings=settings, device=device
+            ),
+            project=partial(project, device=device),
         )
         for r in part.itertuples():
             logger.info(

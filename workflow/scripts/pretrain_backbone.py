@@ -18,12 +18,14 @@ from tacgen_lib.features.settings import DinoSettings, MaeSettings
 from tacgen_lib.features.vit import save_backbone
 from tacgen_lib.io import edges, hashed, log
 from tacgen_lib.preprocess.frames import decode_frames
+from tacgen_lib.runtime.device import torch_device
 
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
 modality = snakemake.wildcards.modality
 pretrain = snakemake.params.pretrain
 spec = BackboneSpec.from_config(snakemake.params.backbone)
+device = torch_device(snakemake.params.device)
 column = "rgb" if modality == "vision" else "tactile_proc"
 
 
@@ -43,6 +45,7 @@ model, curve_rows, how = make_backbone(
     mae=MaeSettings.from_config(snakemake.params.mae),
     frames=train_frames,
     progress=logger.info,
+    device=device,
 )
 logger.info("%s backbone: %s", modality, how)
 curve = (
@@ -70,6 +73,7 @@ for src, dest in zip(
         image_size=snakemake.params.image_size,
         batch_size=snakemake.params.batch_size,
         pool=snakemake.params.pool,
+        device=device,
     )
     edges.write(dest, frames.frame[["sample_id"]], {"vit": feats}, producer=snakemake.rule)
     logger.info("%s: %d frames -> features[%d]", dest, len(feats), feats.shape[1])

@@ -14,6 +14,7 @@ from tacgen_lib.io import edges, log
 from tacgen_lib.preprocess.frames import decode_frames
 from tacgen_lib.report.tables import pretrained_vs_random_view
 from tacgen_lib.report.write import write_table
+from tacgen_lib.runtime.device import torch_device
 
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
@@ -38,6 +39,7 @@ for modality, column in (("vision", "rgb"), ("tactile", "tactile_proc")):
         image_size=cfg["image_size"],
         batch_size=cfg["batch_size"],
         pool=cfg["pool"],
+        device=torch_device(snakemake.params.device),
     )
     with threadpool_limits(snakemake.threads):
         res = pretrained_vs_random(

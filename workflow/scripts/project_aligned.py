@@ -11,6 +11,7 @@ from tacgen_lib.align import checkpoint as align_checkpoint
 from tacgen_lib.align import heads as align_heads
 from tacgen_lib.align.settings import AlignSettings
 from tacgen_lib.io import edges, log
+from tacgen_lib.runtime.device import torch_device
 
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
@@ -29,7 +30,10 @@ if set(ids) != set(tactile.ids):
     )
 try:
     v_aligned, t_aligned = align_heads.project(
-        model, vision.subset(ids).vectors[feature], tactile.subset(ids).vectors[feature]
+        model,
+        vision.subset(ids).vectors[feature],
+        tactile.subset(ids).vectors[feature],
+        device=torch_device(snakemake.params.device),
     )
 except ValueError as exc:
     raise ValueError(

@@ -11,6 +11,7 @@ from tacgen_lib.io import edges, log
 from tacgen_lib.io.config import load_yaml
 from tacgen_lib.policy import bc, data, rollouts
 from tacgen_lib.policy.settings import PolicySettings
+from tacgen_lib.runtime.device import torch_device
 
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
@@ -22,6 +23,8 @@ episodes = pd.concat(
 ).sort_values("episode_id", ignore_index=True)
 edge = edges.read(snakemake.input.palpation)
 policy = bc.load_bc(snakemake.input.weights[0]) if snakemake.input.weights else None
+if policy is not None:
+    policy.net.to(torch_device(snakemake.params.device))  # grip forces computed where it is
 forces = rollouts.grip_forces(w.condition, edge, policy, settings)
 idx = data.shard_indices(len(episodes), settings.rollout_shards, shard)
 scene = load_yaml(snakemake.input.scenes)["grasp_lift"]

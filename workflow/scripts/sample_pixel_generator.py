@@ -24,6 +24,7 @@ from tacgen_lib.generate.pixel.utility import arm_generator
 from tacgen_lib.generate.pixel.weights import load_pixel_generator
 from tacgen_lib.io import edges, log
 from tacgen_lib.io.images import encode_png
+from tacgen_lib.runtime.device import torch_device
 
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
@@ -43,6 +44,8 @@ rgb_u8, tac_u8 = paired_frames(
 )
 rgb = rgb_units(rgb_u8)
 fit = load_pixel_generator(snakemake.input.weights)
+device = torch_device(snakemake.params.device)
+fit.model.to(device)  # the sampler runs where the model is
 logger.info("%s: generating %d frames at %s with %s", w.corpus, len(ids), size, w.arm)
 if generator == "pix2pix":
     from tacgen_lib.generate.pixel.pix2pix import translate
@@ -88,6 +91,7 @@ def vit(images):
         image_size=feat["image_size"],
         batch_size=feat["batch_size"],
         pool=feat["pool"],
+        device=device,
     )
 
 

@@ -12,6 +12,7 @@ from tacgen_lib.corpus.splits import assert_trainable, ids_in_split
 from tacgen_lib.generate.settings import GenerateSettings
 from tacgen_lib.generate.train import fit_generator, save_generator
 from tacgen_lib.io import edges, log
+from tacgen_lib.runtime.device import torch_device
 
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
@@ -50,7 +51,16 @@ logger.info(
     settings.train_steps,
 )
 with threadpool_limits(snakemake.threads):
-    fit = fit_generator(t_tr, v_tr, t_va, v_va, settings, seed=seed, progress=logger.info)
+    fit = fit_generator(
+        t_tr,
+        v_tr,
+        t_va,
+        v_va,
+        settings,
+        seed=seed,
+        progress=logger.info,
+        device=torch_device(snakemake.params.device),
+    )
 save_generator(fit, snakemake.output.weights, producer=snakemake.rule)
 curve = pd.DataFrame(fit.curve)
 curve.insert(0, "eval", [f"step~{s}" for s in curve["step"]])

@@ -13,6 +13,7 @@ from tacgen_lib.align import grid as align_grid
 from tacgen_lib.align.cells import cell_name
 from tacgen_lib.align.settings import AlignSettings
 from tacgen_lib.io import edges, log
+from tacgen_lib.runtime.device import torch_device
 
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
@@ -46,6 +47,7 @@ with threadpool_limits(snakemake.threads):
         settings=settings,
         rule=snakemake.rule,
         progress=logger.info,
+        device=torch_device(snakemake.params.device),
     )
 cell = cell_name(w.corpus, w.variant, seed, w.tau, w.n_train)
 row = {

@@ -12,6 +12,7 @@ from tacgen_lib.generate.pixel.frames import paired_frames, rgb_units, tactile_u
 from tacgen_lib.generate.pixel.settings import Pix2PixSettings, PixelDDPMSettings
 from tacgen_lib.generate.pixel.weights import save_pixel_generator
 from tacgen_lib.io import edges, log
+from tacgen_lib.runtime.device import torch_device
 
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
@@ -59,6 +60,7 @@ if w.generator == "pix2pix":
         Pix2PixSettings.from_config(cfg["pix2pix"]),
         seed=int(w.seed),
         progress=logger.info,
+        device=torch_device(snakemake.params.device),
     )
 else:
     from tacgen_lib.generate.pixel.ddpm import fit_pixel_ddpm
@@ -71,6 +73,7 @@ else:
         PixelDDPMSettings.from_config(cfg["ddpm"]),
         seed=int(w.seed),
         progress=logger.info,
+        device=torch_device(snakemake.params.device),
     )
 save_pixel_generator(fit, snakemake.output.weights, kind=w.generator, producer=snakemake.rule)
 curve = fit.curve.assign(eval=[f"step~{int(s)}" for s in fit.curve["step"]])

@@ -10,6 +10,7 @@ import torch
 from tacgen_lib.io import edges, hashed, log
 from tacgen_lib.policy import bc, data
 from tacgen_lib.policy.settings import PolicySettings
+from tacgen_lib.runtime.device import torch_device
 
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
@@ -36,6 +37,7 @@ policy, losses = bc.fit_bc(
     weight_decay=settings.weight_decay,
     batch_size=settings.batch_size,
     seed=seed,
+    device=torch_device(snakemake.params.device),
 )
 logger.info(
     "%s: %d demos, %d features, loss %.4f -> %.4f",

@@ -106,7 +106,8 @@ def unet_output(
     given RGB frames (B, 3, H, W); rows with ``drop`` True see zeros instead of their RGB
     frame (the unconditional model of classifier-free guidance)."""
     if drop is not None:
-        rgb = torch.where(drop.view(-1, 1, 1, 1), torch.zeros((), dtype=rgb.dtype), rgb)
+        zero = torch.zeros((), dtype=rgb.dtype, device=rgb.device)
+        rgb = torch.where(drop.view(-1, 1, 1, 1), zero, rgb)
     return unet(torch.cat([x_t, rgb], dim=1), t, return_dict=False)[0]
 
 
@@ -176,6 +177,7 @@ def fit_pixel_ddpm(
     settings: PixelDDPMSettings,
     seed: int,
     progress: Callable[[str], Any] | None = None,
+    device: torch.device | str = "cpu",
 ) -> PixelDDPMFit:
     """Train the eps- (or v-) prediction U-Net on train pairs, early-stopped on val pairs.
 
@@ -185,6 +187,10 @@ def fit_pixel_ddpm(
     its v-target), fused AdamW, then the EMA. Every ``eval_every`` steps (and at the last)
     the EMA model's loss on the val pairs at fixed (t, noise) draws; the best EMA weights are
     kept, and training stops after ``patience`` evaluations without improvement (0: never).
+
+    device: where it trains (`tacgen_lib.runtime.device`): the U-Net initialised and every
+    random draw made on the CPU, then moved (on the CPU no move); the EMA U-Net comes back on
+    the CPU.
     """
     say = progress or (lambda _m: None)
     divisor = 2 ** (len(settings.channels) - 1)
@@ -204,6 +210,11 @@ def fit_pixel_ddpm(
         unet = make_unet(settings, size)
     ema = copy.deepcopy(unet)
     ema.requires_grad_(False)
+    dev = torch.device(device)  # on the CPU every `.to` below is no move
+    unet.to(dev)
+    ema.to(dev)
+    x_tr, c_tr, x_va, c_va = (a.to(dev) for a in (x_tr, c_tr, x_va, c_va))
+    sqrt_abar, sqrt_1m = sqrt_abar.to(dev), sqrt_1m.to(dev)
     model, ema_rows = RowDenoiser(unet, size), RowDenoiser(ema, size)
     params = list(unet.parameters())
     opt = make_optimiser(params, settings)
@@ -211,8 +222,8 @@ def fit_pixel_ddpm(
     # Fixed validation draws: every evaluation scores the same (t, noise) for each val row.
     vgen = torch.Generator().manual_seed(int(seed) + 1)
     n_va = x_va.shape[0]
-    val_t = torch.randint(0, T, (_VAL_REPEATS, n_va), generator=vgen)
-    val_noise = torch.randn(_VAL_REPEATS, n_va, d, generator=vgen)
+    val_t = torch.randint(0, T, (_VAL_REPEATS, n_va), generator=vgen).to(dev)
+    val_noise = torch.randn(_VAL_REPEATS, n_va, d, generator=vgen).to(dev)
 
     def val_loss() -> float:
         if n_va == 0:
@@ -255,6 +266,7 @@ def fit_pixel_ddpm(
     )
     ema.load_state_dict(stopper.state)
     ema.eval()
+    ema.to("cpu")
     return PixelDDPMFit(
         model=ema,
         settings=settings,
@@ -276,22 +288,28 @@ def guided_unet_output(
 
     Only the passes `cells.guidance_passes` names run: the conditional pass alone at w = 1
     (exactly out_c), the unconditional alone at w = 0 (exactly out_u), else both in one batch
-    of 2B. x_t, rgb: (B, 3, H, W) float32; returns float32 (B, 3, H, W).
+    of 2B. x_t, rgb: (B, 3, H, W) float32; returns float32 (B, 3, H, W). Runs on the U-Net's
+    device (on the CPU no move).
     """
     passes = guidance_passes(guidance)
     b = x_t.shape[0]
     k = len(passes)
-    x = torch.from_numpy(np.ascontiguousarray(x_t, dtype=np.float32))
-    c = torch.from_numpy(np.ascontiguousarray(rgb, dtype=np.float32))
-    drop = torch.tensor(passes, dtype=torch.bool).repeat_interleave(b)
+    dev = next(unet.parameters()).device
+    x = torch.from_numpy(np.ascontiguousarray(x_t, dtype=np.float32)).to(dev)
+    c = torch.from_numpy(np.ascontiguousarray(rgb, dtype=np.float32)).to(dev)
+    drop = torch.tensor(passes, dtype=torch.bool).repeat_interleave(b).to(dev)
     with torch.inference_mode():
-        out = unet_output(
-            unet,
-            torch.cat([x] * k) if k > 1 else x,
-            torch.full((k * b,), int(t), dtype=torch.long),
-            torch.cat([c] * k) if k > 1 else c,
-            drop,
-        ).numpy()
+        out = (
+            unet_output(
+                unet,
+                torch.cat([x] * k) if k > 1 else x,
+                torch.full((k * b,), int(t), dtype=torch.long).to(dev),
+                torch.cat([c] * k) if k > 1 else c,
+                drop,
+            )
+            .cpu()
+            .numpy()
+        )
     if k == 1:
         return out
     out_c, out_u = out[:b], out[b:]

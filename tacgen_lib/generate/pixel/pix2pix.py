@@ -181,14 +181,18 @@ def translate(model: UNetTranslator, rgb: np.ndarray, batch: int = 256) -> np.nd
 
     G runs in eval mode (dropout off, BatchNorm on running statistics), so the result is
     deterministic: one tactile frame per RGB frame (the paper kept dropout on as noise). The
-    model's train/eval mode is restored afterwards.
+    model's train/eval mode is restored afterwards. It runs on the model's device (the frames
+    move there in batches; on the CPU no move).
     """
     x = frames_tensor(rgb, "rgb", divisor=2 ** len(model.channels))
+    dev = next(model.parameters()).device
     was_training = model.training
     model.eval()
     try:
         with torch.inference_mode():
-            out = [model(x[s : s + batch]).numpy() for s in range(0, x.shape[0], batch)]
+            out = [
+                model(x[s : s + batch].to(dev)).cpu().numpy() for s in range(0, x.shape[0], batch)
+            ]
     finally:
         model.train(was_training)
     if not out:
@@ -272,6 +276,7 @@ def fit_pix2pix(
     settings: Pix2PixSettings,
     seed: int,
     progress: Callable[[str], Any] | None = None,
+    device: torch.device | str = "cpu",
 ) -> Pix2PixFit:
     """Train G and D on train pairs (paper eq. 4), keep the G with the lowest val L1.
 
@@ -280,6 +285,10 @@ def fit_pix2pix(
     (and at the last) the mean absolute error of `translate` on the val pairs; the best G is
     kept (a deep copy of its state), and training stops after ``patience`` evaluations
     without improvement (0: never).
+
+    device: where G and D train (`tacgen_lib.runtime.device`): initialised and the batches
+    drawn on the CPU, then moved (on the CPU no move); G comes back on the CPU. On a GPU the
+    dropout masks come from the GPU's generator (seeded with `seed` too).
     """
     say = progress or (lambda _m: None)
     levels = len(settings.channels)
@@ -308,6 +317,10 @@ def fit_pix2pix(
             UNetTranslator(settings.channels, settings.dropout),
             PatchDiscriminator(settings.disc_channels),
         )
+        dev = torch.device(device)
+        g.to(dev)
+        d.to(dev)
+        x_tr, y_tr = x_tr.to(dev), y_tr.to(dev)
         opt_g, opt_d = make_pix2pix_optimisers(g, d, settings)
         gen = torch.Generator().manual_seed(int(seed))
         n, bs = x_tr.shape[0], min(settings.batch_size, x_tr.shape[0])
@@ -340,6 +353,7 @@ def fit_pix2pix(
                     break
     g.load_state_dict(stopper.state)
     g.eval()
+    g.to("cpu")
     return Pix2PixFit(
         model=g,
         settings=settings,
