@@ -139,14 +139,23 @@ def test_the_pin_is_read_from_constraints():
     assert torch_build.torch_pin() == "2.13.0"
 
 
-def test_every_conda_env_names_the_cpu_build_and_can_name_the_gpu_one():
-    """envs/*.yaml follow the same choice: conda-forge's pytorch-cpu by default, pytorch-gpu
-    after `tools/torch_build.py envs cuda` (and back)."""
+def test_every_conda_env_names_one_build_and_can_name_either():
+    """envs/*.yaml follow setup's choice: all name the same build (conda-forge's pytorch-cpu,
+    or pytorch-gpu after `TORCH=cuda` setup), and `conda_env_text` moves each between the two
+    and back without touching anything else."""
     envs = sorted((ROOT / "envs").glob("*.yaml"))
     assert envs
+    builds = set()
     for path in envs:
         text = path.read_text()
-        assert torch_build.conda_env_text(text, "cpu") == text, path.name
+        named = [b for b, pkg in torch_build.CONDA_PACKAGES.items() if f"  - {pkg}=" in text]
+        assert len(named) == 1, path.name
+        builds.add(named[0])
+        assert torch_build.conda_env_text(text, named[0]) == text, path.name
+        cpu = torch_build.conda_env_text(text, "cpu")
         gpu = torch_build.conda_env_text(text, "cuda")
         assert "  - pytorch-gpu=2.*" in gpu and "pytorch-cpu" not in gpu, path.name
-        assert torch_build.conda_env_text(gpu, "cpu") == text, path.name
+        assert "  - pytorch-cpu=2.*" in cpu and "pytorch-gpu" not in cpu, path.name
+        assert torch_build.conda_env_text(gpu, "cpu") == cpu, path.name
+        assert len(gpu.splitlines()) == len(text.splitlines()), path.name
+    assert len(builds) == 1, f"envs/*.yaml name different torch builds: {builds}"
