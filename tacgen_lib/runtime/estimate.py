@@ -25,7 +25,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -46,13 +46,22 @@ from tacgen_lib.runtime.calibration import (
     run_calibration,
 )
 from tacgen_lib.runtime.dag import DagJob, dag_jobs
-from tacgen_lib.runtime.schedule import Machine, Task, list_schedule, local_machine, slurm_machine
+from tacgen_lib.runtime.schedule import (
+    Machine,
+    Task,
+    critical_chain,
+    list_schedule,
+    local_machine,
+    longest_first_makespan,
+    slurm_machine,
+)
 from tacgen_lib.runtime.units import UNITS, MissingUnitsError, flop_seconds, job_units
 
 __all__ = [
     "Estimate",
     "RULE_COLUMNS",
     "job_seconds",
+    "job_prediction",
     "workflow_overhead",
     "estimate_run",
     "choose_calibration",
@@ -84,33 +93,82 @@ class Estimate:
     overhead: float
     machine: str
     source: str
+    critical: tuple[tuple[str, float], ...] = ()
+
+    @property
+    def critical_seconds(self) -> float:
+        """Length of the DAG's longest chain of dependent jobs (no core count shortens it)."""
+        return sum(s for _, s in self.critical)
 
     @property
     def total(self) -> float:
         return self.makespan + self.overhead
 
 
+def job_prediction(
+    rule: str,
+    config: Mapping[str, Any],
+    wildcards: Mapping[str, str],
+    threads: int,
+    lines: dict[str, CostLine],
+    *,
+    gpu_tflops: float | None = None,
+) -> tuple[str, float, float, bool]:
+    """(cost class, units, predicted seconds, per-unit cost identified) of one job of `rule`.
+
+    Seconds = its class's `overhead + per_unit × units` plus its FLOPs at the CPU's rate for
+    its threads (`units.flop_seconds`); for a rule whose job runs cells in one-thread workers
+    (`UnitRule.cells`), the overhead plus the longest-first schedule of its cells' seconds on
+    its threads. With `gpu_tflops`, the FLOPs of a rule whose model runs in torch
+    (`UnitRule.on_gpu`) are charged at that effective rate instead (its per-unit cost, the
+    data handling around the model, stays the CPU's). A class without calibration points
+    raises naming it."""
+    cost_class, units, flops = job_units(rule, config, wildcards)
+    if cost_class not in lines:
+        have = sorted(c for c in lines if c.split(":")[0] == rule)
+        raise MissingCalibrationError(
+            f"rule {rule!r}: cost class {cost_class!r} has no calibration point "
+            f"(calibrated classes of this rule: {have or 'none'}); run a config that has such "
+            "jobs and regenerate the calibration (python -m tacgen_lib.runtime.calibration)"
+        )
+    line, spec = lines[cost_class], UNITS[rule]
+    gpu = gpu_tflops is not None and spec.on_gpu
+
+    def arithmetic(f: float, t: int) -> float:
+        return f / (gpu_tflops * 1e12) if gpu else flop_seconds(f, t)
+
+    if spec.cells is not None:
+        cells = [line.per_unit * u + arithmetic(f, 1) for u, f in spec.cells(config, wildcards)]
+        seconds = line.overhead + longest_first_makespan(cells, threads)
+    else:
+        seconds = line.seconds(units) + arithmetic(flops, threads)
+    return cost_class, units, seconds, line.identified
+
+
 def job_seconds(
-    jobs: Sequence[DagJob], config: dict[str, Any], lines: dict[str, CostLine]
+    jobs: Sequence[DagJob],
+    config: dict[str, Any],
+    lines: dict[str, CostLine],
+    *,
+    gpu_tflops: float | None = None,
 ) -> pd.DataFrame:
-    """One row per job that runs: jobid, rule, cost class, units, predicted seconds, and
-    whether its class's per-unit cost was identified (else a lower bound). A rule
-    without a `UNITS` line, or a cost class without calibration points, raises naming it."""
+    """One row per job that runs: jobid, rule, cost class, units, predicted seconds
+    (`job_prediction`), and whether its class's per-unit cost was identified (else a lower
+    bound). A rule without a `UNITS` line, or a cost class without calibration points, raises
+    naming it."""
     rows = []
     for job in jobs:
         if not job.runs:
             continue
-        cost_class, units, flops = job_units(job.rule, job.config_of(config), job.wildcards)
-        if cost_class not in lines:
-            have = sorted(c for c in lines if c.split(":")[0] == job.rule)
-            raise MissingCalibrationError(
-                f"rule {job.rule!r}: cost class {cost_class!r} has no calibration point "
-                f"(calibrated classes of this rule: {have or 'none'}); run a config that has such "
-                "jobs and regenerate the calibration (python -m tacgen_lib.runtime.calibration)"
-            )
-        line = lines[cost_class]
-        seconds = line.seconds(units) + flop_seconds(flops, job.threads)
-        rows.append((job.jobid, job.rule, cost_class, units, seconds, line.identified))
+        cost_class, units, seconds, identified = job_prediction(
+            job.rule,
+            job.config_of(config),
+            job.wildcards,
+            job.threads,
+            lines,
+            gpu_tflops=gpu_tflops,
+        )
+        rows.append((job.jobid, job.rule, cost_class, units, seconds, identified))
     columns = ["jobid", "rule", "cost_class", "units", "seconds", "identified"]
     return pd.DataFrame(rows, columns=columns)
 
@@ -137,6 +195,7 @@ def estimate_run(
     *,
     machine_label: str = "",
     speed: float = 1.0,
+    gpu_tflops: float | None = None,
 ) -> Estimate:
     """Predict the run of `jobs` (a DAG from `dag_jobs`) on `machine` from `calibration`.
 
@@ -148,7 +207,7 @@ def estimate_run(
     if not speed > 0:
         raise ValueError(f"speed factor must be > 0, got {speed}")
     lines = fit_costs(calibration.points)
-    per_job = job_seconds(jobs, config, lines)
+    per_job = job_seconds(jobs, config, lines, gpu_tflops=gpu_tflops)
     per_job["seconds"] *= speed
     seconds = dict(zip(per_job["jobid"], per_job["seconds"], strict=True))
     tasks = [Task(j.jobid, seconds.get(j.jobid, 0.0), j.threads, j.deps, j.local) for j in jobs]
@@ -174,12 +233,15 @@ def estimate_run(
     per_rule["unit"] = per_rule["rule"].map(lambda r: UNITS[r].unit)
     startup, per_job_s = workflow_overhead(calibration.runs)
     overhead = (startup + per_job_s * len(per_job)) * speed
+    rule_of = {j.jobid: j.rule for j in jobs}
+    _, chain = critical_chain(tasks)
     return Estimate(
         per_rule=per_rule[RULE_COLUMNS].reset_index(drop=True),
         makespan=schedule.makespan,
         overhead=overhead,
         machine=machine_label,
         source=calibration.source,
+        critical=tuple((rule_of[k], seconds.get(k, 0.0)) for k in chain if k in seconds),
     )
 
 
@@ -227,15 +289,25 @@ def choose_calibration(
     return Calibration(points, shipped.runs, source)
 
 
-def profile_threads(profile: str | os.PathLike[str]) -> dict[str, int]:
-    """`set-threads:` of a Snakemake profile folder (its config.yaml); {} without one."""
+def _profile(profile: str | os.PathLike[str]) -> dict[str, Any]:
     path = Path(profile) / "config.yaml"
     if not str(profile) or not path.is_file():
         return {}
     import yaml
 
-    data = yaml.safe_load(path.read_text()) or {}
+    return yaml.safe_load(path.read_text()) or {}
+
+
+def profile_threads(profile: str | os.PathLike[str]) -> dict[str, int]:
+    """`set-threads:` of a Snakemake profile folder (its config.yaml); {} without one."""
+    data = _profile(profile)
     return {str(k): int(v) for k, v in (data.get("set-threads") or {}).items()}
+
+
+def profile_jobs(profile: str | os.PathLike[str], default: int = 50) -> int:
+    """`jobs:` of a Snakemake profile folder (jobs queued or running at once); `default`
+    without one."""
+    return int(_profile(profile).get("jobs", default))
 
 
 def format_estimate(est: Estimate) -> str:
@@ -258,8 +330,11 @@ def format_estimate(est: Estimate) -> str:
             "* per-unit cost not identified (the calibration measured one size of these jobs, "
             "or sizes too close): flat at the measured mean, a lower bound for larger jobs"
         ]
+    chain = " -> ".join(f"{rule} ({seconds:.0f} s)" for rule, seconds in est.critical)
     lines += [
         "",
+        f"critical path (longest chain of dependent jobs, {est.critical_seconds:.0f} s = "
+        f"{est.critical_seconds / 3600:.2f} h; no core count shortens it): {chain}",
         f"jobs: {int(table['jobs'].sum())}, job-seconds: {table['job_seconds'].sum():.0f} s",
         f"scheduled jobs (makespan): {est.makespan:.0f} s; workflow overhead: {est.overhead:.0f} s",
         f"total predicted wall time: {est.total:.0f} s ({est.total / 60:.1f} min, "
@@ -313,7 +388,18 @@ def main(argv: Sequence[str] | None = None) -> Estimate:
         "--queue-s", type=float, default=30.0, help="SLURM queue + start seconds per job"
     )
     parser.add_argument(
-        "--max-jobs", type=int, default=50, help="SLURM jobs at once (profile `jobs:`)"
+        "--max-jobs",
+        type=int,
+        default=None,
+        help="SLURM jobs at once (default: the profile's `jobs:`)",
+    )
+    parser.add_argument(
+        "--gpu-tflops",
+        type=float,
+        default=None,
+        help="a GPU class: the FLOPs of the rules whose model runs in torch at this effective "
+        "rate (TFLOP/s; an assumption until a GPU run calibrates it), their other costs the "
+        "CPU's",
     )
     parser.add_argument(
         "--profile",
@@ -346,6 +432,8 @@ def main(argv: Sequence[str] | None = None) -> Estimate:
     parser.add_argument("--out", default=None, help="write the per-rule table (.parquet/.csv/.tsv)")
     args = parser.parse_args(argv)
 
+    if args.max_jobs is None:
+        args.max_jobs = profile_jobs(Path(args.workdir) / args.profile)
     if args.slurm_nodes:
         machine = slurm_machine(
             args.slurm_nodes,
@@ -377,6 +465,11 @@ def main(argv: Sequence[str] | None = None) -> Estimate:
         label += f", load factor {args.load_factor:g}"
     if args.speed_factor != 1.0:
         label += f", x{args.speed_factor:g} the calibration CPU's seconds"
+    if args.gpu_tflops is not None:
+        label += (
+            f", a GPU per job whose model runs in torch at an assumed {args.gpu_tflops:g} "
+            "TFLOP/s effective (not calibrated)"
+        )
     try:
         est = estimate_run(
             jobs,
@@ -385,6 +478,7 @@ def main(argv: Sequence[str] | None = None) -> Estimate:
             machine,
             machine_label=f"{label} ({configs})",
             speed=args.speed_factor * args.load_factor,
+            gpu_tflops=args.gpu_tflops,
         )
     except (MissingCalibrationError, MissingUnitsError) as exc:
         # what to run is in the message; a traceback would only hide it
