@@ -218,9 +218,11 @@ def _family_frames(c: Config) -> float:
 
 def _family_backbone(c: Config, w: Wildcards) -> tuple[str, float]:
     """One family backbone: its pretraining (epoch × train frame, MAE or DINO; none for the
-    random init) and the frames of the probe corpora it extracts. Class: the objective."""
+    random init or a checkpoint) and the frames of the probe corpora it extracts. Class: the
+    objective; a checkpoint's job is priced as the random init's (the same job: a backbone
+    made without training, then extraction, whose FLOPs are counted by its arch)."""
     objective, units = _pretraining_units(c, _family_spec(c, w))
-    return objective, units + _family_frames(c)
+    return ("random" if objective == "checkpoint" else objective), units + _family_frames(c)
 
 
 def _family_backbone_flops(c: Config, w: Wildcards) -> float:
