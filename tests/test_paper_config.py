@@ -248,3 +248,29 @@ def test_paper_estimate_on_eight_nodes_is_within_a_day(paper_dag):
     rules = [r for r, _ in est.critical]
     assert "sample_generator" in rules and est.critical_seconds <= est.makespan + 1e-6
     assert "critical path" in format_estimate(est)
+
+
+def test_estimate_prices_paper_before_the_checkpoints_are_downloaded(tmp_path):
+    """make estimate of paper.yaml works before models/ is filled: the missing files are named
+    (the run itself still stops on them) and priced through empty stand-ins of their names."""
+    import shutil
+
+    from tacgen_lib.runtime.estimate import (
+        merged_config,
+        missing_checkpoints,
+        stand_in_checkpoints,
+    )
+
+    (tmp_path / "config").mkdir()
+    for name in ("config.yaml", "paper.yaml"):
+        shutil.copy(ROOT / "config" / name, tmp_path / "config" / name)
+    config = merged_config(["config/paper.yaml"], tmp_path)
+    missing = missing_checkpoints(config, tmp_path)
+    assert set(missing) == {".".join(p) for p in CHECKPOINT_KEYS}
+    assert missing["backbones.families.mae.vision"] == "models/mae_pretrain_vit_base.pth"
+    override = stand_in_checkpoints(missing, config, tmp_path / "stand-ins")
+    config = merged_config(["config/paper.yaml", str(override)], tmp_path)
+    assert missing_checkpoints(config, tmp_path) == {}
+    assert Path(config["features"]["backbones"]["vision"]["checkpoint"]).name == (
+        "dinov2_vits14_pretrain.pth"
+    )

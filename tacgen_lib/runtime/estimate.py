@@ -25,6 +25,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import tempfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -310,6 +311,70 @@ def profile_jobs(profile: str | os.PathLike[str], default: int = 50) -> int:
     return int(_profile(profile).get("jobs", default))
 
 
+def merged_config(
+    configfiles: Sequence[str | os.PathLike[str]], workdir: str | os.PathLike[str] = "."
+) -> dict[str, Any]:
+    """config/config.yaml with `configfiles` merged over it as Snakemake's `--configfile`
+    does (recursively, key by key), before the workflow's own additions and validation."""
+    import yaml
+    from snakemake.utils import update_config
+
+    config = yaml.safe_load((Path(workdir) / "config" / "config.yaml").read_text()) or {}
+    for f in configfiles:
+        path = Path(f) if Path(f).is_absolute() else Path(workdir) / f
+        update_config(config, yaml.safe_load(path.read_text()) or {})
+    return config
+
+
+def missing_checkpoints(
+    config: Mapping[str, Any], workdir: str | os.PathLike[str] = "."
+) -> dict[str, str]:
+    """Config key of every backbone (main features, families run) whose checkpoint file is not
+    here (the run would stop on it: `families.check_checkpoint_file`) -> its checkpoint."""
+    from tacgen_lib.features.families import BackboneSpec, check_checkpoint_file
+    from tacgen_lib.io.config import ConfigError
+
+    specs = {f"features.backbones.{m}": s for m, s in config["features"]["backbones"].items()}
+    families = (config.get("backbones") or {}).get("families") or {}
+    for name in (config.get("backbones") or {}).get("run") or ():
+        for m, spec in (families.get(name) or {}).items():
+            specs[f"backbones.families.{name}.{m}"] = spec
+    missing = {}
+    for key, spec in specs.items():
+        try:
+            check_checkpoint_file(BackboneSpec.from_config(spec), where=key, root=workdir)
+        except ConfigError:
+            missing[key] = str(spec["checkpoint"])
+    return missing
+
+
+def stand_in_checkpoints(
+    missing: Mapping[str, str], config: Mapping[str, Any], folder: str | os.PathLike[str]
+) -> Path:
+    """A config file in `folder` pointing each missing checkpoint key at an empty file of the
+    same name there: the DAG a run would have once the files are downloaded (building it reads
+    no checkpoint). For the estimate only; the run itself still stops on the missing file."""
+    import yaml
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    override: dict[str, Any] = {}
+    for key in missing:
+        path = key.split(".")
+        spec: Any = config
+        for k in path:
+            spec = spec[k]
+        stand_in = folder / Path(spec["checkpoint"]).name
+        stand_in.touch()
+        node = override
+        for k in path:
+            node = node.setdefault(k, {})
+        node["checkpoint"] = str(stand_in)
+    out = folder / "stand_in_checkpoints.yaml"
+    out.write_text(yaml.safe_dump(override))
+    return out
+
+
 def format_estimate(est: Estimate) -> str:
     """The per-rule table and the total, as printed by the command."""
     table = est.per_rule.copy()
@@ -451,9 +516,14 @@ def main(argv: Sequence[str] | None = None) -> Estimate:
     else:
         machine, label, cap = local_machine(args.cores), f"{args.cores} local cores", args.cores
     set_threads = profile_threads(Path(args.workdir) / args.profile) if args.slurm_nodes else {}
-    jobs, config = dag_jobs(
-        args.configfile, workdir=args.workdir, cores=cap, set_threads=set_threads
-    )
+    # official checkpoints not downloaded yet: priced as if they were (a run stops on them)
+    merged = merged_config(args.configfile, args.workdir)
+    missing = missing_checkpoints(merged, args.workdir)
+    with tempfile.TemporaryDirectory(prefix="tacgen-estimate-") as tmp:
+        extra = [str(stand_in_checkpoints(missing, merged, tmp))] if missing else []
+        jobs, config = dag_jobs(
+            [*args.configfile, *extra], workdir=args.workdir, cores=cap, set_threads=set_threads
+        )
     calibration = choose_calibration(
         calibration=args.calibration,
         benchmarks=args.benchmarks,
@@ -484,6 +554,16 @@ def main(argv: Sequence[str] | None = None) -> Estimate:
         # what to run is in the message; a traceback would only hide it
         raise SystemExit(f"estimate: {exc}") from None
     print(format_estimate(est))
+    if missing:
+        from tacgen_lib.features.families import OFFICIAL_CHECKPOINTS
+
+        print(
+            f"\nnote: {len(missing)} checkpoint keys name files that are not here; priced as if "
+            "they were, but a run stops at parse time until they are downloaded:"
+        )
+        for key, path in missing.items():
+            where = OFFICIAL_CHECKPOINTS.get(Path(path).name, "no official release of that name")
+            print(f"  {key}.checkpoint: {path} ({where})")
     if args.out:
         write_table(est, args.out)
         print(f"per-rule table: {args.out}", file=sys.stderr)
