@@ -84,8 +84,10 @@ RULE_COLUMNS = [
 
 @dataclass(frozen=True)
 class Estimate:
-    """A predicted run: `per_rule` (RULE_COLUMNS: jobs, summed job seconds, and the rule's span
-    in the schedule, first start to last end), `makespan` (scheduled jobs), `overhead` (the
+    """A predicted run: `per_rule` (RULE_COLUMNS: jobs, summed job seconds (each job's wall: a
+    job whose cells run on several threads counts its wall once), and the rule's span in the
+    schedule, first start to last end), `critical` ((rule, seconds) of each job of the DAG's
+    longest dependent chain), `makespan` (scheduled jobs), `overhead` (the
     workflow's own), `total` = makespan + overhead, `machine`, and `source` (which calibration
     and CPU)."""
 
