@@ -1,7 +1,11 @@
 """Backbone families: the config (tacgen_lib.features.families) and the paths the rules of
 rules/backbones.smk read."""
 
-from tacgen_lib.features.families import FamilySettings, check_backbone
+from tacgen_lib.features.families import (
+    FamilySettings,
+    check_backbone,
+    check_checkpoint_file,
+)
 from tacgen_lib.features.families import BackboneSpec as _Spec
 
 for _m in MODALITIES:
@@ -11,8 +15,18 @@ for _m in MODALITIES:
         dino_epochs=int(PRETRAIN["epochs"]),
         mae_epochs=int(FEAT["mae"]["epochs"]),
     )
+    # an official checkpoint must be here before any job runs (relative to the working
+    # directory, where results/ lives)
+    check_checkpoint_file(
+        _Spec.from_config(FEAT["backbones"][_m]), where=f"features.backbones.{_m}"
+    )
 
 FAMILIES = FamilySettings.from_config(config)
+for _f in FAMILIES.run:
+    for _m in MODALITIES:
+        check_checkpoint_file(
+            FAMILIES.families[_f][_m], where=f"backbones.families.{_f}.{_m}"
+        )
 OWN_FAMILIES = FAMILIES.own(FEAT)
 FAMILY_VARIANT = PROBES["heads"]["variant"]  # the tactile frames the probes read
 FAMILY_PROBE = "results/backbones/{family}/probes.parquet"

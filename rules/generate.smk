@@ -1,7 +1,7 @@
 """Generate stage: a latent V->T diffusion generator per corpus x seed, sampled over the
 guidance x steps x sampler grid, judged by what generated touch adds to the probes.
 
-train_generator -> sample_generator (per cell) -> evaluate_generator (every cell of one
+train_generator -> sample_generator (every cell of one generator in one job) -> evaluate_generator (every cell of one
 generator in one job) -> aggregate_generate (summary + report). The probes no generator
 changes (V, V+T_real, the nonlinear V baseline) are fitted once per corpus by
 fit_generator_baselines, beside training, and shared by every seed's evaluate_generator.
@@ -60,22 +60,27 @@ rule train_generator:
 
 
 rule sample_generator:
-    """Generated tactile features for every row of the corpus: one sampler, guidance and steps."""
+    """Generated tactile features for every row of the corpus, every sampling cell of one generator: loaded once, its cells on the job's threads."""
     input:
         weights=f"{GENERATOR}/generator.arrow",
         v=lambda w: feature_edge(w.corpus, "vision"),
         code=imports_of("sample_generator"),
     output:
-        t_gen=f"{SAMPLE_CELL}/t_gen.parquet",
+        t_gen=generator_cells(f"{SAMPLE_CELL}/t_gen.parquet", GENERATE_CELLS),
+        # each cell's seconds (the job times its cells; the Generation summary and the cost
+        # page read them as they read a benchmark file)
+        seconds=generator_cells(SAMPLE_SECONDS, GENERATE_CELLS),
     log:
-        "results/logs/sample_generator/{corpus}/{seed}_{sampler}_{guidance}_{steps}.log",
+        "results/logs/sample_generator/{corpus}/{seed}.log",
     benchmark:
-        "results/benchmarks/sample_generator/{corpus}/{seed}_{sampler}_{guidance}_{steps}.tsv"
+        "results/benchmarks/sample_generator/{corpus}/{seed}.tsv"
     wildcard_constraints:
-        **SAMPLE_CONSTRAINTS,
         corpus=one_of(GENERATE_CORPORA),
+        seed=SAMPLE_CONSTRAINTS["seed"],
     conda:
         "../envs/generate.yaml"
+    # one thread: on a workstation the generators' jobs share its cores (profiles/slurm gives
+    # each more: its cells in one-thread workers, the same edges at any thread count)
     threads: 1
     resources:
         mem_mb=2000,
@@ -83,6 +88,7 @@ rule sample_generator:
     params:
         device=DEVICE,  # config device (tacgen_lib.runtime.device)
         settings=GENERATE,
+        cells=GENERATE_CELLS,  # the order of the outputs
     script:
         "../workflow/scripts/sample_generator.py"
 

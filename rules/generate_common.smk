@@ -5,6 +5,7 @@ from tacgen_lib.generate.cells import (
     GENERATOR,
     SAMPLE_CELL,
     SAMPLE_CONSTRAINTS,
+    generator_cells,
     guidance_text,
     sample_cells,
 )
@@ -75,8 +76,14 @@ def sample_edge(corpus, seed, sampler, guidance, steps):
     )
 
 
+#: One sampling cell's seconds, timed by its generator's sampling job (benchmark format)
+SAMPLE_SECONDS = "results/benchmarks/sample_generator/{corpus}/{seed}_{sampler}_{guidance}_{steps}.tsv"
+
+
 def sample_benchmark(corpus, seed, sampler, guidance, steps):
-    return f"results/benchmarks/sample_generator/{corpus}/{seed}_{sampler}_{guidance}_{steps}.tsv"
+    return SAMPLE_SECONDS.format(
+        corpus=corpus, seed=seed, sampler=sampler, guidance=guidance, steps=steps
+    )
 
 
 def generate_tactile(corpus):

@@ -12,8 +12,10 @@ so nothing is computed twice.
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from tacgen_lib.features.archs import arch_family
@@ -23,7 +25,9 @@ __all__ = [
     "BackboneSpec",
     "FamilySettings",
     "MODALITIES",
+    "OFFICIAL_CHECKPOINTS",
     "check_backbone",
+    "check_checkpoint_file",
 ]
 
 MODALITIES = ("vision", "tactile")
@@ -80,6 +84,50 @@ def check_backbone(spec: BackboneSpec, *, where: str, dino_epochs: int, mae_epoc
         )
     if spec.objective == "mae" and mae_epochs < 1:
         raise ConfigError(f"config {where}: objective mae needs features.mae.epochs >= 1")
+
+
+#: The official checkpoints the workflow loads, by file name: where each is published (the
+#: file is downloaded once into `models/`; nothing is fetched during a run).
+OFFICIAL_CHECKPOINTS = {
+    "dinov2_vits14_pretrain.pth": "https://dl.fbaipublicfiles.com/dinov2/dinov2_vits14/"
+    "dinov2_vits14_pretrain.pth (DINOv2 ViT-S/14, github.com/facebookresearch/dinov2, "
+    "README 'Pretrained models')",
+    "dinov2_vitb14_pretrain.pth": "https://dl.fbaipublicfiles.com/dinov2/dinov2_vitb14/"
+    "dinov2_vitb14_pretrain.pth (DINOv2 ViT-B/14, github.com/facebookresearch/dinov2, "
+    "README 'Pretrained models')",
+    "mae_pretrain_vit_base.pth": "https://dl.fbaipublicfiles.com/mae/pretrain/"
+    "mae_pretrain_vit_base.pth (MAE ViT-B/16 encoder, github.com/facebookresearch/mae, "
+    "PRETRAIN.md / README 'pre-trained checkpoints')",
+    "resnet18-f37072fd.pth": "https://download.pytorch.org/models/resnet18-f37072fd.pth "
+    "(torchvision ResNet18_Weights.IMAGENET1K_V1)",
+}
+
+
+def check_checkpoint_file(
+    spec: BackboneSpec, *, where: str, root: str | os.PathLike[str] = "."
+) -> None:
+    """Refuse, before any job runs, a backbone whose `checkpoint` names no file: the error
+    names the config key, the file expected (relative paths against `root`, the workflow's
+    working directory), where the official weights of that name are published, and the key
+    that pretrains in the workflow instead. A backbone without a checkpoint passes."""
+    if not spec.checkpoint:
+        return
+    path = Path(spec.checkpoint)
+    full = path if path.is_absolute() else Path(root) / path
+    if full.is_file():
+        return
+    published = OFFICIAL_CHECKPOINTS.get(path.name)
+    where_from = (
+        f"the official weights of that name are published at {published}"
+        if published
+        else f"no official release is named {path.name!r} (known: {sorted(OFFICIAL_CHECKPOINTS)})"
+    )
+    raise ConfigError(
+        f"config {where}.checkpoint: {spec.checkpoint} not found (expected the file "
+        f"{path.name} at {full}); {where_from}: download it there, or set {where}.checkpoint: "
+        "null to make this backbone in the workflow instead (features.pretrain / features.mae; "
+        "`make estimate` prices it)"
+    )
 
 
 @dataclass(frozen=True)

@@ -12,6 +12,8 @@ __all__ = [
     "GENERATOR",
     "SAMPLE_CELL",
     "SAMPLE_CONSTRAINTS",
+    "cell_seed",
+    "generator_cells",
     "guidance_passes",
     "guidance_text",
     "sample_cells",
@@ -61,3 +63,20 @@ def sample_cells(guidance: list, samplers: dict) -> list[tuple[str, str, str]]:
         for s in steps
         for w in guidance
     ]
+
+
+def generator_cells(path: str, cells: list[tuple[str, str, str]]) -> list[str]:
+    """`path` (a pattern of SAMPLE_CELL's fields) for each (sampler, guidance, steps) of
+    `cells`, its `{corpus}` and `{seed}` left as wildcards: the outputs of one generator's
+    sampling job, in the order of `cells`."""
+    return [
+        path.format(corpus="{corpus}", seed="{seed}", sampler=s, guidance=g, steps=n)
+        for s, g, n in cells
+    ]
+
+
+def cell_seed(generator_seed: int | str, guidance: float | str, steps: int | str) -> int:
+    """The sampling noise's seed of one cell of a generator: the generator seed, the steps and
+    the guidance (in thousandths), so each cell is reproducible on its own, whichever job or
+    worker samples it."""
+    return int(generator_seed) * 1_000_003 + int(steps) * 101 + int(round(float(guidance) * 1000))

@@ -17,12 +17,21 @@ import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
-
-import pandas as pd
+from typing import TYPE_CHECKING
 
 from tacgen_lib.runtime.preload import usage_path
 
-__all__ = ["Benchmark", "read_benchmark", "benchmark_seconds", "benchmark_table", "cpu_label"]
+if TYPE_CHECKING:
+    import pandas as pd
+
+__all__ = [
+    "Benchmark",
+    "read_benchmark",
+    "write_benchmark",
+    "benchmark_seconds",
+    "benchmark_table",
+    "cpu_label",
+]
 
 
 @dataclass(frozen=True)
@@ -36,6 +45,8 @@ class Benchmark:
 
 
 def _read(path: str | os.PathLike[str]) -> pd.DataFrame:
+    import pandas as pd  # here, not at the top: a sampling job writes its cells' files without it
+
     try:
         table = pd.read_csv(path, sep="\t")
     except (OSError, pd.errors.ParserError, pd.errors.EmptyDataError) as exc:
@@ -48,6 +59,8 @@ def _read(path: str | os.PathLike[str]) -> pd.DataFrame:
 
 
 def _mean(table: pd.DataFrame, column: str) -> float:
+    import pandas as pd
+
     if column not in table.columns:
         return float("nan")
     return float(pd.to_numeric(table[column], errors="coerce").mean())
@@ -68,11 +81,26 @@ def read_benchmark(path: str | os.PathLike[str]) -> Benchmark:
             raise ValueError(f"{usage_file}: not a readable job usage file ({exc})") from exc
         cpu = copy_cpu + (cpu if cpu == cpu else 0.0)
         rss = max(copy_rss, rss) if rss == rss else copy_rss
+    import pandas as pd
+
     return Benchmark(
         wall=float(pd.to_numeric(table["s"], errors="raise").mean()),
         cpu=cpu,
         max_rss_mb=rss,
     )
+
+
+def write_benchmark(path: str | os.PathLike[str], *, wall: float, cpu: float) -> None:
+    """A benchmark file in Snakemake's format (`s`, `h:m:s`, `cpu_time`) for a part of a job
+    that times itself: one sampling cell of a generator's sampling job, whose cells share the
+    job's benchmark. `read_benchmark` reads it like Snakemake's own; written atomically."""
+    path = Path(path)
+    h, rest = divmod(int(wall), 3600)
+    text = f"s\th:m:s\tcpu_time\n{wall:.4f}\t{h}:{rest // 60:02d}:{rest % 60:02d}\t{cpu:.4f}\n"
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(text)
+    tmp.replace(path)
 
 
 def benchmark_seconds(path: str | os.PathLike[str]) -> float:
@@ -84,6 +112,8 @@ def benchmark_table(root: str | os.PathLike[str] = "results/benchmarks") -> pd.D
     """Every benchmark file below `root`, one row each: `rule` (the first folder, which is the
     rule's name by the workflow's convention), `job` (the rest of the path, without `.tsv`),
     `path`, `wall`, `cpu`, `max_rss_mb`. Empty (with those columns) if `root` does not exist."""
+    import pandas as pd
+
     root = Path(root)
     rows = []
     for path in sorted(root.rglob("*.tsv")) if root.is_dir() else []:

@@ -30,7 +30,8 @@ class DagJob:
     rule: runs on the submitting host under SLURM), `benchmark` (its benchmark file, relative to
     the working directory; None for a rule without one, e.g. the target rule `all`), `log`
     (its first log file, likewise), `runs` (False for a rule without a script/shell/run, such as `all`: it costs nothing) and
-    `deps` (jobids of the jobs it waits for)."""
+    `deps` (jobids of the jobs it waits for), `runtime` (its `runtime` resource in minutes as
+    Snakemake evaluates it for the first attempt: its SLURM time limit; None without one)."""
 
     jobid: int
     rule: str
@@ -43,6 +44,7 @@ class DagJob:
     deps: tuple[int, ...] = ()
     setting: str | None = None
     config: Mapping[str, Any] | None = None
+    runtime: int | None = None
 
     def config_of(self, run_config: Mapping[str, Any]) -> Mapping[str, Any]:
         """The config the job's units are counted from: its setting's, else the run's."""
@@ -120,6 +122,7 @@ def dag_jobs(
                     deps=tuple(sorted(ids[d] for d in dag.job_dependencies(job))),
                     setting=setting_of[job.rule.name][1],
                     config=setting_of[job.rule.name][2],
+                    runtime=_runtime(job),
                 )
                 for job in snake_jobs
             ]
@@ -127,6 +130,12 @@ def dag_jobs(
     finally:
         os.chdir(here)
     return jobs, config
+
+
+def _runtime(job: Any) -> int | None:
+    """A Snakemake job's `runtime` resource (minutes), None where it has none."""
+    value = job.resources.get("runtime")
+    return int(value) if isinstance(value, int | float) else None
 
 
 def _setting_rule(

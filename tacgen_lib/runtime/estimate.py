@@ -25,7 +25,8 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-from collections.abc import Sequence
+import tempfile
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -46,13 +47,22 @@ from tacgen_lib.runtime.calibration import (
     run_calibration,
 )
 from tacgen_lib.runtime.dag import DagJob, dag_jobs
-from tacgen_lib.runtime.schedule import Machine, Task, list_schedule, local_machine, slurm_machine
+from tacgen_lib.runtime.schedule import (
+    Machine,
+    Task,
+    critical_chain,
+    list_schedule,
+    local_machine,
+    longest_first_makespan,
+    slurm_machine,
+)
 from tacgen_lib.runtime.units import UNITS, MissingUnitsError, flop_seconds, job_units
 
 __all__ = [
     "Estimate",
     "RULE_COLUMNS",
     "job_seconds",
+    "job_prediction",
     "workflow_overhead",
     "estimate_run",
     "choose_calibration",
@@ -74,8 +84,10 @@ RULE_COLUMNS = [
 
 @dataclass(frozen=True)
 class Estimate:
-    """A predicted run: `per_rule` (RULE_COLUMNS: jobs, summed job seconds, and the rule's span
-    in the schedule, first start to last end), `makespan` (scheduled jobs), `overhead` (the
+    """A predicted run: `per_rule` (RULE_COLUMNS: jobs, summed job seconds (each job's wall: a
+    job whose cells run on several threads counts its wall once), and the rule's span in the
+    schedule, first start to last end), `critical` ((rule, seconds) of each job of the DAG's
+    longest dependent chain), `makespan` (scheduled jobs), `overhead` (the
     workflow's own), `total` = makespan + overhead, `machine`, and `source` (which calibration
     and CPU)."""
 
@@ -84,33 +96,82 @@ class Estimate:
     overhead: float
     machine: str
     source: str
+    critical: tuple[tuple[str, float], ...] = ()
+
+    @property
+    def critical_seconds(self) -> float:
+        """Length of the DAG's longest chain of dependent jobs (no core count shortens it)."""
+        return sum(s for _, s in self.critical)
 
     @property
     def total(self) -> float:
         return self.makespan + self.overhead
 
 
+def job_prediction(
+    rule: str,
+    config: Mapping[str, Any],
+    wildcards: Mapping[str, str],
+    threads: int,
+    lines: dict[str, CostLine],
+    *,
+    gpu_tflops: float | None = None,
+) -> tuple[str, float, float, bool]:
+    """(cost class, units, predicted seconds, per-unit cost identified) of one job of `rule`.
+
+    Seconds = its class's `overhead + per_unit × units` plus its FLOPs at the CPU's rate for
+    its threads (`units.flop_seconds`); for a rule whose job runs cells in one-thread workers
+    (`UnitRule.cells`), the overhead plus the longest-first schedule of its cells' seconds on
+    its threads. With `gpu_tflops`, the FLOPs of a rule whose model runs in torch
+    (`UnitRule.on_gpu`) are charged at that effective rate instead (its per-unit cost, the
+    data handling around the model, stays the CPU's). A class without calibration points
+    raises naming it."""
+    cost_class, units, flops = job_units(rule, config, wildcards)
+    if cost_class not in lines:
+        have = sorted(c for c in lines if c.split(":")[0] == rule)
+        raise MissingCalibrationError(
+            f"rule {rule!r}: cost class {cost_class!r} has no calibration point "
+            f"(calibrated classes of this rule: {have or 'none'}); run a config that has such "
+            "jobs and regenerate the calibration (python -m tacgen_lib.runtime.calibration)"
+        )
+    line, spec = lines[cost_class], UNITS[rule]
+    gpu = gpu_tflops is not None and spec.on_gpu
+
+    def arithmetic(f: float, t: int) -> float:
+        return f / (gpu_tflops * 1e12) if gpu else flop_seconds(f, t)
+
+    if spec.cells is not None:
+        cells = [line.per_unit * u + arithmetic(f, 1) for u, f in spec.cells(config, wildcards)]
+        seconds = line.overhead + longest_first_makespan(cells, threads)
+    else:
+        seconds = line.seconds(units) + arithmetic(flops, threads)
+    return cost_class, units, seconds, line.identified
+
+
 def job_seconds(
-    jobs: Sequence[DagJob], config: dict[str, Any], lines: dict[str, CostLine]
+    jobs: Sequence[DagJob],
+    config: dict[str, Any],
+    lines: dict[str, CostLine],
+    *,
+    gpu_tflops: float | None = None,
 ) -> pd.DataFrame:
-    """One row per job that runs: jobid, rule, cost class, units, predicted seconds, and
-    whether its class's per-unit cost was identified (else a lower bound). A rule
-    without a `UNITS` line, or a cost class without calibration points, raises naming it."""
+    """One row per job that runs: jobid, rule, cost class, units, predicted seconds
+    (`job_prediction`), and whether its class's per-unit cost was identified (else a lower
+    bound). A rule without a `UNITS` line, or a cost class without calibration points, raises
+    naming it."""
     rows = []
     for job in jobs:
         if not job.runs:
             continue
-        cost_class, units, flops = job_units(job.rule, job.config_of(config), job.wildcards)
-        if cost_class not in lines:
-            have = sorted(c for c in lines if c.split(":")[0] == job.rule)
-            raise MissingCalibrationError(
-                f"rule {job.rule!r}: cost class {cost_class!r} has no calibration point "
-                f"(calibrated classes of this rule: {have or 'none'}); run a config that has such "
-                "jobs and regenerate the calibration (python -m tacgen_lib.runtime.calibration)"
-            )
-        line = lines[cost_class]
-        seconds = line.seconds(units) + flop_seconds(flops, job.threads)
-        rows.append((job.jobid, job.rule, cost_class, units, seconds, line.identified))
+        cost_class, units, seconds, identified = job_prediction(
+            job.rule,
+            job.config_of(config),
+            job.wildcards,
+            job.threads,
+            lines,
+            gpu_tflops=gpu_tflops,
+        )
+        rows.append((job.jobid, job.rule, cost_class, units, seconds, identified))
     columns = ["jobid", "rule", "cost_class", "units", "seconds", "identified"]
     return pd.DataFrame(rows, columns=columns)
 
@@ -137,6 +198,7 @@ def estimate_run(
     *,
     machine_label: str = "",
     speed: float = 1.0,
+    gpu_tflops: float | None = None,
 ) -> Estimate:
     """Predict the run of `jobs` (a DAG from `dag_jobs`) on `machine` from `calibration`.
 
@@ -148,7 +210,7 @@ def estimate_run(
     if not speed > 0:
         raise ValueError(f"speed factor must be > 0, got {speed}")
     lines = fit_costs(calibration.points)
-    per_job = job_seconds(jobs, config, lines)
+    per_job = job_seconds(jobs, config, lines, gpu_tflops=gpu_tflops)
     per_job["seconds"] *= speed
     seconds = dict(zip(per_job["jobid"], per_job["seconds"], strict=True))
     tasks = [Task(j.jobid, seconds.get(j.jobid, 0.0), j.threads, j.deps, j.local) for j in jobs]
@@ -174,12 +236,15 @@ def estimate_run(
     per_rule["unit"] = per_rule["rule"].map(lambda r: UNITS[r].unit)
     startup, per_job_s = workflow_overhead(calibration.runs)
     overhead = (startup + per_job_s * len(per_job)) * speed
+    rule_of = {j.jobid: j.rule for j in jobs}
+    _, chain = critical_chain(tasks)
     return Estimate(
         per_rule=per_rule[RULE_COLUMNS].reset_index(drop=True),
         makespan=schedule.makespan,
         overhead=overhead,
         machine=machine_label,
         source=calibration.source,
+        critical=tuple((rule_of[k], seconds.get(k, 0.0)) for k in chain if k in seconds),
     )
 
 
@@ -227,15 +292,89 @@ def choose_calibration(
     return Calibration(points, shipped.runs, source)
 
 
-def profile_threads(profile: str | os.PathLike[str]) -> dict[str, int]:
-    """`set-threads:` of a Snakemake profile folder (its config.yaml); {} without one."""
+def _profile(profile: str | os.PathLike[str]) -> dict[str, Any]:
     path = Path(profile) / "config.yaml"
     if not str(profile) or not path.is_file():
         return {}
     import yaml
 
-    data = yaml.safe_load(path.read_text()) or {}
+    return yaml.safe_load(path.read_text()) or {}
+
+
+def profile_threads(profile: str | os.PathLike[str]) -> dict[str, int]:
+    """`set-threads:` of a Snakemake profile folder (its config.yaml); {} without one."""
+    data = _profile(profile)
     return {str(k): int(v) for k, v in (data.get("set-threads") or {}).items()}
+
+
+def profile_jobs(profile: str | os.PathLike[str], default: int = 50) -> int:
+    """`jobs:` of a Snakemake profile folder (jobs queued or running at once); `default`
+    without one."""
+    return int(_profile(profile).get("jobs", default))
+
+
+def merged_config(
+    configfiles: Sequence[str | os.PathLike[str]], workdir: str | os.PathLike[str] = "."
+) -> dict[str, Any]:
+    """config/config.yaml with `configfiles` merged over it as Snakemake's `--configfile`
+    does (recursively, key by key), before the workflow's own additions and validation."""
+    import yaml
+    from snakemake.utils import update_config
+
+    config = yaml.safe_load((Path(workdir) / "config" / "config.yaml").read_text()) or {}
+    for f in configfiles:
+        path = Path(f) if Path(f).is_absolute() else Path(workdir) / f
+        update_config(config, yaml.safe_load(path.read_text()) or {})
+    return config
+
+
+def missing_checkpoints(
+    config: Mapping[str, Any], workdir: str | os.PathLike[str] = "."
+) -> dict[str, str]:
+    """Config key of every backbone (main features, families run) whose checkpoint file is not
+    here (the run would stop on it: `families.check_checkpoint_file`) -> its checkpoint."""
+    from tacgen_lib.features.families import BackboneSpec, check_checkpoint_file
+    from tacgen_lib.io.config import ConfigError
+
+    specs = {f"features.backbones.{m}": s for m, s in config["features"]["backbones"].items()}
+    families = (config.get("backbones") or {}).get("families") or {}
+    for name in (config.get("backbones") or {}).get("run") or ():
+        for m, spec in (families.get(name) or {}).items():
+            specs[f"backbones.families.{name}.{m}"] = spec
+    missing = {}
+    for key, spec in specs.items():
+        try:
+            check_checkpoint_file(BackboneSpec.from_config(spec), where=key, root=workdir)
+        except ConfigError:
+            missing[key] = str(spec["checkpoint"])
+    return missing
+
+
+def stand_in_checkpoints(
+    missing: Mapping[str, str], config: Mapping[str, Any], folder: str | os.PathLike[str]
+) -> Path:
+    """A config file in `folder` pointing each missing checkpoint key at an empty file of the
+    same name there: the DAG a run would have once the files are downloaded (building it reads
+    no checkpoint). For the estimate only; the run itself still stops on the missing file."""
+    import yaml
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    override: dict[str, Any] = {}
+    for key in missing:
+        path = key.split(".")
+        spec: Any = config
+        for k in path:
+            spec = spec[k]
+        stand_in = folder / Path(spec["checkpoint"]).name
+        stand_in.touch()
+        node = override
+        for k in path:
+            node = node.setdefault(k, {})
+        node["checkpoint"] = str(stand_in)
+    out = folder / "stand_in_checkpoints.yaml"
+    out.write_text(yaml.safe_dump(override))
+    return out
 
 
 def format_estimate(est: Estimate) -> str:
@@ -258,8 +397,11 @@ def format_estimate(est: Estimate) -> str:
             "* per-unit cost not identified (the calibration measured one size of these jobs, "
             "or sizes too close): flat at the measured mean, a lower bound for larger jobs"
         ]
+    chain = " -> ".join(f"{rule} ({seconds:.0f} s)" for rule, seconds in est.critical)
     lines += [
         "",
+        f"critical path (longest chain of dependent jobs, {est.critical_seconds:.0f} s = "
+        f"{est.critical_seconds / 3600:.2f} h; no core count shortens it): {chain}",
         f"jobs: {int(table['jobs'].sum())}, job-seconds: {table['job_seconds'].sum():.0f} s",
         f"scheduled jobs (makespan): {est.makespan:.0f} s; workflow overhead: {est.overhead:.0f} s",
         f"total predicted wall time: {est.total:.0f} s ({est.total / 60:.1f} min, "
@@ -313,7 +455,18 @@ def main(argv: Sequence[str] | None = None) -> Estimate:
         "--queue-s", type=float, default=30.0, help="SLURM queue + start seconds per job"
     )
     parser.add_argument(
-        "--max-jobs", type=int, default=50, help="SLURM jobs at once (profile `jobs:`)"
+        "--max-jobs",
+        type=int,
+        default=None,
+        help="SLURM jobs at once (default: the profile's `jobs:`)",
+    )
+    parser.add_argument(
+        "--gpu-tflops",
+        type=float,
+        default=None,
+        help="a GPU class: the FLOPs of the rules whose model runs in torch at this effective "
+        "rate (TFLOP/s; an assumption until a GPU run calibrates it), their other costs the "
+        "CPU's",
     )
     parser.add_argument(
         "--profile",
@@ -346,6 +499,8 @@ def main(argv: Sequence[str] | None = None) -> Estimate:
     parser.add_argument("--out", default=None, help="write the per-rule table (.parquet/.csv/.tsv)")
     args = parser.parse_args(argv)
 
+    if args.max_jobs is None:
+        args.max_jobs = profile_jobs(Path(args.workdir) / args.profile)
     if args.slurm_nodes:
         machine = slurm_machine(
             args.slurm_nodes,
@@ -363,9 +518,14 @@ def main(argv: Sequence[str] | None = None) -> Estimate:
     else:
         machine, label, cap = local_machine(args.cores), f"{args.cores} local cores", args.cores
     set_threads = profile_threads(Path(args.workdir) / args.profile) if args.slurm_nodes else {}
-    jobs, config = dag_jobs(
-        args.configfile, workdir=args.workdir, cores=cap, set_threads=set_threads
-    )
+    # official checkpoints not downloaded yet: priced as if they were (a run stops on them)
+    merged = merged_config(args.configfile, args.workdir)
+    missing = missing_checkpoints(merged, args.workdir)
+    with tempfile.TemporaryDirectory(prefix="tacgen-estimate-") as tmp:
+        extra = [str(stand_in_checkpoints(missing, merged, tmp))] if missing else []
+        jobs, config = dag_jobs(
+            [*args.configfile, *extra], workdir=args.workdir, cores=cap, set_threads=set_threads
+        )
     calibration = choose_calibration(
         calibration=args.calibration,
         benchmarks=args.benchmarks,
@@ -377,6 +537,11 @@ def main(argv: Sequence[str] | None = None) -> Estimate:
         label += f", load factor {args.load_factor:g}"
     if args.speed_factor != 1.0:
         label += f", x{args.speed_factor:g} the calibration CPU's seconds"
+    if args.gpu_tflops is not None:
+        label += (
+            f", a GPU per job whose model runs in torch at an assumed {args.gpu_tflops:g} "
+            "TFLOP/s effective (not calibrated)"
+        )
     try:
         est = estimate_run(
             jobs,
@@ -385,11 +550,22 @@ def main(argv: Sequence[str] | None = None) -> Estimate:
             machine,
             machine_label=f"{label} ({configs})",
             speed=args.speed_factor * args.load_factor,
+            gpu_tflops=args.gpu_tflops,
         )
     except (MissingCalibrationError, MissingUnitsError) as exc:
         # what to run is in the message; a traceback would only hide it
         raise SystemExit(f"estimate: {exc}") from None
     print(format_estimate(est))
+    if missing:
+        from tacgen_lib.features.families import OFFICIAL_CHECKPOINTS
+
+        print(
+            f"\nnote: {len(missing)} checkpoint keys name files that are not here; priced as if "
+            "they were, but a run stops at parse time until they are downloaded:"
+        )
+        for key, path in missing.items():
+            where = OFFICIAL_CHECKPOINTS.get(Path(path).name, "no official release of that name")
+            print(f"  {key}.checkpoint: {path} ({where})")
     if args.out:
         write_table(est, args.out)
         print(f"per-rule table: {args.out}", file=sys.stderr)

@@ -18,7 +18,16 @@ import heapq
 from collections.abc import Sequence
 from dataclasses import dataclass
 
-__all__ = ["Task", "Machine", "Schedule", "list_schedule", "local_machine", "slurm_machine"]
+__all__ = [
+    "Task",
+    "Machine",
+    "Schedule",
+    "critical_chain",
+    "list_schedule",
+    "local_machine",
+    "longest_first_makespan",
+    "slurm_machine",
+]
 
 
 @dataclass(frozen=True)
@@ -203,3 +212,34 @@ def _fit(
             if free[s] >= need:
                 return s, need
     return None
+
+
+def longest_first_makespan(seconds: Sequence[float], workers: int) -> float:
+    """Wall time of independent items of `seconds` on `workers` one-thread workers, handed out
+    longest first (`tacgen_lib.runtime.workers.fork_map` with a cost): each goes to the worker
+    that frees first. Never below the longest item, nor below the sum / workers."""
+    free = [0.0] * max(1, min(int(workers), len(seconds) or 1))
+    heapq.heapify(free)
+    for s in sorted(seconds, reverse=True):
+        heapq.heappush(free, heapq.heappop(free) + float(s))
+    return max(free)
+
+
+def critical_chain(tasks: Sequence[Task]) -> tuple[float, list[int]]:
+    """The DAG's longest chain of dependent tasks by seconds (the wall time no number of cores
+    removes) and its task keys, first to last."""
+    by_key = {t.key: t for t in tasks}
+    rank = _remaining_chain(tasks, by_key)
+    children: dict[int, list[int]] = {t.key: [] for t in tasks}
+    for t in tasks:
+        for d in t.deps:
+            children[d].append(t.key)
+    roots = [t.key for t in tasks if not t.deps]
+    if not roots:
+        return 0.0, []
+    key = max(roots, key=lambda k: rank[k])
+    chain = [key]
+    while children[key]:
+        key = max(children[key], key=lambda k: rank[k])
+        chain.append(key)
+    return rank[chain[0]], chain

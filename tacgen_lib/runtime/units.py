@@ -55,12 +55,20 @@ class UnitRule:
     dense floating-point work (multiply-add = 2): it is charged at the CPU's effective GEMM
     rate (`GFLOPS_PER_THREAD`), so a bigger model costs more without a fitted term for it.
     `same_as`: another rule whose calibration prices these jobs (the same kind of work, where
-    this rule never runs in a calibration run)."""
+    this rule never runs in a calibration run).
+    `cells(config, wildcards) -> [(units, FLOPs), ...]`, for a job that runs independent cells
+    in one-thread workers, one per thread (`tacgen_lib.runtime.workers.fork_map`): the job's
+    units and FLOPs are the cells' sums, and its wall is the overhead plus the longest-first
+    schedule of its cells on its threads (`tacgen_lib.runtime.estimate.job_prediction`)."""
 
     unit: str
     count: Callable[[Config, Wildcards], tuple[str, float]]
     flops: Callable[[Config, Wildcards], float] | None = None
     same_as: str | None = None
+    cells: Callable[[Config, Wildcards], list[tuple[float, float]]] | None = None
+    #: whether its FLOPs run in torch, so on a GPU class (`estimate --gpu-tflops`) at the
+    #: GPU's rate; False for numpy arithmetic (the latent generator's sampler)
+    on_gpu: bool = True
 
 
 #: Effective dense float32 rate per thread of the calibration's CPU (2-core AMD EPYC, AVX-512):
@@ -210,9 +218,11 @@ def _family_frames(c: Config) -> float:
 
 def _family_backbone(c: Config, w: Wildcards) -> tuple[str, float]:
     """One family backbone: its pretraining (epoch × train frame, MAE or DINO; none for the
-    random init) and the frames of the probe corpora it extracts. Class: the objective."""
+    random init or a checkpoint) and the frames of the probe corpora it extracts. Class: the
+    objective; a checkpoint's job is priced as the random init's (the same job: a backbone
+    made without training, then extraction, whose FLOPs are counted by its arch)."""
     objective, units = _pretraining_units(c, _family_spec(c, w))
-    return objective, units + _family_frames(c)
+    return ("random" if objective == "checkpoint" else objective), units + _family_frames(c)
 
 
 def _family_backbone_flops(c: Config, w: Wildcards) -> float:
@@ -302,6 +312,19 @@ def _pixel_passes(w: Wildcards) -> int:
     if arm == "pix2pix":
         return 1
     return len(guidance_passes(arm.removeprefix("ddpm_w").rsplit("_s", 1)[0]))
+
+
+def _sample_cells(c: Config, w: Wildcards) -> list[tuple[float, float]]:
+    """(units, FLOPs) of each sampling cell of one generator (rule sample_generator): sample ×
+    sampling step, and the MLP's FLOPs × the passes its guidance needs."""
+    g = c["generate"]
+    n, mlp = _n(c, w["corpus"]), _generator_mlp(c)
+    return [
+        (n * int(steps), len(guidance_passes(guidance)) * n * int(steps) * mlp)
+        for steps_list in g["samplers"].values()
+        for steps in steps_list
+        for guidance in g["guidance"]
+    ]
 
 
 def _generate_cells(c: Config) -> float:
@@ -450,14 +473,12 @@ UNITS: dict[str, UnitRule] = {
         ),
     ),
     "sample_generator": UnitRule(
-        "sample × sampling step (+ MLP FLOPs × the passes guidance w needs: 1 at w = 0, 1; else 2)",
-        lambda c, w: ("", _n(c, w["corpus"]) * int(w["steps"])),
-        lambda c, w: (
-            len(guidance_passes(w["guidance"]))
-            * _n(c, w["corpus"])
-            * int(w["steps"])
-            * _generator_mlp(c)
-        ),
+        "sample × sampling step, every cell of the generator (+ MLP FLOPs × the passes "
+        "guidance w needs: 1 at w = 0, 1; else 2)",
+        lambda c, w: ("", sum(u for u, _ in _sample_cells(c, w))),
+        lambda c, w: sum(f for _, f in _sample_cells(c, w)),
+        cells=_sample_cells,
+        on_gpu=False,  # sampled in numpy (tacgen_lib.generate.inference)
     ),
     "fit_generator_baselines": UnitRule(
         "sample × target (3 CV probes + one per nonlinear gamma)",

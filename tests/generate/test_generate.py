@@ -257,10 +257,12 @@ def test_numpy_forward_equals_the_torch_module():
 
 
 def test_sampling_modules_do_not_import_torch_or_pandas():
-    """What a sample_generator job imports: the weights reader, the samplers, the edges (its
-    start-up, paid by every sampling cell: torch ~1.2 s, pandas ~0.25 s)."""
+    """What a sample_generator job imports: the weights reader, the samplers, the edges, the
+    cells' seed and timing files and the forked workers (its start-up: torch ~1.2 s, pandas
+    ~0.25 s)."""
     code = (
         "import sys; import tacgen_lib.generate.inference, tacgen_lib.generate.sampling, "
+        "tacgen_lib.generate.cells, tacgen_lib.runtime.benchmarks, tacgen_lib.runtime.workers, "
         "tacgen_lib.io.edges, tacgen_lib.io.log, tacgen_lib.runtime.device, threadpoolctl; "
         "print('torch' in sys.modules, 'pandas' in sys.modules)"
     )
@@ -981,3 +983,18 @@ def test_report_tables_and_figures_from_a_summary():
         rep.pca_figure(rng.normal(size=(30, 5)), rng.normal(size=(30, 5)), title="x"),
     ):
         assert len(fig.axes) >= 1
+
+
+def test_cell_seed_is_the_per_cell_jobs_seed_and_cells_keep_their_paths():
+    """One job per generator samples each cell with the seed a job per cell used (generator
+    seed, steps, guidance in thousandths), so the edges stay the same bytes; its outputs are
+    the cells' paths with corpus and seed left as wildcards, in the cells' order."""
+    from tacgen_lib.generate.cells import SAMPLE_CELL, cell_seed, generator_cells, sample_cells
+
+    assert cell_seed(0, "1", "25") == 25 * 101 + 1000
+    assert cell_seed("3", 1.5, 1000) == 3 * 1_000_003 + 1000 * 101 + 1500
+    assert cell_seed(1, "0", "5") != cell_seed(1, "0", "10")
+    cells = sample_cells([0, 1.5], {"ddim": [5], "ddpm": [1000]})
+    paths = generator_cells(SAMPLE_CELL, cells)
+    assert paths[0] == "results/generate/{corpus}/seed~{seed}/sampler~ddim/guidance~0/steps~5"
+    assert paths[-1].endswith("sampler~ddpm/guidance~1.5/steps~1000") and len(paths) == 4

@@ -34,3 +34,14 @@ def test_unreadable_benchmark_is_named(tmp_path):
     path.write_text("")
     with pytest.raises(ValueError, match="empty.tsv"):
         read_benchmark(path)
+
+
+def test_a_cell_timed_by_its_job_reads_like_a_snakemake_benchmark(tmp_path):
+    from tacgen_lib.runtime.benchmarks import write_benchmark
+
+    path = tmp_path / "sample_generator" / "c" / "0_ddim_1_25.tsv"
+    write_benchmark(path, wall=3725.5, cpu=3600.25)
+    b = read_benchmark(path)
+    assert b.wall == 3725.5 and b.cpu == 3600.25
+    assert path.read_text().splitlines()[1].split("\t")[1] == "1:02:05"  # h:m:s
+    assert not list(path.parent.glob(".*.tmp"))  # written atomically

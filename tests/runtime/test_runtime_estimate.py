@@ -300,3 +300,93 @@ def test_shipped_calibration_estimates_the_real_dags(configfile):
         and (j.log is None or benchmark_of_log(j.log) != Path(j.benchmark))
     }
     assert not wrong, wrong
+
+
+# ---- cells in one-thread workers, the critical chain, a GPU class ------------------------------
+
+
+def test_longest_first_makespan_of_cells_on_workers():
+    from tacgen_lib.runtime.schedule import longest_first_makespan
+
+    cells = [10.0, 7.0, 5.0, 3.0, 3.0, 2.0]
+    assert longest_first_makespan(cells, 1) == pytest.approx(30.0)  # one worker: the sum
+    # two workers, longest first: 10 | 7 5 -> 10+3+2=15 | 12+3=15
+    assert longest_first_makespan(cells, 2) == pytest.approx(15.0)
+    # as many workers as cells or more: the longest cell
+    assert longest_first_makespan(cells, 6) == longest_first_makespan(cells, 64) == 10.0
+    assert longest_first_makespan([], 4) == 0.0
+
+
+def test_critical_chain_is_the_longest_dependent_path():
+    from tacgen_lib.runtime.schedule import critical_chain
+
+    # 0 -> 1 -> 3 (1 + 10 + 2) beats 0 -> 2 -> 3 (1 + 4 + 2); 4 stands alone (5 s)
+    tasks = [
+        Task(0, 1.0),
+        Task(1, 10.0, 1, (0,)),
+        Task(2, 4.0, 1, (0,)),
+        Task(3, 2.0, 1, (1, 2)),
+        Task(4, 5.0),
+    ]
+    seconds, keys = critical_chain(tasks)
+    assert seconds == pytest.approx(13.0) and keys == [0, 1, 3]
+
+
+def sampling_config(guidance, samplers, n=100):
+    return {
+        "corpora": {"c": {"n": n}},
+        "generate": {"guidance": guidance, "samplers": samplers, "hidden": 64, "blocks": 1},
+    }
+
+
+def test_a_generators_sampling_job_runs_its_cells_on_its_threads():
+    """One job per generator: its units are the cells' sums; one thread costs the overhead
+    plus every cell, many threads the overhead plus the longest cell (each cell on one
+    thread)."""
+    from tacgen_lib.runtime.estimate import job_prediction
+    from tacgen_lib.runtime.units import flop_seconds
+
+    cfg = sampling_config([1, 3], {"ddim": [5, 25], "ddpm": [100]})
+    w = {"corpus": "c", "seed": "0"}
+    lines = fit_costs(
+        points(
+            [("sample_generator", 100, 1.0 + 1e-3 * 100)] * 1
+            + [("sample_generator", 10_000, 1.0 + 1e-3 * 10_000)]
+        )
+    )
+    _, units, flops = job_units("sample_generator", cfg, w)
+    assert units == pytest.approx(100 * (5 + 25 + 100) * 2)  # sample x step, both guidances
+    cells = UNITS["sample_generator"].cells(cfg, w)
+    assert len(cells) == 6 and sum(f for _, f in cells) == pytest.approx(flops)
+    line = lines["sample_generator"]
+    one = [line.per_unit * u + flop_seconds(f, 1) for u, f in cells]
+    _, _, serial, _ = job_prediction("sample_generator", cfg, w, 1, lines)
+    _, _, wide, _ = job_prediction("sample_generator", cfg, w, 8, lines)
+    assert serial == pytest.approx(line.overhead + sum(one))
+    assert wide == pytest.approx(line.overhead + max(one))  # the DDPM-100 cell at w = 3
+
+
+def test_a_gpu_class_moves_only_the_torch_rules_flops():
+    from tacgen_lib.runtime.estimate import job_prediction
+
+    cfg = sampling_config([3], {"ddim": [50]}, n=1000)
+    cfg["generate"].update(steps=1000, batch_size=256)
+    w = {"corpus": "c", "seed": "0"}
+    lines = fit_costs(
+        points(
+            [
+                (r, u, 1.0 + 1e-3 * u)
+                for r in ("train_generator", "sample_generator")
+                for u in (10, 10_000)
+            ]
+        )
+    )
+    cpu = job_prediction("train_generator", cfg, w, 2, lines)[2]
+    gpu = job_prediction("train_generator", cfg, w, 2, lines, gpu_tflops=20.0)[2]
+    assert gpu < cpu  # torch training: its FLOPs at the GPU's rate
+    assert gpu >= lines["train_generator"].seconds(1000)  # its per-unit cost stays the CPU's
+    # the latent sampler is numpy: a GPU does not change it
+    assert (
+        job_prediction("sample_generator", cfg, w, 1, lines, gpu_tflops=20.0)[2]
+        == (job_prediction("sample_generator", cfg, w, 1, lines)[2])
+    )
