@@ -100,7 +100,7 @@ NEEDS: dict[str, str] = {
     "probe_training_size": "pandas sklearn",
     "probe_within_scale": "pandas sklearn",
     "project_aligned": "torch pandas",
-    "regime_appearance": "pandas sklearn",
+    "visibility_check": "pandas sklearn",
     "regime_evaluate": "pandas sklearn",
     "regime_generators": "torch pandas",
     "rollout_policy": "torch " + _SIM,

@@ -214,3 +214,54 @@ rule pretrained_vs_random:
         C=[0.1, 1.0, 10.0],
     script:
         "../workflow/scripts/pretrained_vs_random.py"
+
+
+# what V sees (tacgen_lib.generate.visibility): every simulated corpus's visible factors
+# decoded from its vision features; the report page What vision sees and the regime's gate
+VISIBILITY = FEAT.get("visibility") or {"gammas": [1.0], "bootstrap": 2000, "gate": {}}
+VISIBILITY_EDGE = "results/features/visibility.parquet"
+VISIBILITY_ITEMS = {"table": "html", "figure": "png"}
+if SIM_CORPORA:
+    EDGES.append(VISIBILITY_EDGE)
+    TARGETS += [
+        f"results/report/visibility/{n}.{e}" for n, e in VISIBILITY_ITEMS.items()
+    ]
+
+
+rule visibility_check:
+    """How well V decodes each factor a simulated frame shows (colour, texture, shape, size, the natural design's appearance class), with a linear and a nonlinear probe on every non-test row."""
+    input:
+        manifest="results/corpus/manifest.parquet",
+        splits="results/corpus/splits.parquet",
+        v=[feature_edge(c, "vision") for c in SIM_CORPORA],
+        code=imports_of("visibility_check"),
+    output:
+        **{
+            name: report(
+                f"results/report/visibility/{name}.{ext}",
+                caption=f"../workflow/report/visibility_{name}.rst",
+                category=category("What vision sees"),
+                labels={"item": name},
+            )
+            for name, ext in VISIBILITY_ITEMS.items()
+        },
+        edge=VISIBILITY_EDGE,
+    log:
+        "results/logs/visibility_check.log",
+    benchmark:
+        "results/benchmarks/visibility_check.tsv"
+    conda:
+        "../envs/probes.yaml"
+    threads: 2  # its (corpus, factor, probe) fits in forked one-thread workers (runtime.workers)
+    resources:
+        mem_mb=3000,
+        runtime=30,
+    params:
+        corpora=SIM_CORPORA,  # the order of the v inputs
+        # corpora of the natural design: their appearance_id is the appearance class
+        natural=[c for c in SIM_CORPORA if CORPORA[c].get("design") == "natural"],
+        visibility=VISIBILITY,
+        probes=PROBE_SETTINGS,
+        probe_seed=config["probes"]["seeds"][0],
+    script:
+        "../workflow/scripts/visibility_check.py"

@@ -10,7 +10,7 @@ include: "regime_common.smk"
 if REGIME_CORPORA:
     TARGETS += [f"{REGIME_DIR}/summary.parquet"]
     TARGETS += [f"{REGIME_REPORT}/{n}.{e}" for n, e in REGIME_ITEMS.items()]
-    EDGES += [f"{REGIME_DIR}/evaluation.parquet", f"{REGIME_DIR}/appearance.parquet"]
+    EDGES += [f"{REGIME_DIR}/evaluation.parquet"]
     EDGES += [p for c, s in regime_cells() for p in regime_t_gen(c, s)]
 
 
@@ -38,6 +38,7 @@ rule regime_generators:
         mem_mb=3000,
         runtime=30,
     params:
+        device=DEVICE,  # config device (tacgen_lib.runtime.device)
         generate=GENERATE,
         regime=REGIME,
         cells=REGIME_CELLS,  # the order of the t_gen outputs
@@ -46,7 +47,7 @@ rule regime_generators:
 
 
 rule regime_evaluate:
-    """Every arm of the regime (linear and nonlinear V, V + T_gen, the shuffled-pool generator, generalised distillation, V + real T, the vision ceiling) for one corpus x seed."""
+    """Every arm of the regime (linear and nonlinear V, the generator ladder from the look oracle to one diffusion sample, the shuffled-pool generator, generalised distillation, V + real T, the V ceiling and the vision ceiling) for one corpus x seed."""
     input:
         manifest="results/corpus/manifest.parquet",
         splits="results/corpus/splits.parquet",
@@ -81,42 +82,11 @@ rule regime_evaluate:
         "../workflow/scripts/regime_evaluate.py"
 
 
-rule regime_appearance:
-    """Whether V decodes the appearance class (linear and nonlinear V probe), once per run: on the first rho's corpus at the first seed (the class -> frame process is the same at every rho)."""
-    input:
-        manifest="results/corpus/manifest.parquet",
-        splits="results/corpus/splits.parquet",
-        v=feature_edge(REGIME_APPEARANCE.get("corpus", "none"), "vision"),
-        code=imports_of("regime_appearance"),
-    output:
-        f"{REGIME_DIR}/appearance.parquet",
-    log:
-        "results/logs/regime_appearance.log",
-    benchmark:
-        "results/benchmarks/regime_appearance.tsv"
-    conda:
-        "../envs/probes.yaml"
-    # one thread: its two probes are unequal (the nonlinear one ~1.7x the linear), so two
-    # workers keep ~1.6 of 2 cores busy; profiles/slurm gives it 2 (runtime.workers)
-    threads: 1
-    resources:
-        mem_mb=3000,
-        runtime=30,
-    params:
-        **REGIME_APPEARANCE,
-        regime=REGIME,
-        rho=float(CORPORA.get(REGIME_APPEARANCE.get("corpus"), {}).get("rho", 0.0)),
-        probes=PROBE_SETTINGS,
-        probe_seed=config["probes"]["seeds"][0],
-    script:
-        "../workflow/scripts/regime_appearance.py"
-
-
 rule aggregate_regime:
     """One summary of every regime cell and arm; the report page Where generated touch helps."""
     input:
         rows=regime_files(f"{REGIME_CELL}/evaluation.parquet"),
-        appearance=f"{REGIME_DIR}/appearance.parquet",
+        visibility=VISIBILITY_EDGE,
         curves=regime_files(f"{REGIME_CELL}/curves.parquet"),
         code=imports_of("aggregate_regime"),
     output:
@@ -142,5 +112,7 @@ rule aggregate_regime:
     resources:
         mem_mb=2000,
         runtime=10,
+    params:
+        gate=VISIBILITY["gate"],  # the visibility gate of the regime's corpora
     script:
         "../workflow/scripts/aggregate_regime.py"

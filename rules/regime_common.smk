@@ -16,19 +16,10 @@ REGIME_CORPORA = list(regime_corpora(REGIME))
 REGIME_DIR = "results/generate/regime"
 REGIME_CELL = f"{REGIME_DIR}/{{corpus}}/seed~{{seed}}"
 REGIME_REPORT = "results/report/regime"
-# the appearance check runs once, on the first rho's corpus at the first seed: at every rho the
-# appearance class is uniform over the classes and the frame depends on the class, colour
-# jitter, shape, size and yaw only (tacgen_lib.corpus.sim.corpus), so the class -> frame process
-# and the accuracy the check estimates are the same on every corpus of the grid
-REGIME_APPEARANCE = (
-    {"corpus": REGIME_CORPORA[0], "seed": str(REGIME["seeds"][0])}
-    if REGIME_CORPORA
-    else {}
-)
 REGIME_ITEMS = {
     "findings": "html",
     "table": "html",
-    "appearance": "html",
+    "ladder": "html",
     "heatmap": "png",
     "curves": "png",
 }

@@ -126,6 +126,7 @@ rule findings:
     input:
         unpack(findings_policy_inputs),
         unpack(findings_regime_inputs),
+        unpack(findings_visibility_inputs),
         unpack(findings_backbone_inputs),
         unpack(findings_transfer_inputs),
         unpack(findings_pixel_inputs),
@@ -154,6 +155,9 @@ rule findings:
         generate_ref=generate_ref(),
         policy=POLICY_ON,
         regime=bool(REGIME_CORPORA),
+        regime_corpora=REGIME_CORPORA,
+        visibility=bool(SIM_CORPORA),
+        gate=VISIBILITY["gate"],
         transfer=bool(TRANSFER_CORPUS),
         pixel=bool(PIXEL_CORPORA),
         backbones=(

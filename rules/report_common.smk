@@ -26,6 +26,11 @@ def features_report_item(path, caption, labels):
     )
 
 
+def findings_visibility_inputs(wildcards):
+    """The visibility check the findings page reads, where a simulated corpus runs."""
+    return {"visibility": VISIBILITY_EDGE} if SIM_CORPORA else {}
+
+
 def findings_regime_inputs(wildcards):
     """The regime summary the findings page reads, where the regime runs."""
     return {"regime": f"{REGIME_DIR}/summary.parquet"} if REGIME_CORPORA else {}

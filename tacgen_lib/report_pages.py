@@ -16,6 +16,7 @@ PAGES = (
     "Corpus",
     "Preprocessing",
     "Features",
+    "What vision sees",
     "Alignment",
     "Probes",
     "Robustness",

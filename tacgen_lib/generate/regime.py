@@ -9,27 +9,37 @@ larger than the labelled set, and (4) it must shrink as labels grow and must bea
 that uses the same pool without generating anything. This module draws the sets and fits every
 arm on the same test rows:
 
-- ``v`` / linear: the probes stage's probe on V (`fit_probe`, regulariser by CV on the N_L
-  labelled rows); ``v`` / nonlinear: V + RBF Nystroem features of V
-  (`baselines.nonlinear_baseline`, gamma and regulariser by CV on the same rows);
-- ``v_tgen`` / linear and nonlinear: V + T_gen, T_gen from the diffusion generator trained on
-  the pool (`regime_generators`);
+- ``v`` / linear: the probes stage's probe on V (`fit_small_probe`, regulariser by CV on the
+  N_L labelled rows over the regime's grid, which reaches the majority class); ``v`` /
+  nonlinear: V + RBF Nystroem features of V (`fit_small_nonlinear`);
+- the generator ladder (`generate.ladder`), each rung V + its T_gen with the linear and the
+  nonlinear probe: ``look_oracle`` (A0, the positive control: the mean real T of the pool
+  rows with the row's look), ``knn`` (A1), ``ridge``, ``gen_mean`` (A2, the mean of K
+  diffusion samples) and ``v_tgen`` (A3, one sample: the paper's arm);
 - ``v_tgen_shuffled`` / linear: V + T_gen of a generator trained on the pool with its pairs
   broken (a Sattolo cycle of the pool rows): what generation adds without the V-T link;
 - ``distilled`` / linear and nonlinear: generalised distillation (Lopez-Paz et al. 2016), a
   pool-aware V-only baseline that generates nothing: a teacher on V + real T fitted on the N_L
   labelled rows labels the pool through the pool's real T; a student on V alone is fitted on
-  the labelled rows (true labels) and the pool (the teacher's labels). If it matches V +
-  T_gen, the value lies in the pool, not in generating touch;
+  the labelled rows (true labels) and the pool (the teacher's labels);
 - ``v_treal`` / linear: V + real T, the reference;
-- ``vision_ceiling`` / oracle: the best score a function of appearance reaches, from the known
-  generative process: the probe on the true appearance class (one-hot) and the visible shape
-  and size, fitted on every non-test row with its true label (an oracle no arm can use).
+- ``v_ceiling`` / linear and nonlinear: the V probes fitted on every non-test row with its
+  true label: the best a function of V reaches with every label, the bound that matters for
+  every arm built on V;
+- ``vision_ceiling`` / oracle: the probe on the true appearance class (one-hot) and the
+  visible shape and size, fitted on every non-test row: the best any function of appearance
+  reaches (an oracle no arm can use).
 
-Every score carries a 5,000-resample fixed-test bootstrap CI; the Deltas against linear and
-nonlinear V are paired on the same resamples (drawn once per target and shared by every arm).
-``gap_closed`` = (arm - nonlinear V) / (real - nonlinear V); ``delta_vs_distilled`` = arm -
-generalised distillation with the same probe (linear for the linear, oracle and real arms).
+Every score carries a fixed-test bootstrap CI; the Deltas against linear and nonlinear V are
+paired on the same resamples (drawn once per target and shared by every arm). ``gap_closed`` =
+(arm - nonlinear V) / (real - nonlinear V); ``headroom_captured`` = (arm - nonlinear V) / (V
+ceiling - nonlinear V), the V ceiling being the nonlinear one; ``majority`` is the score of
+predicting the labelled rows' majority class (their mean, for ridge) on the test rows, and
+``below_majority`` flags an arm that scores less. ``delta_vs_distilled`` = arm - generalised
+distillation with the same probe (linear for the oracle and real arms).
+
+Each seed draws ``label_draws`` labelled sets that share its pool and its generators
+(`RegimeSets.labelled_draw`); the summary's ``draw`` says which.
 
 The sets (labelled, pool, test) and the settings live in `regime_sets`, which the DAG and the
 generator jobs import without scikit-learn; this module re-exports them.
@@ -45,8 +55,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from tacgen_lib.generate.baselines import nonlinear_baseline
 from tacgen_lib.generate.blocks import feature_block
+from tacgen_lib.generate.ladder import LADDER
 from tacgen_lib.generate.regime_sets import (
     RegimeSets,
     RegimeSettings,
@@ -55,13 +65,12 @@ from tacgen_lib.generate.regime_sets import (
     draw_regime_sets,
     job_regime_sets,
 )
+from tacgen_lib.generate.small_probes import SmallFit, fit_small_nonlinear, fit_small_probe
 from tacgen_lib.probes.bootstrap import (
     percentile_interval,
     resample_indices,
-    score_interval,
     score_resamples,
 )
-from tacgen_lib.probes.fit import fit_probe
 from tacgen_lib.probes.metrics import score
 from tacgen_lib.probes.rows import FamilyRows, visible_design
 from tacgen_lib.probes.settings import ProbeSettings
@@ -69,10 +78,10 @@ from tacgen_lib.runtime.workers import fork_map
 
 __all__ = [
     "ARMS",
+    "LADDER",
     "SUMMARY_COLUMNS",
     "RegimeSets",
     "RegimeSettings",
-    "appearance_check",
     "appearance_design",
     "assert_regime_disjoint",
     "check_regime_sizes",
@@ -82,6 +91,8 @@ __all__ = [
     "fit_small_probe",
     "gap_closed",
     "distillation_rows",
+    "majority_score",
+    "regime_probe_settings",
     "regime_test_rows",
 ]
 
@@ -89,12 +100,13 @@ __all__ = [
 ARMS: tuple[tuple[str, str], ...] = (
     ("v", "linear"),
     ("v", "nonlinear"),
-    ("v_tgen", "linear"),
-    ("v_tgen", "nonlinear"),
+    *((rung, probe) for rung in LADDER for probe in ("linear", "nonlinear")),
     ("v_tgen_shuffled", "linear"),
     ("distilled", "linear"),
     ("distilled", "nonlinear"),
     ("v_treal", "linear"),
+    ("v_ceiling", "linear"),
+    ("v_ceiling", "nonlinear"),
     ("vision_ceiling", "oracle"),
 )
 
@@ -106,6 +118,7 @@ SUMMARY_COLUMNS = (
     "n_labelled",
     "n_pool",
     "seed",
+    "draw",
     "target",
     "kind",
     "metric",
@@ -121,14 +134,28 @@ SUMMARY_COLUMNS = (
     "ci_low_vs_nonlinear_v",
     "ci_high_vs_nonlinear_v",
     "gap_closed",
+    "headroom_captured",
     "delta_vs_distilled",
     "ci_low_vs_distilled",
     "ci_high_vs_distilled",
+    "majority",
+    "below_majority",
     "reg",
     "reg_source",
     "n_test",
     "n_labelled_classes",
 )
+
+
+def regime_probe_settings(settings: ProbeSettings, regime: RegimeSettings) -> ProbeSettings:
+    """The probes stage's settings of a target with the regime's grids (`RegimeSettings.C`,
+    ``lambdas``): penalties strong enough for a probe on a few rows to fall back to the
+    majority class (or the mean) instead of overfitting."""
+    return replace(
+        settings,
+        C=tuple(float(c) for c in regime.C),
+        lambdas=tuple(float(v) for v in regime.lambdas),
+    )
 
 
 def regime_test_rows(rows: FamilyRows, sets: RegimeSets) -> FamilyRows:
@@ -139,77 +166,6 @@ def regime_test_rows(rows: FamilyRows, sets: RegimeSets) -> FamilyRows:
             "the split's (a test row without a label?)"
         )
     return rows
-
-
-# --------------------------------------------------------------------------- probes
-
-
-@dataclass(frozen=True)
-class SmallFit:
-    """A probe fitted on few rows: test predictions, regulariser and how it was chosen."""
-
-    pred: np.ndarray
-    reg: float
-    source: str  # "cv" | "single class: constant" | "fixed C (a class with < 2 rows)"
-    gamma_multiple: float = math.nan  # a nonlinear probe's RBF gamma / median heuristic
-
-
-def _cv_impossible(y: np.ndarray, settings: ProbeSettings) -> str:
-    """Why the family's CV cannot run on these labels ("" when it can): a logistic probe's
-    labels holding a single class, or a class with one row (stratified CV needs two)."""
-    if settings.kind != "logistic":
-        return ""
-    classes, counts = np.unique(np.asarray(y).astype(str), return_counts=True)
-    if classes.size < 2:
-        return "single class: constant"
-    if counts.min() < 2:
-        return "fixed C (a class with < 2 rows)"
-    return ""
-
-
-def fit_small_probe(
-    x_train: np.ndarray, y_train: np.ndarray, x_test: np.ndarray, settings: ProbeSettings
-) -> SmallFit:
-    """The probes stage's probe (`fit_probe`, CV over the family's grid) on possibly tiny
-    labelled sets, with the two cases CV cannot handle made explicit (`_cv_impossible`):
-
-    - a single class among the labelled rows: the constant prediction of that class;
-    - a class with one labelled row (stratified CV needs two): the logistic probe at the
-      middle C of the grid, refitted on all rows (``reg_source`` says so).
-    """
-    y = np.asarray(y_train)
-    why = _cv_impossible(y, settings)
-    if why.startswith("single class"):
-        return SmallFit(np.full(len(x_test), y[0], dtype=object), math.nan, why)
-    if why:
-        grid = sorted(float(c) for c in settings.C)
-        c_mid = grid[len(grid) // 2]
-        from tacgen_lib.probes.logistic import FixedLogistic  # scikit-learn: only where fitted
-
-        pred = FixedLogistic(c_mid).fit_predict(x_train, y, x_test)
-        return SmallFit(np.asarray(pred, dtype=object), c_mid, why)
-    fit = fit_probe(x_train, y, x_test, settings)
-    return SmallFit(np.asarray(fit.pred_test), float(fit.reg), "cv")
-
-
-def _nonlinear(
-    x_train: np.ndarray,
-    y_train: np.ndarray,
-    x_test: np.ndarray,
-    settings: ProbeSettings,
-    *,
-    gammas: Sequence[float],
-    n_components: int,
-) -> SmallFit:
-    """The nonlinear V baseline's probe on [x, phi(x)] (`nonlinear_baseline`), or the
-    `fit_small_probe` fallback where CV cannot run on these labels."""
-    y = np.asarray(y_train)
-    if _cv_impossible(y, settings):
-        return fit_small_probe(x_train, y, x_test, settings)
-    nl = nonlinear_baseline(
-        x_train, x_test, y, settings, gammas=gammas, n_components=n_components, seed=settings.seed
-    )
-    return SmallFit(np.asarray(nl.probe.pred_test), float(nl.probe.reg), "cv", nl.multiple)
 
 
 def distillation_rows(
@@ -268,13 +224,25 @@ def gap_closed(arm: float, nonlinear_v: float, real: float) -> float:
     return (arm - nonlinear_v) / gap
 
 
+def majority_score(metric: str, y_lab: np.ndarray, y_test: np.ndarray) -> float:
+    """The score of the constant prediction a probe falls back to: the labelled rows'
+    majority class (ties: the first in sorted order) for accuracy, their mean for R^2."""
+    if metric == "r2":
+        pred = np.full(len(y_test), float(np.mean(np.asarray(y_lab, np.float64))))
+        return float(score("r2", np.asarray(y_test, np.float64), pred))
+    classes, counts = np.unique(np.asarray(y_lab).astype(str), return_counts=True)
+    top = classes[int(np.argmax(counts))]
+    return float(np.mean(np.asarray(y_test).astype(str) == top))
+
+
 # --------------------------------------------------------------------------- evaluation
 
 
 @dataclass(frozen=True)
 class RegimeTarget:
     """One target of the regime: its rows (train = every non-test row, test = the test
-    split), its probe settings and the manifest rows of the vision ceiling."""
+    split), its probe settings (`regime_probe_settings`) and the manifest rows of the
+    vision ceiling."""
 
     rows: FamilyRows
     settings: ProbeSettings
@@ -293,109 +261,148 @@ def evaluate_regime(
     vision: Mapping[str, np.ndarray],
     t_real: Mapping[str, np.ndarray],
     t_gen: Mapping[tuple[int, str], Mapping[str, np.ndarray]],
+    ladder: Mapping[int, Mapping[str, Mapping[str, np.ndarray]]],
     gammas: Sequence[float],
     bootstrap: int,
     n_classes: int,
+    label_draws: int = 1,
     progress: Any = None,
     workers: int = 1,
 ) -> pd.DataFrame:
-    """Every arm (`ARMS`) of every (N_L, N_P) cell of one corpus x seed, per target.
+    """Every arm (`ARMS`) of every (labelled draw, N_L, N_P) cell of one corpus x seed, per
+    target.
 
-    t_gen: (n_pool, "real" | "shuffled") -> sample_id -> generated tactile vector, for at
-    least the labelled and test rows. The (target, N_L) cells are independent: `workers`
-    forked processes compute them (`runtime.workers.fork_map`, the same rows for any number
-    of workers), the costliest (logistic targets, large N_L) first. Returns rows with
-    `SUMMARY_COLUMNS`, ordered by target, N_L and N_P.
+    t_gen: (n_pool, "real" | "shuffled") -> sample_id -> one generated tactile sample (the
+    ``v_tgen`` rung and the shuffled-pool arm); ladder: n_pool -> rung -> sample_id -> T_gen
+    of the other rungs of `LADDER` (look_oracle, knn, ridge, gen_mean). Both hold at least the
+    labelled rows of every draw and the test rows. The (target, draw, N_L) cells are
+    independent: `workers` forked processes compute them (`runtime.workers.fork_map`, the same
+    rows for any number of workers), the costliest (logistic targets, large N_L) first.
+    Returns rows with `SUMMARY_COLUMNS`, ordered by target, draw, N_L and N_P.
     """
     say = progress or (lambda _m: None)
     base = {"corpus": corpus, "rho": float(rho), "seed": int(seed)}
-    # the vision ceiling of each target (fitted on every non-test row), then the cells
-    ceilings = fork_map(lambda tgt: _vision_ceiling(tgt, sets, n_classes), targets, workers)
-    cells = [(t, int(n_l)) for t in range(len(targets)) for n_l in sorted(map(int, n_labelled))]
+    d_t = len(next(iter(t_real.values())))
+    # the ceilings of each target (fitted on every non-test row), then the cells
+    ceilings = fork_map(
+        lambda tgt: _ceilings(tgt, vision, n_classes, gammas=gammas, n_components=d_t),
+        targets,
+        workers,
+    )
+    cells = [
+        (t, d, int(n_l))
+        for t in range(len(targets))
+        for d in range(int(label_draws))
+        for n_l in sorted(map(int, n_labelled))
+    ]
 
-    def one_cell(cell: tuple[int, int]) -> list[dict]:
-        t, n_l = cell
+    def one_cell(cell: tuple[int, int, int]) -> list[dict]:
+        t, draw, n_l = cell
         rows = _labelled_cell(
             targets[t],
             ceilings[t],
             sets,
+            draw,
             n_l,
             sorted(int(n) for n in n_pool),
             vision=vision,
             t_real=t_real,
             t_gen=t_gen,
+            ladder=ladder,
             gammas=gammas,
             bootstrap=bootstrap,
             base=base,
         )
-        say(f"{corpus} seed {seed} {targets[t].rows.target}: N_L={n_l} done")
+        say(f"{corpus} seed {seed} draw {draw} {targets[t].rows.target}: N_L={n_l} done")
         return rows
 
-    def cost(cell: tuple[int, int]) -> float:  # logistic CV dominates, growing with N_L
-        return (10.0 if targets[cell[0]].settings.kind == "logistic" else 1.0) * (cell[1] + 64)
+    def cost(cell: tuple[int, int, int]) -> float:  # logistic CV dominates, growing with N_L
+        return (10.0 if targets[cell[0]].settings.kind == "logistic" else 1.0) * (cell[2] + 64)
 
     out = [row for rows in fork_map(one_cell, cells, workers, cost=cost) for row in rows]
     return pd.DataFrame(out, columns=list(SUMMARY_COLUMNS))
 
 
+def _labels(tgt: RegimeTarget, ids: Sequence) -> np.ndarray:
+    label_of = dict(zip(map(str, tgt.rows.train_ids), tgt.rows.y_train, strict=True))
+    y = np.array([label_of[str(i)] for i in ids], dtype=object)
+    return y.astype(np.float64) if tgt.settings.kind == "ridge" else y
+
+
 def _labelled_cell(
     tgt: RegimeTarget,
-    ceiling: SmallFit,
+    ceilings: Mapping[tuple[str, str], SmallFit],
     sets: RegimeSets,
+    draw: int,
     n_l: int,
     n_pool: Sequence[int],
     *,
     vision: Mapping[str, np.ndarray],
     t_real: Mapping[str, np.ndarray],
     t_gen: Mapping[tuple[int, str], Mapping[str, np.ndarray]],
+    ladder: Mapping[int, Mapping[str, Mapping[str, np.ndarray]]],
     gammas: Sequence[float],
     bootstrap: int,
     base: dict,
 ) -> list[dict]:
-    """The rows of every arm of one target at one labelled size, for every pool size."""
+    """The rows of every arm of one target at one labelled draw and size, for every pool."""
     rows, ps = tgt.rows, tgt.settings
     metric = ps.metric
     test = np.asarray(rows.test_ids, dtype=object)
     y_test = np.asarray(rows.y_test)
-    label_of = dict(zip(map(str, rows.train_ids), rows.y_train, strict=True))
     v_te, t_te = feature_block(vision, test), feature_block(t_real, test)
     d_t = t_te.shape[1]
     idx = resample_indices(len(test), int(bootstrap), ps.seed)
-    lab = sets.labelled_ids(n_l)
-    y_lab = np.array([label_of[str(i)] for i in lab], dtype=object)
-    if ps.kind == "ridge":
-        y_lab = y_lab.astype(np.float64)
+    lab = sets.labelled_ids(n_l, draw)
+    y_lab = _labels(tgt, lab)
     v_lab, t_lab = feature_block(vision, lab), feature_block(t_real, lab)
     fits: dict[tuple[str, str], SmallFit] = {
         ("v", "linear"): fit_small_probe(v_lab, y_lab, v_te, ps),
-        ("v", "nonlinear"): _nonlinear(v_lab, y_lab, v_te, ps, gammas=gammas, n_components=d_t),
+        ("v", "nonlinear"): fit_small_nonlinear(
+            v_lab, y_lab, v_te, ps, gammas=gammas, n_components=d_t
+        ),
         ("v_treal", "linear"): fit_small_probe(
             np.hstack([v_lab, t_lab]), y_lab, np.hstack([v_te, t_te]), ps
         ),
-        ("vision_ceiling", "oracle"): ceiling,
+        **ceilings,
+    }
+    cell_base = {
+        **base,
+        "draw": int(draw),
+        "n_labelled": n_l,
+        "target": rows.target,
+        "kind": ps.kind,
+        "metric": metric,
+        "n_test": len(test),
+        "n_labelled_classes": (len(set(map(str, y_lab))) if ps.kind == "logistic" else 0),
+        "majority": majority_score(metric, y_lab, y_test),
     }
     out: list[dict] = []
     for n_p in n_pool:
         pool = sets.pool_ids(n_p)
         v_pool, t_pool = feature_block(vision, pool), feature_block(t_real, pool)
         cell = dict(fits)
-        gen, shuf = t_gen[(n_p, "real")], t_gen[(n_p, "shuffled")]
-        g_lab, g_te = feature_block(gen, lab), feature_block(gen, test)
-        s_lab, s_te = feature_block(shuf, lab), feature_block(shuf, test)
-        x_lab, x_te = np.hstack([v_lab, g_lab]), np.hstack([v_te, g_te])
-        cell[("v_tgen", "linear")] = fit_small_probe(x_lab, y_lab, x_te, ps)
-        cell[("v_tgen", "nonlinear")] = _nonlinear(
-            x_lab, y_lab, x_te, ps, gammas=gammas, n_components=d_t
-        )
+        rungs = {**ladder[n_p], "v_tgen": t_gen[(n_p, "real")]}
+        for rung in LADDER:
+            x_lab = np.hstack([v_lab, feature_block(rungs[rung], lab)])
+            x_te = np.hstack([v_te, feature_block(rungs[rung], test)])
+            cell[(rung, "linear")] = fit_small_probe(x_lab, y_lab, x_te, ps)
+            cell[(rung, "nonlinear")] = fit_small_nonlinear(
+                x_lab, y_lab, x_te, ps, gammas=gammas, n_components=d_t
+            )
+        shuf = t_gen[(n_p, "shuffled")]
         cell[("v_tgen_shuffled", "linear")] = fit_small_probe(
-            np.hstack([v_lab, s_lab]), y_lab, np.hstack([v_te, s_te]), ps
+            np.hstack([v_lab, feature_block(shuf, lab)]),
+            y_lab,
+            np.hstack([v_te, feature_block(shuf, test)]),
+            ps,
         )
         # the student's gamma multiple: the one CV chose for nonlinear V on these labels
         # (all of `gammas` where that probe could not run CV)
         x_gd, y_gd = distillation_rows(v_lab, t_lab, y_lab, v_pool, t_pool, ps)
         g_nl = fits[("v", "nonlinear")].gamma_multiple
         cell[("distilled", "linear")] = fit_small_probe(x_gd, y_gd, v_te, ps)
-        cell[("distilled", "nonlinear")] = _nonlinear(
+        cell[("distilled", "nonlinear")] = fit_small_nonlinear(
             x_gd,
             y_gd,
             v_te,
@@ -403,42 +410,39 @@ def _labelled_cell(
             gammas=[g_nl] if np.isfinite(g_nl) else gammas,
             n_components=d_t,
         )
-        out += _cell_rows(
-            cell,
-            y_test,
-            idx,
-            metric,
-            base={
-                **base,
-                "n_labelled": n_l,
-                "n_pool": n_p,
-                "target": rows.target,
-                "kind": ps.kind,
-                "metric": metric,
-                "n_test": len(test),
-                "n_labelled_classes": (len(set(map(str, y_lab))) if ps.kind == "logistic" else 0),
-            },
-        )
+        out += _cell_rows(cell, y_test, idx, metric, base={**cell_base, "n_pool": n_p})
     return out
 
 
-def _vision_ceiling(tgt: RegimeTarget, sets: RegimeSets, n_classes: int) -> SmallFit:
-    """The oracle probe on true appearance class + visible shape and size, fitted on every
-    non-test row (labelled and pool) with its true label."""
-    rows, ps = tgt.rows, tgt.settings
-    label_of = dict(zip(map(str, rows.train_ids), rows.y_train, strict=True))
-    train = [str(i) for i in np.concatenate([sets.labelled, sets.pool]) if str(i) in label_of]
+def _ceilings(
+    tgt: RegimeTarget,
+    vision: Mapping[str, np.ndarray],
+    n_classes: int,
+    *,
+    gammas: Sequence[float],
+    n_components: int,
+) -> dict[tuple[str, str], SmallFit]:
+    """The arms fitted once per target on every non-test row with its true label: the V
+    ceiling (the linear and the nonlinear V probe) and the vision ceiling (the oracle probe
+    on the true appearance class + visible shape and size)."""
+    rows, ps = tgt.rows, replace(tgt.settings, cv_repeats=1)
+    train = [str(i) for i in rows.train_ids]
     test = [str(i) for i in rows.test_ids]
+    y = _labels(tgt, train)
+    v_tr, v_te = feature_block(vision, train), feature_block(vision, test)
     x_tr, x_te = appearance_design(
         tgt.manifest.loc[train],
         tgt.manifest.loc[test],
         log_target=rows.target.startswith("log_"),
         n_classes=n_classes,
     )
-    y = np.array([label_of[i] for i in train], dtype=object)
-    if ps.kind == "ridge":
-        y = y.astype(np.float64)
-    return fit_small_probe(x_tr, y, x_te, replace(ps, cv_repeats=1))
+    return {
+        ("v_ceiling", "linear"): fit_small_probe(v_tr, y, v_te, ps),
+        ("v_ceiling", "nonlinear"): fit_small_nonlinear(
+            v_tr, y, v_te, ps, gammas=gammas, n_components=n_components
+        ),
+        ("vision_ceiling", "oracle"): fit_small_probe(x_tr, y, x_te, ps),
+    }
 
 
 def _cell_rows(
@@ -478,7 +482,11 @@ def _cell_rows(
         return full[k] - full[ref], lo, hi
 
     real, nl = full[("v_treal", "linear")], full[("v", "nonlinear")]
-    key = f"{base['corpus']}|{base['n_labelled']}|{base['n_pool']}|{base['seed']}|{base['target']}"
+    ceiling = full[("v_ceiling", "nonlinear")]
+    key = (
+        f"{base['corpus']}|{base['n_labelled']}|{base['n_pool']}|{base['seed']}|"
+        f"d{base['draw']}|{base['target']}"
+    )
     rows = []
     for arm, probe in ARMS:
         k = (arm, probe)
@@ -504,72 +512,14 @@ def _cell_rows(
                 "ci_low_vs_nonlinear_v": lo_nl,
                 "ci_high_vs_nonlinear_v": hi_nl,
                 "gap_closed": gap_closed(full[k], nl, real),
+                # the share of the headroom above nonlinear V (up to the V ceiling) captured
+                "headroom_captured": gap_closed(full[k], nl, ceiling),
                 "delta_vs_distilled": d_gd,
                 "ci_low_vs_distilled": lo_gd,
                 "ci_high_vs_distilled": hi_gd,
+                "below_majority": bool(full[k] < base["majority"]),
                 "reg": fits[k].reg,
                 "reg_source": fits[k].source,
             }
         )
     return rows
-
-
-def appearance_check(
-    vision: Mapping[str, np.ndarray],
-    appearance: pd.Series,
-    sets: RegimeSets,
-    settings: ProbeSettings,
-    *,
-    corpus: str,
-    rho: float,
-    seed: int,
-    gammas: Sequence[float],
-    bootstrap: int,
-    progress: Any = None,
-    workers: int = 1,
-) -> pd.DataFrame:
-    """How well V decodes the appearance class: the linear and the nonlinear V probe
-    (logistic, regulariser by CV) fitted on every labelled and pool row, scored on the test
-    rows with a fixed-test bootstrap CI. appearance: sample_id -> appearance class.
-
-    The natural design builds the class as (colour + texture) mod k, so a linear probe on
-    raw appearance should do worse than a nonlinear one; the report shows both. At every rho
-    the class is uniform and the frame depends on the class, not on the material, so the
-    accuracy is a property of the design, the same on every corpus of a rho grid (the DAG
-    checks one). The two probes are fitted by `workers` forked processes (`fork_map`).
-    """
-    say = progress or (lambda _m: None)
-    train = [str(i) for i in np.concatenate([sets.labelled, sets.pool])]
-    test = [str(i) for i in sets.test]
-    y_tr = appearance.loc[train].astype(str).to_numpy(dtype=object)
-    y_te = appearance.loc[test].astype(str).to_numpy(dtype=object)
-    v_tr, v_te = feature_block(vision, train), feature_block(vision, test)
-    idx = resample_indices(len(test), int(bootstrap), settings.seed)
-
-    def fit(probe: str) -> SmallFit:
-        if probe == "linear":
-            return fit_small_probe(v_tr, y_tr, v_te, settings)
-        return _nonlinear(v_tr, y_tr, v_te, settings, gammas=gammas, n_components=v_tr.shape[1])
-
-    out = []
-    probes = ("linear", "nonlinear")
-    for probe, fitted in zip(probes, fork_map(fit, probes, workers), strict=True):
-        acc = score("accuracy", y_te, fitted.pred)
-        lo, hi = score_interval("accuracy", y_te, fitted.pred, idx)
-        say(f"appearance class, {probe} probe on V: accuracy {acc:.3f}")
-        out.append(
-            {
-                "row_id": f"{corpus}|{seed}|appearance_class|{probe}",
-                "corpus": corpus,
-                "rho": float(rho),
-                "seed": int(seed),
-                "probe": probe,
-                "score": acc,
-                "ci_low": lo,
-                "ci_high": hi,
-                "chance": float(pd.Series(y_te).value_counts(normalize=True).max()),
-                "n_train": len(train),
-                "n_test": len(test),
-            }
-        )
-    return pd.DataFrame(out)

@@ -32,8 +32,15 @@ __all__ = [
     "pool_pairs",
     "regime_generator_settings",
     "sample_regime",
+    "sample_seed",
     "train_pool_generator",
 ]
+
+
+def sample_seed(seed: int, n_pool: int, k: int) -> int:
+    """The noise seed of sample k of a regime generator: sample 0's is the one-sample arm's
+    (seed x 1,000,003 + N_P), the others step by a prime."""
+    return int(seed) * 1_000_003 + int(n_pool) + int(k) * 7_919
 
 
 def regime_generator_settings(
@@ -81,8 +88,9 @@ def train_pool_generator(
     pairing: str,
     seed: int,
     progress: Callable[[str], Any] | None = None,
+    device: Any = "cpu",
 ) -> GeneratorFit:
-    """`fit_generator` on the pool's pairs (`pool_pairs`), seeded by `seed`."""
+    """`fit_generator` on the pool's pairs (`pool_pairs`), seeded by `seed`, on `device`."""
     train, val = pool_pairs(pool, val_fraction=val_fraction, pairing=pairing, seed=seed)
 
     def block(pairs: list[tuple[str, str]]) -> tuple[np.ndarray, np.ndarray]:
@@ -93,7 +101,9 @@ def train_pool_generator(
 
     t_tr, v_tr = block(train)
     t_va, v_va = block(val)
-    return fit_generator(t_tr, v_tr, t_va, v_va, settings, seed=seed, progress=progress)
+    return fit_generator(
+        t_tr, v_tr, t_va, v_va, settings, seed=seed, progress=progress, device=device
+    )
 
 
 def sample_regime(
@@ -128,6 +138,7 @@ class PoolGenerator:
     n_pool: int
     pairing: str
     t_gen: np.ndarray  # (rows, d) float32, in the order of the rows asked for
+    t_gen_mean: np.ndarray  # (rows, d) float32: the mean of K samples (the ladder's gen_mean)
     curve: list[dict]  # step, train_loss, val_loss per evaluation
     best_step: int
     steps_run: int
@@ -146,10 +157,12 @@ def pool_generators(
     seed: int,
     progress: Callable[[str], Any] | None = None,
     workers: int = 1,
+    device: Any = "cpu",
 ) -> list[PoolGenerator]:
     """The generator of every (pool size, pairing) cell (`train_pool_generator` on the pool
-    of that size), each sampled for `rows` (`sample_regime`, noise seeded by the seed and
-    the pool size), in the order of `cells`.
+    of that size), each sampled ``regime.gen_mean_samples`` times for `rows` (`sample_regime`,
+    noise seeded by `sample_seed`): the first sample is the ``v_tgen`` arm's T_gen, the mean
+    of all the ``gen_mean`` rung's; in the order of `cells`.
 
     The cells are independent (each seeds its own training and sampling): `workers` forked
     processes train them (`runtime.workers.fork_map`, the same samples for any number of
@@ -170,15 +183,21 @@ def pool_generators(
             pairing=pairing,
             seed=seed,
             progress=lambda m: say(f"pool {n_pool} {pairing}: {m}"),
+            device=device,
         )
-        t_gen = sample_regime(
-            fit,
-            vision,
-            rows,
-            steps=regime.sampling_steps,
-            guidance=regime.guidance,
-            seed=seed * 1_000_003 + n_pool,
-        )
+        samples = [
+            sample_regime(
+                fit,
+                vision,
+                rows,
+                steps=regime.sampling_steps,
+                guidance=regime.guidance,
+                seed=sample_seed(seed, n_pool, k),
+            )
+            for k in range(int(regime.gen_mean_samples))
+        ]
+        # the ladder's gen_mean: the generator's conditional mean, estimated by K samples
+        t_gen_mean = np.mean(np.stack(samples).astype(np.float64), axis=0).astype(np.float32)
         say(
             f"pool {n_pool} {pairing}: best step {fit.best_step} of {fit.steps_run}, "
             f"val loss {fit.best_val_loss:.4f}"
@@ -186,11 +205,13 @@ def pool_generators(
         return PoolGenerator(
             n_pool,
             pairing,
-            t_gen,
+            samples[0],
+            t_gen_mean,
             [dict(point) for point in fit.curve],
             int(fit.best_step),
             int(fit.steps_run),
             float(fit.best_val_loss),
         )
 
-    return fork_map(one, cells, workers, cost=lambda cell: float(cell[0]))
+    on_cpu = str(device) == "cpu"
+    return fork_map(one, cells, workers if on_cpu else 1, cost=lambda cell: float(cell[0]))

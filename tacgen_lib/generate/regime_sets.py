@@ -11,14 +11,13 @@ order (nested likewise). Labelled, pool and test rows are disjoint by constructi
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
 from tacgen_lib.corpus.splits import LeakageError, assert_trainable
-from tacgen_lib.generate.settings import check_gamma_multiples
 from tacgen_lib.io.config import settings_from
 
 __all__ = [
@@ -92,32 +91,45 @@ class RegimeSettings:
     """The regime grid and how its arms are fitted (config ``regime``).
 
     ``n_labelled`` / ``n_pool``: the label and pool sizes of the grid; ``seeds``: one per set
-    draw and generator; ``targets``: target -> ridge | logistic; ``pool_val_fraction``: the
-    share of the pool that only steers the generator's early stopping; ``steps``,
-    ``batch_size``: the regime generators' step cap and batch (the rest of the model is
-    config ``generate``'s); ``sampling_steps``, ``guidance``: the DDIM cell they are sampled
-    with; ``bootstrap``: fixed-test resamples; ``appearance_gammas``: the RBF gamma multiples
-    (of the median heuristic) the nonlinear V probe of the appearance check chooses among by
-    CV (`regime.appearance_check`; the arms use config generate's nonlinear_gammas).
+    draw and generator; ``label_draws``: labelled draws per seed, sharing the seed's pool and
+    generators (`RegimeSets.labelled_draw`); ``targets``: target -> ridge | logistic;
+    ``pool_val_fraction``: the share of the pool that only steers the generator's early
+    stopping; ``steps``, ``batch_size``: the regime generators' step cap and batch (the rest of
+    the model is config ``generate``'s); ``sampling_steps``, ``guidance``: the DDIM cell they
+    are sampled with; ``gen_mean_samples``: the samples the ladder's ``gen_mean`` rung
+    averages (`generate.ladder`); ``knn_ks``: the k its ``knn`` rung chooses among;
+    ``bootstrap``: fixed-test resamples; ``C`` / ``lambdas``: the regime's probe grids, which
+    reach penalties strong enough for a probe to fall back to the majority class or the mean
+    (the probes stage keeps the paper's, config ``probes``).
     """
 
     n_labelled: tuple[int, ...] = (32, 128, 384)
     n_pool: tuple[int, ...] = (256, 1024)
     seeds: tuple[int, ...] = (0, 1)
+    label_draws: int = 3
     pool_val_fraction: float = 0.1
     steps: int = 1000
     batch_size: int = 128
     sampling_steps: int = 25
     guidance: float = 1.0
+    gen_mean_samples: int = 8
+    knn_ks: tuple[int, ...] = (1, 2, 4, 8, 16, 32, 64)
     bootstrap: int = 5000
-    appearance_gammas: tuple[float, ...] = (1.0,)
+    C: tuple[float, ...] = (0.0001, 0.001, 0.01, 0.1, 1.0, 10.0)
+    lambdas: tuple[float, ...] = (0.1, 1.0, 10.0, 100.0, 1000.0, 10000.0, 100000.0)
 
     def __post_init__(self) -> None:
-        check_gamma_multiples(self.appearance_gammas, "regime.appearance_gammas")
-        for name in ("n_labelled", "n_pool"):
+        for name in ("n_labelled", "n_pool", "knn_ks"):
             values = getattr(self, name)
             if not values or any(int(v) != v or v < 1 for v in values):
                 raise ValueError(f"regime.{name} must be integers >= 1, got {values!r}")
+        for name in ("label_draws", "gen_mean_samples"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"regime.{name} must be >= 1, got {getattr(self, name)!r}")
+        for name in ("C", "lambdas"):
+            values = getattr(self, name)
+            if not values or any(float(v) <= 0 for v in values):
+                raise ValueError(f"regime.{name} must be positive numbers, got {values!r}")
         if not 0.0 < self.pool_val_fraction < 1.0:
             raise ValueError(
                 f"regime.pool_val_fraction must be in (0, 1), got {self.pool_val_fraction}"
@@ -131,17 +143,41 @@ class RegimeSettings:
 @dataclass(frozen=True)
 class RegimeSets:
     """The draw of one regime seed: ``labelled`` (max N_L ids, nested by prefix), ``pool``
-    (max N_P ids, nested by prefix) and ``test`` (the corpus's test split), all disjoint."""
+    (max N_P ids, nested by prefix) and ``test`` (the corpus's test split), all disjoint;
+    ``spare``: the non-test rows in neither (they give the later labelled draws' rows).
+
+    Labelled draw 0 is ``labelled``; draw d >= 1 (`labelled_draw`) re-draws the labelled
+    order from the labelled and spare rows, so every draw shares the seed's pool (and its
+    generators) and stays disjoint from the pool and the test rows."""
 
     labelled: np.ndarray
     pool: np.ndarray
     test: np.ndarray
+    spare: np.ndarray = field(default_factory=lambda: np.empty(0, dtype=object))
+    seed: int = 0
 
-    def labelled_ids(self, n: int) -> np.ndarray:
-        return self.labelled[: int(n)]
+    def labelled_ids(self, n: int, draw: int = 0) -> np.ndarray:
+        return self.labelled_draw(draw)[: int(n)]
 
     def pool_ids(self, n: int) -> np.ndarray:
         return self.pool[: int(n)]
+
+    def labelled_draw(self, draw: int) -> np.ndarray:
+        """The labelled order of draw `draw` (as long as ``labelled``): draw 0 is
+        ``labelled``; a later draw permutes the sorted labelled and spare rows with
+        ``default_rng([seed, 0x6C626C64, draw])`` and takes the first len(labelled)."""
+        if int(draw) == 0:
+            return self.labelled
+        rows = np.sort(np.concatenate([self.labelled, self.spare]).astype(object))
+        perm = np.random.default_rng([int(self.seed), 0x6C626C64, int(draw)]).permutation(len(rows))
+        return rows[perm][: len(self.labelled)]
+
+    def labelled_union(self, draws: int) -> np.ndarray:
+        """Every row of labelled draws 0 .. draws - 1, sorted (the rows a job needs)."""
+        return np.array(
+            sorted({str(i) for d in range(int(draws)) for i in self.labelled_draw(d)}),
+            dtype=object,
+        )
 
 
 def check_regime_sizes(
@@ -191,15 +227,21 @@ def draw_regime_sets(
         labelled=order[: int(n_labelled)],
         pool=order[int(n_labelled) : int(n_labelled) + int(n_pool)],
         test=test,
+        spare=order[int(n_labelled) + int(n_pool) :],
+        seed=int(seed),
     )
 
 
-def assert_regime_disjoint(sets: RegimeSets, splits: pd.DataFrame, *, rule: str) -> None:
-    """Refuse overlapping sets, and any labelled or pool row that the split edge holds out.
+def assert_regime_disjoint(
+    sets: RegimeSets, splits: pd.DataFrame, *, rule: str, draws: int = 1
+) -> None:
+    """Refuse overlapping sets, and any labelled or pool row that the split edge holds out,
+    for labelled draws 0 .. draws - 1 (`RegimeSets.labelled_draw`).
 
     Raises LeakageError naming the rule, the sets and the first shared sample_id.
     """
-    named = {"labelled": sets.labelled, "pool": sets.pool, "test": sets.test}
+    labelled = sets.labelled_union(draws) if draws > 1 else sets.labelled
+    named = {"labelled": labelled, "pool": sets.pool, "test": sets.test}
     names = list(named)
     for i, a in enumerate(names):
         for b in names[i + 1 :]:
@@ -209,9 +251,7 @@ def assert_regime_disjoint(sets: RegimeSets, splits: pd.DataFrame, *, rule: str)
                     f"rule {rule}: the regime's {a} and {b} sets share {len(shared)} row(s), "
                     f"e.g. sample_id {shared[0]!r}"
                 )
-    assert_trainable(
-        list(sets.labelled) + list(sets.pool), splits, rule=rule, allowed=("train", "val")
-    )
+    assert_trainable(list(labelled) + list(sets.pool), splits, rule=rule, allowed=("train", "val"))
 
 
 def job_regime_sets(
@@ -228,5 +268,5 @@ def job_regime_sets(
         n_pool=max(regime.n_pool),
         seed=seed,
     )
-    assert_regime_disjoint(sets, splits, rule=rule)
+    assert_regime_disjoint(sets, splits, rule=rule, draws=regime.label_draws)
     return sets

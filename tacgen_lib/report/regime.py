@@ -1,10 +1,10 @@
-"""The report page *Where generated touch helps* (`tacgen_lib.generate.regime`): Delta heatmaps
-over (rho, N_L) per pool size, score against N_L per arm with the vision ceiling and real
-touch, the table of every arm, the appearance check, and a sentence per panel generated from
-the numbers.
+"""The report page *Where generated touch helps* (`tacgen_lib.generate.regime`): the visibility
+gate and the verdict read from the generator ladder, Delta heatmaps over (rho, N_L) per pool
+size, score against N_L per arm with the V ceiling, the vision ceiling and real touch, the
+ladder table, the table of every arm, and a sentence per panel generated from the numbers.
 
-Seeds are summarised, never averaged into a claim: a cell shows the mean over seeds and how
-many seeds' fixed-test CIs lie above (or below) zero.
+Replicates (seed x labelled draw) are summarised, never averaged into a claim: a cell shows
+the mean over replicates and how many replicates' fixed-test CIs lie above (or below) zero.
 """
 
 from __future__ import annotations
@@ -23,7 +23,8 @@ if TYPE_CHECKING:  # the figures import pyplot; the Findings table reads `arm_ro
 
 __all__ = [
     "ARM_LABELS",
-    "appearance_table",
+    "ladder_table",
+    "ladder_verdict",
     "arm_rows",
     "curves_figure",
     "heatmap_figure",
@@ -34,17 +35,35 @@ __all__ = [
 ]
 
 #: (arm, probe) -> the label a reader sees.
+#: The ladder's rungs in words, top to bottom (`generate.ladder.LADDER`).
+RUNG_LABELS = {
+    "look_oracle": "A0 look oracle",
+    "knn": "A1 kNN in V",
+    "ridge": "ridge V→T",
+    "gen_mean": "A2 diffusion mean",
+    "v_tgen": "A3 one diffusion sample",
+}
+
 ARM_LABELS = {
     ("v", "linear"): "V (linear)",
     ("v", "nonlinear"): "V (nonlinear)",
-    ("v_tgen", "linear"): "V + T_gen (linear)",
-    ("v_tgen", "nonlinear"): "V + T_gen (nonlinear)",
+    **{
+        (rung, probe): f"V + T_gen {label} ({probe})"
+        for rung, label in RUNG_LABELS.items()
+        for probe in ("linear", "nonlinear")
+    },
     ("v_tgen_shuffled", "linear"): "V + T_gen, shuffled pool (linear)",
     ("distilled", "linear"): "distillation, V only (linear)",
     ("distilled", "nonlinear"): "distillation, V only (nonlinear)",
     ("v_treal", "linear"): "V + real T (linear)",
+    ("v_ceiling", "linear"): "V ceiling, every label (linear)",
+    ("v_ceiling", "nonlinear"): "V ceiling, every label (nonlinear)",
     ("vision_ceiling", "oracle"): "vision ceiling (oracle)",
 }
+
+#: Arms that are no function of V and the labelled rows alone: they use the corpus's metadata
+#: (the look oracle, the vision ceiling), every label (the V ceiling) or real touch.
+NOT_BUILT_ON_V = ("look_oracle", "v_treal", "v_ceiling", "vision_ceiling")
 
 _CELL = ["corpus", "rho", "n_labelled", "n_pool", "target", "arm", "probe"]
 
@@ -59,15 +78,20 @@ def _side_counts(lo: pd.Series, hi: pd.Series) -> tuple[int, int]:
 
 
 def seed_view(summary: pd.DataFrame) -> pd.DataFrame:
-    """One row per cell x target x arm over seeds: mean score, CI bounds and Deltas, and per
-    Delta how many seeds' CIs lie above / below 0 (``*_above``, ``*_below``), ``n_seeds``."""
+    """One row per cell x target x arm over its replicates (seed x labelled draw): mean
+    score, CI bounds, Deltas, headroom captured and majority score, how many replicates fall
+    below the majority score (``n_below_majority``), and per Delta how many replicates' CIs
+    lie above / below 0 (``*_above``, ``*_below``); ``n_seeds`` counts the replicates."""
     out = []
+    if "draw" not in summary:
+        summary = summary.assign(draw=0)
     for key, g in summary.groupby(_CELL, sort=True):
         row = dict(zip(_CELL, key, strict=True))
         row["metric"] = g["metric"].iloc[0]
-        row["n_seeds"] = int(g["seed"].nunique())
-        for col in ("score", "ci_low", "ci_high", "gap_closed"):
-            row[col] = float(g[col].mean())
+        row["n_seeds"] = len(g[["seed", "draw"]].drop_duplicates())
+        for col in ("score", "ci_low", "ci_high", "gap_closed", "headroom_captured", "majority"):
+            row[col] = float(g[col].mean()) if col in g else float("nan")
+        row["n_below_majority"] = int(g["below_majority"].sum()) if "below_majority" in g else 0
         for what in ("linear_v", "nonlinear_v", "distilled"):
             row[f"delta_vs_{what}"] = float(g[f"delta_vs_{what}"].mean())
             row[f"above_vs_{what}"], row[f"below_vs_{what}"] = _side_counts(
@@ -85,13 +109,16 @@ def _counts(r: pd.Series, what: str) -> str:
 def regime_table(view: pd.DataFrame) -> pd.DataFrame:
     """Every arm at the largest pool, the smallest and largest labelled sets, per rho and
     target: mean score [mean CI], the Deltas against linear V, nonlinear V and distillation
-    (mean over seeds, with how many seeds' CIs lie above / below 0), the gap closed."""
+    (mean over replicates, with how many replicates' CIs lie above / below 0), the gap
+    closed, the headroom captured, and the majority score with how many replicates fall below
+    it."""
     n_p = view["n_pool"].max()
     ls = sorted(view["n_labelled"].unique())
     sub = view[(view["n_pool"] == n_p) & view["n_labelled"].isin({ls[0], ls[-1]})]
     order = {k: i for i, k in enumerate(ARM_LABELS)}
     sub = sub.assign(_o=[order[(a, p)] for a, p in zip(sub["arm"], sub["probe"], strict=True)])
     sub = sub.sort_values(["target", "rho", "n_labelled", "_o"])
+    ceiling = sub["arm"].isin(["v_ceiling", "vision_ceiling"])
     return pd.DataFrame(
         {
             "target": sub["target"],
@@ -103,34 +130,149 @@ def regime_table(view: pd.DataFrame) -> pd.DataFrame:
                 fmt.with_ci(r.score, r.ci_low, r.ci_high) for r in sub.itertuples()
             ],
             "Δ vs linear V": sub["delta_vs_linear_v"],
-            "seeds' CI vs linear V": [_counts(r, "linear_v") for _, r in sub.iterrows()],
+            "replicates' CI vs linear V": [_counts(r, "linear_v") for _, r in sub.iterrows()],
             "Δ vs nonlinear V": sub["delta_vs_nonlinear_v"],
-            "seeds' CI vs nonlinear V": [_counts(r, "nonlinear_v") for _, r in sub.iterrows()],
+            "replicates' CI vs nonlinear V": [_counts(r, "nonlinear_v") for _, r in sub.iterrows()],
             "Δ vs distillation": sub["delta_vs_distilled"],
-            "seeds' CI vs distillation": [_counts(r, "distilled") for _, r in sub.iterrows()],
-            # the ceiling is an oracle, not an arm that closes the gap to real touch
-            "gap closed": sub["gap_closed"].where(sub["arm"] != "vision_ceiling"),
-        }
-    )
-
-
-def appearance_table(appearance: pd.DataFrame) -> pd.DataFrame:
-    """Appearance-class accuracy of the linear and the nonlinear V probe, per corpus and seed
-    checked (the DAG checks one)."""
-    a = appearance.sort_values(["rho", "seed", "probe"])
-    return pd.DataFrame(
-        {
-            "corpus": a["corpus"],
-            "ρ": [f"{r:g}" for r in a["rho"]],
-            "seed": a["seed"],
-            "probe on V": a["probe"],
-            "appearance-class accuracy [95% CI]": [
-                fmt.with_ci(r.score, r.ci_low, r.ci_high) for r in a.itertuples()
+            "replicates' CI vs distillation": [_counts(r, "distilled") for _, r in sub.iterrows()],
+            # the ceilings are bounds, not arms that close a gap
+            "gap closed": sub["gap_closed"].where(~ceiling),
+            "headroom captured": sub["headroom_captured"].where(~ceiling),
+            "majority score": sub["majority"],
+            "below majority": [
+                f"{int(r.n_below_majority)}/{int(r.n_seeds)}" for r in sub.itertuples()
             ],
-            "majority class": a["chance"],
-            "n train/test": [f"{r.n_train}/{r.n_test}" for r in a.itertuples()],
         }
     )
+
+
+def ladder_table(view: pd.DataFrame) -> pd.DataFrame:
+    """The ladder at the largest pool, per target, rho and the smallest and largest labelled
+    sets: nonlinear V, each rung (linear probe) from the look oracle down to one diffusion
+    sample, V + real T and the V ceiling, each with its Delta against nonlinear V and how
+    many replicates' CIs lie above / below 0, and the headroom captured."""
+    n_p = view["n_pool"].max()
+    ls = sorted(view["n_labelled"].unique())
+    sub = view[(view["n_pool"] == n_p) & view["n_labelled"].isin({ls[0], ls[-1]})]
+    arms = [
+        ("v", "nonlinear"),
+        *((rung, "linear") for rung in RUNG_LABELS),
+        ("v_treal", "linear"),
+        ("v_ceiling", "nonlinear"),
+    ]
+    out = []
+    for (target, rho, n_l), g in sub.groupby(["target", "rho", "n_labelled"], sort=True):
+        for arm, probe in arms:
+            r = arm_rows(g, arm, probe)
+            if r.empty:
+                continue
+            r = r.iloc[0]
+            out.append(
+                {
+                    "target": target,
+                    "ρ": f"{rho:g}",
+                    "N_L": int(n_l),
+                    "rung": ARM_LABELS[(arm, probe)],
+                    "score [mean 95% CI]": fmt.with_ci(r.score, r.ci_low, r.ci_high),
+                    "Δ vs nonlinear V": r["delta_vs_nonlinear_v"],
+                    "replicates' CI vs nonlinear V": _counts(r, "nonlinear_v"),
+                    "headroom captured": (
+                        r["headroom_captured"] if arm in RUNG_LABELS else float("nan")
+                    ),
+                    "majority score": r["majority"],
+                }
+            )
+    return pd.DataFrame(out)
+
+
+def _gains(r: pd.Series) -> bool:
+    """A replicate-summarised row gains over nonlinear V: its CI lies above 0 in every
+    replicate."""
+    return int(r["above_vs_nonlinear_v"]) == int(r["n_seeds"]) > 0
+
+
+#: What each step down the ladder says where the gain is lost (generate.ladder).
+_LOSS = {
+    "knn": "vision: V's neighbourhoods do not hold what the look shows",
+    "ridge": "a linear map from V does not carry it",
+    "gen_mean": "the diffusion generator does not learn it",
+    "v_tgen": "sampling noise (one sample instead of the mean) or the probe loses it",
+}
+
+
+def ladder_verdict(
+    view: pd.DataFrame, gates: Sequence[str] = (), gate_passed: bool = True
+) -> list[str]:
+    """The page's verdict, generated from the ladder (linear probe, largest pool):
+
+    1. the visibility gate (`gates`: its sentences; `gate_passed`: whether V passed it);
+    2. the positive control: the look oracle (A0) at the largest rho and the smallest N_L
+       beats nonlinear V with its CI above 0 in every replicate, and at the smallest rho in
+       none; without it, no claim about generated touch is made;
+    3. only then, per target, how far down the ladder the gain survives and which rung
+       loses it; where V failed the gate, that the regime cannot say whether generated touch
+       helps.
+    """
+    out = list(gates)
+    rhos = sorted(view["rho"].unique())
+    ls = sorted(view["n_labelled"].unique())
+    n_p = view["n_pool"].max()
+    big = view[view["n_pool"] == n_p]
+    for target, t in big.groupby("target", sort=True):
+        top = t[(t["rho"] == rhos[-1]) & (t["n_labelled"] == ls[0])]
+        low = t[(t["rho"] == rhos[0]) & (t["n_labelled"] == ls[0])]
+        a0, a0_low = arm_rows(top, "look_oracle", "linear"), arm_rows(low, "look_oracle", "linear")
+        if a0.empty or a0_low.empty:
+            continue
+        a0, a0_low = a0.iloc[0], a0_low.iloc[0]
+        where = f"{target}, ρ = {rhos[-1]:g}, N_L = {ls[0]}, N_P = {n_p}"
+        control = _gains(a0) and int(a0_low["above_vs_nonlinear_v"]) == 0
+        if not control:
+            out.append(
+                f"Positive control fails ({where}): the look oracle (A0) − nonlinear V "
+                f"{_delta_words(a0, 'nonlinear_v')}; at ρ = {rhos[0]:g} "
+                f"{_delta_words(a0_low, 'nonlinear_v')}. A generator with perfect vision shows "
+                "no gain the probes detect, so the regime cannot say whether generated touch "
+                "helps: the probe or the evaluation lacks the power."
+            )
+            continue
+        out.append(
+            f"Positive control works ({where}): the look oracle (A0) − nonlinear V "
+            f"{_delta_words(a0, 'nonlinear_v')}, and nothing at ρ = {rhos[0]:g} "
+            f"({_delta_words(a0_low, 'nonlinear_v')}): the probes detect a gain that exists."
+        )
+        rungs = list(RUNG_LABELS)
+        lost = next((r for r in rungs[1:] if not _gains(arm_rows(top, r, "linear").iloc[0])), None)
+        if lost is None:
+            out.append(
+                f"{target}: every rung down to one diffusion sample (A3) keeps the gain "
+                f"({_delta_words(arm_rows(top, 'v_tgen', 'linear').iloc[0], 'nonlinear_v')} "
+                "against nonlinear V)."
+                + (
+                    ""
+                    if gate_passed
+                    else " V failed the visibility gate, so this holds for this V only."
+                )
+            )
+            continue
+        kept = rungs[: rungs.index(lost)]
+        r = arm_rows(top, lost, "linear").iloc[0]
+        out.append(
+            f"{target}: the gain survives down to {RUNG_LABELS[kept[-1]]} and is lost at "
+            f"{RUNG_LABELS[lost]} ({_delta_words(r, 'nonlinear_v')} against nonlinear V): "
+            f"{_LOSS[lost]}."
+            + (
+                f" The workflow's own generator (A3) − nonlinear V "
+                f"{_delta_words(arm_rows(top, 'v_tgen', 'linear').iloc[0], 'nonlinear_v')}."
+            )
+            + (
+                ""
+                if gate_passed
+                else " V failed the visibility gate: the regime cannot say whether generated "
+                "touch would help a V that sees the look."
+            )
+        )
+    return out
 
 
 def _grid(view: pd.DataFrame, target: str, n_pool: int, col: str):
@@ -198,7 +340,7 @@ def heatmap_figure(view: pd.DataFrame) -> plt.Figure:
             ax.set_title(f"{target}, N_P = {n_p}: V + T_gen − {name}", fontsize=8)
         fig.colorbar(im, ax=list(axes[i]), shrink=0.9, label=f"Δ {sub['metric'].iloc[0]}")
     fig.suptitle(
-        "Δ of V + T_gen (linear probe), mean over seeds; ↑/↓: seeds whose 95% CI is above/below 0",
+        "Δ of V + T_gen (linear probe), mean over replicates; ↑/↓: replicates whose 95% CI is above/below 0",
         fontsize=9,
     )
     return fig
@@ -207,12 +349,15 @@ def heatmap_figure(view: pd.DataFrame) -> plt.Figure:
 _CURVE_ARMS = (
     (("v", "linear"), "#777777", "-"),
     (("v", "nonlinear"), "#222222", "-"),
+    (("look_oracle", "linear"), "#ff7f0e", "-"),
+    (("gen_mean", "linear"), "#8c564b", "-"),
     (("v_tgen", "linear"), "#d62728", "-"),
     (("v_tgen", "nonlinear"), "#d62728", "--"),
     (("v_tgen_shuffled", "linear"), "#ff9896", ":"),
     (("distilled", "linear"), "#1f77b4", "-"),
     (("distilled", "nonlinear"), "#1f77b4", "--"),
     (("v_treal", "linear"), "#2ca02c", "-"),
+    (("v_ceiling", "nonlinear"), "#17becf", ":"),
     (("vision_ceiling", "oracle"), "#9467bd", ":"),
 )
 
@@ -271,11 +416,11 @@ def _delta_words(r: pd.Series, what: str) -> str:
     d, n = r[f"delta_vs_{what}"], int(r["n_seeds"])
     up, down = int(r[f"above_vs_{what}"]), int(r[f"below_vs_{what}"])
     if up:
-        side = f"CI above 0 in {up} of {n} seeds"
+        side = f"CI above 0 in {up} of {n} replicates"
     elif down:
-        side = f"CI below 0 in {down} of {n} seeds"
+        side = f"CI below 0 in {down} of {n} replicates"
     else:
-        side = f"CI includes 0 in each of {n} seeds"
+        side = f"CI includes 0 in each of {n} replicates"
     return f"{fmt.signed(d)} ({side})"
 
 
@@ -289,16 +434,16 @@ def panel_sentences(view: pd.DataFrame) -> list[str]:
         if wins.empty:
             out.append(
                 f"{target}, N_P = {n_p}: V + T_gen (linear probe) beats linear V with its CI above "
-                "0 in every seed in no cell of ρ × N_L."
+                "0 in every replicate in no cell of ρ × N_L."
             )
             continue
         cells = ", ".join(f"ρ = {r.rho:g} / N_L = {r.n_labelled}" for r in wins.itertuples())
         survive_nl = wins[wins["above_vs_nonlinear_v"] == wins["n_seeds"]]
         survive_gd = wins[wins["above_vs_distilled"] == wins["n_seeds"]]
         out.append(
-            f"{target}, N_P = {n_p}: V + T_gen (linear probe) beats linear V in every seed at "
+            f"{target}, N_P = {n_p}: V + T_gen (linear probe) beats linear V in every replicate at "
             f"{cells}; of these, {len(survive_nl)} also beat nonlinear V and {len(survive_gd)} "
-            "beat generalised distillation (a V-only student of the same pool) in every seed."
+            "beat generalised distillation (a V-only student of the same pool) in every replicate."
         )
     return out
 
@@ -309,7 +454,7 @@ def hypothesis_sentences(view: pd.DataFrame) -> list[str]:
     rhos = sorted(view["rho"].unique())
     ls = sorted(view["n_labelled"].unique())
     n_p = view["n_pool"].max()
-    built_on_v = view[~view["arm"].isin(["v_treal", "vision_ceiling"])]
+    built_on_v = view[~view["arm"].isin(NOT_BUILT_ON_V)]
     # H1: at rho = 0 every arm matches nonlinear V
     r0 = built_on_v[
         (built_on_v["rho"] == rhos[0])
@@ -322,8 +467,8 @@ def hypothesis_sentences(view: pd.DataFrame) -> list[str]:
     above = int((off["above_vs_nonlinear_v"] == off["n_seeds"]).sum())
     out.append(
         f"H1 (ρ = {rhos[0]:g}: no arm built on V beats nonlinear V): {above} of {len(r0)} "
-        f"arm × cell rows beat it with the CI above 0 in every seed; "
-        f"{len(off) - above} fall below it in every seed."
+        f"arm × cell rows beat it with the CI above 0 in every replicate; "
+        f"{len(off) - above} fall below it in every replicate."
     )
     # H2: at the largest rho, smallest N_L, largest pool, V + T_gen beats linear V
     top = view[(view["rho"] == rhos[-1]) & (view["n_labelled"] == ls[0]) & (view["n_pool"] == n_p)]
@@ -372,7 +517,7 @@ def hypothesis_sentences(view: pd.DataFrame) -> list[str]:
             + (
                 ": generation adds nothing the pool does not give without it."
                 if pool_only
-                else ": generation beats the V-only use of the pool in every seed."
+                else ": generation beats the V-only use of the pool in every replicate."
             )
         )
     # H4: no arm built on V exceeds the vision ceiling
@@ -392,24 +537,36 @@ def hypothesis_sentences(view: pd.DataFrame) -> list[str]:
             else f"fails in {len(exceed)} rows, e.g. {exceed[0]}."
         )
     )
+    # H5: no arm built on V exceeds the V ceiling (the best probe on V with every label)
+    v_ceiling = arm_rows(view, "v_ceiling", "nonlinear").set_index(
+        ["corpus", "rho", "n_labelled", "n_pool", "target"]
+    )
+    above = [
+        f"{ARM_LABELS[(r.arm, r.probe)]} at ρ = {r.rho:g}, N_L = {r.n_labelled}"
+        for r in built_on_v.itertuples()
+        if r.ci_low > v_ceiling.loc[(r.corpus, r.rho, r.n_labelled, r.n_pool, r.target), "ci_high"]
+    ]
+    out.append(
+        "H5 (no arm built on V exceeds the V ceiling, nonlinear V with every non-test label): "
+        + (
+            "holds: no arm's mean CI lies above it."
+            if not above
+            else f"fails in {len(above)} rows, e.g. {above[0]}: an arm beats a probe on V with "
+            "every label, so it carries what V does not."
+        )
+    )
     return out
 
 
-def findings_notes(view: pd.DataFrame, appearance: pd.DataFrame) -> list[str]:
-    """The page's sentences: the hypotheses, one per panel, the appearance check (measured on
-    one corpus of the rho grid: the class -> frame process is the same at every rho)."""
-    app = appearance.groupby(["corpus", "rho", "probe"])["score"].mean().unstack("probe")
-    check = "; ".join(
-        f"{corpus} (ρ = {rho:g}): linear {fmt.number(r.get('linear'))}, "
-        f"nonlinear {fmt.number(r.get('nonlinear'))}"
-        for (corpus, rho), r in app.iterrows()
-    )
+def findings_notes(
+    view: pd.DataFrame, gates: Sequence[str] = (), gate_passed: bool = True
+) -> list[str]:
+    """The page's sentences: the gate and the ladder's verdict (`ladder_verdict`), the
+    hypotheses, one per panel."""
     return [
+        *ladder_verdict(view, gates, gate_passed),
         *hypothesis_sentences(view),
         *panel_sentences(view),
-        f"Appearance class from V, linear against nonlinear probe (accuracy): {check}; the "
-        "appearance class and what it looks like do not depend on ρ, so one corpus of the grid "
-        "is checked.",
     ]
 
 

@@ -216,6 +216,12 @@ def _family_frames(c: Config) -> float:
     return sum(_n(c, k) for k in _family_corpora(c))
 
 
+def _simulated_rows(c: Mapping[str, Any]) -> float:
+    """Rows of every simulated corpus of a config, the regime's natural corpora included."""
+    corpora = {**c["corpora"], **regime_corpora(c.get("regime"))}
+    return float(sum(int(v.get("n", 0)) for v in corpora.values() if v.get("kind") == "simulated"))
+
+
 def _family_backbone(c: Config, w: Wildcards) -> tuple[str, float]:
     """One family backbone: its pretraining (epoch × train frame, MAE or DINO; none for the
     random init or a checkpoint) and the frames of the probe corpora it extracts. Class: the
@@ -521,18 +527,19 @@ UNITS: dict[str, UnitRule] = {
         ),
     ),
     "regime_evaluate": UnitRule(
-        "(labelled + pool rows) × target × labelled size × pool size",
+        "(labelled + pool rows) × target × labelled size × pool size × labelled draw",
         lambda c, w: (
             "",
             (max(c["regime"]["n_labelled"]) + max(c["regime"]["n_pool"]))
             * len(c["regime"]["targets"])
             * len(c["regime"]["n_labelled"])
-            * len(c["regime"]["n_pool"]),
+            * len(c["regime"]["n_pool"])
+            * int(c["regime"].get("label_draws", 1)),
         ),
     ),
-    "regime_appearance": UnitRule(
-        "labelled + pool row (one corpus x seed)",
-        lambda c, w: ("", float(max(c["regime"]["n_labelled"]) + max(c["regime"]["n_pool"]))),
+    "visibility_check": UnitRule(
+        "row of every simulated corpus (each factor's two probes)",
+        lambda c, w: ("", _simulated_rows(c)),
     ),
     "aggregate_regime": UnitRule(
         "corpus × seed",

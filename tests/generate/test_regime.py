@@ -16,6 +16,7 @@ from sklearn.preprocessing import StandardScaler
 from threadpoolctl import threadpool_limits
 
 from tacgen_lib.corpus.splits import LeakageError
+from tacgen_lib.generate.ladder import ladder_rungs
 from tacgen_lib.generate.regime import (
     ARMS,
     SUMMARY_COLUMNS,
@@ -24,7 +25,6 @@ from tacgen_lib.generate.regime import (
     RegimeTarget,
     SmallFit,
     _cell_rows,
-    appearance_check,
     appearance_design,
     assert_regime_disjoint,
     check_regime_sizes,
@@ -119,6 +119,28 @@ def test_sets_are_disjoint_nested_and_seeded():
     assert_regime_disjoint(a, splits, rule="test")
 
 
+def test_labelled_draws_share_the_pool_and_never_touch_it_or_the_test_rows():
+    _, splits, _, _ = world(rho=1.0)
+    s = draw_regime_sets(splits, "nat", n_labelled=40, n_pool=100, seed=3)
+    assert list(s.labelled_draw(0)) == list(s.labelled)  # draw 0 is today's labelled set
+    d1, d2 = s.labelled_draw(1), s.labelled_draw(2)
+    assert len(d1) == len(d2) == 40 and list(d1) != list(d2) and list(d1) != list(s.labelled)
+    assert list(s.labelled_draw(1)) == list(d1)  # seeded
+    rest = set(map(str, s.labelled)) | set(map(str, s.spare))
+    for d in (d1, d2):
+        assert set(map(str, d)) <= rest
+        assert not set(map(str, d)) & (set(map(str, s.pool)) | set(map(str, s.test)))
+    assert list(s.labelled_ids(8, draw=2)) == list(d2[:8])  # nested within a draw
+    assert set(map(str, s.labelled_union(3))) == set(map(str, s.labelled)) | set(
+        map(str, d1)
+    ) | set(map(str, d2))
+    assert_regime_disjoint(s, splits, rule="test", draws=3)
+    # a later draw holding a pool row is refused
+    bad = RegimeSets(s.labelled, s.pool, s.test, spare=s.pool[:5], seed=3)
+    with pytest.raises(LeakageError, match="labelled and pool"):
+        assert_regime_disjoint(bad, splits, rule="test", draws=3)
+
+
 def test_a_job_draws_the_largest_sets_and_refuses_overlapping_ones(monkeypatch):
     from tacgen_lib.generate import regime_sets
 
@@ -180,7 +202,9 @@ def test_pool_generators_in_workers_sample_what_one_process_samples():
     _, splits, vision, tactile = world(rho=1.0, seed=11)
     sets = draw_regime_sets(splits, "nat", n_labelled=20, n_pool=100, seed=0)
     settings = GenerateSettings(hidden=32, blocks=1, time_dim=16, steps=30, batch_size=32)
-    regime = RegimeSettings(n_labelled=(20,), n_pool=(60, 100), seeds=(0,), sampling_steps=5)
+    regime = RegimeSettings(
+        n_labelled=(20,), n_pool=(60, 100), seeds=(0,), sampling_steps=5, gen_mean_samples=3
+    )
     cells = [(60, "real"), (60, "shuffled"), (100, "real"), (100, "shuffled")]
     rows = sorted(str(i) for i in [*sets.labelled, *sets.test])
 
@@ -199,9 +223,28 @@ def test_pool_generators_in_workers_sample_what_one_process_samples():
     forked = run(2)
     assert [(g.n_pool, g.pairing) for g in forked] == cells
     for a, b in zip(alone, forked, strict=True):
-        assert a.t_gen.shape == (len(rows), 6)
+        assert a.t_gen.shape == a.t_gen_mean.shape == (len(rows), 6)
         assert np.array_equal(a.t_gen, b.t_gen) and a.curve == b.curve
+        assert np.array_equal(a.t_gen_mean, b.t_gen_mean)
     assert not np.array_equal(forked[2].t_gen, forked[3].t_gen)  # real vs re-paired pool
+    # the mean of 3 samples is not one sample, and spreads less around it
+    assert not np.array_equal(alone[0].t_gen_mean, alone[0].t_gen)
+
+
+def test_the_mean_of_one_sample_is_that_sample():
+    """K = 1: the ladder's gen_mean rung is the one-sample arm's T_gen, within float32
+    rounding of a mean over one float64 copy."""
+    _, splits, vision, tactile = world(rho=1.0, seed=11)
+    sets = draw_regime_sets(splits, "nat", n_labelled=20, n_pool=60, seed=0)
+    settings = GenerateSettings(hidden=16, blocks=1, time_dim=8, steps=10, batch_size=16)
+    regime = RegimeSettings(
+        n_labelled=(20,), n_pool=(60,), seeds=(0,), sampling_steps=3, gen_mean_samples=1
+    )
+    rows = sorted(str(i) for i in sets.test)
+    (fit,) = pool_generators(
+        vision, tactile, sets, [(60, "real")], settings, regime, rows=rows, seed=1
+    )
+    np.testing.assert_array_equal(fit.t_gen_mean, fit.t_gen)
 
 
 def test_a_single_labelled_class_predicts_that_class():
@@ -309,7 +352,8 @@ def test_cell_rows_are_the_pairwise_fixed_test_bootstrap(metric):
 
     fits = {k: SmallFit(pred(0.5 + 0.05 * i), 1.0, "cv") for i, k in enumerate(ARMS)}
     idx = resample_indices(n, 500, 11)
-    base = {"corpus": "c", "n_labelled": 32, "n_pool": 64, "seed": 0, "target": "t"}
+    base = {"corpus": "c", "n_labelled": 32, "n_pool": 64, "seed": 0, "draw": 0, "target": "t"}
+    base["majority"] = 0.5
     rows = _cell_rows(fits, y, idx, metric, base=base)
     assert [(r["arm"], r["probe"]) for r in rows] == list(ARMS)
     # accuracy: integer counts, exact; R^2: sums over a count-matrix product of another
@@ -336,7 +380,8 @@ def test_cell_rows_refuse_an_arm_with_a_missing_or_non_finite_prediction():
     y = np.linspace(0.0, 1.0, 20)
     fits = {k: SmallFit(y.copy(), 1.0, "cv") for k in ARMS}
     fits[("v_tgen", "linear")] = SmallFit(np.where(y > 0.5, np.nan, y), 1.0, "cv")
-    base = {"corpus": "c", "n_labelled": 32, "n_pool": 64, "seed": 0, "target": "t"}
+    base = {"corpus": "c", "n_labelled": 32, "n_pool": 64, "seed": 0, "draw": 0, "target": "t"}
+    base["majority"] = 0.5
     with pytest.raises(ValueError, match="regime cell c N_L=32 t: arm v_tgen/linear"):
         _cell_rows(fits, y, resample_indices(20, 10, 0), "r2", base=base)
 
@@ -368,7 +413,7 @@ def test_vision_ceiling_is_perfect_at_rho_1_and_the_majority_at_rho_0():
     assert abs(_ceiling_accuracy(0.0) - majority) < 0.1
 
 
-def _evaluate(rho: float, *, n_labelled=(6, 40), t_gen_from_real: bool = False, workers=1):
+def _evaluate(rho: float, *, n_labelled=(6, 40), t_gen_from_real: bool = False, workers=1, draws=2):
     manifest, splits, vision, tactile = world(rho=rho, seed=11)
     sets = draw_regime_sets(splits, "nat", n_labelled=max(n_labelled), n_pool=100, seed=0)
     ceiling_rows = manifest.set_index("sample_id")[["appearance_id", "shape", "scale"]]
@@ -381,6 +426,10 @@ def _evaluate(rho: float, *, n_labelled=(6, 40), t_gen_from_real: bool = False, 
     ids = list(tactile)
     shuffled = dict(zip(ids, [tactile[j] for j in np.roll(ids, 1)], strict=True))
     t_gen = {(100, "real"): tactile if t_gen_from_real else noisy, (100, "shuffled"): shuffled}
+    # the world's look is its appearance class (the oracle's key)
+    looks = manifest.set_index("sample_id")["appearance_id"].astype(str)
+    rows = sorted(str(i) for i in [*sets.labelled_union(draws), *sets.test])
+    rungs = ladder_rungs(vision, tactile, looks, sets.pool_ids(100), rows, noisy, seed=0)
     return evaluate_regime(
         targets,
         sets,
@@ -392,9 +441,11 @@ def _evaluate(rho: float, *, n_labelled=(6, 40), t_gen_from_real: bool = False, 
         vision=vision,
         t_real=tactile,
         t_gen=t_gen,
+        ladder={100: rungs.t_gen},
         gammas=[0.5, 2.0],
         bootstrap=200,
         n_classes=6,
+        label_draws=draws,
         workers=workers,
     )
 
@@ -402,7 +453,15 @@ def _evaluate(rho: float, *, n_labelled=(6, 40), t_gen_from_real: bool = False, 
 def test_every_arm_of_every_cell_is_scored_and_reproducible():
     a = _evaluate(1.0)
     assert list(a.columns) == list(SUMMARY_COLUMNS)
-    assert len(a) == 2 * 2 * len(ARMS) and a["row_id"].is_unique
+    assert len(a) == 2 * 2 * 2 * len(ARMS) and a["row_id"].is_unique  # targets x N_L x draws
+    assert set(a["draw"]) == {0, 1}
+    # the ceilings are fitted once per target: the same in every draw and N_L
+    for (_t, arm, probe), g in a[a["arm"].isin(["v_ceiling", "vision_ceiling"])].groupby(
+        ["target", "arm", "probe"]
+    ):
+        assert g["score"].nunique() == 1, (arm, probe)
+    # the majority score is the constant prediction's, and the flag reads it
+    assert (a["below_majority"] == (a["score"] < a["majority"])).all()
     assert set(zip(a["arm"], a["probe"], strict=True)) == set(ARMS)
     assert np.isfinite(a["score"]).all() and (a["ci_low"] <= a["ci_high"]).all()
     v = a[(a["arm"] == "v") & (a["probe"] == "linear")]
@@ -420,10 +479,10 @@ def test_forked_workers_give_the_rows_of_one_process_bit_for_bit():
 
 def test_a_generator_that_returns_real_touch_scores_as_real_touch():
     a = _evaluate(1.0, t_gen_from_real=True)
-    for (target, n_l), g in a.groupby(["target", "n_labelled"]):
+    for (target, n_l, draw), g in a.groupby(["target", "n_labelled", "draw"]):
         real = g[g["arm"] == "v_treal"]["score"].iloc[0]
         gen = g[(g["arm"] == "v_tgen") & (g["probe"] == "linear")]["score"].iloc[0]
-        assert gen == real, (target, n_l)
+        assert gen == real, (target, n_l, draw)
 
 
 def test_a_labelled_set_with_one_class_is_scored_not_refused():
@@ -432,36 +491,9 @@ def test_a_labelled_set_with_one_class_is_scored_not_refused():
     y = manifest.set_index("sample_id").loc[sets.labelled, "hardness"].to_numpy()
     first_two = len(set(y[:2]))
     a = _evaluate(1.0, n_labelled=(2, 40))
-    hard = a[(a["target"] == "hardness") & (a["n_labelled"] == 2)]
+    hard = a[(a["target"] == "hardness") & (a["n_labelled"] == 2) & (a["draw"] == 0)]
     assert (hard["n_labelled_classes"] == first_two).all()
     assert np.isfinite(hard["score"]).all()
-
-
-def test_appearance_check_scores_both_probes():
-    manifest, splits, vision, _ = world(n=400, rho=1.0, seed=3)
-    sets = draw_regime_sets(splits, "nat", n_labelled=60, n_pool=200, seed=0)
-
-    def check(workers: int) -> pd.DataFrame:
-        return appearance_check(
-            vision,
-            manifest.set_index("sample_id")["appearance_id"],
-            sets,
-            probe_settings("logistic"),
-            corpus="nat",
-            rho=1.0,
-            seed=0,
-            gammas=[0.5, 2.0],
-            bootstrap=200,
-            workers=workers,
-        )
-
-    with threadpool_limits(1):
-        out = check(1)
-    pd.testing.assert_frame_equal(check(2), out)  # its two probes in workers: the same rows
-    assert list(out["probe"]) == ["linear", "nonlinear"]
-    assert ((out["score"] >= 0) & (out["score"] <= 1)).all()
-    # V codes the class (on a circle, plus noise): both probes decode it above the majority
-    assert (out["score"] > out["chance"]).all()
 
 
 def test_findings_and_report_read_the_summary():
@@ -484,23 +516,19 @@ def test_findings_and_report_read_the_summary():
     ].iloc[0]
     assert f"{gen['delta_vs_linear_v']:+.3f}" in hard["result"]
     assert "ρ = 1, N_L = 6, N_P = 100" in hard["question"]
+    assert "look oracle − nonlinear V" in hard["control"]
     view = rep.seed_view(summary)
-    assert len(view) == len(summary)  # one seed: one row per cell x target x arm
+    assert len(view) == len(summary) // 2  # one seed, two draws: one row per cell x arm
+    assert set(view["n_seeds"]) == {2}
     table = rep.regime_table(view)
     assert set(table["N_L"]) == {6, 40} and table["arm"].nunique() == len(ARMS)
-    notes = rep.findings_notes(
-        view,
-        pd.DataFrame(
-            {
-                "corpus": ["sim_natural_r0"] * 2,
-                "rho": [0.0, 0.0],
-                "probe": ["linear", "nonlinear"],
-                "score": [0.3, 0.5],
-            }
-        ),
-    )
-    assert notes[0].startswith("H1 (ρ = 0") and any(n.startswith("H4") for n in notes)
-    assert "sim_natural_r0 (ρ = 0): linear 0.300, nonlinear 0.500" in notes[-1]
+    ladder = rep.ladder_table(view)
+    assert set(ladder["rung"]) >= {"V + T_gen A0 look oracle (linear)", "V (nonlinear)"}
+    notes = rep.findings_notes(view, ["V fails the visibility gate on nat: ..."], False)
+    assert notes[0].startswith("V fails the visibility gate")
+    assert any(n.startswith("Positive control") for n in notes)
+    assert any(n.startswith("H1 (ρ = 0") for n in notes)
+    assert any(n.startswith("H5") for n in notes)
     for fig in (rep.heatmap_figure(view), rep.curves_figure(view)):
         assert fig.axes
 

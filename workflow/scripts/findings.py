@@ -7,6 +7,7 @@ run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpre
 
 import pandas as pd
 
+from tacgen_lib.generate.visibility import visibility_gate
 from tacgen_lib.io import edges, log
 from tacgen_lib.report import findings
 from tacgen_lib.report.write import write_table
@@ -26,8 +27,23 @@ if snakemake.params.policy:
             edges.read(snakemake.input.policy_sweep).frame,
         )
     )
+visibility = None
+if snakemake.params.visibility:
+    visibility = edges.read(snakemake.input.visibility).frame
+    parts.insert(0, findings.visibility_findings(visibility, snakemake.params.gate))
 if snakemake.params.regime:
-    parts.append(findings.regime_findings(edges.read(snakemake.input.regime).frame))
+    gates = [
+        visibility_gate(visibility, c, snakemake.params.gate)
+        for c in snakemake.params.regime_corpora
+        if visibility is not None and snakemake.params.gate
+    ]
+    parts.append(
+        findings.regime_findings(
+            edges.read(snakemake.input.regime).frame,
+            " ".join(g.sentence() for g in gates),
+            gate_passed=all(g.passed for g in gates),
+        )
+    )
 if snakemake.params.pixel:
     # a report table with wall times, not an edge (rule aggregate_pixel)
     parts.append(findings.pixel_findings(pd.read_parquet(snakemake.input.pixel)))

@@ -1,6 +1,7 @@
-"""Every arm of the regime for one corpus x seed: linear and nonlinear V, V + T_gen (real and
-shuffled pools), generalised distillation, V + real T and the vision ceiling, per labelled
-size and pool size (rule regime_evaluate; the appearance check is rule regime_appearance)."""
+"""Every arm of the regime for one corpus x seed: linear and nonlinear V, the generator ladder
+(look oracle, kNN, ridge, the diffusion generator's mean and one sample), the shuffled pool,
+generalised distillation, V + real T, the V ceiling and the vision ceiling, per labelled draw,
+labelled size and pool size (rule regime_evaluate)."""
 
 from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
 
@@ -8,11 +9,14 @@ run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpre
 
 from threadpoolctl import threadpool_limits
 
+from tacgen_lib.corpus.looks import look_keys, visible_factors
+from tacgen_lib.generate.ladder import ladder_rungs
 from tacgen_lib.generate.regime import (
     RegimeSettings,
     RegimeTarget,
     evaluate_regime,
     job_regime_sets,
+    regime_probe_settings,
     regime_test_rows,
 )
 from tacgen_lib.io import edges, log
@@ -25,11 +29,13 @@ regime = RegimeSettings.from_config(params.regime)
 seed = int(w.seed)
 splits = edges.read(snakemake.input.splits, require={"split": "str", "corpus": "str"}).frame
 manifest = edges.read(snakemake.input.manifest).frame
-# the probes fit on labelled rows, the distillation teacher labels pool rows: never a test row
+# the probes fit on labelled rows, the ladder and the distillation teacher on pool rows:
+# never a test row
 sets = job_regime_sets(splits, w.corpus, regime, seed, rule=snakemake.rule)
 ceiling_rows = manifest.set_index("sample_id")[["appearance_id", "shape", "scale"]]
+corpus_rows = manifest.loc[manifest["corpus"] == w.corpus]
 # the appearance classes of the natural design (0 .. k-1)
-n_classes = int(manifest.loc[manifest["corpus"] == w.corpus, "appearance_id"].max()) + 1
+n_classes = int(corpus_rows["appearance_id"].max()) + 1
 targets = []
 for target, kind in params.targets.items():
     rows = family_rows(manifest, splits, corpus=w.corpus, target=target, kind=kind)
@@ -37,20 +43,35 @@ for target, kind in params.targets.items():
     targets.append(
         RegimeTarget(
             regime_test_rows(rows, sets),
-            settings,
+            regime_probe_settings(settings, regime),
             ceiling_rows.loc[list(rows.train_ids) + list(rows.test_ids)],
         )
     )
 
-
 vision = edges.read_vector_map(snakemake.input.v, "vit")
-t_gen = {
-    (int(n_pool), pairing): edges.read_vector_map(path, "t_gen")
-    for (n_pool, pairing), path in zip(params.cells, snakemake.input.t_gen, strict=True)
-}
-# one BLAS thread in this process or in each of the job's workers (fork_map): the rows do
-# not depend on the cores Snakemake gives the job
+t_real = edges.read_vector_map(snakemake.input.t, "vit")
+t_gen, ladder = {}, {}
+looks = look_keys(visible_factors(corpus_rows))
+needed = sorted(str(i) for i in [*sets.labelled_union(regime.label_draws), *sets.test])
 with threadpool_limits(1):
+    for (n_pool, pairing), path in zip(params.cells, snakemake.input.t_gen, strict=True):
+        t_gen[(int(n_pool), pairing)] = edges.read_vector_map(path, "t_gen")
+        if pairing != "real":
+            continue
+        rungs = ladder_rungs(
+            vision,
+            t_real,
+            looks,
+            sets.pool_ids(int(n_pool)),
+            needed,
+            edges.read_vector_map(path, "t_gen_mean"),
+            ks=regime.knn_ks,
+            seed=seed,
+        )
+        ladder[int(n_pool)] = rungs.t_gen
+        logger.info("%s seed %d N_P=%d: %s", w.corpus, seed, n_pool, rungs.describe())
+    # one BLAS thread in this process or in each of the job's workers (fork_map): the rows do
+    # not depend on the cores Snakemake gives the job
     rows = evaluate_regime(
         targets,
         sets,
@@ -60,11 +81,13 @@ with threadpool_limits(1):
         n_labelled=regime.n_labelled,
         n_pool=regime.n_pool,
         vision=vision,
-        t_real=edges.read_vector_map(snakemake.input.t, "vit"),
+        t_real=t_real,
         t_gen=t_gen,
+        ladder=ladder,
         gammas=params.gammas,
         bootstrap=regime.bootstrap,
         n_classes=n_classes,
+        label_draws=regime.label_draws,
         progress=logger.info,
         workers=snakemake.threads,
     )

@@ -17,6 +17,7 @@ from tacgen_lib.generate.regime_sets import (
 )
 from tacgen_lib.generate.settings import GenerateSettings
 from tacgen_lib.io import edges, log
+from tacgen_lib.runtime.device import torch_device
 
 logger = log.for_rule(snakemake)
 # one thread per generator, in this process or in each of the job's workers (fork_map): the
@@ -33,7 +34,8 @@ vision, tactile = (
     edges.read_vector_map(snakemake.input.v, "vit"),
     edges.read_vector_map(snakemake.input.t, "vit"),
 )
-rows = sorted(str(i) for i in [*sets.labelled, *sets.test])
+# every labelled draw's rows and the test rows (`RegimeSets.labelled_draw`)
+rows = sorted(str(i) for i in [*sets.labelled_union(regime.label_draws), *sets.test])
 cells = [(int(n_pool), pairing) for n_pool, pairing in params.cells]
 with threadpool_limits(1):
     fits = pool_generators(
@@ -47,10 +49,13 @@ with threadpool_limits(1):
         seed=seed,
         progress=lambda m: logger.info("%s %s", w.corpus, m),
         workers=snakemake.threads,
+        device=torch_device(params.device),
     )
 curves = []
 for fit, path in zip(fits, snakemake.output.t_gen, strict=True):
-    edges.write_vectors(path, rows, {"t_gen": fit.t_gen}, producer=snakemake.rule)
+    edges.write_vectors(
+        path, rows, {"t_gen": fit.t_gen, "t_gen_mean": fit.t_gen_mean}, producer=snakemake.rule
+    )
     curves += [
         {
             "eval": f"{fit.n_pool}|{fit.pairing}|step~{point['step']}",

@@ -1,0 +1,92 @@
+"""What a simulated frame shows: the visible factors of each sample and its look.
+
+A simulated sample's caption adjectives (`corpus.sim.corpus`) are, in order, its size word,
+colour, texture, hardness and weight; its manifest row also carries its shape and, on the
+natural design, its appearance class (``appearance_id``: (colour index + texture index) mod 6).
+The first three adjectives and the shape are what the RGB frame shows; hardness and weight are
+not. This module reads them back by vocabulary, never by position alone, so a caption that
+does not hold one of them is refused, naming the sample.
+
+- `visible_factors`: sample_id -> colour, texture, shape, size (and ``appearance`` where the
+  corpus has an appearance class): the labels of the visibility check
+  (`tacgen_lib.features.visibility`);
+- `look_keys`: sample_id -> the sample's look, colour|texture|shape|size, the key the look
+  oracle of the regime's generator ladder (`tacgen_lib.generate.ladder.look_oracle`) averages
+  real touch over.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+__all__ = ["FACTORS", "SIZE_WORDS", "visible_factors", "look_keys", "LOOK_FACTORS"]
+
+#: The size words of a simulated caption (the object's size in thirds of the corpus's range).
+SIZE_WORDS = ("small", "medium-sized", "large")
+
+#: The visible factors of a simulated frame, in the order the report lists them.
+FACTORS = ("colour", "texture", "shape", "size", "appearance")
+
+#: The factors that make a look (the appearance class is a function of colour and texture).
+LOOK_FACTORS = ("colour", "texture", "shape", "size")
+
+
+def _vocabulary() -> tuple[frozenset[str], frozenset[str]]:
+    from tacgen_lib.corpus.sim.corpus import PALETTE, TEXTURE_WORDS
+
+    return frozenset(PALETTE), frozenset(TEXTURE_WORDS.values())
+
+
+def visible_factors(manifest: pd.DataFrame, *, appearance_class: bool = False) -> pd.DataFrame:
+    """The visible factors of every row of a simulated corpus's manifest rows.
+
+    manifest: rows with ``sample_id``, ``adjectives`` (a sequence of words), ``shape`` and,
+    with `appearance_class` (the natural design, whose ``appearance_id`` is the appearance
+    class; on the other designs it indexes objects), ``appearance_id``. Returns a frame indexed
+    by sample_id with string columns colour, texture, shape, size and, with
+    `appearance_class`, appearance. Raises ValueError naming the first sample whose adjectives
+    hold no colour, texture or size word of the simulator's vocabulary.
+    """
+    colours, textures = _vocabulary()
+    sizes = frozenset(SIZE_WORDS)
+
+    def pick(words, vocab: frozenset[str], what: str, sample: str) -> str:
+        found = [w for w in words if w in vocab]
+        if len(found) != 1:
+            raise ValueError(
+                f"visible_factors: sample_id {sample!r} has adjectives {list(words)!r}: "
+                f"expected exactly one {what} word of {sorted(vocab)}"
+            )
+        return found[0]
+
+    out = {"colour": [], "texture": [], "size": []}
+    ids = manifest["sample_id"].astype(str).to_numpy()
+    for sample, words in zip(ids, manifest["adjectives"], strict=True):
+        words = [str(w) for w in (words if words is not None else [])]
+        out["colour"].append(pick(words, colours, "colour", sample))
+        out["texture"].append(pick(words, textures, "texture", sample))
+        out["size"].append(pick(words, sizes, "size", sample))
+    frame = pd.DataFrame(
+        {
+            "colour": out["colour"],
+            "texture": out["texture"],
+            "shape": manifest["shape"].astype(str).to_numpy(),
+            "size": out["size"],
+        },
+        index=pd.Index(ids, name="sample_id"),
+    )
+    if appearance_class:
+        frame["appearance"] = manifest["appearance_id"].to_numpy(dtype=np.int64).astype(str)
+    return frame
+
+
+def look_keys(factors: pd.DataFrame) -> pd.Series:
+    """sample_id -> its look, ``colour|texture|shape|size`` (`LOOK_FACTORS`), from
+    `visible_factors`' frame: two samples with one key look alike up to colour jitter, pose
+    and size within a third of the range."""
+    missing = [f for f in LOOK_FACTORS if f not in factors]
+    if missing:
+        raise ValueError(f"look_keys: factors frame lacks {missing}")
+    keys = factors[list(LOOK_FACTORS)].astype(str).agg("|".join, axis=1)
+    return keys.rename("look")

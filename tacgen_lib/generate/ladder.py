@@ -1,0 +1,213 @@
+"""The regime's ladder of generators: from an oracle that sees the look to one diffusion sample.
+
+Every rung maps a row to generated touch T_gen using only the unlabelled paired pool (its V,
+its real T and, for the oracle, the corpus's own metadata of what each frame shows); the
+regime (`tacgen_lib.generate.regime`) scores V + T_gen of each rung with the same probes on the
+same test rows. Reading the rungs from the top tells where a gain is lost:
+
+- ``look_oracle`` (A0): the mean real T of the pool rows with the row's look (colour, texture,
+  shape, size third; `corpus.looks.look_keys`). What a generator with perfect vision could
+  give: the positive control. A look absent from the pool falls back to the pool mean,
+  counted;
+- ``knn`` (A1): the mean real T of the k nearest pool rows in (standardised) V, k chosen by
+  K-fold CV of the T prediction on the pool: nonparametric, and only as good as V's
+  neighbourhoods;
+- ``ridge``: multi-output ridge T ~ V on the pool (`generate.ridge.ridge_generate`), the
+  simplest generator;
+- ``gen_mean`` (A2): the mean of K samples of the diffusion generator (its conditional mean);
+- ``v_tgen`` (A3): one sample of it, the paper's arm.
+
+A0 without a gain says the probe or the evaluation is broken; A0 gains and A1 not, V does not
+see what the look shows; A1 gains and A2 not, the generator loses it; A2 gains and A3 not,
+sampling noise or the probe does.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+__all__ = [
+    "LADDER",
+    "KNN_KS",
+    "KnnGeneration",
+    "LadderRungs",
+    "LookOracle",
+    "knn_generate",
+    "ladder_rungs",
+    "look_oracle",
+]
+
+#: The rungs, top (the oracle) to bottom (today's one-sample arm).
+LADDER: tuple[str, ...] = ("look_oracle", "knn", "ridge", "gen_mean", "v_tgen")
+
+#: The k the kNN rung chooses among (capped by the pool's CV training folds).
+KNN_KS: tuple[int, ...] = (1, 2, 4, 8, 16, 32, 64)
+
+
+def _rows(source: Mapping[str, np.ndarray], ids: Sequence[str], what: str) -> np.ndarray:
+    missing = [i for i in ids if i not in source]
+    if missing:
+        raise ValueError(f"{what}: sample_id {missing[0]!r} has no vector ({len(missing)} such)")
+    return np.stack([np.asarray(source[i], np.float64) for i in ids])
+
+
+@dataclass(frozen=True)
+class LookOracle:
+    """The look oracle's T_gen (sample_id -> float64 vector) for the rows asked for, and
+    how many of them had a look absent from the pool (given the pool mean)."""
+
+    t_gen: dict[str, np.ndarray]
+    n_fallback: int
+    n_looks: int  # distinct looks of the pool
+
+
+def look_oracle(
+    t_real: Mapping[str, np.ndarray],
+    looks: Mapping[str, str] | pd.Series,
+    pool: Sequence[str],
+    rows: Sequence[str],
+) -> LookOracle:
+    """A0: each row's T_gen is the mean real T of the pool rows that share its look.
+
+    looks: sample_id -> look key (`corpus.looks.look_keys`) for every pool row and row.
+    A row whose look no pool row has gets the mean real T of the whole pool (counted in
+    ``n_fallback``). Float64 sums; a look with one pool row gives that row's T exactly.
+    """
+    pool = [str(i) for i in pool]
+    rows = [str(i) for i in rows]
+    if not pool:
+        raise ValueError("look_oracle: the pool is empty")
+    look = pd.Series(looks).astype(str)
+    missing = [i for i in (*pool, *rows) if i not in look.index]
+    if missing:
+        raise ValueError(f"look_oracle: sample_id {missing[0]!r} has no look")
+    t_pool = _rows(t_real, pool, "look_oracle")
+    frame = pd.DataFrame(t_pool)
+    means = frame.groupby(look.loc[pool].to_numpy(), sort=True).mean()
+    by_look = {k: means.loc[k].to_numpy(np.float64) for k in means.index}
+    fallback = t_pool.mean(axis=0)
+    out, n_fallback = {}, 0
+    for i in rows:
+        vec = by_look.get(look.loc[i])
+        if vec is None:
+            vec, n_fallback = fallback, n_fallback + 1
+        out[i] = vec
+    return LookOracle(out, n_fallback, len(by_look))
+
+
+@dataclass(frozen=True)
+class KnnGeneration:
+    """The kNN rung's T_gen for the rows asked for, the k CV chose and its CV error."""
+
+    t_gen: dict[str, np.ndarray]
+    k: int
+    cv_mse: float
+
+
+def knn_generate(
+    vision: Mapping[str, np.ndarray],
+    t_real: Mapping[str, np.ndarray],
+    pool: Sequence[str],
+    rows: Sequence[str],
+    *,
+    ks: Sequence[int] = KNN_KS,
+    folds: int = 5,
+    seed: int = 0,
+) -> KnnGeneration:
+    """A1: the mean real T of the k nearest pool rows in V (Euclidean distance on V
+    standardised by the pool's mean and sd; scikit-learn's KNeighborsRegressor, uniform
+    weights), k chosen among `ks` by `folds`-fold CV (seeded shuffle) of the mean squared
+    error of the T prediction on the pool.
+
+    A k larger than a CV training fold is not tried; with fewer than `folds` pool rows, or
+    none of `ks` small enough, k is the smallest of `ks` capped at the pool size (no CV:
+    ``cv_mse`` NaN). k = pool size gives every row the pool mean.
+    """
+    from sklearn.model_selection import GridSearchCV, KFold
+    from sklearn.neighbors import KNeighborsRegressor
+    from sklearn.pipeline import make_pipeline
+    from sklearn.preprocessing import StandardScaler
+
+    pool = [str(i) for i in pool]
+    rows = [str(i) for i in rows]
+    if not pool:
+        raise ValueError("knn_generate: the pool is empty")
+    if not ks or min(int(k) for k in ks) < 1:
+        raise ValueError(f"knn_generate: ks must be integers >= 1, got {list(ks)!r}")
+    v_pool, t_pool = _rows(vision, pool, "knn_generate"), _rows(t_real, pool, "knn_generate")
+    n = len(pool)
+    fold_train = n - -(-n // folds) if n >= folds else 0  # the smallest CV training fold
+    grid = sorted({int(k) for k in ks if int(k) <= fold_train})
+    if n >= folds >= 2 and grid:
+        search = GridSearchCV(
+            make_pipeline(StandardScaler(), KNeighborsRegressor()),
+            {"kneighborsregressor__n_neighbors": grid},
+            scoring="neg_mean_squared_error",
+            cv=KFold(folds, shuffle=True, random_state=int(seed)),
+        ).fit(v_pool, t_pool)
+        k = int(search.best_params_["kneighborsregressor__n_neighbors"])
+        cv_mse = float(-search.best_score_)
+    else:
+        k, cv_mse = min(min(int(k) for k in ks), n), float("nan")
+    model = make_pipeline(StandardScaler(), KNeighborsRegressor(n_neighbors=k)).fit(v_pool, t_pool)
+    pred = model.predict(_rows(vision, rows, "knn_generate"))
+    return KnnGeneration(dict(zip(rows, pred, strict=True)), k, cv_mse)
+
+
+@dataclass(frozen=True)
+class LadderRungs:
+    """The T_gen of the ladder's rungs that need no diffusion sampling, plus the diffusion
+    generator's mean (``gen_mean``), for the rows asked for; and what each rung chose."""
+
+    t_gen: dict[str, dict[str, np.ndarray]]  # rung -> sample_id -> vector
+    look_fallback: int  # rows whose look is absent from the pool (the pool mean)
+    n_looks: int
+    knn_k: int
+    ridge_alpha: float
+
+    def describe(self) -> str:
+        return (
+            f"look oracle: {self.n_looks} looks in the pool, {self.look_fallback} row(s) on "
+            f"the pool mean; kNN: k = {self.knn_k}; ridge: alpha = {self.ridge_alpha:g}"
+        )
+
+
+def ladder_rungs(
+    vision: Mapping[str, np.ndarray],
+    t_real: Mapping[str, np.ndarray],
+    looks: Mapping[str, str] | pd.Series,
+    pool: Sequence[str],
+    rows: Sequence[str],
+    gen_mean: Mapping[str, np.ndarray],
+    *,
+    ks: Sequence[int] = KNN_KS,
+    seed: int = 0,
+) -> LadderRungs:
+    """Every rung of `LADDER` but the one-sample ``v_tgen`` for `rows`, each learnt from the
+    pool only: `look_oracle`, `knn_generate`, ridge (`generate.ridge.ridge_generate`, its
+    conditional mean) and ``gen_mean`` (given: the mean of the diffusion generator's samples,
+    `regime_generators.pool_generators`)."""
+    from tacgen_lib.generate.ridge import ridge_generate
+
+    pool = [str(i) for i in pool]
+    rows = [str(i) for i in rows]
+    oracle = look_oracle(t_real, looks, pool, rows)
+    knn = knn_generate(vision, t_real, pool, rows, ks=ks, seed=seed)
+    needed = {i: vision[i] for i in (*pool, *rows)}
+    ridge = ridge_generate(needed, t_real, pool, seed=seed)
+    return LadderRungs(
+        t_gen={
+            "look_oracle": oracle.t_gen,
+            "knn": knn.t_gen,
+            "ridge": {i: ridge.mean[i] for i in rows},
+            "gen_mean": {i: np.asarray(gen_mean[i], np.float64) for i in rows},
+        },
+        look_fallback=oracle.n_fallback,
+        n_looks=oracle.n_looks,
+        knn_k=knn.k,
+        ridge_alpha=ridge.alpha,
+    )

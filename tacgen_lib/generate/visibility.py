@@ -1,0 +1,218 @@
+"""What V sees: how well the frozen vision features decode each factor a simulated frame shows.
+
+For every simulated corpus, each visible factor (`corpus.looks.visible_factors`: colour,
+texture, shape, size third and, on the natural design, the appearance class) is decoded from V
+by a linear probe (the probes stage's logistic probe, C by CV) and a nonlinear probe (the same
+probe on V + RBF Nystroem features of V, `small_probes.fit_small_nonlinear`), each fitted on
+every non-test row of the corpus and scored on its test split with a fixed-test bootstrap CI
+beside the majority class's share of the test rows.
+
+It is the gate for reading any result that depends on what V sees: the regime's generator can
+pass on only what V holds, so where V does not decode the appearance class the regime cannot
+say whether generated touch helps (`visibility_gate`). A factor with one level in a corpus
+(the controlled corpus shows one colour) has nothing to decode and gets no row.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from tacgen_lib.corpus.looks import FACTORS
+from tacgen_lib.generate.blocks import feature_block
+from tacgen_lib.generate.settings import check_gamma_multiples
+from tacgen_lib.generate.small_probes import fit_small_nonlinear, fit_small_probe
+from tacgen_lib.probes.bootstrap import resample_indices, score_interval
+from tacgen_lib.probes.metrics import score
+from tacgen_lib.probes.settings import ProbeSettings
+from tacgen_lib.runtime.workers import fork_map
+
+__all__ = [
+    "VISIBILITY_COLUMNS",
+    "GateVerdict",
+    "VisibilityCorpus",
+    "VisibilitySettings",
+    "visibility_check",
+    "visibility_gate",
+]
+
+#: Columns of ``results/features/visibility.parquet`` (one row per corpus x factor x probe).
+VISIBILITY_COLUMNS = (
+    "row_id",
+    "corpus",
+    "factor",
+    "probe",
+    "score",
+    "ci_low",
+    "ci_high",
+    "majority",
+    "n_classes",
+    "n",
+    "n_test",
+)
+
+PROBES = ("linear", "nonlinear")
+
+
+@dataclass(frozen=True)
+class VisibilitySettings:
+    """The visibility check (config ``features.visibility``): the RBF gamma multiples (of the
+    median heuristic) the nonlinear probe chooses among by CV, the fixed-test bootstrap
+    resamples, and the gate: factor -> the accuracy V must reach on a regime corpus for the
+    regime to be read (`visibility_gate`)."""
+
+    gammas: tuple[float, ...] = (1.0,)
+    bootstrap: int = 2000
+    gate: Mapping[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        check_gamma_multiples(self.gammas, "features.visibility.gammas")
+        if int(self.bootstrap) < 1:
+            raise ValueError(f"features.visibility.bootstrap must be >= 1, got {self.bootstrap}")
+        for factor, t in self.gate.items():
+            if factor not in FACTORS or not 0.0 <= float(t) <= 1.0:
+                raise ValueError(
+                    f"features.visibility.gate: {factor!r}: {t!r} (factors {', '.join(FACTORS)}; "
+                    "accuracies in [0, 1])"
+                )
+
+    @classmethod
+    def from_config(cls, visibility: Mapping[str, Any]) -> VisibilitySettings:
+        return cls(
+            gammas=tuple(float(g) for g in visibility.get("gammas", (1.0,))),
+            bootstrap=int(visibility.get("bootstrap", 2000)),
+            gate={str(k): float(v) for k, v in (visibility.get("gate") or {}).items()},
+        )
+
+
+@dataclass(frozen=True)
+class VisibilityCorpus:
+    """One corpus of the check: its vision features, its `visible_factors` frame and its
+    train (every non-test row) and test rows."""
+
+    name: str
+    vision: Mapping[str, np.ndarray]
+    factors: pd.DataFrame
+    train: Sequence[str]
+    test: Sequence[str]
+
+
+def visibility_check(
+    corpora: Sequence[VisibilityCorpus],
+    settings: ProbeSettings,
+    visibility: VisibilitySettings,
+    *,
+    progress: Callable[[str], Any] | None = None,
+    workers: int = 1,
+) -> pd.DataFrame:
+    """Accuracy of the linear and the nonlinear V probe on each factor of each corpus with
+    more than one level among its train rows, fitted on its train rows and scored on its test
+    rows (fixed-test bootstrap CI, `visibility.bootstrap` resamples).
+
+    settings: a logistic `ProbeSettings` (its C grid, folds and CV repeats). The (corpus,
+    factor, probe) fits are independent: `workers` forked processes compute them
+    (`fork_map`, the same rows for any number of workers), the nonlinear ones first. Returns
+    `VISIBILITY_COLUMNS` rows, ordered by corpus (as given), factor (`FACTORS`) and probe.
+    """
+    if settings.kind != "logistic":
+        raise ValueError(f"visibility_check: needs a logistic probe, got {settings.kind!r}")
+    say = progress or (lambda _m: None)
+    blocks = {}
+    jobs = []
+    for c in corpora:
+        train, test = [str(i) for i in c.train], [str(i) for i in c.test]
+        if not train or not test:
+            raise ValueError(f"visibility_check: corpus {c.name!r} has no train or no test rows")
+        missing = [i for i in (*train, *test) if i not in c.factors.index]
+        if missing:
+            raise ValueError(
+                f"visibility_check: corpus {c.name!r}: sample_id {missing[0]!r} has no visible "
+                f"factors ({len(missing)} such rows)"
+            )
+        blocks[c.name] = (
+            c,
+            train,
+            test,
+            feature_block(c.vision, train),
+            feature_block(c.vision, test),
+        )
+        shown = [f for f in FACTORS if f in c.factors and c.factors.loc[train, f].nunique() > 1]
+        jobs += [(c.name, f, p) for f in shown for p in PROBES]
+
+    def fit(job: tuple[str, str, str]) -> dict:
+        name, factor, probe = job
+        c, train, test, v_tr, v_te = blocks[name]
+        y_tr = c.factors.loc[train, factor].astype(str).to_numpy(dtype=object)
+        y_te = c.factors.loc[test, factor].astype(str).to_numpy(dtype=object)
+        if probe == "linear":
+            fitted = fit_small_probe(v_tr, y_tr, v_te, settings)
+        else:
+            fitted = fit_small_nonlinear(
+                v_tr, y_tr, v_te, settings, gammas=visibility.gammas, n_components=v_tr.shape[1]
+            )
+        acc = score("accuracy", y_te, fitted.pred)
+        idx = resample_indices(len(test), int(visibility.bootstrap), settings.seed)
+        lo, hi = score_interval("accuracy", y_te, fitted.pred, idx)
+        say(f"{name} {factor}, {probe} probe on V: accuracy {acc:.3f} [{lo:.3f}, {hi:.3f}]")
+        return {
+            "row_id": f"{name}|{factor}|{probe}",
+            "corpus": name,
+            "factor": factor,
+            "probe": probe,
+            "score": float(acc),
+            "ci_low": float(lo),
+            "ci_high": float(hi),
+            "majority": float(pd.Series(y_te).value_counts(normalize=True).max()),
+            "n_classes": int(len(set(y_tr))),
+            "n": len(train),
+            "n_test": len(test),
+        }
+
+    def cost(job: tuple[str, str, str]) -> float:  # the nonlinear CV dominates, with the rows
+        return (2.0 if job[2] == "nonlinear" else 1.0) * len(blocks[job[0]][1])
+
+    rows = fork_map(fit, jobs, workers, cost=cost)
+    return pd.DataFrame(rows, columns=list(VISIBILITY_COLUMNS))
+
+
+@dataclass(frozen=True)
+class GateVerdict:
+    """Whether V passes the visibility gate of one corpus: every factor named by the gate
+    decoded at or above its threshold by the better of the two probes."""
+
+    passed: bool
+    corpus: str
+    scores: dict[str, float]  # factor -> the better probe's accuracy
+    thresholds: dict[str, float]
+
+    def sentence(self) -> str:
+        """The gate in words, with the decode figures."""
+        parts = ", ".join(
+            f"{f} {self.scores.get(f, float('nan')):.2f} (gate {t:.2f})"
+            for f, t in self.thresholds.items()
+        )
+        if self.passed:
+            return f"V passes the visibility gate on {self.corpus}: {parts}."
+        return (
+            f"V fails the visibility gate on {self.corpus}: {parts}. A generator that reads V "
+            "can pass on only what V holds, so this V cannot show whether generated touch helps."
+        )
+
+
+def visibility_gate(
+    rows: pd.DataFrame, corpus: str, thresholds: Mapping[str, float]
+) -> GateVerdict:
+    """The gate of `corpus` from visibility rows: for each factor of `thresholds`, the
+    better (linear or nonlinear) probe's accuracy must reach its threshold. A factor with no
+    row (not shown by the corpus) fails the gate."""
+    sub = rows[rows["corpus"] == corpus]
+    scores = {}
+    for factor in thresholds:
+        got = sub.loc[sub["factor"] == factor, "score"]
+        scores[factor] = float(got.max()) if len(got) else float("nan")
+    passed = all(np.isfinite(scores[f]) and scores[f] >= float(t) for f, t in thresholds.items())
+    return GateVerdict(bool(passed), corpus, scores, {k: float(v) for k, v in thresholds.items()})
