@@ -72,7 +72,7 @@ from tacgen_lib.probes.bootstrap import (
     score_resamples,
 )
 from tacgen_lib.probes.metrics import score
-from tacgen_lib.probes.rows import FamilyRows, visible_design
+from tacgen_lib.probes.rows import FamilyRows, baseline_score, visible_design
 from tacgen_lib.probes.settings import ProbeSettings
 from tacgen_lib.runtime.workers import fork_map
 
@@ -91,7 +91,6 @@ __all__ = [
     "fit_small_probe",
     "gap_closed",
     "distillation_rows",
-    "majority_score",
     "regime_probe_settings",
     "regime_test_rows",
 ]
@@ -222,20 +221,6 @@ def gap_closed(arm: float, nonlinear_v: float, real: float) -> float:
     if not np.isfinite(gap) or gap <= 0:
         return math.nan
     return (arm - nonlinear_v) / gap
-
-
-def majority_score(metric: str, y_lab: np.ndarray, y_test: np.ndarray) -> float:
-    """The score of the constant prediction a probe falls back to: the labelled rows'
-    majority class (ties: the first in sorted order) for accuracy, their mean for R^2."""
-    if metric == "r2":
-        pred = np.full(len(y_test), float(np.mean(np.asarray(y_lab, np.float64))))
-        return float(score("r2", np.asarray(y_test, np.float64), pred))
-    classes, counts = np.unique(np.asarray(y_lab).astype(str), return_counts=True)
-    top = classes[int(np.argmax(counts))]
-    return float(np.mean(np.asarray(y_test).astype(str) == top))
-
-
-# --------------------------------------------------------------------------- evaluation
 
 
 @dataclass(frozen=True)
@@ -375,7 +360,8 @@ def _labelled_cell(
         "metric": metric,
         "n_test": len(test),
         "n_labelled_classes": (len(set(map(str, y_lab))) if ps.kind == "logistic" else 0),
-        "majority": majority_score(metric, y_lab, y_test),
+        # the constant prediction a probe can fall back to (majority class / mean)
+        "majority": baseline_score(y_lab, y_test, metric),
     }
     out: list[dict] = []
     for n_p in n_pool:

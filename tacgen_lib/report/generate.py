@@ -95,8 +95,9 @@ def reference_cell_rows(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
 
 
 def headline_table(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
-    """Paper-style table at the reference cell: per corpus x target, first-seed Delta_gen with
-    its bootstrap CI, the cross-seed mean with its 95 % interval, protocol-matched Delta_real,
+    """Paper-style table at the reference cell: per corpus x target, the V score beside the
+    constant prediction's (majority class / train mean; a V below it is flagged), first-seed
+    Delta_gen with its bootstrap CI, the cross-seed mean with its 95 % interval, protocol-matched Delta_real,
     the nonlinear V-only baseline, Delta_gen against that baseline, the ridge V->T generator's
     Delta and Delta_gen against it, and the shuffled control."""
     s = reference_cell_rows(summary, ref)
@@ -109,12 +110,20 @@ def headline_table(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
             return _ci(*delta_with_ci(by[inp][by[inp]["seed"] == g1].iloc[0], col))
 
         m, lo, hi = cross_seed_interval(by["t_gen"]["delta"].to_numpy())
+        v_score = float(by["t_gen"]["v_score"].iloc[0])
+        majority = (
+            float(by["t_gen"]["baseline_score"].iloc[0]) if "baseline_score" in g else math.nan
+        )
         out.append(
             {
                 "corpus": corpus,
                 "target": target,
                 "metric": g["metric"].iloc[0],
-                "V score": f"{by['t_gen']['v_score'].iloc[0]:.3f}",
+                "V score": f"{v_score:.3f}",
+                # a V probe worse than the constant prediction is a probe failing: a Δ against
+                # it is no evidence (flagged)
+                "majority score": majority,
+                "V below majority": "yes: Δ is no evidence" if v_score < majority else "no",
                 f"Δ_gen seed {first} [bootstrap CI]": one("t_gen"),
                 f"Δ_gen mean over {g['seed'].nunique()} seeds [95% t]": _ci(m, lo, hi),
                 "Δ_real (protocol-matched)": one("t_real"),

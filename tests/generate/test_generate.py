@@ -928,6 +928,9 @@ def test_report_tables_and_figures_from_a_summary():
     assert paired["Δ_gen seed 0 [bootstrap CI]"] == "+0.000 [-0.100, +0.100]"
     assert paired["Δ ridge V→T"] == "+0.040 [-0.060, +0.140]"
     assert paired["Δ_gen − ridge V→T"] == "-0.040 [-0.300, -0.010]"
+    # a V probe below the constant prediction is flagged beside its score
+    flags = head.set_index("corpus")["V below majority"]
+    assert flags["sim_controlled"] == "yes: Δ is no evidence" and flags["sim_paired"] == "no"
     mean, lo, hi = rep.cross_seed_interval(np.array([0.0, 0.05]))
     assert mean == pytest.approx(0.025) and lo < 0 < hi
     found = generation_findings(summary, ref).set_index("question")

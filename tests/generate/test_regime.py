@@ -558,3 +558,72 @@ def test_the_corpora_between_the_grids_ends_are_named_only_when_both_ends_are_in
     assert natural_grid_ends({**base, "rhos": [0, 0.5]}) == ([], [])
     assert natural_grid_ends({**base, "rhos": [0, 1]}) == (["sim_natural_r0", "sim_natural_r1"], [])
     assert natural_grid_ends(None) == ([], [])
+
+
+def _ladder_summary(above: dict[tuple[float, str], bool]) -> pd.DataFrame:
+    """A regime summary of one target whose rungs (linear probe) beat nonlinear V with the CI
+    above 0 in every replicate where `above[(rho, rung)]` says so, else include 0."""
+    from tacgen_lib.generate.ladder import LADDER
+
+    rows = []
+    for rho in (0.0, 1.0):
+        for n_l in (8, 64):
+            for draw in range(3):
+                for arm, probe in [("v", "nonlinear"), *((r, "linear") for r in LADDER)]:
+                    up = above.get((rho, arm), False) and n_l == 8
+                    d = 0.1 if up else 0.0
+                    rows.append(
+                        {
+                            "corpus": f"nat{rho:g}",
+                            "rho": rho,
+                            "n_labelled": n_l,
+                            "n_pool": 100,
+                            "seed": 0,
+                            "draw": draw,
+                            "target": "hardness",
+                            "metric": "accuracy",
+                            "arm": arm,
+                            "probe": probe,
+                            "score": 0.6 + d,
+                            "ci_low": 0.5,
+                            "ci_high": 0.8,
+                            "gap_closed": np.nan,
+                            "headroom_captured": np.nan,
+                            "majority": 0.5,
+                            "below_majority": False,
+                            **{
+                                f"{c}_vs_{w}": v
+                                for w in ("linear_v", "nonlinear_v", "distilled")
+                                for c, v in (
+                                    ("delta", d),
+                                    ("ci_low", 0.02 if up else -0.05),
+                                    ("ci_high", 0.2 if up else 0.05),
+                                )
+                            },
+                        }
+                    )
+    return pd.DataFrame(rows)
+
+
+def test_ladder_verdict_reads_the_control_then_the_rung_that_loses_the_gain():
+    from tacgen_lib.report.regime import ladder_verdict, seed_view
+
+    lost_at_knn = seed_view(_ladder_summary({(1.0, "look_oracle"): True}))
+    words = ladder_verdict(lost_at_knn, ["gate sentence"], gate_passed=True)
+    assert words[0] == "gate sentence"
+    assert words[1].startswith("Positive control works (hardness, ρ = 1, N_L = 8, N_P = 100)")
+    assert "lost at A1 kNN in V" in words[2] and "vision" in words[2]
+
+    keep = {(1.0, r): True for r in ("look_oracle", "knn", "ridge", "gen_mean", "v_tgen")}
+    assert (
+        "every rung down to one diffusion sample"
+        in ladder_verdict(seed_view(_ladder_summary(keep)))[-1]
+    )
+    lost_at_sample = {k: v for k, v in keep.items() if k[1] != "v_tgen"}
+    last = ladder_verdict(seed_view(_ladder_summary(lost_at_sample)), gate_passed=False)[-1]
+    assert "lost at A3 one diffusion sample" in last and "failed the visibility gate" in last
+
+    # no gain for the oracle, or a gain at rho = 0 too: the control fails and nothing more is said
+    for above in ({}, {(1.0, "look_oracle"): True, (0.0, "look_oracle"): True}):
+        words = ladder_verdict(seed_view(_ladder_summary(above)))
+        assert len(words) == 1 and words[0].startswith("Positive control fails")
