@@ -220,6 +220,9 @@ rule pretrained_vs_random:
 # decoded from its vision features; the report page What vision sees and the regime's gate
 VISIBILITY = FEAT.get("visibility") or {"gammas": [1.0], "bootstrap": 2000, "gate": {}}
 VISIBILITY_EDGE = "results/features/visibility.parquet"
+# every simulated corpus but those between the rho grid's ends, whose every frame is an end's
+# (share_natural_vision checks it byte for byte): the ends' rows are theirs
+VISIBILITY_CORPORA = [c for c in SIM_CORPORA if c not in NATURAL_BETWEEN]
 VISIBILITY_ITEMS = {"table": "html", "figure": "png"}
 if SIM_CORPORA:
     EDGES.append(VISIBILITY_EDGE)
@@ -233,7 +236,7 @@ rule visibility_check:
     input:
         manifest="results/corpus/manifest.parquet",
         splits="results/corpus/splits.parquet",
-        v=[feature_edge(c, "vision") for c in SIM_CORPORA],
+        v=[feature_edge(c, "vision") for c in VISIBILITY_CORPORA],
         code=imports_of("visibility_check"),
     output:
         **{
@@ -257,9 +260,9 @@ rule visibility_check:
         mem_mb=3000,
         runtime=30,
     params:
-        corpora=SIM_CORPORA,  # the order of the v inputs
+        corpora=VISIBILITY_CORPORA,  # the order of the v inputs
         # corpora of the natural design: their appearance_id is the appearance class
-        natural=[c for c in SIM_CORPORA if CORPORA[c].get("design") == "natural"],
+        natural=[c for c in VISIBILITY_CORPORA if CORPORA[c].get("design") == "natural"],
         visibility=VISIBILITY,
         probes=PROBE_SETTINGS,
         probe_seed=config["probes"]["seeds"][0],

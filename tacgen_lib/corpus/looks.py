@@ -20,7 +20,15 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-__all__ = ["FACTORS", "SIZE_WORDS", "visible_factors", "look_keys", "LOOK_FACTORS"]
+__all__ = [
+    "FACTORS",
+    "LOOK_FACTORS",
+    "LOOK_LEVELS",
+    "SIZE_WORDS",
+    "look_keys",
+    "look_levels",
+    "visible_factors",
+]
 
 #: The size words of a simulated caption (the object's size in thirds of the corpus's range).
 SIZE_WORDS = ("small", "medium-sized", "large")
@@ -30,6 +38,10 @@ FACTORS = ("colour", "texture", "shape", "size", "appearance")
 
 #: The factors that make a look (the appearance class is a function of colour and texture).
 LOOK_FACTORS = ("colour", "texture", "shape", "size")
+
+#: A look and its coarser back-offs: without size, then colour and texture alone (what sets
+#: the natural design's appearance class).
+LOOK_LEVELS = (LOOK_FACTORS, ("colour", "texture", "shape"), ("colour", "texture"))
 
 
 def _vocabulary() -> tuple[frozenset[str], frozenset[str]]:
@@ -81,12 +93,18 @@ def visible_factors(manifest: pd.DataFrame, *, appearance_class: bool = False) -
     return frame
 
 
-def look_keys(factors: pd.DataFrame) -> pd.Series:
-    """sample_id -> its look, ``colour|texture|shape|size`` (`LOOK_FACTORS`), from
-    `visible_factors`' frame: two samples with one key look alike up to colour jitter, pose
-    and size within a third of the range."""
-    missing = [f for f in LOOK_FACTORS if f not in factors]
+def look_keys(factors: pd.DataFrame, names: tuple[str, ...] = LOOK_FACTORS) -> pd.Series:
+    """sample_id -> its look, ``colour|texture|shape|size`` (`LOOK_FACTORS`, or the factors
+    `names`), from `visible_factors`' frame: two samples with one key look alike up to colour
+    jitter, pose and size within a third of the range."""
+    missing = [f for f in names if f not in factors]
     if missing:
         raise ValueError(f"look_keys: factors frame lacks {missing}")
-    keys = factors[list(LOOK_FACTORS)].astype(str).agg("|".join, axis=1)
+    keys = factors[list(names)].astype(str).agg("|".join, axis=1)
     return keys.rename("look")
+
+
+def look_levels(factors: pd.DataFrame) -> list[pd.Series]:
+    """The look keys of every level of `LOOK_LEVELS`, finest first (the look oracle's back-off,
+    `generate.ladder.look_oracle`)."""
+    return [look_keys(factors, names) for names in LOOK_LEVELS]

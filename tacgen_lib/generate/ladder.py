@@ -7,8 +7,9 @@ same test rows. Reading the rungs from the top tells where a gain is lost:
 
 - ``look_oracle`` (A0): the mean real T of the pool rows with the row's look (colour, texture,
   shape, size third; `corpus.looks.look_keys`). What a generator with perfect vision could
-  give: the positive control. A look absent from the pool falls back to the pool mean,
-  counted;
+  give: the positive control. A look that fewer than ``min_rows`` pool rows share backs off to
+  a coarser look (colour, texture, shape; then colour, texture: `corpus.looks.look_levels`),
+  and a look no level holds to the pool mean, each counted;
 - ``knn`` (A1): the mean real T of the k nearest pool rows in (standardised) V, k chosen by
   K-fold CV of the T prediction on the pool: nonparametric, and only as good as V's
   neighbourhoods;
@@ -57,46 +58,70 @@ def _rows(source: Mapping[str, np.ndarray], ids: Sequence[str], what: str) -> np
 
 @dataclass(frozen=True)
 class LookOracle:
-    """The look oracle's T_gen (sample_id -> float64 vector) for the rows asked for, and
-    how many of them had a look absent from the pool (given the pool mean)."""
+    """The look oracle's T_gen (sample_id -> float64 vector) for the rows asked for; how many
+    rows took each level of the back-off (``levels[k]``: rows averaged at look level k, the
+    last entry the rows given the pool mean), and the distinct finest looks of the pool."""
 
     t_gen: dict[str, np.ndarray]
-    n_fallback: int
-    n_looks: int  # distinct looks of the pool
+    levels: tuple[int, ...]
+    n_looks: int
+
+    @property
+    def n_fallback(self) -> int:
+        """Rows whose look, at every level, is absent from the pool (given the pool mean)."""
+        return self.levels[-1]
 
 
 def look_oracle(
     t_real: Mapping[str, np.ndarray],
-    looks: Mapping[str, str] | pd.Series,
+    looks: Mapping[str, str] | pd.Series | Sequence[Mapping[str, str] | pd.Series],
     pool: Sequence[str],
     rows: Sequence[str],
+    *,
+    min_rows: int = 1,
 ) -> LookOracle:
     """A0: each row's T_gen is the mean real T of the pool rows that share its look.
 
-    looks: sample_id -> look key (`corpus.looks.look_keys`) for every pool row and row.
-    A row whose look no pool row has gets the mean real T of the whole pool (counted in
-    ``n_fallback``). Float64 sums; a look with one pool row gives that row's T exactly.
+    looks: sample_id -> look key (`corpus.looks.look_keys`) for every pool row and row, or a
+    sequence of such keys from the finest look to coarser ones (`corpus.looks.look_levels`).
+    A row takes the finest level whose key at least `min_rows` pool rows share; a row whose
+    key no level holds that often gets the mean real T of the whole pool. Counts per level
+    are in ``levels``. Float64 sums; with one level and ``min_rows=1`` a look with one pool
+    row gives that row's T exactly.
     """
     pool = [str(i) for i in pool]
     rows = [str(i) for i in rows]
     if not pool:
         raise ValueError("look_oracle: the pool is empty")
-    look = pd.Series(looks).astype(str)
-    missing = [i for i in (*pool, *rows) if i not in look.index]
-    if missing:
-        raise ValueError(f"look_oracle: sample_id {missing[0]!r} has no look")
+    if int(min_rows) < 1:
+        raise ValueError(f"look_oracle: min_rows must be >= 1, got {min_rows}")
+    single = isinstance(looks, (Mapping, pd.Series))
+    levels = [pd.Series(k).astype(str) for k in ([looks] if single else looks)]
+    for look in levels:
+        missing = [i for i in (*pool, *rows) if i not in look.index]
+        if missing:
+            raise ValueError(f"look_oracle: sample_id {missing[0]!r} has no look")
     t_pool = _rows(t_real, pool, "look_oracle")
     frame = pd.DataFrame(t_pool)
-    means = frame.groupby(look.loc[pool].to_numpy(), sort=True).mean()
-    by_look = {k: means.loc[k].to_numpy(np.float64) for k in means.index}
+    tables = []
+    for look in levels:
+        keys = look.loc[pool].to_numpy()
+        groups = frame.groupby(keys, sort=True)
+        means, sizes = groups.mean(), groups.size()
+        tables.append(
+            {k: means.loc[k].to_numpy(np.float64) for k in means.index if sizes[k] >= min_rows}
+        )
     fallback = t_pool.mean(axis=0)
-    out, n_fallback = {}, 0
+    out, counts = {}, [0] * (len(levels) + 1)
     for i in rows:
-        vec = by_look.get(look.loc[i])
-        if vec is None:
-            vec, n_fallback = fallback, n_fallback + 1
-        out[i] = vec
-    return LookOracle(out, n_fallback, len(by_look))
+        for k, (look, table) in enumerate(zip(levels, tables, strict=True)):
+            vec = table.get(look.loc[i])
+            if vec is not None:
+                out[i], counts[k] = vec, counts[k] + 1
+                break
+        else:
+            out[i], counts[-1] = fallback, counts[-1] + 1
+    return LookOracle(out, tuple(counts), int(levels[0].loc[pool].nunique()))
 
 
 @dataclass(frozen=True)
@@ -164,27 +189,29 @@ class LadderRungs:
     generator's mean (``gen_mean``), for the rows asked for; and what each rung chose."""
 
     t_gen: dict[str, dict[str, np.ndarray]]  # rung -> sample_id -> vector
-    look_fallback: int  # rows whose look is absent from the pool (the pool mean)
+    look_levels: tuple[int, ...]  # rows per back-off level of the look oracle, then pool mean
     n_looks: int
     knn_k: int
     ridge_alpha: float
 
     def describe(self) -> str:
         return (
-            f"look oracle: {self.n_looks} looks in the pool, {self.look_fallback} row(s) on "
-            f"the pool mean; kNN: k = {self.knn_k}; ridge: alpha = {self.ridge_alpha:g}"
+            f"look oracle: {self.n_looks} looks in the pool, rows per look level (finest "
+            f"first, then the pool mean) {list(self.look_levels)}; kNN: k = {self.knn_k}; "
+            f"ridge: alpha = {self.ridge_alpha:g}"
         )
 
 
 def ladder_rungs(
     vision: Mapping[str, np.ndarray],
     t_real: Mapping[str, np.ndarray],
-    looks: Mapping[str, str] | pd.Series,
+    looks: Mapping[str, str] | pd.Series | Sequence[Mapping[str, str] | pd.Series],
     pool: Sequence[str],
     rows: Sequence[str],
     gen_mean: Mapping[str, np.ndarray],
     *,
     ks: Sequence[int] = KNN_KS,
+    look_min_rows: int = 1,
     seed: int = 0,
 ) -> LadderRungs:
     """Every rung of `LADDER` but the one-sample ``v_tgen`` for `rows`, each learnt from the
@@ -195,7 +222,7 @@ def ladder_rungs(
 
     pool = [str(i) for i in pool]
     rows = [str(i) for i in rows]
-    oracle = look_oracle(t_real, looks, pool, rows)
+    oracle = look_oracle(t_real, looks, pool, rows, min_rows=look_min_rows)
     knn = knn_generate(vision, t_real, pool, rows, ks=ks, seed=seed)
     needed = {i: vision[i] for i in (*pool, *rows)}
     ridge = ridge_generate(needed, t_real, pool, seed=seed)
@@ -206,7 +233,7 @@ def ladder_rungs(
             "ridge": {i: ridge.mean[i] for i in rows},
             "gen_mean": {i: np.asarray(gen_mean[i], np.float64) for i in rows},
         },
-        look_fallback=oracle.n_fallback,
+        look_levels=oracle.levels,
         n_looks=oracle.n_looks,
         knn_k=knn.k,
         ridge_alpha=ridge.alpha,

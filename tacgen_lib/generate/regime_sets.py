@@ -98,6 +98,8 @@ class RegimeSettings:
     the model is config ``generate``'s); ``sampling_steps``, ``guidance``: the DDIM cell they
     are sampled with; ``gen_mean_samples``: the samples the ladder's ``gen_mean`` rung
     averages (`generate.ladder`); ``knn_ks``: the k its ``knn`` rung chooses among;
+    ``look_min_rows``: the pool rows a look needs before its ``look_oracle`` rung averages
+    them (else it backs off to a coarser look);
     ``bootstrap``: fixed-test resamples; ``C`` / ``lambdas``: the regime's probe grids, which
     reach penalties strong enough for a probe to fall back to the majority class or the mean
     (the probes stage keeps the paper's, config ``probes``).
@@ -114,6 +116,7 @@ class RegimeSettings:
     guidance: float = 1.0
     gen_mean_samples: int = 8
     knn_ks: tuple[int, ...] = (1, 2, 4, 8, 16, 32, 64)
+    look_min_rows: int = 5
     bootstrap: int = 5000
     C: tuple[float, ...] = (0.0001, 0.001, 0.01, 0.1, 1.0, 10.0)
     lambdas: tuple[float, ...] = (0.1, 1.0, 10.0, 100.0, 1000.0, 10000.0, 100000.0)
@@ -123,7 +126,7 @@ class RegimeSettings:
             values = getattr(self, name)
             if not values or any(int(v) != v or v < 1 for v in values):
                 raise ValueError(f"regime.{name} must be integers >= 1, got {values!r}")
-        for name in ("label_draws", "gen_mean_samples"):
+        for name in ("label_draws", "gen_mean_samples", "look_min_rows"):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"regime.{name} must be >= 1, got {getattr(self, name)!r}")
         for name in ("C", "lambdas"):

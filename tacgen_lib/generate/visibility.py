@@ -115,14 +115,19 @@ def visibility_check(
 
     settings: a logistic `ProbeSettings` (its C grid, folds and CV repeats). The (corpus,
     factor, probe) fits are independent: `workers` forked processes compute them
-    (`fork_map`, the same rows for any number of workers), the nonlinear ones first. Returns
-    `VISIBILITY_COLUMNS` rows, ordered by corpus (as given), factor (`FACTORS`) and probe.
+    (`fork_map`, the same rows for any number of workers), the nonlinear ones first. A corpus
+    whose vectors, factors and split repeat an earlier one's row for row (a null corpus and
+    its paired twin show the same frames) is fitted once and given that corpus's rows.
+    Returns `VISIBILITY_COLUMNS` rows, ordered by corpus (as given), factor (`FACTORS`) and
+    probe.
     """
     if settings.kind != "logistic":
         raise ValueError(f"visibility_check: needs a logistic probe, got {settings.kind!r}")
     say = progress or (lambda _m: None)
     blocks = {}
     jobs = []
+    twin_of: dict[str, str] = {}  # corpus -> the earlier corpus whose inputs it repeats
+    seen: dict[str, str] = {}
     for c in corpora:
         train, test = [str(i) for i in c.train], [str(i) for i in c.test]
         if not train or not test:
@@ -133,14 +138,17 @@ def visibility_check(
                 f"visibility_check: corpus {c.name!r}: sample_id {missing[0]!r} has no visible "
                 f"factors ({len(missing)} such rows)"
             )
-        blocks[c.name] = (
-            c,
-            train,
-            test,
-            feature_block(c.vision, train),
-            feature_block(c.vision, test),
-        )
+        v_tr, v_te = feature_block(c.vision, train), feature_block(c.vision, test)
         shown = [f for f in FACTORS if f in c.factors and c.factors.loc[train, f].nunique() > 1]
+        # a corpus whose frames are another's (a null corpus shares its paired twin's): the
+        # same vectors, factors and split in row order give the same rows, fitted once
+        key = _fingerprint(v_tr, v_te, c.factors.loc[train, shown], c.factors.loc[test, shown])
+        if key in seen:
+            twin_of[c.name] = seen[key]
+            say(f"{c.name}: the vision features, factors and split of {seen[key]}: its rows")
+            continue
+        seen[key] = c.name
+        blocks[c.name] = (c, train, test, v_tr, v_te)
         jobs += [(c.name, f, p) for f in shown for p in PROBES]
 
     def fit(job: tuple[str, str, str]) -> dict:
@@ -176,7 +184,26 @@ def visibility_check(
         return (2.0 if job[2] == "nonlinear" else 1.0) * len(blocks[job[0]][1])
 
     rows = fork_map(fit, jobs, workers, cost=cost)
-    return pd.DataFrame(rows, columns=list(VISIBILITY_COLUMNS))
+    by_corpus = {c.name: [r for r in rows if r["corpus"] == c.name] for c in corpora}
+    out = []
+    for c in corpora:
+        for r in by_corpus[twin_of.get(c.name, c.name)]:
+            out.append({**r, "row_id": f"{c.name}|{r['factor']}|{r['probe']}", "corpus": c.name})
+    return pd.DataFrame(out, columns=list(VISIBILITY_COLUMNS))
+
+
+def _fingerprint(*blocks: np.ndarray | pd.DataFrame) -> str:
+    """A digest of the check's inputs of a corpus in row order (vectors' bytes, labels)."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for b in blocks:
+        if isinstance(b, pd.DataFrame):
+            h.update(repr(list(b.columns)).encode())
+            h.update("\x1f".join(b.astype(str).to_numpy().ravel().tolist()).encode())
+        else:
+            h.update(np.ascontiguousarray(b).tobytes())
+    return h.hexdigest()
 
 
 @dataclass(frozen=True)

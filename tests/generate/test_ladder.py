@@ -58,6 +58,27 @@ def test_a_look_absent_from_the_pool_falls_back_to_the_pool_mean_and_is_counted(
     assert got.n_fallback == 1
 
 
+def test_a_rare_look_backs_off_to_a_coarser_one_before_the_pool_mean():
+    ids, _, t, _ = _world(12)
+    pool, rows = ids[:9], ids[9:]
+    # finest: pool looks "a" (x2) and "b" (x7); coarse: "a" and "b" are both "ab"
+    fine = {i: "a" for i in ids[:2]} | {i: "b" for i in ids[2:9]}
+    fine |= {ids[9]: "a", ids[10]: "b", ids[11]: "z"}
+    coarse = {i: "ab" for i in ids[:9]} | {ids[9]: "ab", ids[10]: "ab", ids[11]: "zz"}
+    got = look_oracle(t, [fine, coarse], pool, rows, min_rows=3)
+    pool_mean = np.mean([t[i] for i in pool], axis=0)
+    # "a": 2 < 3 pool rows, so the coarse "ab": all 9 pool rows
+    np.testing.assert_allclose(got.t_gen[ids[9]], pool_mean, rtol=1e-12)
+    np.testing.assert_allclose(
+        got.t_gen[ids[10]], np.mean([t[i] for i in ids[2:9]], axis=0), rtol=1e-12
+    )
+    np.testing.assert_allclose(got.t_gen[ids[11]], pool_mean, rtol=1e-12)
+    # one row at the finest level, one at the coarse ("ab" holds all 9), one on the pool mean
+    assert got.levels == (1, 1, 1) and got.n_fallback == 1 and got.n_looks == 2
+    with pytest.raises(ValueError, match="min_rows"):
+        look_oracle(t, fine, pool, rows, min_rows=0)
+
+
 def test_look_oracle_refuses_an_empty_pool_and_a_row_without_a_look():
     ids, _, t, _ = _world(4)
     with pytest.raises(ValueError, match="pool is empty"):

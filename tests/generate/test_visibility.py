@@ -129,3 +129,26 @@ def test_the_page_reads_the_rows():
     assert sentence.startswith("V sees, on toy: colour") and f"texture {best:.3f}" in sentence
     fig = visibility_figure(pd.concat([rows, rows.assign(corpus="toy2")]))
     assert figure_problems(fig) == []
+
+
+def test_a_corpus_showing_anothers_frames_gets_its_rows_without_refitting():
+    c = _corpus()
+    rename = {i: i.replace("c-", "n-") for i in c.factors.index}
+    twin = VisibilityCorpus(
+        "toy_null",
+        {rename[i]: v for i, v in c.vision.items()},
+        c.factors.rename(index=rename),
+        [rename[i] for i in c.train],
+        [rename[i] for i in c.test],
+    )
+    said = []
+    rows = visibility_check(
+        [c, twin], _probe(), VisibilitySettings(bootstrap=200), progress=said.append
+    )
+    a, b = (rows[rows["corpus"] == n].reset_index(drop=True) for n in ("toy", "toy_null"))
+    pd.testing.assert_frame_equal(
+        a.drop(columns=["row_id", "corpus"]), b.drop(columns=["row_id", "corpus"])
+    )
+    assert b["row_id"].str.startswith("toy_null|").all() and rows["row_id"].is_unique
+    assert any("toy_null: the vision features, factors and split of toy" in m for m in said)
+    assert sum("probe on V" in m for m in said) == 6  # fitted once: 3 factors x 2 probes

@@ -35,7 +35,8 @@ if snakemake.params.regime:
     gates = [
         visibility_gate(visibility, c, snakemake.params.gate)
         for c in snakemake.params.regime_corpora
-        if visibility is not None and snakemake.params.gate
+        # a corpus between the rho grid's ends shows only the ends' frames: not checked
+        if visibility is not None and snakemake.params.gate and c in set(visibility["corpus"])
     ]
     parts.append(
         findings.regime_findings(

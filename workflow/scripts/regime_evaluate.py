@@ -9,7 +9,7 @@ run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpre
 
 from threadpoolctl import threadpool_limits
 
-from tacgen_lib.corpus.looks import look_keys, visible_factors
+from tacgen_lib.corpus.looks import look_levels, visible_factors
 from tacgen_lib.generate.ladder import ladder_rungs
 from tacgen_lib.generate.regime import (
     RegimeSettings,
@@ -51,7 +51,7 @@ for target, kind in params.targets.items():
 vision = edges.read_vector_map(snakemake.input.v, "vit")
 t_real = edges.read_vector_map(snakemake.input.t, "vit")
 t_gen, ladder = {}, {}
-looks = look_keys(visible_factors(corpus_rows))
+looks = look_levels(visible_factors(corpus_rows))
 needed = sorted(str(i) for i in [*sets.labelled_union(regime.label_draws), *sets.test])
 with threadpool_limits(1):
     for (n_pool, pairing), path in zip(params.cells, snakemake.input.t_gen, strict=True):
@@ -66,6 +66,7 @@ with threadpool_limits(1):
             needed,
             edges.read_vector_map(path, "t_gen_mean"),
             ks=regime.knn_ks,
+            look_min_rows=regime.look_min_rows,
             seed=seed,
         )
         ladder[int(n_pool)] = rungs.t_gen
