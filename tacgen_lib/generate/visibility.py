@@ -9,8 +9,9 @@ beside the majority class's share of the test rows.
 
 It is the gate for reading any result that depends on what V sees: the regime's generator can
 pass on only what V holds, so where V does not decode the appearance class the regime cannot
-say whether generated touch helps (`visibility_gate`). A factor with one level in a corpus
-(the controlled corpus shows one colour) has nothing to decode and gets no row.
+say whether generated touch helps (`visibility_gate`). A factor with one level among a
+corpus's train rows, or with a test level its train rows lack (the controlled corpus's
+held-out scale), has nothing a probe could decode and gets no row.
 """
 
 from __future__ import annotations
@@ -139,7 +140,7 @@ def visibility_check(
                 f"factors ({len(missing)} such rows)"
             )
         v_tr, v_te = feature_block(c.vision, train), feature_block(c.vision, test)
-        shown = [f for f in FACTORS if f in c.factors and c.factors.loc[train, f].nunique() > 1]
+        shown = [f for f in FACTORS if f in c.factors and _decodable(c.factors[f], train, test)]
         # a corpus whose frames are another's (a null corpus shares its paired twin's): the
         # same vectors, factors and split in row order give the same rows, fitted once
         key = _fingerprint(v_tr, v_te, c.factors.loc[train, shown], c.factors.loc[test, shown])
@@ -190,6 +191,14 @@ def visibility_check(
         for r in by_corpus[twin_of.get(c.name, c.name)]:
             out.append({**r, "row_id": f"{c.name}|{r['factor']}|{r['probe']}", "corpus": c.name})
     return pd.DataFrame(out, columns=list(VISIBILITY_COLUMNS))
+
+
+def _decodable(labels: pd.Series, train: Sequence[str], test: Sequence[str]) -> bool:
+    """A factor the check reads: more than one level among the train rows, and no test level
+    the train rows lack (a split that holds a level out, as the controlled corpus's held-out
+    scale, asks the probe for a class it never saw)."""
+    seen = set(labels.loc[train].astype(str))
+    return len(seen) > 1 and set(labels.loc[test].astype(str)) <= seen
 
 
 def _fingerprint(*blocks: np.ndarray | pd.DataFrame) -> str:

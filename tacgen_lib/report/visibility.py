@@ -83,7 +83,11 @@ def visibility_figure(rows: pd.DataFrame) -> plt.Figure:
             )
         maj = sub.groupby("factor", sort=False)["majority"].first().loc[factors]
         ax.scatter(x, maj, marker="_", s=300, color="#d62728", label="majority class", zorder=3)
-        ax.set_xticks(x, [_FACTOR_WORDS.get(f, f).replace(" class", "\nclass") for f in factors])
+        ax.set_xticks(
+            x,
+            [_FACTOR_WORDS.get(f, f).replace(" class", "\nclass") for f in factors],
+            fontsize=8,
+        )
         ax.set_ylim(0, 1.05)
         ax.set_ylabel("test accuracy")
         ax.set_title(corpus, fontsize=9)

@@ -152,3 +152,12 @@ def test_a_corpus_showing_anothers_frames_gets_its_rows_without_refitting():
     assert b["row_id"].str.startswith("toy_null|").all() and rows["row_id"].is_unique
     assert any("toy_null: the vision features, factors and split of toy" in m for m in said)
     assert sum("probe on V" in m for m in said) == 6  # fitted once: 3 factors x 2 probes
+
+
+def test_a_factor_level_held_out_of_the_train_rows_is_not_checked():
+    c = _corpus()
+    factors = c.factors.copy()
+    factors.loc[list(c.test), "size"] = "medium-sized"  # a level no train row has
+    held = VisibilityCorpus(c.name, c.vision, factors, c.train, c.test)
+    rows = visibility_check([held], _probe(), VisibilitySettings(bootstrap=200))
+    assert "size" not in set(rows["factor"]) and {"colour", "texture"} <= set(rows["factor"])
