@@ -1,4 +1,4 @@
-"""Cost of accuracy (DESIGN §7): the knobs of config `cost.knobs`, each setting a module of this
+"""Cost of accuracy (docs/cost.md): the knobs of config `cost.knobs`, each setting a module of this
 workflow, and what each setting's points read; included by cost.smk.
 
 `tacgen_lib.cost.knobs.KNOBS` is the one table of knobs. For a swept knob every setting (and

@@ -42,7 +42,7 @@ def pytest_addoption(parser: pytest.Parser) -> None:
 
 def pytest_report_header(config: pytest.Config) -> str:
     """The kernels this session's numpy, OpenBLAS and torch use: a float comparison that holds
-    on one set and not another is a defect of the test or the code (DESIGN.md, Tests)."""
+    on one set and not another is a defect of the test or the code (docs/tests.md)."""
     sys.path.insert(0, str(ROOT / "tools"))
     from kernel_variants import active_kernels
 

@@ -88,3 +88,66 @@ def test_config_reference_is_written_from_the_schema():
         text=True,
     )
     assert proc.returncode == 0, proc.stderr
+
+
+#: Where the code's comments and docstrings live.
+CODE_DIRS = ("tacgen_lib", "rules", "workflow", "tools", "benchmarks", "tests")
+#: A path inside this repository named in a comment or docstring.
+REPO_PATH = re.compile(
+    r"(?<![\w./-])((?:docs|config|tools|tests|benchmarks|rules|workflow|profiles|envs)"
+    r"/[\w./~{}-]*[\w}])"
+)
+#: Citations a reader of the repository cannot follow: files kept outside it, section marks
+#: without a file, or notes of past work sessions.
+OUTSIDE = re.compile(r"\bDESIGN\b|\bSTYLE\b|§|note of the stop|closing note")
+
+
+def _code_files() -> list[Path]:
+    files = []
+    for d in CODE_DIRS:
+        files += [p for p in (ROOT / d).rglob("*") if p.suffix in (".py", ".smk")]
+    return sorted([*files, ROOT / "Snakefile"])
+
+
+def _prose(path: Path) -> list[tuple[int, str]]:
+    """(line number, text) of a file's comments and triple-quoted strings (its docstrings and
+    rule descriptions): what a reader follows, not what the code does."""
+    out, in_doc = [], False
+    for n, line in enumerate(path.read_text().splitlines(), 1):
+        quotes = line.count('"""')
+        if in_doc or quotes:
+            out.append((n, line))
+        if quotes % 2:
+            in_doc = not in_doc
+        elif not in_doc and "#" in line:
+            out.append((n, line[line.index("#") :]))
+    return out
+
+
+def test_every_reference_in_the_code_resolves_inside_the_repository():
+    """A comment or docstring names a file that exists here (a pattern with wildcards is
+    checked up to its first wildcard), and never a file kept outside the repository."""
+    this = Path(__file__).resolve()
+    bad = []
+    for path in _code_files():
+        if path.resolve() == this:
+            continue  # this test spells the patterns it refuses
+        for n, line in _prose(path):
+            if OUTSIDE.search(line):
+                bad.append(f"{path.relative_to(ROOT)}:{n}: cites what is not in the repository")
+            for ref in REPO_PATH.findall(line):
+                stem = re.split(r"[{*]", ref)[0].rstrip("/")
+                if stem and not any((ROOT / stem).parent.glob(Path(stem).name + "*")):
+                    bad.append(f"{path.relative_to(ROOT)}:{n}: {ref} does not exist")
+    assert not bad, "\n".join(bad[:20])
+
+
+def test_the_reference_check_reads_comments_and_docstrings(tmp_path):
+    f = tmp_path / "m.py"
+    f.write_text(
+        '"""A module (see DESIGN §3).\n\ndocs/x.md\n"""\nx = "config/no.yaml"  # tools/y\n'
+    )
+    assert [n for n, _ in _prose(f)] == [1, 2, 3, 4, 5]
+    lines = dict(_prose(f))
+    assert OUTSIDE.search(lines[1]) and REPO_PATH.findall(lines[3]) == ["docs/x.md"]
+    assert REPO_PATH.findall(lines[5]) == ["tools/y"]  # the comment, not the string

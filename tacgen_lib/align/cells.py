@@ -1,6 +1,6 @@
 """A cell of the alignment grid: its fields, its canonical name, and the paths made from it.
 
-One source of truth for every place that names a cell (DESIGN §6): the rules build their
+One source of truth for every place that names a cell (docs/alignment.md): the rules build their
 output, log and benchmark paths from `CELL_PATTERN`, the training script keys its metrics row
 with `cell_name`, and the aggregate reads cells back from the `cell` column of those rows,
 never by parsing a path. A cell's name is the relative path of its folder below

@@ -1,4 +1,4 @@
-"""The alignment stage's settings: one frozen object from config ``align`` (STYLE: one per stage).
+"""The alignment stage's settings: one frozen object from config ``align`` (one per stage, read by `io.config.settings_from`).
 
 `AlignSettings.from_config(config["align"])` reads what a grid cell's training needs (the
 schema, config/config.schema.yaml, has already checked types and ranges); the grid itself

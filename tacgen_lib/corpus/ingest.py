@@ -1,4 +1,4 @@
-"""Real-corpus ingest: the TVL dataset's SSVTP and HCT folders as corpus edges (DESIGN §1, §3).
+"""Real-corpus ingest: the TVL dataset's SSVTP and HCT folders as corpus edges (docs/real_data.md; the edge contract: docs/layout.md, Edges).
 
 This module owns reading the public Touch-Vision-Language (TVL) dataset (Fu et al., 2024) from
 disk and turning it into the two tables every corpus provides: one row per visuo-tactile sample

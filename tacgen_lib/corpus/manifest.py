@@ -1,4 +1,4 @@
-"""The fused manifest: one pool of samples across corpora, keyed by `sample_id` (DESIGN §1).
+"""The fused manifest: one pool of samples across corpora, keyed by `sample_id` (docs/layout.md, Corpus edges).
 
 It holds what splits, probes and the report need (corpus, sensor, caption, labels, strata,
 provenance) and no pixels. Corpora may carry different label columns (a real corpus has no

@@ -1,4 +1,4 @@
-"""Fixed splits and the split guard (DESIGN §5).
+"""Fixed splits and the split guard (docs/layout.md, Corpus edges).
 
 Splits are made once, from the fused manifest, before any feature is computed, and stored as an
 edge (`sample_id`, `corpus`, `split`). Two policies:

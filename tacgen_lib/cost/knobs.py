@@ -1,4 +1,4 @@
-"""The cost knobs: the one table that describes each knob (DESIGN §7).
+"""The cost knobs: the one table that describes each knob (docs/cost.md).
 
 A swept knob is the main workflow run again with config keys changed. Each setting of a knob
 (and each replicate of a setting, where the knob measures a Monte Carlo error) becomes a

@@ -78,7 +78,7 @@ def check_points(table: pd.DataFrame, source: str) -> pd.DataFrame:
 
 def write_points(table: pd.DataFrame, path: str, source: str) -> pd.DataFrame:
     """Check `table` (`check_points`) and write it to `path` as Parquet, atomically. Not an
-    edge (no sidecar): its seconds vary from run to run (DESIGN §3)."""
+    edge (no sidecar): its seconds vary from run to run (docs/layout.md, Edges)."""
     import io
 
     from tacgen_lib.io.hashed import atomic_write_bytes

@@ -1,4 +1,4 @@
-"""The generate stage's settings: one frozen object from config ``generate`` (STYLE: one per stage).
+"""The generate stage's settings: one frozen object from config ``generate`` (one per stage, read by `io.config.settings_from`).
 
 `GenerateSettings.from_config(config["generate"])` reads what training, sampling and evaluating
 the generator need (the schema, config/config.schema.yaml, has already checked types); the grid

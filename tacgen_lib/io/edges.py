@@ -1,4 +1,4 @@
-"""The Parquet edge contract (DESIGN §3): every arrow of the DAG is a verified Parquet file.
+"""The Parquet edge contract (docs/layout.md, Edges): every arrow of the DAG is a verified Parquet file.
 
 An edge is a table keyed by a unique, non-null string key (`sample_id`, or `episode_id` /
 `sensor_id` for the few edges keyed by something else). Vectors are `fixed_size_list<float32>[d]`

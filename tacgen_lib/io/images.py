@@ -1,4 +1,4 @@
-"""PNG bytes <-> uint8 RGB arrays, the image encoding of every corpus edge (DESIGN §3).
+"""PNG bytes <-> uint8 RGB arrays, the image encoding of every corpus edge (docs/layout.md, Corpus edges).
 
 Images travel between rules as PNG bytes in `binary` columns. PNG is lossless, so a frame
 decoded from an edge equals the array that was encoded, and encoding is deterministic, so the

@@ -1,4 +1,4 @@
-"""A rule's code inputs: the `tacgen_lib` modules its script reaches through imports (DESIGN §2).
+"""A rule's code inputs: the `tacgen_lib` modules its script reaches through imports (docs/cost.md and the README: only what changed reruns).
 
 Snakemake reruns a job when its script changes, not when a module the script imports changes.
 So every rule declares, as inputs, the library modules its script imports, transitively; editing

@@ -1,4 +1,4 @@
-"""Policy stage: a grasp-lift-hold task where touch is needed (DESIGN §1, policy).
+"""Policy stage: a grasp-lift-hold task where touch is needed (docs/policy.md).
 
 Modules: settings (PolicySettings), task (episodes, grip-force window, physics-only lift),
 palpation (the observation phase: RGB + both pads' tactile frames), oracle (privileged

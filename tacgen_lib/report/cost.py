@@ -1,4 +1,4 @@
-"""The cost-of-accuracy page (DESIGN §7): what each knob's settings buy, against their seconds.
+"""The cost-of-accuracy page (docs/cost.md): what each knob's settings buy, against their seconds.
 
 Input is the points of every knob (`tacgen_lib.cost.points`, one table per knob). The page
 has a figure (one row of panels per knob, one panel per metric: metric ± uncertainty against

@@ -9,8 +9,8 @@ chain, and no chain ever ends: after n finished jobs the loop runs about n passe
 and every pass checks the existence and size of every input file of every ready job. With
 the `code` inputs that every rule declares (its scripts' import closure), a local run of the
 default DAG spent about half a core in the scheduler by its 180th job, with over a hundred
-timer threads alive (measured on a 2-core machine; the note of the stop that added this
-module gives the figures).
+timer threads alive (measured on a 2-core machine; `tests/runtime/test_scheduler.py` shows
+the chains grow and the patch stops them).
 
 A local run needs no submission rate limit: the cores already bound what runs at once, and
 Snakemake before 8.17 had none. `drop_local_rate_limit` removes it from a local run's
