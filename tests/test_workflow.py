@@ -68,7 +68,7 @@ def test_dry_run_plans_the_whole_dag(cold_dry_run):
         # regime
         "regime_generators",
         "regime_evaluate",
-        "regime_appearance",
+        "visibility_check",
         "aggregate_regime",
         # transfer to a second sensor
         "transfer_evaluate",
@@ -152,7 +152,10 @@ def test_regime_summary_has_every_arm_of_every_cell(run_dir):
     assert got == cells
     assert summary["score"].notna().all() and (summary["ci_low"] <= summary["ci_high"]).all()
     assert set(summary["rho"]) == {0.0, 1.0}
-    # generated touch is sampled for the labelled and test rows (the pool only trains)
+    # every cell is scored on each labelled draw (the schema's default count)
+    assert set(summary["draw"]) == set(range(3))
+    # generated touch is sampled for every draw's labelled rows and the test rows (the pool
+    # only trains), one sample and the mean of regime.gen_mean_samples
     from tacgen_lib.generate.regime_sets import draw_regime_sets
 
     splits = edges.read(run_dir / "results/corpus/splits.parquet").frame
@@ -164,20 +167,32 @@ def test_regime_summary_has_every_arm_of_every_cell(run_dir):
         n_pool=max(cfg["n_pool"]),
         seed=seed,
     )
-    t_gen = edges.read(
+    path = (
         run_dir
         / f"results/generate/regime/{corpus}/seed~{seed}/pool~{max(cfg['n_pool'])}/real/t_gen.parquet"
     )
-    assert set(t_gen.ids) == set(sets.labelled) | set(sets.test)
+    t_gen = edges.read(path)
+    assert set(t_gen.ids) == set(sets.labelled_union(3)) | set(sets.test)
+    assert not set(t_gen.ids) & set(sets.pool)
+    _, mean = edges.read_vectors(path, "t_gen_mean")
+    _, one = edges.read_vectors(path, "t_gen")
+    assert mean.shape == one.shape and not (mean == one).all()
     page = run_dir / "results/report/regime"
-    for name in ("findings.html", "table.html", "appearance.html", "heatmap.png", "curves.png"):
+    for name in ("findings.html", "table.html", "ladder.html", "heatmap.png", "curves.png"):
         assert (page / name).stat().st_size > 500, name
-    assert "H1 (ρ = 0" in (page / "findings.html").read_text()
-    # the appearance check runs once, on the first rho's corpus at the first seed
-    appearance = edges.read(run_dir / "results/generate/regime/appearance.parquet").frame
-    assert set(appearance["corpus"]) == {corpus} and set(appearance["seed"]) == {seed}
-    assert sorted(appearance["probe"]) == ["linear", "nonlinear"]
-    assert (appearance["n_train"] == len(sets.labelled) + len(sets.pool)).all()
+    findings = (page / "findings.html").read_text()
+    assert "visibility gate on sim_natural_r0" in findings and "Positive control" in findings
+    assert "H1 (ρ = 0" in findings
+    # the visibility check: every simulated corpus, each factor it shows, both probes
+    visibility = edges.read(run_dir / "results/features/visibility.parquet").frame
+    assert set(visibility["corpus"]) >= {"sim_paired", "sim_null", *regime_names}
+    natural = visibility[visibility["corpus"] == corpus]
+    assert set(natural["factor"]) == {"colour", "texture", "shape", "size", "appearance"}
+    assert sorted(set(natural["probe"])) == ["linear", "nonlinear"]
+    # the paired design's appearance_id indexes objects: it is no factor there
+    assert "appearance" not in set(visibility.loc[visibility["corpus"] == "sim_paired", "factor"])
+    for name in ("table.html", "figure.png"):
+        assert (run_dir / "results/report/visibility" / name).stat().st_size > 500, name
     # the natural corpora's scene presses once: their force-band table says there is no band
     bands = (run_dir / "results/report/corpus/sim_natural_r1_force_bands.html").read_text()
     assert "no band to check" in bands
@@ -343,7 +358,7 @@ def test_changed_probe_param_reruns_only_the_probes(run_dir, tmp_path):
     # evidence its bootstrap count
     regime = {
         "regime_evaluate",
-        "regime_appearance",
+        "visibility_check",
         "aggregate_regime",
         "language_evidence",
         "aggregate_language",
