@@ -369,12 +369,18 @@ def _labelled_cell(
         v_pool, t_pool = feature_block(vision, pool), feature_block(t_real, pool)
         cell = dict(fits)
         rungs = {**ladder[n_p], "v_tgen": t_gen[(n_p, "real")]}
+        # the nonlinear probes of the rungs and of the distillation student take the gamma
+        # multiple (of their own input's median heuristic) that CV chose for nonlinear V on
+        # these labels, as the student always did; all of `gammas` where that probe could not
+        # run CV. One CV over gammas per cell instead of one per arm
+        g_nl = fits[("v", "nonlinear")].gamma_multiple
+        g_arms = [g_nl] if np.isfinite(g_nl) else gammas
         for rung in LADDER:
             x_lab = np.hstack([v_lab, feature_block(rungs[rung], lab)])
             x_te = np.hstack([v_te, feature_block(rungs[rung], test)])
             cell[(rung, "linear")] = fit_small_probe(x_lab, y_lab, x_te, ps)
             cell[(rung, "nonlinear")] = fit_small_nonlinear(
-                x_lab, y_lab, x_te, ps, gammas=gammas, n_components=d_t
+                x_lab, y_lab, x_te, ps, gammas=g_arms, n_components=d_t
             )
         shuf = t_gen[(n_p, "shuffled")]
         cell[("v_tgen_shuffled", "linear")] = fit_small_probe(
@@ -383,18 +389,10 @@ def _labelled_cell(
             np.hstack([v_te, feature_block(shuf, test)]),
             ps,
         )
-        # the student's gamma multiple: the one CV chose for nonlinear V on these labels
-        # (all of `gammas` where that probe could not run CV)
         x_gd, y_gd = distillation_rows(v_lab, t_lab, y_lab, v_pool, t_pool, ps)
-        g_nl = fits[("v", "nonlinear")].gamma_multiple
         cell[("distilled", "linear")] = fit_small_probe(x_gd, y_gd, v_te, ps)
         cell[("distilled", "nonlinear")] = fit_small_nonlinear(
-            x_gd,
-            y_gd,
-            v_te,
-            ps,
-            gammas=[g_nl] if np.isfinite(g_nl) else gammas,
-            n_components=d_t,
+            x_gd, y_gd, v_te, ps, gammas=g_arms, n_components=d_t
         )
         out += _cell_rows(cell, y_test, idx, metric, base={**cell_base, "n_pool": n_p})
     return out

@@ -118,7 +118,7 @@ class RegimeSettings:
     knn_ks: tuple[int, ...] = (1, 2, 4, 8, 16, 32, 64)
     look_min_rows: int = 5
     bootstrap: int = 5000
-    C: tuple[float, ...] = (0.0001, 0.001, 0.01, 0.1, 1.0, 10.0)
+    C: tuple[float, ...] = (0.0001, 0.01, 0.1, 1.0, 10.0)
     lambdas: tuple[float, ...] = (0.1, 1.0, 10.0, 100.0, 1000.0, 10000.0, 100000.0)
 
     def __post_init__(self) -> None:

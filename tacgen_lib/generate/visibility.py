@@ -63,17 +63,20 @@ PROBES = ("linear", "nonlinear")
 class VisibilitySettings:
     """The visibility check (config ``features.visibility``): the RBF gamma multiples (of the
     median heuristic) the nonlinear probe chooses among by CV, the fixed-test bootstrap
-    resamples, and the gate: factor -> the accuracy V must reach on a regime corpus for the
+    resamples, the CV folds of both probes (one draw), and the gate: factor -> the accuracy V must reach on a regime corpus for the
     regime to be read (`visibility_gate`)."""
 
     gammas: tuple[float, ...] = (1.0,)
     bootstrap: int = 2000
+    folds: int = 3
     gate: Mapping[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         check_gamma_multiples(self.gammas, "features.visibility.gammas")
         if int(self.bootstrap) < 1:
             raise ValueError(f"features.visibility.bootstrap must be >= 1, got {self.bootstrap}")
+        if int(self.folds) < 2:
+            raise ValueError(f"features.visibility.folds must be >= 2, got {self.folds}")
         for factor, t in self.gate.items():
             if factor not in FACTORS or not 0.0 <= float(t) <= 1.0:
                 raise ValueError(
@@ -86,6 +89,7 @@ class VisibilitySettings:
         return cls(
             gammas=tuple(float(g) for g in visibility.get("gammas", (1.0,))),
             bootstrap=int(visibility.get("bootstrap", 2000)),
+            folds=int(visibility.get("folds", 3)),
             gate={str(k): float(v) for k, v in (visibility.get("gate") or {}).items()},
         )
 

@@ -38,9 +38,12 @@ for corpus, path in zip(params.corpora, snakemake.input.v, strict=True):
         )
     )
     logger.info("%s: %d train, %d test rows", corpus, len(corpora[-1].train), len(corpora[-1].test))
-# one CV draw: the check reads each factor once, on every non-test row
+# the probes stage's logistic probe with the check's folds, one draw of them: the check reads
+# each factor once, on every non-test row
 probe = replace(
-    ProbeSettings.from_config(params.probes, "logistic", params.probe_seed), cv_repeats=1
+    ProbeSettings.from_config(params.probes, "logistic", params.probe_seed),
+    folds=settings.folds,
+    cv_repeats=1,
 )
 # one BLAS thread in this process or in each of the job's workers (fork_map): the rows do not
 # depend on the cores Snakemake gives the job
