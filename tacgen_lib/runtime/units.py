@@ -217,8 +217,10 @@ def _family_frames(c: Config) -> float:
 
 
 def _simulated_rows(c: Mapping[str, Any]) -> float:
-    """Rows of every simulated corpus of a config, the regime's natural corpora included."""
-    corpora = {**c["corpora"], **regime_corpora(c.get("regime"))}
+    """Rows of the corpora the visibility check reads: every simulated corpus of a config and
+    the first corpus of the regime's rho grid (rules/features.smk, VISIBILITY_CORPORA)."""
+    grid = list(regime_corpora(c.get("regime")).items())[:1]
+    corpora = {**c["corpora"], **dict(grid)}
     return float(sum(int(v.get("n", 0)) for v in corpora.values() if v.get("kind") == "simulated"))
 
 

@@ -30,8 +30,8 @@ edges.write(out.evaluation, summary, key="row_id", producer=snakemake.rule)
 edges.write(out.summary, summary, key="row_id", producer=snakemake.rule)
 view = report.seed_view(summary)
 best = curves.groupby(["corpus", "seed", "n_pool", "pairing"])["best_step"].first()
-# the gate of every regime corpus the check read (a corpus between the rho grid's ends shows
-# only the ends' frames): what its V decodes of what its frames show
+# the gate of the regime's corpora: what V decodes of what their frames show, read on the rho
+# grid's first corpus (rule visibility_check: the look -> frame process is the same at every rho)
 checked = set(visibility["corpus"])
 gates = [
     visibility_gate(visibility, c, snakemake.params.gate)

@@ -35,7 +35,7 @@ if snakemake.params.regime:
     gates = [
         visibility_gate(visibility, c, snakemake.params.gate)
         for c in snakemake.params.regime_corpora
-        # a corpus between the rho grid's ends shows only the ends' frames: not checked
+        # the rho grid is checked on its first corpus (rule visibility_check)
         if visibility is not None and snakemake.params.gate and c in set(visibility["corpus"])
     ]
     parts.append(
