@@ -1,4 +1,5 @@
-"""What a simulated frame shows: the visible factors of each sample and its look.
+"""What a simulated frame shows: the vocabulary of looks (colours, textures, size words), the
+visible factors of each sample and its look.
 
 A simulated sample's caption adjectives (`corpus.sim.corpus`) are, in order, its size word,
 colour, texture, hardness and weight; its manifest row also carries its shape and, on the
@@ -9,7 +10,7 @@ does not hold one of them is refused, naming the sample.
 
 - `visible_factors`: sample_id -> colour, texture, shape, size (and ``appearance`` where the
   corpus has an appearance class): the labels of the visibility check
-  (`tacgen_lib.features.visibility`);
+  (`tacgen_lib.generate.visibility`);
 - `look_keys`: sample_id -> the sample's look, colour|texture|shape|size, the key the look
   oracle of the regime's generator ladder (`tacgen_lib.generate.ladder.look_oracle`) averages
   real touch over.
@@ -22,6 +23,8 @@ import pandas as pd
 
 __all__ = [
     "FACTORS",
+    "PALETTE",
+    "TEXTURE_WORDS",
     "LOOK_FACTORS",
     "LOOK_LEVELS",
     "SIZE_WORDS",
@@ -29,6 +32,26 @@ __all__ = [
     "look_levels",
     "visible_factors",
 ]
+
+#: An object's colour word -> its RGB (before the natural design's per-channel jitter).
+PALETTE: dict[str, tuple[float, float, float]] = {
+    "red": (0.85, 0.15, 0.12),
+    "orange": (0.95, 0.55, 0.1),
+    "yellow": (0.95, 0.88, 0.2),
+    "green": (0.2, 0.7, 0.25),
+    "blue": (0.15, 0.35, 0.9),
+    "purple": (0.55, 0.25, 0.75),
+    "white": (0.92, 0.92, 0.9),
+    "black": (0.12, 0.12, 0.13),
+}
+
+#: An object's texture (the scene's material name) -> its caption word.
+TEXTURE_WORDS = {
+    "plain": "plain",
+    "checkered": "checkered",
+    "striped": "striped",
+    "speckled": "speckled",
+}
 
 #: The size words of a simulated caption (the object's size in thirds of the corpus's range).
 SIZE_WORDS = ("small", "medium-sized", "large")
@@ -44,12 +67,6 @@ LOOK_FACTORS = ("colour", "texture", "shape", "size")
 LOOK_LEVELS = (LOOK_FACTORS, ("colour", "texture", "shape"), ("colour", "texture"))
 
 
-def _vocabulary() -> tuple[frozenset[str], frozenset[str]]:
-    from tacgen_lib.corpus.sim.corpus import PALETTE, TEXTURE_WORDS
-
-    return frozenset(PALETTE), frozenset(TEXTURE_WORDS.values())
-
-
 def visible_factors(manifest: pd.DataFrame, *, appearance_class: bool = False) -> pd.DataFrame:
     """The visible factors of every row of a simulated corpus's manifest rows.
 
@@ -60,7 +77,7 @@ def visible_factors(manifest: pd.DataFrame, *, appearance_class: bool = False) -
     `appearance_class`, appearance. Raises ValueError naming the first sample whose adjectives
     hold no colour, texture or size word of the simulator's vocabulary.
     """
-    colours, textures = _vocabulary()
+    colours, textures = frozenset(PALETTE), frozenset(TEXTURE_WORDS.values())
     sizes = frozenset(SIZE_WORDS)
 
     def pick(words, vocab: frozenset[str], what: str, sample: str) -> str:

@@ -153,12 +153,14 @@ def visibility_check(
             say(f"{c.name}: the vision features, factors and split of {seen[key]}: its rows")
             continue
         seen[key] = c.name
-        blocks[c.name] = (c, train, test, v_tr, v_te)
+        # the fixed-test resamples of the corpus, shared by its every factor and probe
+        idx = resample_indices(len(test), int(visibility.bootstrap), settings.seed)
+        blocks[c.name] = (c, train, test, v_tr, v_te, idx)
         jobs += [(c.name, f, p) for f in shown for p in PROBES]
 
     def fit(job: tuple[str, str, str]) -> dict:
         name, factor, probe = job
-        c, train, test, v_tr, v_te = blocks[name]
+        c, train, test, v_tr, v_te, idx = blocks[name]
         y_tr = c.factors.loc[train, factor].astype(str).to_numpy(dtype=object)
         y_te = c.factors.loc[test, factor].astype(str).to_numpy(dtype=object)
         if probe == "linear":
@@ -168,7 +170,6 @@ def visibility_check(
                 v_tr, y_tr, v_te, settings, gammas=visibility.gammas, n_components=v_tr.shape[1]
             )
         acc = score("accuracy", y_te, fitted.pred)
-        idx = resample_indices(len(test), int(visibility.bootstrap), settings.seed)
         lo, hi = score_interval("accuracy", y_te, fitted.pred, idx)
         say(f"{name} {factor}, {probe} probe on V: accuracy {acc:.3f} [{lo:.3f}, {hi:.3f}]")
         return {

@@ -55,6 +55,7 @@ import pandas as pd
 
 from tacgen_lib.corpus.derangement import sattolo_cycle
 from tacgen_lib.corpus.keys import corpus_key_errors
+from tacgen_lib.corpus.looks import PALETTE, TEXTURE_WORDS
 from tacgen_lib.corpus.manifest import LABEL_COLUMNS
 from tacgen_lib.corpus.sim import physics
 from tacgen_lib.corpus.sim.render import (
@@ -95,26 +96,6 @@ COLUMNS = [
     "force_source",
     "hardness_source",
 ]
-
-
-PALETTE: dict[str, tuple[float, float, float]] = {
-    "red": (0.85, 0.15, 0.12),
-    "orange": (0.95, 0.55, 0.1),
-    "yellow": (0.95, 0.88, 0.2),
-    "green": (0.2, 0.7, 0.25),
-    "blue": (0.15, 0.35, 0.9),
-    "purple": (0.55, 0.25, 0.75),
-    "white": (0.92, 0.92, 0.9),
-    "black": (0.12, 0.12, 0.13),
-}
-
-
-TEXTURE_WORDS = {
-    "plain": "plain",
-    "checkered": "checkered",
-    "striped": "striped",
-    "speckled": "speckled",
-}
 
 
 SOFT_RANGE = (600.0, 2000.0)  # N/m, contact stiffness of soft objects (log-uniform)
