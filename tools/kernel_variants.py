@@ -27,7 +27,7 @@ the tool stops if a variable did not take effect where this CPU allows the choic
 Ends with one line `kernels: N passed, N failed, N skipped` over all variants.
 
 Usage: python tools/kernel_variants.py [--variant NAME ... | --all] [-- extra pytest args]
-(without --variant: DEFAULT_VARIANTS, what `make test` runs)
+(without --variant: `default_variants` of this CPU, what `make test` runs)
 Standard library only in this process; each variant's pytest imports the rest.
 """
 
@@ -71,6 +71,7 @@ NOT_NUMERIC = (
     # render-memory test (MuJoCo frames through Mesa: its RSS, not a float, is compared)
     "tests/test_faults.py",
     "tests/runtime/test_runtime_estimate.py",  # run-time estimates: sums of benchmark seconds
+    "tests/test_kernel_variants.py",  # which variant a CPU class gets
 )
 #: single tests of numeric modules that compare no float: what a process imports, and which
 #: checkpoint keys and shapes an architecture accepts
@@ -109,9 +110,32 @@ VARIANTS: dict[str, tuple[dict[str, str], int, str]] = {
         "older kernels: AVX BLAS, SSE4.1 convolutions, torch's unvectorised default",
     ),
 }
-#: what `make test` runs (each variant re-runs every test that is not a workflow run); the
-#: others on request (`--variant NAME` or `--all`)
-DEFAULT_VARIANTS = ("avx2-2threads",)
+#: what `make test` runs, by this CPU's own torch capability (each variant re-runs every test
+#: that is not a workflow run): a variant that picks kernels the machine does not use by
+#: default. On a CPU with AVX-512 the AVX2 kernels are other kernels; on one without (AVX2 is
+#: its own), AVX2 would repeat the main run, so it gets the older ones. The others on request
+#: (`--variant NAME` or `--all`).
+DEFAULT_VARIANTS = {"AVX512": ("avx2-2threads",), "AVX2": ("generic",), "DEFAULT": ("generic",)}
+
+
+def native_capability() -> str:
+    """This CPU's own torch kernel capability (``AVX512``, ``AVX2`` or ``DEFAULT``), asked of a
+    process without any of the variants' variables."""
+    names = {v for env, _, _ in VARIANTS.values() for v in env}
+    env = {k: v for k, v in os.environ.items() if k not in names}
+    code = "import torch; print(torch.backends.cpu.get_cpu_capability())"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    if out.returncode != 0:
+        raise RuntimeError(
+            f"kernel_variants: cannot ask torch for this CPU's capability: {out.stderr}"
+        )
+    return out.stdout.strip().upper()
+
+
+def default_variants(capability: str) -> tuple[str, ...]:
+    """The variants `make test` runs on a CPU whose own torch capability is `capability`: the
+    non-native ones (an unknown capability gets the oldest kernels)."""
+    return DEFAULT_VARIANTS.get(capability, ("generic",))
 
 
 def numpy_dispatch() -> list[str]:
@@ -264,7 +288,15 @@ def main(argv: list[str] | None = None) -> int:
     args, rest = parser.parse_known_args(argv)
     rest = [a for a in rest if a != "--"]
     failed, total = [], [0, 0, 0]
-    for name in list(VARIANTS) if args.all else args.variant or DEFAULT_VARIANTS:
+    if args.all:
+        names = list(VARIANTS)
+    elif args.variant:
+        names = args.variant
+    else:
+        capability = native_capability()
+        names = list(default_variants(capability))
+        print(f"kernel variants: this CPU's own kernels are {capability}; running {names}")
+    for name in names:
         rc, counts = run_variant(name, rest)
         total = [a + b for a, b in zip(total, counts, strict=True)]
         if rc != 0:

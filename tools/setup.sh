@@ -17,6 +17,7 @@ for arg in "$@"; do
   esac
 done
 PYTHON=${PYTHON:-python3}
+started=$SECONDS
 
 # 1. System packages for offscreen MuJoCo rendering (EGL through Mesa llvmpipe; OSMesa fallback),
 #    and with --browser headless Chromium with its WebDriver.
@@ -75,3 +76,4 @@ import mujoco, snakemake  # noqa: F401
 build = f"cuda {torch.version.cuda}" if torch.version.cuda else "cpu"
 print(f"setup: ok (python {sys.version.split()[0]}, torch {torch.__version__} [{build}], mujoco {mujoco.__version__})")
 PY
+echo "setup: done in $((SECONDS - started)) s"
