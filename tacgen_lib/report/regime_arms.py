@@ -7,9 +7,13 @@ from __future__ import annotations
 
 import pandas as pd
 
-__all__ = ["ARM_LABELS", "NOT_BUILT_ON_V", "RUNG_LABELS", "arm_rows"]
+__all__ = [
+    "ARM_LABELS",
+    "NOT_BUILT_ON_V",
+    "RUNG_LABELS",
+    "arm_rows",
+]
 
-#: (arm, probe) -> the label a reader sees.
 #: The ladder's rungs in words, top to bottom (`generate.ladder.LADDER`).
 RUNG_LABELS = {
     "look_oracle": "A0 look oracle",
@@ -19,6 +23,7 @@ RUNG_LABELS = {
     "v_tgen": "A3 one diffusion sample",
 }
 
+#: (arm, probe) -> the label a reader sees.
 ARM_LABELS = {
     ("v", "linear"): "V (linear)",
     ("v", "nonlinear"): "V (nonlinear)",

@@ -91,19 +91,26 @@ def heatmap_figure(view: pd.DataFrame) -> plt.Figure:
     return fig
 
 
-_CURVE_ARMS = (
-    (("v", "linear"), "#777777", "-"),
-    (("v", "nonlinear"), "#222222", "-"),
-    (("look_oracle", "linear"), "#ff7f0e", "-"),
-    (("gen_mean", "linear"), "#8c564b", "-"),
-    (("v_tgen", "linear"), "#d62728", "-"),
-    (("v_tgen", "nonlinear"), "#d62728", "--"),
-    (("v_tgen_shuffled", "linear"), "#ff9896", ":"),
-    (("distilled", "linear"), "#1f77b4", "-"),
-    (("distilled", "nonlinear"), "#1f77b4", "--"),
-    (("v_treal", "linear"), "#2ca02c", "-"),
-    (("v_ceiling", "nonlinear"), "#17becf", ":"),
-    (("vision_ceiling", "oracle"), "#9467bd", ":"),
+#: The curves of `curves_figure`, one a line: arm, probe, colour, line style.
+_CURVE_ARMS = tuple(
+    ((arm, probe), colour, style)
+    for arm, probe, colour, style in map(
+        str.split,
+        """
+        v linear #777777 -
+        v nonlinear #222222 -
+        look_oracle linear #ff7f0e -
+        gen_mean linear #8c564b -
+        v_tgen linear #d62728 -
+        v_tgen nonlinear #d62728 --
+        v_tgen_shuffled linear #ff9896 :
+        distilled linear #1f77b4 -
+        distilled nonlinear #1f77b4 --
+        v_treal linear #2ca02c -
+        v_ceiling nonlinear #17becf :
+        vision_ceiling oracle #9467bd :
+        """.strip().splitlines(),
+    )
 )
 
 
