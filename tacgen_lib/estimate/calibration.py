@@ -175,7 +175,7 @@ MIN_UNITS_SPAN = 2.0
 
 def fit_costs(points: pd.DataFrame, *, unshared: bool = True) -> dict[str, CostLine]:
     """One `CostLine` per cost class by non-negative least squares of wall (less the FLOP
-    term, `units.flop_seconds`) on [1, units]; with
+    term, `flops.flop_seconds`) on [1, units]; with
     `unshared`, each job's wall is first its idle wall (`unshared_seconds`), so runs measured
     under different loads fit one line, in seconds on idle cores.
 

@@ -1,6 +1,6 @@
 """Where generated touch helps, and where it cannot: scarce labels against a paired pool.
 
-On a natural-appearance corpus (`tacgen_lib.corpus.sim.corpus`, design ``natural``: appearance
+On a natural-appearance corpus (`tacgen_lib.corpus.sim.samples`, design ``natural``: appearance
 class = material class with probability rho) a generator trained on a large *unlabelled*
 paired pool of (V, T) rows can carry what V predicts of touch into a probe fitted on few
 labels. Learning with privileged information says such a gain needs (1) V to predict the label
