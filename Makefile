@@ -31,7 +31,7 @@ report:
 ## Predict per-rule and total wall time of a config before running it (README, Run-time estimate):
 ##   make estimate ARGS='--configfile config/paper.yaml --slurm-nodes 8 --cores-per-node 32'
 estimate:
-	$(BIN)/python -m tacgen_lib.runtime.estimate --cores $(CORES) $(ARGS)
+	$(BIN)/python -m tacgen_lib.estimate --cores $(CORES) $(ARGS)
 
 lint:
 	$(BIN)/ruff check .

@@ -6,7 +6,7 @@ Run `snakemake --cores 2` for the embedded default (config/config.yaml), or
 
 from snakemake.utils import min_version
 
-from tacgen_lib.runtime.resources import attach_estimated_runtime
+from tacgen_lib.estimate.resources import attach_estimated_runtime
 
 min_version("9.0")
 
@@ -50,7 +50,7 @@ rule all:
 
 
 # Every job's runtime (its SLURM time limit) from its run-time estimate, with headroom and the
-# attempt factor (tacgen_lib/runtime/resources.py); a runtime given with --set-resources wins.
+# attempt factor (tacgen_lib/estimate/resources.py); a runtime given with --set-resources wins.
 # Attached once, by the main workflow, to its rules and the cost settings' alike.
 if not (config.get("cost") or {}).get("setting"):
     attach_estimated_runtime(

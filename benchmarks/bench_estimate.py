@@ -1,4 +1,4 @@
-"""How close the run-time estimate comes to a finished cold run (`tacgen_lib.runtime.estimate`).
+"""How close the run-time estimate comes to a finished cold run (`tacgen_lib.estimate`).
 
 Reads a finished run of a config (its Snakemake log for the wall, its `benchmark:` files for
 each job's seconds) and estimates the same DAG from the shipped calibration only (earlier runs,
@@ -28,11 +28,11 @@ from pathlib import Path
 import machine
 import numpy as np
 
+from tacgen_lib.estimate.calibration import fit_costs, last_run, load_calibration
+from tacgen_lib.estimate.dag import dag_jobs
+from tacgen_lib.estimate.predict import estimate_run, job_seconds
+from tacgen_lib.estimate.schedule import local_machine
 from tacgen_lib.runtime.benchmarks import read_benchmark
-from tacgen_lib.runtime.calibration import fit_costs, last_run, load_calibration
-from tacgen_lib.runtime.dag import dag_jobs
-from tacgen_lib.runtime.estimate import estimate_run, job_seconds
-from tacgen_lib.runtime.schedule import local_machine
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from snakemake_run import SNAKEMAKE, copy_tree  # noqa: E402  (the tests' workflow copy)

@@ -24,7 +24,7 @@ import numpy as np
 import yaml
 
 import tacgen_lib.corpus.sim  # noqa: F401  (sets MUJOCO_GL=egl before mujoco is imported)
-from tacgen_lib.corpus.sim import corpus, physics, render, tactile
+from tacgen_lib.corpus.sim import corpus, physics, render, samples, tactile
 from tacgen_lib.corpus.sim.scenes import scene_xml, validate_scene
 
 SCENES = yaml.safe_load(open("config/scenes.yaml"))
@@ -50,10 +50,10 @@ def pressed_states(n: int):
     model = mujoco.MjModel.from_xml_string(xml)
     model.light_castshadow[:] = 0
     rt = physics.SceneRuntime(scene, model)
-    cfg = corpus.CorpusSettings.from_config(dict(PAIRED, n=n))
+    cfg = samples.CorpusSettings.from_config(dict(PAIRED, n=n))
     states = []
     for i in range(n):
-        spec = corpus.sample_spec(cfg, scene, i)
+        spec = samples.sample_spec(cfg, scene, i)
         physics.apply_object(rt, spec.obj)
         res = physics.press_object(rt, scene.press_force)
         states.append((spec.obj, rt.data.qpos.copy(), res.gel_depth))

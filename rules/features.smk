@@ -222,7 +222,7 @@ VISIBILITY = FEAT.get("visibility") or {"gammas": [1.0], "bootstrap": 2000, "gat
 VISIBILITY_EDGE = "results/features/visibility.parquet"
 # every simulated corpus, and of the regime's rho grid its first corpus only: at every rho
 # the appearance class is uniform and a frame depends on its look (colour, texture, shape,
-# size, jitter, pose), never on the material (tacgen_lib.corpus.sim.corpus), so each corpus of
+# size, jitter, pose), never on the material (tacgen_lib.corpus.sim.samples), so each corpus of
 # the grid would estimate the same accuracies; the grid's gate reads the first corpus's rows
 VISIBILITY_CORPORA = [c for c in SIM_CORPORA if c not in NATURAL_GRID[1:]]
 VISIBILITY_ITEMS = {"table": "html", "figure": "png"}

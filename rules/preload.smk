@@ -1,4 +1,4 @@
-"""The preloaded interpreter (tacgen_lib.runtime.preload): on a local run, one server per
+"""The preloaded interpreter (tacgen_lib.runtime.preload, .preload_server): on a local run, one server per
 Snakemake process imports torch, scikit-learn, scipy and pandas once, and every script job
 forks from it instead of importing them again. Cluster executors never start it (their jobs
 run where the server is not), nor does a run of a few jobs (MIN_JOBS); TACGEN_PRELOAD=0 turns
@@ -7,7 +7,7 @@ it off.
 The same `onstart` drops Snakemake's default submission rate limit from a local run's scheduler
 (tacgen_lib.runtime.scheduler: its wake-up timers multiply with every finished job)."""
 
-from tacgen_lib.runtime.preload import (
+from tacgen_lib.runtime.preload_server import (
     start_preloaded_interpreter,
     stop_preloaded_interpreter,
 )

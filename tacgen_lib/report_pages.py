@@ -9,7 +9,10 @@ apart from `tacgen_lib.report` (which loads matplotlib) because the DAG reads it
 
 from __future__ import annotations
 
-__all__ = ["PAGES", "category", "page_of"]
+__all__ = ["FINDINGS_COLUMNS", "PAGES", "category", "page_of"]
+
+#: The columns of the findings page's table, one row per finding (`tacgen_lib.report.findings`).
+FINDINGS_COLUMNS = ["evidence", "question", "result", "control", "verdict", "page"]
 
 PAGES = (
     "Findings",

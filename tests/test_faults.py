@@ -418,7 +418,7 @@ def test_crafted_pickle_checkpoint_is_refused_without_running_code(tmp_path):
     import torch
 
     from tacgen_lib.align.checkpoint import load_heads
-    from tacgen_lib.features.vit import load_backbone
+    from tacgen_lib.features.vit_checkpoint import load_backbone
 
     marker = tmp_path / "side_effect"
     ckpt = tmp_path / "dinov2_vits14_pretrain.pth"
@@ -478,7 +478,7 @@ _PATHS = [p for p in _leaf_paths(_BASE) if p and p != ("scenes_file",)]
 def _build_every_settings_object(cfg: dict) -> None:
     """What the rules build from a validated config (rules/common.smk and the scripts)."""
     from tacgen_lib.align.settings import AlignSettings
-    from tacgen_lib.corpus.sim.corpus import CorpusSettings
+    from tacgen_lib.corpus.sim.samples import CorpusSettings
     from tacgen_lib.features.settings import DinoSettings
     from tacgen_lib.probes.settings import ProbeSettings
 

@@ -7,7 +7,7 @@
 - The paper's backbones are the official checkpoints in models/: a missing file stops the run
   at parse time, naming the key, the file and where it is published. The DAG tests point the
   keys at tiny stand-in files (nothing loads them: a dry run builds the DAG only).
-- Every job's requested runtime (tacgen_lib.runtime.resources, as Snakemake evaluates it under
+- Every job's requested runtime (tacgen_lib.estimate.resources, as Snakemake evaluates it under
   profiles/slurm's threads) is at least its run-time estimate; the estimate on 8 × 32-core
   nodes is within a day and names its critical path.
 """
@@ -20,6 +20,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from tacgen_lib.estimate.command import checkpoint_override
 from tacgen_lib.features.families import OFFICIAL_CHECKPOINTS, BackboneSpec, check_checkpoint_file
 from tacgen_lib.io.config import ConfigError
 
@@ -159,7 +160,7 @@ def stand_in_checkpoints(folder: Path, missing: tuple[str, ...] = ()) -> Path:
     (dotted) at a file that is not there."""
     folder.mkdir(parents=True, exist_ok=True)
     run = merged(PAPER)
-    override: dict = {}
+    targets = {}
     for path in CHECKPOINT_KEYS:
         name = Path(get(run, path)["checkpoint"]).name
         target = folder / name
@@ -167,20 +168,17 @@ def stand_in_checkpoints(folder: Path, missing: tuple[str, ...] = ()) -> Path:
             target = folder / "absent" / name
         else:
             target.write_bytes(b"stand-in")
-        node = override
-        for k in path:
-            node = node.setdefault(k, {})
-        node["checkpoint"] = str(target)
+        targets[".".join(path)] = target
     out = folder / "checkpoints.yaml"
-    out.write_text(yaml.safe_dump(override))
+    out.write_text(yaml.safe_dump(checkpoint_override(targets)))
     return out
 
 
 @pytest.fixture(scope="module")
 def paper_dag(tmp_path_factory):
     """paper.yaml's DAG with profiles/slurm's threads on 32-core nodes (a dry run)."""
-    from tacgen_lib.runtime.dag import dag_jobs
-    from tacgen_lib.runtime.estimate import profile_threads
+    from tacgen_lib.estimate.command import profile_threads
+    from tacgen_lib.estimate.dag import dag_jobs
 
     override = stand_in_checkpoints(tmp_path_factory.mktemp("models"))
     threads = profile_threads(ROOT / "profiles" / "slurm")
@@ -191,7 +189,7 @@ def paper_dag(tmp_path_factory):
 
 
 def test_missing_checkpoint_stops_the_dag_at_parse_time(tmp_path):
-    from tacgen_lib.runtime.dag import dag_jobs
+    from tacgen_lib.estimate.dag import dag_jobs
 
     override = stand_in_checkpoints(tmp_path, missing=("backbones.families.mae.tactile",))
     with pytest.raises(Exception) as err:
@@ -217,9 +215,9 @@ def test_paper_dag_jobs_per_rule(paper_dag):
 def test_no_paper_job_asks_for_less_time_than_its_estimate(paper_dag):
     """Each job's runtime as Snakemake evaluates it for profiles/slurm (attempt 1) against the
     estimate of that job (same rule, config, wildcards and threads, shipped calibration)."""
-    from tacgen_lib.runtime.calibration import fit_costs, load_calibration
-    from tacgen_lib.runtime.estimate import job_prediction
-    from tacgen_lib.runtime.resources import HEADROOM, MIN_RUNTIME_S
+    from tacgen_lib.estimate.calibration import fit_costs, load_calibration
+    from tacgen_lib.estimate.predict import job_prediction
+    from tacgen_lib.estimate.resources import HEADROOM, MIN_RUNTIME_S
 
     jobs, config = paper_dag
     lines = fit_costs(load_calibration().points)
@@ -237,9 +235,10 @@ def test_no_paper_job_asks_for_less_time_than_its_estimate(paper_dag):
 
 
 def test_paper_estimate_on_eight_nodes_is_within_a_day(paper_dag):
-    from tacgen_lib.runtime.calibration import load_calibration
-    from tacgen_lib.runtime.estimate import estimate_run, format_estimate, profile_jobs
-    from tacgen_lib.runtime.schedule import slurm_machine
+    from tacgen_lib.estimate.calibration import load_calibration
+    from tacgen_lib.estimate.command import format_estimate, profile_jobs
+    from tacgen_lib.estimate.predict import estimate_run
+    from tacgen_lib.estimate.schedule import slurm_machine
 
     jobs, config = paper_dag
     machine = slurm_machine(8, 32, max_jobs=profile_jobs(ROOT / "profiles" / "slurm"))
@@ -255,7 +254,7 @@ def test_estimate_prices_paper_before_the_checkpoints_are_downloaded(tmp_path):
     (the run itself still stops on them) and priced through empty stand-ins of their names."""
     import shutil
 
-    from tacgen_lib.runtime.estimate import (
+    from tacgen_lib.estimate.command import (
         merged_config,
         missing_checkpoints,
         stand_in_checkpoints,

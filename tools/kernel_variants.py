@@ -70,7 +70,7 @@ NOT_NUMERIC = (
     # its tests that are not workflow runs: config fuzzing, path and pickle refusals, and the
     # render-memory test (MuJoCo frames through Mesa: its RSS, not a float, is compared)
     "tests/test_faults.py",
-    "tests/runtime/test_runtime_estimate.py",  # run-time estimates: sums of benchmark seconds
+    "tests/estimate/test_estimate.py",  # run-time estimates: sums of benchmark seconds
     "tests/test_kernel_variants.py",  # which variant a CPU class gets
 )
 #: single tests of numeric modules that compare no float: what a process imports, and which

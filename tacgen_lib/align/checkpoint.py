@@ -11,13 +11,7 @@ from typing import Any
 
 import torch
 
-from tacgen_lib.align.heads import (
-    AlignHeads,
-    heads_from_state,
-)
-from tacgen_lib.align.train import (
-    AlignResult,
-)
+from tacgen_lib.align.heads import AlignHeads, AlignResult, heads_from_state
 from tacgen_lib.io import hashed
 
 _FORMAT = "tacgen-align-heads/1"

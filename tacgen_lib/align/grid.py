@@ -12,9 +12,7 @@ from typing import Any, Literal
 import numpy as np
 import pandas as pd
 
-from tacgen_lib.align.heads import (
-    project,
-)
+from tacgen_lib.align.heads import AlignResult, project
 from tacgen_lib.align.retrieval import (
     CHANCE_COLUMNS,
     RETRIEVAL_METRICS,
@@ -22,10 +20,7 @@ from tacgen_lib.align.retrieval import (
     retrieval_ranks,
 )
 from tacgen_lib.align.settings import AlignSettings
-from tacgen_lib.align.train import (
-    AlignResult,
-    fit_heads,
-)
+from tacgen_lib.align.train import fit_heads
 from tacgen_lib.corpus.splits import assert_trainable, ids_in_split
 from tacgen_lib.io import edges
 

@@ -3,22 +3,21 @@
 `ProjectionHead` (paired in `AlignHeads`) is an MLP ``Linear(in_dim, 512) -> LayerNorm(512) ->
 GELU -> Linear(512, 128)`` followed by an l2-normalisation with an eps floor (`l2_normalise`), so
 a zero vector maps to a finite (zero) projection instead of NaN. `project` maps features to the
-aligned, l2-normalised 128-d float32 projections. The loss is `loss`, training `train`, saving
+aligned, l2-normalised 128-d float32 projections, from an `AlignHeads` or from the fitted heads
+(`AlignResult`, what `train.fit_heads` returns). The loss is `loss`, training `train`, saving
 and loading `checkpoint`, one grid cell of the stage `grid`; retrieval metrics (top-k, median
 rank) live in `retrieval`.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
-
-if TYPE_CHECKING:
-    from tacgen_lib.align.train import AlignResult
 
 HIDDEN_DIM = 512
 
@@ -92,6 +91,34 @@ def as_features(x: np.ndarray | Tensor, name: str) -> Tensor:
             "fix or drop those samples before alignment"
         )
     return torch.from_numpy(arr)
+
+
+@dataclass
+class AlignResult:
+    """What `fit_heads` returns.
+
+    heads: {"vision": state_dict, "tactile": state_dict} of the best-validation weights.
+    dims: in_dim_v, in_dim_t, hidden_dim, out_dim. curve: one dict per evaluation with step
+    (optimiser steps done), epoch (epochs done, fractional), lr, train_loss (mean training
+    loss since the previous evaluation; None at step 0), val_loss, val_top1 (mean of v2t and t2v
+    top-1 over the whole validation set). best_step: step of the kept weights (0 = the
+    initialisation). seconds: wall time of the fit.
+    """
+
+    heads: dict[str, dict[str, Tensor]]
+    dims: dict[str, int]
+    config: dict[str, Any]
+    curve: list[dict[str, float | None]] = field(default_factory=list)
+    best_step: int = 0
+    best_val_loss: float = float("nan")
+    steps_run: int = 0
+    total_steps: int = 0
+    stopped_early: bool = False
+    seconds: float = 0.0
+
+    def module(self) -> AlignHeads:
+        """The best heads as an `AlignHeads` module in eval mode."""
+        return heads_from_state(self.dims, self.heads)
 
 
 @torch.no_grad()

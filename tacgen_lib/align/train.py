@@ -9,7 +9,6 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -18,8 +17,8 @@ from torch import Tensor
 
 from tacgen_lib.align.heads import (
     AlignHeads,
+    AlignResult,
     as_features,
-    heads_from_state,
 )
 from tacgen_lib.align.loss import info_nce
 from tacgen_lib.align.retrieval import (
@@ -84,34 +83,6 @@ def train_step(
         torch.nn.utils.clip_grad_norm_(heads.parameters(), clip_grad, foreach=True)
     opt.step()
     return float(loss.detach())
-
-
-@dataclass
-class AlignResult:
-    """What `fit_heads` returns.
-
-    heads: {"vision": state_dict, "tactile": state_dict} of the best-validation weights.
-    dims: in_dim_v, in_dim_t, hidden_dim, out_dim. curve: one dict per evaluation with step
-    (optimiser steps done), epoch (epochs done, fractional), lr, train_loss (mean training
-    loss since the previous evaluation; None at step 0), val_loss, val_top1 (mean of v2t and t2v
-    top-1 over the whole validation set). best_step: step of the kept weights (0 = the
-    initialisation). seconds: wall time of the fit.
-    """
-
-    heads: dict[str, dict[str, Tensor]]
-    dims: dict[str, int]
-    config: dict[str, Any]
-    curve: list[dict[str, float | None]] = field(default_factory=list)
-    best_step: int = 0
-    best_val_loss: float = float("nan")
-    steps_run: int = 0
-    total_steps: int = 0
-    stopped_early: bool = False
-    seconds: float = 0.0
-
-    def module(self) -> AlignHeads:
-        """The best heads as an `AlignHeads` module in eval mode."""
-        return heads_from_state(self.dims, self.heads)
 
 
 def _as_index(idx: Sequence[int] | np.ndarray, n: int, name: str) -> np.ndarray:

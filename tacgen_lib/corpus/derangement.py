@@ -1,7 +1,7 @@
 """A seeded derangement: a permutation of range(n) with no fixed point, as one n-cycle drawn
 by Sattolo's algorithm. Numpy only, so that a job which only needs the pairing broken (the
 force-band control of `force_bands`) does not import the simulator that the null corpus
-(`sim.corpus.null_sources`) draws it for."""
+(`sim.samples.null_sources`) draws it for."""
 
 from __future__ import annotations
 

@@ -18,16 +18,11 @@ from tacgen_lib.corpus.captions import (
     parse_caption,
     top_pattern_strata,
 )
+from tacgen_lib.corpus.manifest import FRAME_COLUMNS
 from tacgen_lib.io.images import decode_png, encode_png
 
 SAMPLE_COLUMNS: tuple[str, ...] = (
-    "sample_id",
-    "corpus",
-    "rgb",
-    "tactile",
-    "sensor_id",
-    "caption",
-    "adjectives",
+    *FRAME_COLUMNS,
     "hardness",
     "stratum",
     "source_split",

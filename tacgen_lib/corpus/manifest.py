@@ -12,25 +12,29 @@ from collections.abc import Sequence
 import numpy as np
 import pandas as pd
 
-__all__ = ["CORE_COLUMNS", "LABEL_COLUMNS", "check_labels", "fuse_manifest"]
+__all__ = [
+    "CORE_COLUMNS",
+    "FORCE_COLUMNS",
+    "FRAME_COLUMNS",
+    "LABEL_COLUMNS",
+    "check_labels",
+    "fuse_manifest",
+]
 
 #: Columns every corpus edge carries (the corpus edge schema; see README "Corpus edges").
 CORE_COLUMNS = ("sample_id", "corpus", "sensor_id", "caption", "stratum")
 
 
+#: The leading columns of every corpus's samples edge, simulated or ingested: the key, the two
+#: frames, the sensor and the words.
+FRAME_COLUMNS = ("sample_id", "corpus", "rgb", "tactile", "sensor_id", "caption", "adjectives")
+
+#: The contact force of the nominal press and its bands over repeated presses (N).
+FORCE_COLUMNS = ("force_normal", "force_p05", "force_p50", "force_p95")
+
 #: Numeric label columns: where a corpus carries one, every value must be finite (a NaN label
 #: would silently drop or skew a probe's rows downstream).
-LABEL_COLUMNS = (
-    "scale",
-    "density",
-    "mass",
-    "stiffness",
-    "friction",
-    "force_normal",
-    "force_p05",
-    "force_p50",
-    "force_p95",
-)
+LABEL_COLUMNS = ("scale", "density", "mass", "stiffness", "friction", *FORCE_COLUMNS)
 
 
 def check_labels(frame: pd.DataFrame, *, where: str) -> None:

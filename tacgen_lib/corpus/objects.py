@@ -3,7 +3,7 @@ the objects' mass-quantile classes (the transfer probe's label, and the object-l
 strata).
 
 A simulated paired corpus with ``contacts`` = c > 1 holds c rows per object, all with the
-object's index in ``appearance_id`` (tacgen_lib.corpus.sim.corpus); an object's label is one
+object's index in ``appearance_id`` (tacgen_lib.corpus.sim.samples); an object's label is one
 value, shared by its rows.
 """
 

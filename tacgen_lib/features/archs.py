@@ -5,7 +5,7 @@ torchvision-shaped ResNets (`RESNET_ARCHS`, `tacgen_lib.features.resnet`). `arch
 which family a name belongs to and `feature_dim` the width of its frozen feature.
 
 The backbone (`tacgen_lib.features.vit`, which imports torch) builds its networks from these;
-the run-time estimate (`tacgen_lib.runtime.units`: FLOPs of a forward) and the Snakefile's cost
+the run-time estimate (`tacgen_lib.estimate.units`: FLOPs of a forward) and the Snakefile's cost
 plans (a knob's embed width) read them without importing torch (~1 s).
 """
 

@@ -22,12 +22,11 @@ from tacgen_lib.features.families import BackboneSpec
 from tacgen_lib.features.mae import load_mae_checkpoint, pretrain_mae
 from tacgen_lib.features.resnet import random_resnet, resnet_from_state_dict
 from tacgen_lib.features.settings import DinoSettings, MaeSettings
-from tacgen_lib.features.vit import (
-    build_vit,
+from tacgen_lib.features.vit import build_vit, random_backbone
+from tacgen_lib.features.vit_checkpoint import (
     load_backbone,
     load_pretrained,
     load_tensors,
-    random_backbone,
     unwrap_state_dict,
 )
 
@@ -88,7 +87,7 @@ def make_backbone(
 
 def read_backbone(path: str | Path) -> nn.Module:
     """The network a saved state dict describes, loaded and in eval mode: a ViT (it has a
-    cls_token, `vit.load_backbone`) or a ResNet (torchvision names); anything else is refused
+    cls_token, `vit_checkpoint.load_backbone`) or a ResNet (torchvision names); anything else is refused
     naming the file."""
     sd = unwrap_state_dict(load_tensors(path), where=str(path))
     if "cls_token" in sd:

@@ -108,7 +108,7 @@ class PretrainResult:
     """Outcome of `pretrain_dino`.
 
     backbone_state: the teacher backbone's weights in official DINOv2 key format (what DINO
-    evaluates; save with torch.save or vit.save_backbone after `backbone()`).
+    evaluates; save with torch.save or vit_checkpoint.save_backbone after `backbone()`).
     curve: one dict per epoch (means over its steps): epoch, loss (DINO cross-entropy),
     teacher_entropy (per-sample), kl, koleo, teacher_batch_entropy, teacher_cls_cosine (see
     `collapse_diagnostics`), then the last step's lr, momentum, teacher_temp, and seconds.

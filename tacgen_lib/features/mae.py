@@ -30,10 +30,8 @@ from torch import Tensor, nn
 from tacgen_lib.features.dino import PretrainResult
 from tacgen_lib.features.extract import imagenet_normalise, to_unit_tensor
 from tacgen_lib.features.settings import MaeSettings
-from tacgen_lib.features.vit import (
-    Block,
-    DinoVisionTransformer,
-    build_vit,
+from tacgen_lib.features.vit import Block, DinoVisionTransformer, build_vit
+from tacgen_lib.features.vit_checkpoint import (
     fit_pos_embed,
     load_tensors,
     state_dict_mismatch,

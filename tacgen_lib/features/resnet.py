@@ -24,7 +24,7 @@ import torch
 from torch import Tensor, nn
 
 from tacgen_lib.features.archs import RESNET_ARCHS, ResNetConfig
-from tacgen_lib.features.vit import state_dict_mismatch
+from tacgen_lib.features.vit_checkpoint import state_dict_mismatch
 
 __all__ = [
     "BasicBlock",

@@ -1,3 +1,4 @@
-"""Run times: reading Snakemake benchmark files, and predicting a config's run time before it
-runs (`estimate`: the DAG's jobs, `units` of work per rule, a `calibration` fitted on benchmark
-files, a `schedule` over cores or a SLURM cluster)."""
+"""The job runtime: the preloaded interpreter local script jobs fork from (`preload`), the local
+scheduler's rate-limit patch (`scheduler`), where a torch job computes (`device`), a job's
+cells on forked workers (`workers`), and what a job measured (`benchmarks`: Snakemake
+benchmark files). Predicting a config's run time before it runs is `tacgen_lib.estimate`."""

@@ -7,7 +7,9 @@ import pandas as pd
 import pytest
 from sim_scenes import fast_scenes
 
-from tacgen_lib.corpus.sim import corpus
+from tacgen_lib.corpus.manifest import LABEL_COLUMNS
+from tacgen_lib.corpus.sim import corpus, samples
+from tacgen_lib.corpus.sim.scenes import validate_scene
 from tacgen_lib.io.images import decode_png
 
 SCENES = fast_scenes()
@@ -31,17 +33,7 @@ CONTROLLED = {
     "sensors": 2,
     "presses": 3,
 }
-FLOATS = [
-    "scale",
-    "density",
-    "mass",
-    "stiffness",
-    "friction",
-    "force_normal",
-    "force_p05",
-    "force_p50",
-    "force_p95",
-]
+FLOATS = list(LABEL_COLUMNS)
 
 
 @pytest.fixture(scope="module")
@@ -102,9 +94,9 @@ def test_controlled_appearance_identical_across_densities():
 
 def test_null_sources_is_a_derangement():
     for n in (2, 3, 17, 500):
-        perm = corpus.null_sources(9, n)
+        perm = samples.null_sources(9, n)
         assert sorted(perm) == list(range(n)) and np.all(perm != np.arange(n))
-    assert np.array_equal(corpus.null_sources(9, 50), corpus.null_sources(9, 50))
+    assert np.array_equal(samples.null_sources(9, 50), samples.null_sources(9, 50))
 
 
 def imprint_energy(df, cfg):
@@ -155,9 +147,9 @@ def test_repeated_contacts_share_their_object_and_nothing_else():
     """contacts = 3: rows 3o..3o+2 are one object (shape, size, physics, appearance, the
     appearance_id o), each with its own presses, sensor and pixel noise; contacts = 1 draws
     exactly the single-contact corpus."""
-    scene = corpus.validate_scene("paired_press", SCENES["paired_press"])
-    cfg = corpus.CorpusSettings.from_config(dict(PAIRED, n=9, contacts=3))
-    specs = [corpus.sample_spec(cfg, scene, i) for i in range(9)]
+    scene = validate_scene("paired_press", SCENES["paired_press"])
+    cfg = samples.CorpusSettings.from_config(dict(PAIRED, n=9, contacts=3))
+    specs = [samples.sample_spec(cfg, scene, i) for i in range(9)]
     for o in range(3):
         group = specs[3 * o : 3 * o + 3]
         assert {s.appearance_id for s in group} == {o}
@@ -168,10 +160,10 @@ def test_repeated_contacts_share_their_object_and_nothing_else():
         assert len({s.pixel_seed for s in group}) == 3
         assert not np.array_equal(group[0].jitter, group[1].jitter)
     assert len({(s.obj.shape, s.obj.size) for s in specs[::3]}) == 3  # three objects
-    single = corpus.CorpusSettings.from_config(PAIRED)
-    one = corpus.CorpusSettings.from_config(dict(PAIRED, contacts=1))
+    single = samples.CorpusSettings.from_config(PAIRED)
+    one = samples.CorpusSettings.from_config(dict(PAIRED, contacts=1))
     for i in range(4):
-        a, b = corpus.sample_spec(single, scene, i), corpus.sample_spec(one, scene, i)
+        a, b = samples.sample_spec(single, scene, i), samples.sample_spec(one, scene, i)
         assert (a.obj, a.appearance_id, a.sensor, a.pixel_seed) == (
             b.obj,
             b.appearance_id,
@@ -193,8 +185,8 @@ def test_repeated_contacts_frames_and_labels(paired):
 
 def test_bad_contacts_are_refused():
     with pytest.raises(ValueError, match=r"corpus 'p': n=10 is not a whole number of objects"):
-        corpus.CorpusSettings.from_config(dict(PAIRED, contacts=3))
+        samples.CorpusSettings.from_config(dict(PAIRED, contacts=3))
     with pytest.raises(ValueError, match=r"corpus 'c': key 'contacts' belongs to design 'paired'"):
-        corpus.CorpusSettings.from_config(dict(CONTROLLED, contacts=2))
+        samples.CorpusSettings.from_config(dict(CONTROLLED, contacts=2))
     with pytest.raises(ValueError, match=r"contacts' must be >= 1"):
-        corpus.CorpusSettings.from_config(dict(PAIRED, contacts=0))
+        samples.CorpusSettings.from_config(dict(PAIRED, contacts=0))

@@ -11,7 +11,8 @@ import pytest
 from scipy import stats
 from sim_scenes import fast_scenes
 
-from tacgen_lib.corpus.sim import corpus
+from tacgen_lib.corpus.looks import PALETTE, TEXTURE_WORDS
+from tacgen_lib.corpus.sim import corpus, samples
 from tacgen_lib.corpus.sim.physics import shape_volume
 from tacgen_lib.corpus.sim.scenes import validate_scene
 
@@ -27,17 +28,17 @@ NATURAL = {
     "presses": 3,
     "rho": 0.5,
 }
-N_CLASSES = len(corpus.MATERIALS)
+N_CLASSES = len(samples.MATERIALS)
 
 
-def specs(rho: float, n: int = 900) -> list[corpus.SampleSpec]:
-    cfg = corpus.CorpusSettings.from_config(dict(NATURAL, rho=rho, n=n))
+def specs(rho: float, n: int = 900) -> list[samples.SampleSpec]:
+    cfg = samples.CorpusSettings.from_config(dict(NATURAL, rho=rho, n=n))
     scene = validate_scene(cfg.scene, SCENES[cfg.scene])
-    return [corpus.sample_spec(cfg, scene, i) for i in range(n)]
+    return [samples.sample_spec(cfg, scene, i) for i in range(n)]
 
 
-def material_index(spec: corpus.SampleSpec) -> int:
-    return [m.name for m in corpus.MATERIALS].index(spec.material)
+def material_index(spec: samples.SampleSpec) -> int:
+    return [m.name for m in samples.MATERIALS].index(spec.material)
 
 
 def test_rho_one_shows_the_material_and_rho_zero_is_independent_of_it():
@@ -77,7 +78,7 @@ def test_physics_and_geometry_do_not_depend_on_rho():
 
 def test_materials_set_hardness_and_spread_within_class():
     got = specs(0.5)
-    for mat in corpus.MATERIALS:
+    for mat in samples.MATERIALS:
         mine = [s for s in got if s.material == mat.name]
         assert len(mine) > 100
         assert {s.hardness for s in mine} == {mat.hardness}
@@ -85,40 +86,40 @@ def test_materials_set_hardness_and_spread_within_class():
         assert (k >= mat.stiffness[0]).all() and (k <= mat.stiffness[1]).all()
         log_d = np.log([s.obj.density for s in mine])
         # log-normal spread around the class density: mean and sd within sampling error
-        assert abs(log_d.mean() - np.log(mat.density)) < 4 * corpus.DENSITY_LOG_SD / np.sqrt(
+        assert abs(log_d.mean() - np.log(mat.density)) < 4 * samples.DENSITY_LOG_SD / np.sqrt(
             len(mine)
         )
-        assert 0.8 < log_d.std(ddof=1) / corpus.DENSITY_LOG_SD < 1.2
-    assert {m.hardness for m in corpus.MATERIALS} == {"soft", "hard"}
+        assert 0.8 < log_d.std(ddof=1) / samples.DENSITY_LOG_SD < 1.2
+    assert {m.hardness for m in samples.MATERIALS} == {"soft", "hard"}
 
 
 def test_neither_colour_nor_texture_alone_names_the_appearance_class():
-    families = corpus.APPEARANCE_FAMILIES
+    families = samples.APPEARANCE_FAMILIES
     assert len(families) == N_CLASSES
     pairs = [p for fam in families for p in fam]
-    assert len(pairs) == len(set(pairs)) == len(corpus.PALETTE) * len(corpus.TEXTURE_WORDS)
-    for texture in corpus.TEXTURE_WORDS:  # every texture occurs in every class
+    assert len(pairs) == len(set(pairs)) == len(PALETTE) * len(TEXTURE_WORDS)
+    for texture in TEXTURE_WORDS:  # every texture occurs in every class
         assert sum(any(t == texture for _c, t in fam) for fam in families) == N_CLASSES
-    for colour in corpus.PALETTE:  # every colour in as many classes as there are textures
+    for colour in PALETTE:  # every colour in as many classes as there are textures
         classes = [c for c, fam in enumerate(families) if any(k == colour for k, _t in fam)]
-        assert len(classes) == len(corpus.TEXTURE_WORDS)
+        assert len(classes) == len(TEXTURE_WORDS)
     # the appearance drawn is a member of its class's family, its colour jittered
     for s in specs(0.5, 100):
         assert (s.colour, s.texture) in families[s.appearance_id]
-        assert s.rgb is not None and s.rgb != corpus.PALETTE[s.colour]
+        assert s.rgb is not None and s.rgb != PALETTE[s.colour]
 
 
 def test_appearance_class_is_the_material_below_rho_else_the_uniform_draw():
-    assert corpus.appearance_class(3, 0.0, 0.0, 5) == 5  # rho = 0: never the material
-    assert corpus.appearance_class(3, 1.0, 0.999999, 5) == 3  # rho = 1: always
-    assert corpus.appearance_class(3, 0.5, 0.49, 5) == 3
-    assert corpus.appearance_class(3, 0.5, 0.5, 5) == 5
+    assert samples.appearance_class(3, 0.0, 0.0, 5) == 5  # rho = 0: never the material
+    assert samples.appearance_class(3, 1.0, 0.999999, 5) == 3  # rho = 1: always
+    assert samples.appearance_class(3, 0.5, 0.49, 5) == 3
+    assert samples.appearance_class(3, 0.5, 0.5, 5) == 5
 
 
 def test_natural_corpus_simulates_and_records_material_and_appearance():
     df = corpus.simulate_shard(NATURAL, SCENES, 0, 1)
     assert list(df.columns) == corpus.COLUMNS and len(df) == 12
-    materials = {m.name: m for m in corpus.MATERIALS}
+    materials = {m.name: m for m in samples.MATERIALS}
     for r in df.itertuples():
         material, appearance = r.stratum.split("|appearance~")
         assert int(appearance) == r.appearance_id
@@ -131,9 +132,9 @@ def test_natural_corpus_simulates_and_records_material_and_appearance():
 
 def test_rho_outside_the_natural_design_or_the_unit_interval_is_refused():
     with pytest.raises(ValueError, match=r"'rho' must be in \[0, 1\], got 1.5"):
-        corpus.CorpusSettings.from_config(dict(NATURAL, rho=1.5))
+        samples.CorpusSettings.from_config(dict(NATURAL, rho=1.5))
     with pytest.raises(ValueError, match="'rho' belongs to design 'natural', not 'paired'"):
-        corpus.CorpusSettings.from_config(dict(NATURAL, design="paired"))
+        samples.CorpusSettings.from_config(dict(NATURAL, design="paired"))
 
 
 def test_a_rho_grid_simulated_together_equals_each_corpus_alone():

@@ -8,6 +8,7 @@ import pytest
 import yaml
 
 from tacgen_lib.corpus.sim import corpus, physics, tactile
+from tacgen_lib.corpus.sim.render import render_rgb
 from tacgen_lib.corpus.sim.scenes import EFFECTS, compile_scene, validate_scene, validate_scenes
 
 SCENES = yaml.safe_load(open("config/scenes.yaml"))
@@ -70,7 +71,7 @@ def test_undeclared_physics_is_disabled_in_the_model():
 
 def test_without_rgb_no_renderer_is_created_and_no_frame_rendered(monkeypatch):
     calls = {"render": 0, "renderer": 0}
-    real_render = corpus.render_rgb
+    real_render = render_rgb
 
     def spy_render(*a, **k):
         calls["render"] += 1

@@ -20,8 +20,8 @@ from tacgen_lib.cost.knobs import (
     shared_runs,
 )
 from tacgen_lib.cost.readers import READERS, headline_row
+from tacgen_lib.estimate.dag import base_rule
 from tacgen_lib.io.config import load_yaml
-from tacgen_lib.runtime.dag import base_rule
 
 ROOT = Path(__file__).resolve().parents[2]
 CONFIG = load_yaml(ROOT / "config" / "config.yaml")

@@ -30,7 +30,8 @@ from tacgen_lib.features.resnet import (
     resnet_from_state_dict,
 )
 from tacgen_lib.features.settings import DinoSettings, MaeSettings
-from tacgen_lib.features.vit import build_vit, save_backbone
+from tacgen_lib.features.vit import build_vit
+from tacgen_lib.features.vit_checkpoint import save_backbone
 from tacgen_lib.io.config import ConfigError, load_yaml
 from tacgen_lib.probes.backbone_families import (
     FAMILY_COLUMNS,

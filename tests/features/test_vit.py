@@ -8,15 +8,8 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from tacgen_lib.features.vit import (
-    ARCHS,
-    Attention,
-    build_vit,
-    interpolate_pos_embed,
-    load_backbone,
-    load_pretrained,
-    save_backbone,
-)
+from tacgen_lib.features.vit import ARCHS, Attention, build_vit, interpolate_pos_embed
+from tacgen_lib.features.vit_checkpoint import load_backbone, load_pretrained, save_backbone
 
 
 def official_shapes(dim: int, depth: int, grid: int, regs: int = 0) -> dict[str, tuple]:

@@ -24,7 +24,6 @@ from tacgen_lib.generate.regime import (
     RegimeSettings,
     RegimeTarget,
     SmallFit,
-    _cell_rows,
     appearance_design,
     assert_regime_disjoint,
     check_regime_sizes,
@@ -35,6 +34,7 @@ from tacgen_lib.generate.regime import (
     gap_closed,
     job_regime_sets,
 )
+from tacgen_lib.generate.regime_arms import cell_rows
 from tacgen_lib.generate.regime_generators import pool_generators, pool_pairs
 from tacgen_lib.generate.regime_sets import (
     natural_corpus_name,
@@ -354,7 +354,7 @@ def test_cell_rows_are_the_pairwise_fixed_test_bootstrap(metric):
     idx = resample_indices(n, 500, 11)
     base = {"corpus": "c", "n_labelled": 32, "n_pool": 64, "seed": 0, "draw": 0, "target": "t"}
     base["majority"] = 0.5
-    rows = _cell_rows(fits, y, idx, metric, base=base)
+    rows = cell_rows(fits, y, idx, metric, base=base)
     assert [(r["arm"], r["probe"]) for r in rows] == list(ARMS)
     # accuracy: integer counts, exact; R^2: sums over a count-matrix product of another
     # shape (10 arms against 1 or 2), equal within rounding on any CPU
@@ -383,7 +383,7 @@ def test_cell_rows_refuse_an_arm_with_a_missing_or_non_finite_prediction():
     base = {"corpus": "c", "n_labelled": 32, "n_pool": 64, "seed": 0, "draw": 0, "target": "t"}
     base["majority"] = 0.5
     with pytest.raises(ValueError, match="regime cell c N_L=32 t: arm v_tgen/linear"):
-        _cell_rows(fits, y, resample_indices(20, 10, 0), "r2", base=base)
+        cell_rows(fits, y, resample_indices(20, 10, 0), "r2", base=base)
 
 
 def test_gap_closed():

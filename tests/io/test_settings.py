@@ -9,7 +9,7 @@ import yaml
 from snakemake_run import ROOT, validated
 
 from tacgen_lib.align.settings import AlignSettings
-from tacgen_lib.corpus.sim.corpus import CorpusSettings
+from tacgen_lib.corpus.sim.samples import CorpusSettings
 from tacgen_lib.features.settings import DinoSettings
 from tacgen_lib.generate.pixel.settings import Pix2PixSettings, PixelDDPMSettings
 from tacgen_lib.io.config import ConfigError, settings_from

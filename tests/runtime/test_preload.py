@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from tacgen_lib.runtime import preload
+from tacgen_lib.runtime import preload, preload_server
 from tacgen_lib.runtime.benchmarks import read_benchmark
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -50,7 +50,9 @@ def _wait_until(predicate, timeout: float) -> bool:
 def server(tmp_path_factory):
     """A server of this test process, as the Snakefile's onstart starts one for Snakemake."""
     name = f"tacgen-test-{os.getpid()}-{uuid.uuid4().hex}"
-    proc = subprocess.Popen([sys.executable, "-P", "-c", preload._SERVER, name, str(os.getpid())])
+    proc = subprocess.Popen(
+        [sys.executable, "-P", "-c", preload_server._SERVER, name, str(os.getpid())]
+    )
 
     def listening() -> bool:
         with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as s:
@@ -80,7 +82,7 @@ def job_script(tmp_path: Path, body: str, log: str | None = LOG) -> Path:
         "import types\n"
         f"snakemake = types.SimpleNamespace(log={logs!r}, rule='rule_x', wildcards={{}})\n"
         "import sys\n"
-        f"preloaded = all(m in sys.modules for m in {preload.PRELOADED_MODULES!r})\n"
+        f"preloaded = all(m in sys.modules for m in {preload_server.PRELOADED_MODULES!r})\n"
         "from tacgen_lib.runtime.preload import run_in_preloaded_interpreter\n"
         "run_in_preloaded_interpreter(snakemake)\n" + textwrap.dedent(body)
     )
@@ -227,9 +229,9 @@ def test_a_job_waiting_while_the_server_imports_is_forked_between_two_imports(tm
     name = f"tacgen-test-{os.getpid()}-{uuid.uuid4().hex}"
     code = (
         f"import sys; sys.path.insert(0, {str(tmp_path / 'lib')!r})\n"
-        "from tacgen_lib.runtime import preload\n"
-        "preload.PRELOADED_MODULES = ('numpy', 'first', 'second')\n"
-        f"preload.serve({name!r}, {os.getpid()})"
+        "from tacgen_lib.runtime import preload_server\n"
+        "preload_server.PRELOADED_MODULES = ('numpy', 'first', 'second')\n"
+        f"preload_server.serve({name!r}, {os.getpid()})"
     )
     server = subprocess.Popen([sys.executable, "-P", "-c", code])
     try:
@@ -418,7 +420,8 @@ def _cmdline(pid: int) -> bytes:
         return b""
 
 
-def test_a_killed_job_process_takes_its_copy_with_it(server, tmp_path):
+def _sleeping_job(server, tmp_path):
+    """A job that sleeps in the server: (its process, the pid of its copy)."""
     pidfile = tmp_path / "pid"
     body = f"""
     import os, time, pathlib
@@ -427,7 +430,11 @@ def test_a_killed_job_process_takes_its_copy_with_it(server, tmp_path):
     """
     proc = _start(job_script(tmp_path, body), env_for(server))
     assert _wait_until(pidfile.exists, 60), proc.communicate(timeout=5)
-    copy = int(pidfile.read_text())
+    return proc, int(pidfile.read_text())
+
+
+def test_a_killed_job_process_takes_its_copy_with_it(server, tmp_path):
+    proc, copy = _sleeping_job(server, tmp_path)
     assert copy != proc.pid and _alive(copy)
     proc.kill()
     proc.wait(timeout=30)
@@ -449,8 +456,8 @@ def test_the_server_exits_when_its_snakemake_is_gone(tmp_path):
         [
             sys.executable,
             "-c",
-            "import sys, time; from tacgen_lib.runtime import preload\n"
-            "p = preload.start_preloaded_interpreter(); print(p.pid, flush=True); time.sleep(600)",
+            "import sys, time; from tacgen_lib.runtime import preload_server\n"
+            "p = preload_server.start_preloaded_interpreter(); print(p.pid, flush=True); time.sleep(600)",
         ],
         stdout=subprocess.PIPE,
         text=True,
@@ -464,13 +471,13 @@ def test_the_server_exits_when_its_snakemake_is_gone(tmp_path):
 
 def test_no_server_for_a_cluster_a_few_jobs_or_switched_off(monkeypatch):
     """No server, and no inherited server name (an enclosing run's) left for the jobs."""
-    for kwargs in ({"jobs": preload.MIN_JOBS - 1}, {"jobs": 1000, "local": False}):
+    for kwargs in ({"jobs": preload_server.MIN_JOBS - 1}, {"jobs": 1000, "local": False}):
         monkeypatch.setenv(preload.SOCKET_ENV, "tacgen-an-enclosing-run")
-        assert preload.start_preloaded_interpreter(**kwargs) is None
+        assert preload_server.start_preloaded_interpreter(**kwargs) is None
         assert preload.SOCKET_ENV not in os.environ
     monkeypatch.setenv(preload.SWITCH_ENV, "0")
     monkeypatch.setenv(preload.SOCKET_ENV, "tacgen-an-enclosing-run")
-    assert preload.start_preloaded_interpreter(1000) is None
+    assert preload_server.start_preloaded_interpreter(1000) is None
     assert preload.SOCKET_ENV not in os.environ
 
 
@@ -621,15 +628,7 @@ def _children(pid: int) -> list[int]:
 def test_a_killed_supervisor_takes_the_job_with_it(server, tmp_path):
     """The copy's parent (its supervisor, which holds the job's connection) killed as the OOM
     killer would: the copy dies by its parent-death signal, the job's process fails."""
-    pidfile = tmp_path / "pid"
-    body = f"""
-    import os, time, pathlib
-    pathlib.Path({str(pidfile)!r}).write_text(str(os.getpid()))
-    time.sleep(120)
-    """
-    proc = _start(job_script(tmp_path, body), env_for(server))
-    assert _wait_until(pidfile.exists, 60), proc.communicate(timeout=5)
-    copy = int(pidfile.read_text())
+    proc, copy = _sleeping_job(server, tmp_path)
     supervisor = _ppid(copy)
     assert supervisor not in (proc.pid, os.getpid())
     os.kill(supervisor, signal.SIGKILL)
@@ -651,9 +650,9 @@ def _gated_server(tmp_path: Path, name: str) -> tuple[subprocess.Popen, Path, Pa
     )
     code = (
         f"import sys; sys.path.insert(0, {str(lib)!r})\n"
-        "from tacgen_lib.runtime import preload\n"
-        "preload.PRELOADED_MODULES = ('numpy', 'gate')\n"
-        f"preload.serve({name!r}, {os.getpid()})"
+        "from tacgen_lib.runtime import preload_server\n"
+        "preload_server.PRELOADED_MODULES = ('numpy', 'gate')\n"
+        f"preload_server.serve({name!r}, {os.getpid()})"
     )
     return subprocess.Popen([sys.executable, "-P", "-c", code]), started, release
 

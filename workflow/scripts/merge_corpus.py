@@ -6,7 +6,8 @@ run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpre
 
 import pandas as pd
 
-from tacgen_lib.corpus.sim.corpus import CorpusSettings, sensor_backgrounds
+from tacgen_lib.corpus.sim.corpus import sensor_backgrounds
+from tacgen_lib.corpus.sim.samples import CorpusSettings
 from tacgen_lib.io import edges, log
 
 logger = log.for_rule(snakemake)

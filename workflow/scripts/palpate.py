@@ -8,7 +8,7 @@ import pandas as pd
 import torch
 
 from tacgen_lib.align import checkpoint as align_checkpoint
-from tacgen_lib.features.vit import load_backbone
+from tacgen_lib.features.vit_checkpoint import load_backbone
 from tacgen_lib.io import edges, log
 from tacgen_lib.policy.features import palpation_features
 from tacgen_lib.policy.palpation import PAD_NAMES, frame_names, pad_background

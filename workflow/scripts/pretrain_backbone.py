@@ -15,7 +15,7 @@ from tacgen_lib.features.backbones import make_backbone
 from tacgen_lib.features.extract import extract_features
 from tacgen_lib.features.families import BackboneSpec
 from tacgen_lib.features.settings import DinoSettings, MaeSettings
-from tacgen_lib.features.vit import save_backbone
+from tacgen_lib.features.vit_checkpoint import save_backbone
 from tacgen_lib.io import edges, hashed, log
 from tacgen_lib.preprocess.frames import decode_frames
 from tacgen_lib.runtime.device import torch_device

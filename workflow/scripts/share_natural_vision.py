@@ -1,6 +1,6 @@
 """The vision features of a natural corpus between its rho grid's ends, shared from the ends
 (rule share_natural_vision): each of its samples looks as at rho = 0 or as at rho = 1
-(`tacgen_lib.corpus.sim.corpus._natural_spec`), so each RGB frame is byte-identical to one of
+(`tacgen_lib.corpus.sim.samples._natural_spec`), so each RGB frame is byte-identical to one of
 theirs (checked here, sample by sample) and so are its features."""
 
 from tacgen_lib.runtime.preload import run_in_preloaded_interpreter

@@ -6,7 +6,8 @@ from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
 
 run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
 
-from tacgen_lib.corpus.sim.corpus import CorpusSettings, simulate_shards
+from tacgen_lib.corpus.sim.corpus import simulate_shards
+from tacgen_lib.corpus.sim.samples import CorpusSettings
 from tacgen_lib.io import edges, log
 from tacgen_lib.io.config import load_yaml
 

@@ -8,17 +8,15 @@ from __future__ import annotations
 
 import functools
 import os
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import mujoco
 import numpy as np
 
 from tacgen_lib.corpus.sim import physics, tactile
+from tacgen_lib.corpus.sim.samples import CorpusSettings, SampleSpec
 from tacgen_lib.corpus.sim.scenes import Scene, compile_scene
 from tacgen_lib.io.images import encode_png
-
-if TYPE_CHECKING:  # the corpus module uses this one; annotations only
-    from tacgen_lib.corpus.sim.corpus import CorpusSettings, SampleSpec
 
 _RUNTIMES: dict[tuple, dict[str, Any]] = {}
 

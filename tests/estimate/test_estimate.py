@@ -1,4 +1,4 @@
-"""Run-time estimate before running (tacgen_lib.runtime.estimate, .schedule, .calibration, .units).
+"""Run-time estimate before running (tacgen_lib.estimate: .predict, .command, .schedule, .calibration, .units).
 
 Scheduling on tiny hand-made DAGs, the non-negative least-squares fit recovering known per-unit
 costs, clear errors naming the rule, and the shipped calibration over the real DAGs. How close
@@ -12,7 +12,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from tacgen_lib.runtime.calibration import (
+from tacgen_lib.estimate.calibration import (
     CALIBRATION_COLUMNS,
     Calibration,
     MissingCalibrationError,
@@ -20,16 +20,11 @@ from tacgen_lib.runtime.calibration import (
     load_calibration,
     load_factors,
 )
-from tacgen_lib.runtime.dag import DagJob
-from tacgen_lib.runtime.estimate import (
-    estimate_run,
-    format_estimate,
-    job_seconds,
-    workflow_overhead,
-    write_table,
-)
-from tacgen_lib.runtime.schedule import Machine, Task, list_schedule, local_machine, slurm_machine
-from tacgen_lib.runtime.units import UNITS, MissingUnitsError, job_units
+from tacgen_lib.estimate.command import format_estimate, write_table
+from tacgen_lib.estimate.dag import DagJob
+from tacgen_lib.estimate.predict import estimate_run, job_seconds, workflow_overhead
+from tacgen_lib.estimate.schedule import Machine, Task, list_schedule, local_machine, slurm_machine
+from tacgen_lib.estimate.units import UNITS, MissingUnitsError, job_units
 
 # ---- scheduling -----------------------------------------------------------------------------
 
@@ -221,7 +216,7 @@ def test_every_rule_of_the_workflow_has_a_unit_line():
         for m in re.finditer(r"^rule (\w+):", smk.read_text(), re.M)
     }
     missing = sorted(rules - set(UNITS) - {"all"})
-    assert not missing, f"rules without a line in tacgen_lib/runtime/units.py UNITS: {missing}"
+    assert not missing, f"rules without a line in tacgen_lib/estimate/units.py UNITS: {missing}"
 
 
 # ---- the estimate end to end on a hand DAG ------------------------------------------------------
@@ -280,7 +275,7 @@ def test_shipped_calibration_estimates_the_real_dags(configfile):
     benchmarked job's benchmark file is its log file's by the workflow's convention."""
     from pathlib import Path
 
-    from tacgen_lib.runtime.dag import dag_jobs
+    from tacgen_lib.estimate.dag import dag_jobs
 
     root = Path(__file__).resolve().parents[2]
     jobs, config = dag_jobs([configfile], workdir=root)
@@ -306,7 +301,7 @@ def test_shipped_calibration_estimates_the_real_dags(configfile):
 
 
 def test_longest_first_makespan_of_cells_on_workers():
-    from tacgen_lib.runtime.schedule import longest_first_makespan
+    from tacgen_lib.estimate.schedule import longest_first_makespan
 
     cells = [10.0, 7.0, 5.0, 3.0, 3.0, 2.0]
     assert longest_first_makespan(cells, 1) == pytest.approx(30.0)  # one worker: the sum
@@ -318,7 +313,7 @@ def test_longest_first_makespan_of_cells_on_workers():
 
 
 def test_critical_chain_is_the_longest_dependent_path():
-    from tacgen_lib.runtime.schedule import critical_chain
+    from tacgen_lib.estimate.schedule import critical_chain
 
     # 0 -> 1 -> 3 (1 + 10 + 2) beats 0 -> 2 -> 3 (1 + 4 + 2); 4 stands alone (5 s)
     tasks = [
@@ -343,8 +338,8 @@ def test_a_generators_sampling_job_runs_its_cells_on_its_threads():
     """One job per generator: its units are the cells' sums; one thread costs the overhead
     plus every cell, many threads the overhead plus the longest cell (each cell on one
     thread)."""
-    from tacgen_lib.runtime.estimate import job_prediction
-    from tacgen_lib.runtime.units import flop_seconds
+    from tacgen_lib.estimate.flops import flop_seconds
+    from tacgen_lib.estimate.predict import job_prediction
 
     cfg = sampling_config([1, 3], {"ddim": [5, 25], "ddpm": [100]})
     w = {"corpus": "c", "seed": "0"}
@@ -367,7 +362,7 @@ def test_a_generators_sampling_job_runs_its_cells_on_its_threads():
 
 
 def test_a_gpu_class_moves_only_the_torch_rules_flops():
-    from tacgen_lib.runtime.estimate import job_prediction
+    from tacgen_lib.estimate.predict import job_prediction
 
     cfg = sampling_config([3], {"ddim": [50]}, n=1000)
     cfg["generate"].update(steps=1000, batch_size=256)

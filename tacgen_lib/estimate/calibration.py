@@ -2,7 +2,7 @@
 project.
 
 A calibration is a table of points, one per benchmarked job: its cost class and units
-(tacgen_lib.runtime.units) and its measured wall seconds, labelled with the run (config) and the
+(tacgen_lib.estimate.units) and its measured wall seconds, labelled with the run (config) and the
 CPU it was measured on. `fit_costs` turns points into one `overhead + per_unit × units` line
 per cost class by non-negative least squares. The shipped calibration lives in
 `config/cost_calibration/` (`points.csv` and `runs.csv`, the runs' total wall times, which
@@ -11,7 +11,7 @@ calibrate the workflow's own overhead: DAG building and per-job bookkeeping).
 Regenerate it after a change to the default config, a rule's code or its `UNITS` line, from
 the benchmark folders of finished cold runs (each with the config it ran and its total wall):
 
-    .venv/bin/python -m tacgen_lib.runtime.calibration --run test RUNDIR_TEST --run default RUNDIR_DEFAULT
+    .venv/bin/python -m tacgen_lib.estimate.calibration --run test RUNDIR_TEST --run default RUNDIR_DEFAULT
 
 where each RUNDIR is a workflow directory after a cold `snakemake --cores 2` run (its config
 and wall time are read from its newest finished Snakemake log, `.snakemake/log/`).
@@ -31,10 +31,11 @@ import numpy as np
 import pandas as pd
 from scipy.optimize import nnls
 
+from tacgen_lib.estimate.dag import DagJob, dag_jobs
+from tacgen_lib.estimate.flops import flop_seconds
+from tacgen_lib.estimate.schedule import Task, list_schedule, local_machine
+from tacgen_lib.estimate.units import job_units
 from tacgen_lib.runtime.benchmarks import cpu_label, read_benchmark
-from tacgen_lib.runtime.dag import DagJob, dag_jobs
-from tacgen_lib.runtime.schedule import Task, list_schedule, local_machine
-from tacgen_lib.runtime.units import flop_seconds, job_units
 
 __all__ = [
     "CALIBRATION_COLUMNS",
@@ -174,7 +175,7 @@ MIN_UNITS_SPAN = 2.0
 
 def fit_costs(points: pd.DataFrame, *, unshared: bool = True) -> dict[str, CostLine]:
     """One `CostLine` per cost class by non-negative least squares of wall (less the FLOP
-    term, `units.flop_seconds`) on [1, units]; with
+    term, `flops.flop_seconds`) on [1, units]; with
     `unshared`, each job's wall is first its idle wall (`unshared_seconds`), so runs measured
     under different loads fit one line, in seconds on idle cores.
 
@@ -223,7 +224,7 @@ def load_calibration(folder: str | os.PathLike[str] = SHIPPED) -> Calibration:
         if not path.exists():
             raise FileNotFoundError(
                 f"{path}: no calibration here; regenerate it with "
-                "`python -m tacgen_lib.runtime.calibration` (see its --help)"
+                "`python -m tacgen_lib.estimate.calibration` (see its --help)"
             )
         table = pd.read_csv(path, comment="#")
         missing = [c for c in columns if c not in table.columns]
@@ -247,8 +248,8 @@ def write_calibration(
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     header = (
-        "# Run-time calibration of tacgen_lib.runtime.estimate (one row per benchmarked job / run).\n"
-        "# Regenerate: python -m tacgen_lib.runtime.calibration --help\n"
+        "# Run-time calibration of tacgen_lib.estimate (one row per benchmarked job / run).\n"
+        "# Regenerate: python -m tacgen_lib.estimate.calibration --help\n"
     )
     for name, table, columns in (
         ("points.csv", points, CALIBRATION_COLUMNS),
@@ -341,7 +342,7 @@ def last_run(rundir: str | os.PathLike[str] = ".") -> RunLog | None:
 
 def main(argv: Sequence[str] | None = None) -> None:
     parser = argparse.ArgumentParser(
-        prog="python -m tacgen_lib.runtime.calibration",
+        prog="python -m tacgen_lib.estimate.calibration",
         description="Regenerate the run-time calibration from finished cold runs: each run's "
         "directory holds results/benchmarks and the Snakemake log giving its config and wall.",
     )

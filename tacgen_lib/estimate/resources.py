@@ -1,6 +1,6 @@
 """Each job's `runtime` resource (its SLURM time limit) from its run-time estimate.
 
-What the run-time estimate predicts for one job (`tacgen_lib.runtime.estimate.job_prediction`:
+What the run-time estimate predicts for one job (`tacgen_lib.estimate.predict.job_prediction`:
 its rule's units line fitted on the shipped calibration, its own config, wildcards and
 threads), with headroom, times the attempt:
 
@@ -58,7 +58,7 @@ def requested_runtime(seconds: float, attempt: int = 1) -> int:
 @functools.cache
 def _shipped_lines() -> dict[str, Any]:
     """The shipped calibration's lines (config/cost_calibration), fitted once per process."""
-    from tacgen_lib.runtime.calibration import fit_costs, load_calibration
+    from tacgen_lib.estimate.calibration import fit_costs, load_calibration
 
     return fit_costs(load_calibration().points)
 
@@ -68,7 +68,7 @@ def predicted_seconds(
 ) -> float:
     """The run-time estimate of one job of `rule` (the main rule's name) under `config` (the
     job's own: a cost setting's module's config for its jobs), from the shipped calibration."""
-    from tacgen_lib.runtime.estimate import job_prediction
+    from tacgen_lib.estimate.predict import job_prediction
 
     wildcards = {k: str(v) for k, v in wildcards.items()}  # Snakemake's Wildcards, or a dict
     return job_prediction(rule, config, wildcards, int(threads), _shipped_lines())[2]
@@ -83,8 +83,8 @@ def estimated_runtime(
     cannot count), `fallback` × attempt minutes, the rule's own runtime, so that a run never
     stops for want of an estimate (`make estimate` names what is missing); without a fallback
     the estimate's error is raised."""
-    from tacgen_lib.runtime.calibration import MissingCalibrationError
-    from tacgen_lib.runtime.units import MissingUnitsError
+    from tacgen_lib.estimate.calibration import MissingCalibrationError
+    from tacgen_lib.estimate.units import MissingUnitsError
 
     def runtime(wildcards: Any, threads: int, attempt: int) -> int:
         try:
@@ -100,13 +100,13 @@ def estimated_runtime(
 
 
 def attach_estimated_runtime(rules: Iterable[Any], *, keep: Mapping[str, Any]) -> list[str]:
-    """Give every rule that runs and has a units line (`tacgen_lib.runtime.units.UNITS`) its
+    """Give every rule that runs and has a units line (`tacgen_lib.estimate.units.UNITS`) its
     `estimated_runtime`, but a rule named in `keep` with a `runtime` (Snakemake's
     `--set-resources`, a profile's `set-resources:`). A cost setting's rules (a Snakemake
     module) are priced as their main rule under the module's config. Returns the names of
     the rules given one."""
-    from tacgen_lib.runtime.dag import base_rule
-    from tacgen_lib.runtime.units import UNITS
+    from tacgen_lib.estimate.dag import base_rule
+    from tacgen_lib.estimate.units import UNITS
 
     attached = []
     for rule in rules:

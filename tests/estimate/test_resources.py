@@ -1,4 +1,4 @@
-"""SLURM time limits from the run-time estimate (tacgen_lib.runtime.resources): the headroom,
+"""SLURM time limits from the run-time estimate (tacgen_lib.estimate.resources): the headroom,
 the floor and the attempt factor; a rule the estimate cannot price keeps its own runtime; the
 rules of the workflow get the estimate's function, a runtime set from outside wins."""
 
@@ -10,8 +10,8 @@ import pytest
 from snakemake.iocontainers import Wildcards
 from snakemake.resources import Resources
 
-from tacgen_lib.runtime.calibration import MissingCalibrationError
-from tacgen_lib.runtime.resources import (
+from tacgen_lib.estimate.calibration import MissingCalibrationError
+from tacgen_lib.estimate.resources import (
     HEADROOM,
     MIN_RUNTIME_S,
     attach_estimated_runtime,
