@@ -355,7 +355,7 @@ def test_changed_probe_param_reruns_only_the_probes(run_dir, tmp_path):
     generate = {"fit_generator_baselines", "evaluate_generator", "aggregate_generate"}
     # the cost page's free generator knobs read the generation summary; the
     # findings page reads the probe summary
-    cost = {"cost_generate_points", "cost_backbone_points", "cost_of_accuracy"}
+    cost = {"cost_knob_points", "cost_of_accuracy"}
     report = {"findings", "edge_manifest", "all"}
     # the regime's probes read the probes subtree (their grids and folds) and the language
     # evidence its bootstrap count
@@ -424,7 +424,7 @@ def test_edit_to_an_indirectly_imported_module_reruns_exactly_its_users(run_dir,
         "edge_manifest",
         "findings",
         "all",
-        "cost_backbone_points",
+        "cost_knob_points",
         "cost_of_accuracy",
     }
 

@@ -2,7 +2,7 @@
 stage's own outputs and the seconds of the jobs they came from.
 
 Each function takes what a knob's setting produced (ranks, replicate rows, a stage summary)
-and the seconds of its jobs (`Seconds`: wall and CPU from the `benchmark:` files, with the
+and the seconds of its jobs (`spread.Seconds`: wall and CPU from the `benchmark:` files, with the
 number of files), and returns rows in `points.POINT_COLUMNS` + `direction`:
 
 - `align_points`: top-1 and median rank V→T on the test rows, mean over alignment seeds, with
@@ -22,13 +22,12 @@ from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 
 from tacgen_lib.cost.points import POINT_COLUMNS
-from tacgen_lib.cost.spread import retrieval_bootstrap, sd_interval
+from tacgen_lib.cost.spread import Seconds, retrieval_bootstrap, sd_interval
 
 __all__ = [
     "Seconds",
@@ -40,15 +39,6 @@ __all__ = [
     "point",
     "policy_points",
 ]
-
-
-@dataclass(frozen=True)
-class Seconds:
-    """What one run of a setting costs: wall and CPU seconds, from `n_jobs` benchmark files."""
-
-    wall: float
-    cpu: float
-    n_jobs: int
 
 
 def point(
