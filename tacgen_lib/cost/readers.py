@@ -35,6 +35,7 @@ from typing import Any
 
 import pandas as pd
 
+from tacgen_lib.cost import sweeps
 from tacgen_lib.cost.knob_metrics import (
     BAND_WIDTH,
     FRAMES_PER_S,
@@ -47,14 +48,6 @@ from tacgen_lib.cost.knob_metrics import (
     probe_metric_ids,
 )
 from tacgen_lib.cost.spread import Seconds, setting_seconds
-from tacgen_lib.cost.sweeps import (
-    align_points,
-    backbone_points,
-    bootstrap_spread_points,
-    generate_points,
-    permutation_points,
-    policy_points,
-)
 from tacgen_lib.runtime.benchmarks import Benchmark
 
 __all__ = ["EDGE_COLUMNS", "READERS", "SettingRun", "headline_row", "read_knob"]
@@ -120,7 +113,7 @@ def read_align(knob: str, runs: Sequence[SettingRun], options: Mapping[str, Any]
         (int(r.edges["metrics"][0]["n_train_rows"].iloc[0]) for r in runs if r.label == "all"),
         None,
     )
-    return align_points(
+    return sweeps.align_points(
         knob,
         ranks,
         _seconds(runs),
@@ -154,12 +147,12 @@ def _replicates(runs: Sequence[SettingRun]) -> pd.DataFrame:
 
 def read_probe_bootstrap(knob: str, runs: Sequence[SettingRun], options: Mapping[str, Any]):
     reps = _replicates(runs)
-    return bootstrap_spread_points(knob, reps, _seconds(runs), _default_label(runs))
+    return sweeps.bootstrap_spread_points(knob, reps, _seconds(runs), _default_label(runs))
 
 
 def read_probe_permutations(knob: str, runs: Sequence[SettingRun], options: Mapping[str, Any]):
     reps = _replicates(runs)
-    return permutation_points(knob, reps, _seconds(runs), _default_label(runs))
+    return sweeps.permutation_points(knob, reps, _seconds(runs), _default_label(runs))
 
 
 def _settings(runs: Sequence[SettingRun], metrics: Callable[[SettingRun], list[dict]]):
@@ -249,7 +242,7 @@ def read_generate(knob: str, runs: Sequence[SettingRun], options: Mapping[str, A
             f"{options['corpus']!r}, target {options['target']!r}, guidance {options['guidance']}"
         )
     seconds, default = _seconds(runs), _default_label(runs)
-    return generate_points(knob, rows, seconds, default, target=options["target"])
+    return sweeps.generate_points(knob, rows, seconds, default, target=options["target"])
 
 
 def read_policy(knob: str, runs: Sequence[SettingRun], options: Mapping[str, Any]):
@@ -257,12 +250,14 @@ def read_policy(knob: str, runs: Sequence[SettingRun], options: Mapping[str, Any
     cells = {(int(r.options["hidden"]), int(r.options["epochs"])): r for r in runs}
     rows = summary[summary["condition"] == "v"]
     keys = [(int(h), int(e)) for h, e in zip(rows["hidden"], rows["epochs"], strict=True)]
-    return policy_points(knob, _cells(rows, keys, cells), _seconds(runs), _default_label(runs))
+    return sweeps.policy_points(
+        knob, _cells(rows, keys, cells), _seconds(runs), _default_label(runs)
+    )
 
 
 def read_backbones(knob: str, runs: Sequence[SettingRun], options: Mapping[str, Any]):
     rows, order = runs[0].edges["summary"][0], [r.label for r in runs]
-    return backbone_points(knob, rows, _seconds(runs), order, _default_label(runs))
+    return sweeps.backbone_points(knob, rows, _seconds(runs), order, _default_label(runs))
 
 
 READERS: dict[str, Callable[[str, Sequence[SettingRun], Mapping[str, Any]], pd.DataFrame]] = {

@@ -353,15 +353,9 @@ def fit_generator(
     model = Denoiser(
         x_tr.shape[1], c_tr.shape[1], settings.hidden, settings.blocks, settings.time_dim
     )
+    pairs = (x_tr, c_tr), (x_va, c_va)
     fit = train_ema(
-        model,
-        (x_tr, c_tr),
-        (x_va, c_va),
-        settings,
-        seed=seed,
-        device=device,
-        val_loss=_val_loss,
-        progress=say,
+        model, *pairs, settings, seed=seed, device=device, val_loss=_val_loss, progress=say
     )
     stopper = fit.stopper
     return GeneratorFit(

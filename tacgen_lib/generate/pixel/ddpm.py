@@ -204,15 +204,16 @@ def fit_pixel_ddpm(
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(int(seed))
         unet = make_unet(settings, size)
+    rows = lambda m: RowDenoiser(m, size)  # noqa: E731 (the U-Net as diffusion_loss calls it)
+    data = (x_tr, c_tr), (x_va, c_va)
     fit = train_ema(
         unet,
-        (x_tr, c_tr),
-        (x_va, c_va),
+        *data,
         settings,
         seed=seed,
         device=device,
         val_loss=_val_loss,
-        wrap=lambda m: RowDenoiser(m, size),
+        wrap=rows,
         score_untrained=True,
         progress=say,
     )
