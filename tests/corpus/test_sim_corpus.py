@@ -7,6 +7,7 @@ import pandas as pd
 import pytest
 from sim_scenes import fast_scenes
 
+from tacgen_lib.corpus.manifest import LABEL_COLUMNS
 from tacgen_lib.corpus.sim import corpus
 from tacgen_lib.io.images import decode_png
 
@@ -31,17 +32,7 @@ CONTROLLED = {
     "sensors": 2,
     "presses": 3,
 }
-FLOATS = [
-    "scale",
-    "density",
-    "mass",
-    "stiffness",
-    "friction",
-    "force_normal",
-    "force_p05",
-    "force_p50",
-    "force_p95",
-]
+FLOATS = list(LABEL_COLUMNS)  # the manifest's numeric labels, every one a simulator output
 
 
 @pytest.fixture(scope="module")
