@@ -295,28 +295,22 @@ def test_ingest_is_deterministic(tmp_path: Path) -> None:
 # --------------------------------------------------------------------------- SSVTP errors
 
 
-def test_ssvtp_missing_rgb_names_path_and_sample(ssvtp_root: Path) -> None:
-    path = ssvtp_root / "ssvtp" / "images_rgb" / "image_3_rgb.jpg"
+@pytest.mark.parametrize(
+    ("missing", "names"),
+    [
+        ("images_rgb/image_3_rgb.jpg", ("ssvtp-000003", "RGB")),
+        ("images_tac/image_5_tac.jpg", ("ssvtp-000005", "tactile")),
+        ("text/labels_7.txt", ("ssvtp-000007",)),
+    ],
+)
+def test_ssvtp_missing_file_names_path_and_sample(
+    ssvtp_root: Path, missing: str, names: tuple[str, ...]
+) -> None:
+    path = ssvtp_root / "ssvtp" / missing
     path.unlink()
     with pytest.raises(FileNotFoundError) as err:
         ingest_ssvtp(ssvtp_root)
-    assert_names(err, path, "ssvtp-000003", "RGB")
-
-
-def test_ssvtp_missing_tactile_names_path_and_sample(ssvtp_root: Path) -> None:
-    path = ssvtp_root / "ssvtp" / "images_tac" / "image_5_tac.jpg"
-    path.unlink()
-    with pytest.raises(FileNotFoundError) as err:
-        ingest_ssvtp(ssvtp_root)
-    assert_names(err, path, "ssvtp-000005", "tactile")
-
-
-def test_ssvtp_missing_caption_file(ssvtp_root: Path) -> None:
-    path = ssvtp_root / "ssvtp" / "text" / "labels_7.txt"
-    path.unlink()
-    with pytest.raises(FileNotFoundError) as err:
-        ingest_ssvtp(ssvtp_root)
-    assert_names(err, path, "ssvtp-000007")
+    assert_names(err, path, *names)
 
 
 @pytest.mark.parametrize("content", [b"not a jpeg at all", b""])
