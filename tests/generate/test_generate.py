@@ -300,27 +300,10 @@ def test_guidance_extremes_stay_finite_and_w0_is_unconditional(guidance):
 def test_batch_of_one_and_identical_conditions():
     model = random_denoiser().arrays()
     sch = make_schedule("linear", 100)
-    one = sample(
-        model,
-        sch,
-        np.ones((1, 5), np.float32),
-        sampler="ddpm",
-        steps=100,
-        guidance=2.0,
-        seed=0,
-        prediction="v",
-    )
+    kw = dict(sampler="ddpm", steps=100, guidance=2.0, seed=0, prediction="v")
+    one = sample(model, sch, np.ones((1, 5), np.float32), **kw)
     assert one.shape == (1, 6) and np.isfinite(one).all()
-    same = sample(
-        model,
-        sch,
-        np.ones((32, 5), np.float32),
-        sampler="ddpm",
-        steps=100,
-        guidance=2.0,
-        seed=0,
-        prediction="v",
-    )
+    same = sample(model, sch, np.ones((32, 5), np.float32), **kw)
     assert np.isfinite(same).all()
     assert np.unique(same.round(6), axis=0).shape[0] == 32  # the noise still varies rows
     # one-row guidance equals the batched computation row by row
