@@ -25,31 +25,29 @@ from tacgen_lib.cost.sweeps import (
     bootstrap_spread_points,
     generate_points,
     permutation_points,
+    point,
     policy_points,
 )
 from tacgen_lib.runtime.benchmarks import Benchmark
 
 
 def points(knob, metric, rows, direction="higher"):
-    """rows: (label, setting, is_default, value, ci_low, ci_high, wall_s)."""
+    """rows: (label, setting, is_default, value, ci_low, ci_high, wall_s); CPU = wall, 1 job."""
     return check_points(
         pd.DataFrame(
             [
-                dict(
-                    knob=knob,
-                    stage="probes",
-                    setting=s,
-                    label=lab,
-                    is_default=d,
-                    metric=metric,
-                    value=v,
-                    ci_low=lo,
-                    ci_high=hi,
-                    uncertainty="test",
-                    wall_s=w,
-                    cpu_s=w,
-                    n_jobs=1,
-                    direction=direction,
+                point(
+                    knob,
+                    "probes",
+                    s,
+                    lab,
+                    d,
+                    metric,
+                    v,
+                    (lo, hi),
+                    "test",
+                    Seconds(w, w, 1),
+                    direction,
                 )
                 for lab, s, d, v, lo, hi, w in rows
             ]
