@@ -1,6 +1,6 @@
 """The scenes of config/scenes.yaml for tests that simulate whole shards: settling cut to 80
 steps where a scene does not set it, so a shard takes seconds (a plain module: pytest puts
-tests/ on sys.path, like snakemake_run.py)."""
+tests/ on sys.path, like snakemake_run.py), and the gel's ray-cast height field at rest."""
 
 from __future__ import annotations
 
@@ -14,3 +14,17 @@ def fast_scenes() -> dict:
     for decl in scenes.values():
         decl.setdefault("settle_steps", 80)
     return scenes
+
+
+def heights_at_rest(rt, optics):
+    """`tactile.height_field_rays` of the runtime's active object under a gel at the origin,
+    unrotated, through `optics` (its own ray directions)."""
+    import numpy as np
+
+    from tacgen_lib.corpus.sim import tactile
+
+    origin, frame = np.zeros(3), np.eye(3).ravel()
+    directions = tactile.ray_directions(optics)
+    return tactile.height_field_rays(
+        rt.model, rt.data, rt.active_geom, origin, frame, optics, directions
+    )
