@@ -223,9 +223,9 @@ def train_ema(
     train: tuple[Tensor, Tensor],
     val: tuple[Tensor, Tensor],
     settings: Any,
-    *,
     seed: int,
     device: torch.device | str,
+    *,
     val_loss: Callable[[nn.Module, ValidationDraws], float],
     wrap: Callable[[nn.Module], nn.Module] = lambda m: m,
     score_untrained: bool = False,
@@ -354,9 +354,7 @@ def fit_generator(
         x_tr.shape[1], c_tr.shape[1], settings.hidden, settings.blocks, settings.time_dim
     )
     pairs = (x_tr, c_tr), (x_va, c_va)
-    fit = train_ema(
-        model, *pairs, settings, seed=seed, device=device, val_loss=_val_loss, progress=say
-    )
+    fit = train_ema(model, *pairs, settings, seed, device, val_loss=_val_loss, progress=say)
     stopper = fit.stopper
     return GeneratorFit(
         std,
