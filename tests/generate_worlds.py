@@ -57,3 +57,14 @@ def toy_specs():
         for name, kind in (("force_p50", "ridge"), ("hardness", "logistic"))
     ]
     return ids, dict(zip(ids, v, strict=True)), dict(zip(ids, t, strict=True)), specs
+
+
+def evaluate_one(spec: TargetSpec, vision: dict, t_real: dict, t_gen: dict, **kw):
+    """`evaluate_generator` of one target on corpus "toy" against its baselines (fitted at
+    gamma 1); `kw`: the rest of its arguments (seed, permutations, generator_train_ids...)."""
+    from tacgen_lib.generate.baselines import fit_baselines
+    from tacgen_lib.generate.evaluate import evaluate_generator
+
+    baselines = {spec.name: fit_baselines(spec, vision, t_real, gammas=(1.0,))}
+    data = {"vision": vision, "t_real": t_real, "t_gen": t_gen, "baselines": baselines}
+    return evaluate_generator([spec], corpus="toy", **data, **kw)

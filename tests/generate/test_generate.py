@@ -18,7 +18,7 @@ import pandas as pd
 import pytest
 import torch
 import yaml
-from generate_worlds import small_probes, toy_specs, toy_world, train_ids
+from generate_worlds import evaluate_one, small_probes, toy_specs, toy_world, train_ids
 from scipy import linalg
 from snakemake.utils import update_config
 from snakemake_run import ROOT
@@ -567,16 +567,16 @@ def test_evaluation_real_touch_helps_where_generated_touch_cannot():
     ps = small_probes("ridge", [0.1, 1, 10], [1], bootstrap=500)
     spec = TargetSpec("force_p50", rows, ps)
     vision, t_real = dict(zip(ids, v, strict=True)), dict(zip(ids, t, strict=True))
-    summary, perms = evaluate_generator(
-        [spec],
-        corpus="toy",
+    t_gen = {("ddim", "1", "10"): dict(zip(ids, gen, strict=True))}
+    generator_train_ids = train_ids(splits)
+    summary, perms = evaluate_one(
+        spec,
+        vision,
+        t_real,
+        t_gen,
         seed=0,
-        vision=vision,
-        t_real=t_real,
-        t_gen={("ddim", "1", "10"): dict(zip(ids, gen, strict=True))},
-        baselines={"force_p50": fit_baselines(spec, vision, t_real, gammas=(1.0,))},
         permutations=100,
-        generator_train_ids=train_ids(splits),
+        generator_train_ids=generator_train_ids,
     )
     by = summary.set_index("input")
     assert set(by.index) == {
@@ -687,18 +687,8 @@ def test_logistic_c_is_chosen_on_the_reference_cell_and_reused():
     }
     spec = TargetSpec("hardness", rows, ps)
     vision, t_real = dict(zip(ids, v, strict=True)), dict(zip(ids, t, strict=True))
-    summary, _ = evaluate_generator(
-        [spec],
-        corpus="toy",
-        seed=0,
-        vision=vision,
-        t_real=t_real,
-        t_gen=cells,
-        baselines={"hardness": fit_baselines(spec, vision, t_real, gammas=(1.0,))},
-        permutations=10,
-        generator_train_ids=train_ids(splits),
-        reference=("ddim", "1", "5"),
-    )
+    kw = dict(seed=0, permutations=10, generator_train_ids=train_ids(splits))
+    summary, _ = evaluate_one(spec, vision, t_real, cells, **kw, reference=("ddim", "1", "5"))
     gen = summary[summary["input"].isin(["t_gen", "t_gen_shuffled"])].set_index(
         ["input", "guidance"]
     )
