@@ -1,7 +1,8 @@
 """Training the latent generator: the denoising objective, AdamW + EMA, early stopping, save/load.
 
 This module owns `fit_generator` (one generator per corpus x seed, on the train split's V -> T
-pairs, early-stopped on the val split's loss), its objective `diffusion_loss` and the hashed
+pairs, early-stopped on the val split's loss), the EMA training every diffusion generator shares
+(`train_ema`, the pixel DDPM's too), its objective `diffusion_loss` and the hashed
 weights file (`save_generator` / `load_generator`: EMA weights, the train-split standardisation
 statistics, the settings and the curve in one file with a sidecar, like the alignment heads).
 
