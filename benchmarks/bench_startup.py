@@ -73,11 +73,8 @@ NEEDS: dict[str, str] = {
     "background_subtract": "pandas cv2",
     "collect_demos": _SIM,
     "corpus_examples": _TABLE_FIGURES + " scipy.stats cv2",  # binomtest; PNG decoding
-    "cost_backbone_points": "pandas",
-    "cost_generate_points": "pandas",
     "cost_knob_points": "pandas scipy.stats",  # the bootstrap knob's chi-square interval
     "cost_of_accuracy": _TABLE_FIGURES,
-    "cost_policy_points": "pandas",
     "edge_manifest": "pandas",
     "evaluate_generator": "pandas sklearn",
     "evaluate_pixel_generators": "torch pandas sklearn cv2 scipy",  # ViT, probes, SSIM

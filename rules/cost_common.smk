@@ -5,10 +5,13 @@ workflow, and what each setting's points read; included by cost.smk.
 replicate) becomes a Snakemake module of this Snakefile with the knob's config keys set; the
 module's copies of the main rules the knob reruns write under `results/cost/{knob}/{setting}/`
 (`replace_prefix`), and read the main run's edges for everything else. Free knobs (the
-generator's steps and samplers, the policy sweep) are the stages' own grids and rerun nothing.
+backbone families, the generator's steps and samplers, the policy sweep) are the stages' own
+grids and rerun nothing: a setting run is a cell of the grid (per seed), read from the stage's
+summary. Both kinds go through rule cost_knob_points with a plan of setting runs.
 """
 
 from tacgen_lib.align.cells import cell_name
+from tacgen_lib.policy.cells import all_cells as _policy_all_cells
 from tacgen_lib.features.settings import backbones_pretrained
 from tacgen_lib.cost.knobs import (
     KNOBS,
@@ -18,6 +21,8 @@ from tacgen_lib.cost.knobs import (
     moved_path,
     shared_runs,
 )
+
+TARGETS += ["results/report/cost_of_accuracy.html"]
 
 COST = config.get("cost") or {}
 COST_KNOB_CONFIG = COST.get("knobs") or {}
@@ -175,10 +180,152 @@ _SETTING_FILES = {
 }
 
 
+# ---- the free knobs: a setting run per cell of the stage's own grid (and per seed)
+
+
+def _free_run(
+    label, number, is_default, rep, benchmarks, options, edges=None, tables=None
+):
+    return {
+        "label": label,
+        "number": float(number),
+        "is_default": is_default,
+        "rep": rep,
+        "edges": edges or {},
+        "tables": tables or {},
+        "benchmarks": benchmarks,
+        "options": options,
+    }
+
+
+def _steps_cells(sampler, steps):
+    """generate_steps: the reference sampler at each of its steps."""
+    return [
+        (str(s), int(s), sampler, int(s))
+        for s in sorted(int(x) for x in GENERATE["samplers"][sampler])
+    ], str(steps)
+
+
+def _sampler_cells(sampler, steps):
+    """generate_sampler: each sampler at the reference steps (or its most)."""
+    cells = []
+    for i, (name, steps_list) in enumerate(GENERATE["samplers"].items()):
+        st = steps if steps in [int(x) for x in steps_list] else max(steps_list)
+        cells.append((f"{name} {int(st)}", i, name, int(st)))
+    return cells, f"{sampler} {steps}"
+
+
+_GENERATE_CELLS = {"generate_steps": _steps_cells, "generate_sampler": _sampler_cells}
+
+
+def _generate_subject(knob):
+    """The corpus, target and guidance a generator knob's points read (the run's reference
+    guidance, generate_ref)."""
+    entry = COST_KNOB_CONFIG.get(knob) or {}
+    corpus = entry.get("corpus") or GENERATE_CORPORA[0]
+    target = entry.get("target") or next(iter(GENERATE["corpora"][corpus]))
+    return corpus, target, generate_ref()["guidance"]
+
+
+def _generate_plan(knob):
+    """Per cell (label, setting, sampler, steps) and generator seed: its sampling job. The
+    default is the run's own reference cell (generate_ref)."""
+    corpus, _, guidance = _generate_subject(knob)
+    ref = generate_ref()
+    cells, default = _GENERATE_CELLS[knob](ref["sampler"], ref["steps"])
+    summary = {"summary": ["results/generate/summary.parquet"]}
+    return [
+        _free_run(
+            label,
+            setting,
+            label == default,
+            rep,
+            [sample_benchmark(corpus, seed, sampler, guidance, steps)],
+            {"sampler": sampler, "steps": steps},
+            tables=summary,
+        )
+        for label, setting, sampler, steps in cells
+        for rep, seed in enumerate(GENERATE["seeds"])
+    ]
+
+
+def _width_cells(s, v_cells):
+    """policy_width: the V-only cells at the run's epochs."""
+    widths = sorted({h for _, h, e, _ in v_cells if e == s.epochs})
+    return [(str(h), h, h, s.epochs) for h in widths], str(s.hidden)
+
+
+def _epochs_cells(s, v_cells):
+    """policy_epochs: the V-only cells at the run's width."""
+    epochs = sorted({e for _, h, e, _ in v_cells if h == s.hidden})
+    return [(str(e), e, s.hidden, e) for e in epochs], str(s.epochs)
+
+
+_POLICY_CELLS = {"policy_width": _width_cells, "policy_epochs": _epochs_cells}
+
+
+def _policy_plan(knob):
+    """Per cell (label, setting, hidden, epochs) and policy seed: its training job and its
+    rollout shards. The default is the run's own width and epochs."""
+    v_cells = [c for c in _policy_all_cells(POLICY_SETTINGS) if c[0] == "v"]
+    cells, default = _POLICY_CELLS[knob](POLICY_SETTINGS, v_cells)
+    summary = {"summary": [f"{POLICY_DIR}/summary.parquet"]}
+    out = []
+    for label, setting, h, e in cells:
+        seeds = [c for c in v_cells if (c[1], c[2]) == (h, e)]
+        for rep, c in enumerate(seeds):
+            name = policy_cell_name(c)
+            jobs = [f"results/benchmarks/train_policy/{name}.tsv"] + [
+                f"results/benchmarks/rollout_policy/{name}/{k}.tsv"
+                for k in range(POLICY_SETTINGS.rollout_shards)
+            ]
+            options = {"hidden": h, "epochs": e}
+            out.append(
+                _free_run(
+                    label, setting, label == default, rep, jobs, options, tables=summary
+                )
+            )
+    return out
+
+
+def _backbone_plan(knob):
+    """Per family of the run: every job that makes its backbones and the probe corpora's
+    features (its own family_backbone jobs, or, for the main family, the main backbones and
+    the main extraction of the probe corpora; the probes' cost, alike for every family, is
+    left out). The default is the main DAG's family."""
+    default = (MAIN_FAMILIES or [None])[0]
+    summary = {"summary": ["results/backbones/summary.parquet"]}
+    out = []
+    for i, family in enumerate(FAMILIES.run):
+        jobs = []
+        for m in MODALITIES:
+            if family in OWN_FAMILIES:
+                jobs.append(f"results/benchmarks/family_backbone/{family}/{m}.tsv")
+                continue
+            jobs.append(f"results/benchmarks/pretrain_backbone/{m}.tsv")
+            what = "vision" if m == "vision" else f"tactile~{FAMILY_VARIANT}"
+            jobs += [
+                f"results/benchmarks/extract_features/{c}/{what}.tsv"
+                for c in FAMILY_CORPORA
+            ]
+        out.append(_free_run(family, i, family == default, 0, jobs, {}, edges=summary))
+    return out
+
+
+_FREE_PLANS = {
+    "generate": _generate_plan,
+    "policy": _policy_plan,
+    "backbones": _backbone_plan,
+}
+
+
 def cost_setting_plan(knob):
-    """Per setting run of a swept knob: label, x position, default flag, replicate, its edges
-    by role and its benchmark files (the setting's own paths) and the reader's options.
+    """Per setting run of a knob: label, x position, default flag, replicate, its edges by
+    role (verified edges; a free knob's plain summary tables under `tables`), its benchmark
+    files (a swept setting's own paths) and the reader's options.
     """
+    if KNOBS[knob].free:
+        return _FREE_PLANS[KNOBS[knob].reads](knob)
     plan = []
     for run in COST_SETTINGS[knob]:
         edges, benchmarks = _SETTING_FILES[KNOBS[knob].reads](knob, run)
@@ -192,6 +339,7 @@ def cost_setting_plan(knob):
                     role: [moved_path(p, run.replace_prefix) for p in paths]
                     for role, paths in edges.items()
                 },
+                "tables": {},
                 "benchmarks": [moved_path(b, run.replace_prefix) for b in benchmarks],
                 "options": {
                     "pretraining": backbones_pretrained(run.config["features"])
@@ -202,18 +350,31 @@ def cost_setting_plan(knob):
 
 
 def cost_knob_options(knob):
-    """What a knob's reader needs from the run's config (resamples, seed, metrics)."""
+    """What a knob's reader needs from the run's config (resamples, seed, metrics; a
+    generator knob's corpus, target and guidance)."""
     probes = config["probes"]
-    return {
-        "bootstrap": knob_bootstrap(KNOBS[knob], COST_KNOB_CONFIG[knob], config),
+    entry = COST_KNOB_CONFIG.get(knob) or {}
+    options = {
+        "bootstrap": knob_bootstrap(KNOBS[knob], entry, config),
         "seed": int(probes["seeds"][0]),
         "metrics": knob_metrics(KNOBS[knob], config),
     }
+    if KNOBS[knob].reads == "generate":
+        corpus, target, guidance = _generate_subject(knob)
+        options |= {"corpus": corpus, "target": target, "guidance": guidance}
+    return options
 
 
 def cost_knob_inputs(wildcards):
     plan = cost_setting_plan(wildcards.knob)
+    files = [
+        p
+        for run in plan
+        for role in ("edges", "tables")
+        for paths in run[role].values()
+        for p in paths
+    ]
     return {
-        "edges": [p for run in plan for paths in run["edges"].values() for p in paths],
-        "benchmarks": [b for run in plan for b in run["benchmarks"]],
+        "edges": list(dict.fromkeys(files)),
+        "benchmarks": list(dict.fromkeys(b for run in plan for b in run["benchmarks"])),
     }

@@ -19,6 +19,7 @@ import time
 
 import numpy as np
 import yaml
+from sim_scenes import gel_heights
 
 from tacgen_lib.corpus.sim import physics, tactile
 from tacgen_lib.corpus.sim.render import render_rgb
@@ -59,15 +60,7 @@ def main(scenes_file: str, frames: int, warmup: int) -> None:
             obj = physics.ObjectPhysics(shapes[(i // 100) % 3], 0.02, 800.0, 3000.0, 0.6, 0.1 * i)
             physics.apply_object(rt, obj, rgba=(0.2, 0.5, 0.8, 1.0))
             physics.press_object(rt, scene.press_force)
-        height = tactile.height_field_rays(
-            rt.model,
-            rt.data,
-            rt.active_geom,
-            rt.data.site_xpos[frame_site],
-            rt.data.site_xmat[frame_site],
-            optics,
-            directions,
-        )
+        height = gel_heights(rt, optics, directions=directions, site=frame_site)
         tac = tactile.tactile_shading(height, background, optics, noise=rng)
         rgb = render_rgb(state, RGB_SIZE)
         nbytes += len(encode_png(tac)) + len(encode_png(rgb))

@@ -1,11 +1,15 @@
-"""Synthetic probe families shared by the probe-protocol and backbone-family tests (a plain
+"""Synthetic probe families and small probe settings shared by the probe tests (a plain
 module: pytest puts tests/ on sys.path)."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
+from typing import Any
+
 import numpy as np
 
 from tacgen_lib.probes import rows as ps_rows
+from tacgen_lib.probes.settings import ProbeSettings
 
 
 def synthetic_family_rows(kind: str, y: np.ndarray, n_train: int) -> ps_rows.FamilyRows:
@@ -24,3 +28,25 @@ def synthetic_family_rows(kind: str, y: np.ndarray, n_train: int) -> ps_rows.Fam
         bands_test=None,
         n_unlabelled=0,
     )
+
+
+#: the names of the control draws (`ProbeSettings`), each set to `controls` unless named
+CONTROLS = ("train_resamples", "permutations", "label_permutations", "random_draws")
+
+
+def probe_settings(
+    kind: str,
+    lambdas: Sequence[float],
+    C: Sequence[float],
+    *,
+    folds: int,
+    bootstrap: int,
+    seed: int,
+    controls: int = 0,
+    **fields: Any,
+) -> ProbeSettings:
+    """`ProbeSettings` of `kind` on the λ / C grids, `controls` draws of every control (0:
+    none) unless `fields` names it; `fields` sets any other field."""
+    draws = dict.fromkeys(CONTROLS, controls) | fields
+    grid = {"lambdas": tuple(lambdas), "C": tuple(C), "folds": folds, "bootstrap": bootstrap}
+    return ProbeSettings(kind=kind, **grid, seed=seed, **draws)

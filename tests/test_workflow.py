@@ -19,6 +19,7 @@ import yaml
 from snakemake_run import (
     ROOT,
     SNAKEMAKE,
+    copy_run,
     copy_tree,
     edge_hashes,
     merged_config,
@@ -331,9 +332,7 @@ def test_second_run_has_nothing_to_do(run_dir):
 
 
 def test_changed_param_reruns_only_its_downstream(run_dir, tmp_path):
-    work = copy_tree(tmp_path / "b")
-    shutil.copytree(run_dir / "results", work / "results")
-    shutil.copytree(run_dir / ".snakemake", work / ".snakemake")
+    work = copy_run(run_dir, tmp_path / "b")
     assert planned_rules(work) == {}
     cfg = work / "config/test.yaml"
     cfg.write_text(cfg.read_text().replace("examples_per_corpus: 3", "examples_per_corpus: 2"))
@@ -341,9 +340,7 @@ def test_changed_param_reruns_only_its_downstream(run_dir, tmp_path):
 
 
 def test_changed_probe_param_reruns_only_the_probes(run_dir, tmp_path):
-    work = copy_tree(tmp_path / "p")
-    shutil.copytree(run_dir / "results", work / "results")
-    shutil.copytree(run_dir / ".snakemake", work / ".snakemake")
+    work = copy_run(run_dir, tmp_path / "p")
     cfg = work / "config/test.yaml"
     cfg.write_text(
         cfg.read_text().replace("probes:\n  bootstrap: 200", "probes:\n  bootstrap: 150")
@@ -355,7 +352,7 @@ def test_changed_probe_param_reruns_only_the_probes(run_dir, tmp_path):
     generate = {"fit_generator_baselines", "evaluate_generator", "aggregate_generate"}
     # the cost page's free generator knobs read the generation summary; the
     # findings page reads the probe summary
-    cost = {"cost_generate_points", "cost_backbone_points", "cost_of_accuracy"}
+    cost = {"cost_knob_points", "cost_of_accuracy"}
     report = {"findings", "edge_manifest", "all"}
     # the regime's probes read the probes subtree (their grids and folds) and the language
     # evidence its bootstrap count
@@ -378,9 +375,7 @@ def test_changed_probe_param_reruns_only_the_probes(run_dir, tmp_path):
 
 
 def test_changed_library_module_reruns_only_its_users(run_dir, tmp_path):
-    work = copy_tree(tmp_path / "c")
-    shutil.copytree(run_dir / "results", work / "results")
-    shutil.copytree(run_dir / ".snakemake", work / ".snakemake")
+    work = copy_run(run_dir, tmp_path / "c")
     module = work / "tacgen_lib/features/pretrained_vs_random.py"
     module.write_text(module.read_text() + "\n# an edit that changes the module's content\n")
     # the cost page reads knob points only, not the pretrained-vs-random edge
@@ -413,9 +408,7 @@ def test_edit_to_an_indirectly_imported_module_reruns_exactly_its_users(run_dir,
     backbones = {"family_probe", "aggregate_backbones"}
     assert direct == []
     assert users == {"probe", "aggregate_probes"} | robustness | backbones
-    work = copy_tree(tmp_path / "f")
-    shutil.copytree(run_dir / "results", work / "results")
-    shutil.copytree(run_dir / ".snakemake", work / ".snakemake")
+    work = copy_run(run_dir, tmp_path / "f")
     (work / module).write_text((work / module).read_text() + "\n# an edit\n")
     # its users rerun, then only what reads their outputs: the findings page, the edge
     # manifest, `all` and the backbone-family knob's points with the cost page (the free knobs
@@ -424,7 +417,7 @@ def test_edit_to_an_indirectly_imported_module_reruns_exactly_its_users(run_dir,
         "edge_manifest",
         "findings",
         "all",
-        "cost_backbone_points",
+        "cost_knob_points",
         "cost_of_accuracy",
     }
 
@@ -465,9 +458,7 @@ def test_report_builds_offline_and_reads_in_a_browser(run_dir):
 
 
 def test_tampered_edge_is_refused(run_dir, tmp_path):
-    work = copy_tree(tmp_path / "t")
-    shutil.copytree(run_dir / "results", work / "results")
-    shutil.copytree(run_dir / ".snakemake", work / ".snakemake")
+    work = copy_run(run_dir, tmp_path / "t")
     target = work / "results/corpus/manifest.parquet"
     data = bytearray(target.read_bytes())
     data[100] ^= 0xFF
@@ -479,25 +470,24 @@ def test_tampered_edge_is_refused(run_dir, tmp_path):
     assert target.read_bytes() == bytes(data)
 
 
-def test_bad_config_stops_with_the_key_named(tmp_path):
-    work = copy_tree(tmp_path / "bad")
+def refused_dry_run(work: Path, old: str, new: str) -> str:
+    """The output of a dry run of `work` with `old` replaced by `new` in config/test.yaml,
+    which must fail."""
     cfg = work / "config/test.yaml"
-    cfg.write_text(cfg.read_text().replace("taus: [0.07]", "taus: [-0.07]"))
+    cfg.write_text(cfg.read_text().replace(old, new))
     proc = smk(work, "--dry-run", check=False)
     assert proc.returncode != 0
-    assert (
-        "align.taus[0]: -0.07 is less than or equal to the minimum of 0"
-        in proc.stdout + proc.stderr
-    )
+    return proc.stdout + proc.stderr
+
+
+def test_bad_config_stops_with_the_key_named(tmp_path):
+    out = refused_dry_run(copy_tree(tmp_path / "bad"), "taus: [0.07]", "taus: [-0.07]")
+    assert "align.taus[0]: -0.07 is less than or equal to the minimum of 0" in out
 
 
 def test_a_regime_that_cannot_be_drawn_stops_before_any_job_naming_the_sizes(tmp_path):
     work = copy_tree(tmp_path / "regime")
-    cfg = work / "config/test.yaml"
-    cfg.write_text(cfg.read_text().replace("  n_pool: [24]", "  n_pool: [48]"))
-    proc = smk(work, "--dry-run", check=False)
-    assert proc.returncode != 0
-    out = proc.stdout + proc.stderr
+    out = refused_dry_run(work, "  n_pool: [24]", "  n_pool: [48]")
     assert "corpus 'sim_natural_r0' has 48 non-test rows (60 rows, 12 test)" in out
     assert "(16) and the largest pool (48) need 64 disjoint rows" in out
     assert not (work / "results").exists()

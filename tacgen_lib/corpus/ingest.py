@@ -130,6 +130,18 @@ def _read_ssvtp_split(csv_path: Path) -> dict[int, int]:
     return listed
 
 
+def _tvl_part(root: Path, part: str) -> Path:
+    """The folder of one part of the TVL dataset (``root/ssvtp``, ``root/hct``); a missing one
+    raises FileNotFoundError naming it."""
+    folder = root / part
+    if not folder.is_dir():
+        raise FileNotFoundError(
+            f"{part.upper()} folder {folder} not found; pass the unzipped TVL dataset folder "
+            "that holds ssvtp/ and hct/"
+        )
+    return folder
+
+
 def ingest_ssvtp(
     root: Path, *, corpus: str = "ssvtp", background: Path | None = None
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
@@ -141,12 +153,7 @@ def ingest_ssvtp(
     :data:`SAMPLE_COLUMNS` and :data:`SENSOR_COLUMNS`; rows sorted by ``sample_id``.
     """
     root = Path(root)
-    folder = root / "ssvtp"
-    if not folder.is_dir():
-        raise FileNotFoundError(
-            f"SSVTP folder {folder} not found; pass the unzipped TVL dataset folder that "
-            "holds ssvtp/ and hct/"
-        )
+    folder = _tvl_part(root, "ssvtp")
     sensor_id = f"{corpus}-bg"
     bg_path = Path(background) if background is not None else folder / SSVTP_BACKGROUND_NAME
     if not bg_path.is_file():
@@ -290,12 +297,7 @@ def ingest_hct(root: Path, *, corpus: str = "hct") -> tuple[pd.DataFrame, pd.Dat
     Columns: :data:`SAMPLE_COLUMNS` and :data:`SENSOR_COLUMNS`; rows sorted by ``sample_id``.
     """
     root = Path(root)
-    hct = root / "hct"
-    if not hct.is_dir():
-        raise FileNotFoundError(
-            f"HCT folder {hct} not found; pass the unzipped TVL dataset folder that holds "
-            "ssvtp/ and hct/"
-        )
+    hct = _tvl_part(root, "hct")
     backgrounds: dict[Path, tuple[str, Image]] = {}
     records: list[Record] = []
     for folder in _hct_data_folders(hct):

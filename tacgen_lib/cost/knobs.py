@@ -12,8 +12,9 @@ test checks this), the run-time estimate prices them with the main rules' calibr
 change to a main rule reaches the sweep by itself.
 
 What a knob's points read (`Knob.reads`) names one reader of `tacgen_lib.cost.readers`. The
-generator and policy knobs are `free`: their settings are the stages' own grids
-(`generate.samplers`, `policy.sweep_*`), so they rerun nothing.
+backbone, generator and policy knobs are `free`: their settings are the stages' own grids
+(their `keys`: `backbones.run`, `generate.samplers`, `policy.sweep_*`), so they rerun nothing;
+their points come through the same rule and the same readers as a swept knob's.
 
     knob              config key(s) a setting sets              reruns (main rules)
     align_steps       align.steps (align.budget = steps)        train_heads
@@ -25,6 +26,11 @@ generator and policy knobs are `free`: their settings are the stages' own grids
     image_size        features.image_size                       backbones, features, check
     backbone_arch     features.backbones.{vision,tactile}.arch  backbones, features, check
     pretrain_epochs   features.pretrain.epochs                  backbones, features, check
+    backbones         (free) backbones.run                      none: the families' own jobs
+    generate_steps    (free) generate.samplers (steps)          none: the sampling jobs
+    generate_sampler  (free) generate.samplers (samplers)       none: the sampling jobs
+    policy_width      (free) policy.sweep_hidden                none: the V-only policy jobs
+    policy_epochs     (free) policy.sweep_epochs                none: the V-only policy jobs
 """
 
 from __future__ import annotations
@@ -102,7 +108,8 @@ class Knob:
     edges into metrics; metrics: the metric names the page shows (None: all the reader gives;
     "{vision_target}" / "{tactile_target}" are the pretrained-vs-random targets). axis: how a
     value becomes the x position ("value", "height" of an [H, W] frame, "width" of a ViT).
-    free: the settings are a stage's own grid (no rerun, no module). has_default: whether a
+    free: the settings are a stage's own grid, the config key(s) `keys` name (no rerun, no
+    module; the grid's cells and seeds are the setting runs). has_default: whether a
     value can be the run's own setting (not for `align_steps`: the run budgets epochs).
     bootstrap_key: the config key of the resamples of the points' CIs (else the knob's
     `bootstrap`, default 2000).
@@ -158,11 +165,15 @@ KNOBS: dict[str, Knob] = {k.name: k for k in (
          keys=("features.pretrain.epochs",),
          metrics=("vision {vision_target} Δaccuracy pretrained − random",
                   "tactile {tactile_target} Δaccuracy pretrained − random"), **_FEATURES),
-    Knob("backbones", stage="features", reads="backbones", free=True),
-    Knob("generate_steps", stage="generate", reads="generate_steps", free=True),
-    Knob("generate_sampler", stage="generate", reads="generate_sampler", free=True),
-    Knob("policy_width", stage="policy", reads="policy_width", free=True),
-    Knob("policy_epochs", stage="policy", reads="policy_epochs", free=True),
+    Knob("backbones", stage="features", reads="backbones", keys=("backbones.run",), free=True),
+    Knob("generate_steps", stage="generate", reads="generate", keys=("generate.samplers",),
+         free=True),
+    Knob("generate_sampler", stage="generate", reads="generate", keys=("generate.samplers",),
+         free=True),
+    Knob("policy_width", stage="policy", reads="policy", keys=("policy.sweep_hidden",),
+         free=True),
+    Knob("policy_epochs", stage="policy", reads="policy", keys=("policy.sweep_epochs",),
+         free=True),
 )}
 # fmt: on
 
@@ -299,7 +310,7 @@ def knob_settings(name: str, entry: Mapping[str, Any], config: Mapping[str, Any]
         if values:
             raise ValueError(
                 f"config cost.knobs.{name}: its settings are the stage's own grid "
-                "(generate.samplers, policy.sweep_hidden / sweep_epochs); widen that instead"
+                f"({', '.join(knob.keys)}); widen that instead"
             )
         return []
     if not values:

@@ -14,6 +14,16 @@ returns the knob's points. `KNOBS[knob].reads` names the reader; `READERS` is th
   use, and Δ pretrained − random;
 - `simulation`: the reduced corpus's force band width, the headline Δ of its probe families
   and the simulate job's frames per second.
+
+The free knobs' settings are a stage's own grid (no rerun): each run is one cell of it (one
+per seed where the stage has seeds), its `summary` the stage's summary table:
+
+- `generate`: Δ_gen and the Fréchet distance of the generation summary's t_gen rows of one
+  corpus, target and guidance, per (sampler, steps) cell (`options`: sampler, steps);
+- `policy`: the V-only success of the policy summary per (hidden, epochs) cell;
+- `backbones`: each backbone family's V+T − V on the families' summary.
+
+A setting's seconds are assembled in one place, `spread.setting_seconds`.
 """
 
 from __future__ import annotations
@@ -25,6 +35,7 @@ from typing import Any
 
 import pandas as pd
 
+from tacgen_lib.cost import sweeps
 from tacgen_lib.cost.knob_metrics import (
     BAND_WIDTH,
     FRAMES_PER_S,
@@ -36,13 +47,7 @@ from tacgen_lib.cost.knob_metrics import (
     metric_row,
     probe_metric_ids,
 )
-from tacgen_lib.cost.spread import replicate_seconds
-from tacgen_lib.cost.sweeps import (
-    Seconds,
-    align_points,
-    bootstrap_spread_points,
-    permutation_points,
-)
+from tacgen_lib.cost.spread import Seconds, setting_seconds
 from tacgen_lib.runtime.benchmarks import Benchmark
 
 __all__ = ["EDGE_COLUMNS", "READERS", "SettingRun", "headline_row", "read_knob"]
@@ -73,18 +78,11 @@ class SettingRun:
 
 
 def _seconds(runs: Sequence[SettingRun]) -> dict[str, Seconds]:
-    """Per label: the cost of one run (replicates of a setting are averaged)."""
-    by_label: dict[str, list[SettingRun]] = {}
+    """Per label: the cost of one run (`setting_seconds`; replicates of a setting averaged)."""
+    by_label: dict[str, list[Sequence[Benchmark]]] = {}
     for r in runs:
-        by_label.setdefault(r.label, []).append(r)
-    out = {}
-    for label, reps in by_label.items():
-        if len(reps) == 1:
-            b = reps[0].benchmarks
-            out[label] = Seconds(sum(x.wall for x in b), sum(x.cpu for x in b), len(b))
-        else:
-            out[label] = Seconds(*replicate_seconds([x for r in reps for x in r.benchmarks]))
-    return out
+        by_label.setdefault(r.label, []).append(r.benchmarks)
+    return {label: setting_seconds(reps) for label, reps in by_label.items()}
 
 
 def _default_label(runs: Sequence[SettingRun]) -> str | None:
@@ -115,7 +113,7 @@ def read_align(knob: str, runs: Sequence[SettingRun], options: Mapping[str, Any]
         (int(r.edges["metrics"][0]["n_train_rows"].iloc[0]) for r in runs if r.label == "all"),
         None,
     )
-    return align_points(
+    return sweeps.align_points(
         knob,
         ranks,
         _seconds(runs),
@@ -149,12 +147,12 @@ def _replicates(runs: Sequence[SettingRun]) -> pd.DataFrame:
 
 def read_probe_bootstrap(knob: str, runs: Sequence[SettingRun], options: Mapping[str, Any]):
     reps = _replicates(runs)
-    return bootstrap_spread_points(knob, reps, _seconds(runs), _default_label(runs))
+    return sweeps.bootstrap_spread_points(knob, reps, _seconds(runs), _default_label(runs))
 
 
 def read_probe_permutations(knob: str, runs: Sequence[SettingRun], options: Mapping[str, Any]):
     reps = _replicates(runs)
-    return permutation_points(knob, reps, _seconds(runs), _default_label(runs))
+    return sweeps.permutation_points(knob, reps, _seconds(runs), _default_label(runs))
 
 
 def _settings(runs: Sequence[SettingRun], metrics: Callable[[SettingRun], list[dict]]):
@@ -217,12 +215,60 @@ def read_simulation(knob: str, runs: Sequence[SettingRun], options: Mapping[str,
     return knob_points(knob, "corpus", _settings(runs, metrics), options["metrics"])
 
 
+def _cells(rows: pd.DataFrame, keys: list[tuple], cells: Mapping[tuple, SettingRun]):
+    """`rows` of the grid cells the runs name (`keys`: each row's cell), with each run's
+    `label` and x position (`setting`)."""
+    keep = [k in cells for k in keys]
+    kept = [k for k in keys if k in cells]
+    return rows[keep].assign(
+        label=[cells[k].label for k in kept], setting=[cells[k].number for k in kept]
+    )
+
+
+def read_generate(knob: str, runs: Sequence[SettingRun], options: Mapping[str, Any]):
+    summary = runs[0].edges["summary"][0]
+    cells = {(r.options["sampler"], int(r.options["steps"])): r for r in runs}
+    rows = summary[
+        (summary["input"] == "t_gen")
+        & (summary["corpus"] == options["corpus"])
+        & (summary["target"] == options["target"])
+        & (summary["guidance"].astype(float) == float(options["guidance"]))
+    ]
+    keys = [(s, int(st)) for s, st in zip(rows["sampler"], rows["steps"], strict=True)]
+    rows = _cells(rows, keys, cells)
+    if rows.empty:
+        raise ValueError(
+            f"knob {knob!r}: the generation summary has no t_gen rows for corpus "
+            f"{options['corpus']!r}, target {options['target']!r}, guidance {options['guidance']}"
+        )
+    seconds, default = _seconds(runs), _default_label(runs)
+    return sweeps.generate_points(knob, rows, seconds, default, target=options["target"])
+
+
+def read_policy(knob: str, runs: Sequence[SettingRun], options: Mapping[str, Any]):
+    summary = runs[0].edges["summary"][0]
+    cells = {(int(r.options["hidden"]), int(r.options["epochs"])): r for r in runs}
+    rows = summary[summary["condition"] == "v"]
+    keys = [(int(h), int(e)) for h, e in zip(rows["hidden"], rows["epochs"], strict=True)]
+    return sweeps.policy_points(
+        knob, _cells(rows, keys, cells), _seconds(runs), _default_label(runs)
+    )
+
+
+def read_backbones(knob: str, runs: Sequence[SettingRun], options: Mapping[str, Any]):
+    rows, order = runs[0].edges["summary"][0], [r.label for r in runs]
+    return sweeps.backbone_points(knob, rows, _seconds(runs), order, _default_label(runs))
+
+
 READERS: dict[str, Callable[[str, Sequence[SettingRun], Mapping[str, Any]], pd.DataFrame]] = {
     "align": read_align,
     "probe_bootstrap": read_probe_bootstrap,
     "probe_permutations": read_probe_permutations,
     "features": read_features,
     "simulation": read_simulation,
+    "generate": read_generate,
+    "policy": read_policy,
+    "backbones": read_backbones,
 }
 
 

@@ -8,20 +8,32 @@ This module owns the new numerics of the knob sweeps (the rest is the stages' ow
 - `retrieval_bootstrap`: top-1 and median rank of paired retrieval, averaged over alignment
   seeds, with a percentile CI from resampling the test rows (the same resample for every
   seed, drawn by the probes' `resample_indices`);
-- `replicate_seconds`: the cost of one run of a setting from its replicate jobs' benchmarks.
+- `replicate_seconds`: the cost of one run of a setting from its replicate jobs' benchmarks;
+- `setting_seconds`: what one run of a setting costs (`Seconds`), from the benchmark files of
+  its runs, the one place every knob's seconds are assembled.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
 from tacgen_lib.probes.bootstrap import resample_indices
 from tacgen_lib.runtime.benchmarks import Benchmark
 
-__all__ = ["replicate_seconds", "retrieval_bootstrap", "sd_interval"]
+__all__ = ["Seconds", "replicate_seconds", "retrieval_bootstrap", "sd_interval", "setting_seconds"]
+
+
+@dataclass(frozen=True)
+class Seconds:
+    """What one run of a setting costs: wall and CPU seconds, from `n_jobs` benchmark files."""
+
+    wall: float
+    cpu: float
+    n_jobs: int
 
 
 def sd_interval(values: Sequence[float], confidence: float = 0.95) -> tuple[float, float, float]:
@@ -96,3 +108,21 @@ def replicate_seconds(benchmarks: Sequence[Benchmark]) -> tuple[float, float, in
         else math.nan
     )
     return wall, cpu, len(benchmarks)
+
+
+def setting_seconds(runs: Sequence[Sequence[Benchmark]]) -> Seconds:
+    """What one run of a setting costs, from its runs' benchmark files (one list per run: the
+    jobs of one run add up). One run: its jobs' wall and CPU seconds summed. Several runs
+    (replicate seeds, run only to measure a spread): the mean over runs of each run's sums
+    (`replicate_seconds`). `n_jobs` counts every file read."""
+    if len(runs) == 1:
+        jobs = runs[0]
+        return Seconds(sum(b.wall for b in jobs), sum(b.cpu for b in jobs), len(jobs))
+    per_run = [
+        Benchmark(
+            sum(b.wall for b in jobs), sum(b.cpu for b in jobs), max(b.max_rss_mb for b in jobs)
+        )
+        for jobs in runs
+    ]
+    wall, cpu, _ = replicate_seconds(per_run)
+    return Seconds(wall, cpu, sum(len(jobs) for jobs in runs))

@@ -40,6 +40,7 @@ __all__ = [
     "predicted_x0_eps",
     "project_guidance",
     "sample",
+    "sampling_plan",
 ]
 
 
@@ -143,6 +144,29 @@ def ddim_timesteps(n_train: int, steps: int) -> np.ndarray:
     return np.unique(ts)[::-1].copy()
 
 
+def sampling_plan(
+    schedule: Schedule, sampler: str, steps: int, prediction: str | None = None
+) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """What every sampler of the latent generator (`sample`, `sampling_torch.sample_torch`)
+    runs on, after checking `sampler` (and `prediction`, where given) and `steps`: the
+    schedule's float32 coefficients (`Schedule.arrays`), abar_t (float64), sqrt(abar_t) and
+    sqrt(1 - abar_t) (float32), and the timesteps, T-1 down to 0 for ``ddpm`` (which runs all
+    T) or `ddim_timesteps(T, steps)` for ``ddim``."""
+    if sampler not in ("ddpm", "ddim"):
+        raise ValueError(f"sampler must be 'ddpm' or 'ddim', got {sampler!r}")
+    if prediction is not None and prediction not in ("eps", "v"):
+        raise ValueError(f"prediction must be 'eps' or 'v', got {prediction!r}")
+    T = schedule.n_steps
+    if sampler == "ddpm" and steps != T:
+        raise ValueError(f"DDPM ancestral sampling runs all T = {T} steps, got steps = {steps}")
+    coef = schedule.arrays(np.float32)
+    abar64 = schedule.alphas_cumprod
+    sqrt_abar = np.sqrt(abar64).astype(np.float32)
+    sqrt_1m = np.sqrt(schedule.one_minus_alphas_cumprod).astype(np.float32)
+    ts = np.arange(T - 1, -1, -1) if sampler == "ddpm" else ddim_timesteps(T, steps)
+    return coef, abar64, sqrt_abar, sqrt_1m, ts
+
+
 def sample(
     model: DenoiserArrays,
     schedule: Schedule,
@@ -163,16 +187,7 @@ def sample(
     vectors (bit for bit on one machine). ``ddpm`` runs all T steps (`steps` must equal T);
     ``ddim`` runs `ddim_timesteps(T, steps)`.
     """
-    if sampler not in ("ddpm", "ddim"):
-        raise ValueError(f"sampler must be 'ddpm' or 'ddim', got {sampler!r}")
-    T = schedule.n_steps
-    if sampler == "ddpm" and steps != T:
-        raise ValueError(f"DDPM ancestral sampling runs all T = {T} steps, got steps = {steps}")
-    coef = schedule.arrays(np.float32)
-    abar64 = schedule.alphas_cumprod
-    sqrt_abar = np.sqrt(abar64).astype(np.float32)
-    sqrt_1m = np.sqrt(schedule.one_minus_alphas_cumprod).astype(np.float32)
-    ts = np.arange(T - 1, -1, -1) if sampler == "ddpm" else ddim_timesteps(T, steps)
+    coef, abar64, sqrt_abar, sqrt_1m, ts = sampling_plan(schedule, sampler, steps)
     rng = np.random.default_rng(int(seed))
     cond32 = np.ascontiguousarray(cond, dtype=np.float32)
     d_t = model.dims["dim_t"]

@@ -21,7 +21,7 @@ import torch
 from tacgen_lib.generate.cells import guidance_passes
 from tacgen_lib.generate.inference import GeneratorWeights
 from tacgen_lib.generate.model import Denoiser
-from tacgen_lib.generate.sampling import ddim_timesteps
+from tacgen_lib.generate.sampling import sampling_plan
 from tacgen_lib.generate.schedules import Schedule
 
 __all__ = ["denoiser_module", "generate_torch", "guided_output_torch", "sample_torch"]
@@ -77,19 +77,8 @@ def sample_torch(
        6-7); DDIM: sqrt(abar_prev) x0 + sqrt(1 - abar_prev - sigma^2) eps + sigma z (eq. 12)
     Noise: numpy Generator(seed) in `sample`'s order, so both samplers use the same numbers.
     """
-    if sampler not in ("ddpm", "ddim"):
-        raise ValueError(f"sampler must be 'ddpm' or 'ddim', got {sampler!r}")
-    if prediction not in ("eps", "v"):
-        raise ValueError(f"prediction must be 'eps' or 'v', got {prediction!r}")
-    T = schedule.n_steps
-    if sampler == "ddpm" and steps != T:
-        raise ValueError(f"DDPM ancestral sampling runs all T = {T} steps, got steps = {steps}")
+    coef, abar64, sqrt_abar, sqrt_1m, ts = sampling_plan(schedule, sampler, steps, prediction)
     dev = next(model.parameters()).device
-    coef = schedule.arrays(np.float32)
-    abar64 = schedule.alphas_cumprod
-    sqrt_abar = np.sqrt(abar64).astype(np.float32)
-    sqrt_1m = np.sqrt(schedule.one_minus_alphas_cumprod).astype(np.float32)
-    ts = np.arange(T - 1, -1, -1) if sampler == "ddpm" else ddim_timesteps(T, steps)
     rng = np.random.default_rng(int(seed))
     cond32 = np.ascontiguousarray(cond, dtype=np.float32)
     d_t = model.dims["dim_t"]

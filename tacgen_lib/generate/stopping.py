@@ -5,7 +5,7 @@ DDPM, the pixel DDPM, Pix2Pix).
 lower is better) and says when ``patience`` evaluations in a row have not beaten it (patience 0:
 never). It starts from the module's initial state with a given score (the untrained model's
 validation score where one is measured, else infinity), so a run that never improves ends on
-its initial weights.
+its initial weights. `EarlyStopping.restore` ends a fit on that best state.
 """
 
 from __future__ import annotations
@@ -42,3 +42,11 @@ class EarlyStopping:
         self.bad += 1
         self.stopped = bool(self.patience and self.bad >= self.patience)
         return self.stopped
+
+    def restore(self, module: nn.Module) -> nn.Module:
+        """The end of every fit: `module` with the best state loaded, in eval mode, on the CPU
+        (the same module, returned)."""
+        module.load_state_dict(self.state)
+        module.eval()
+        module.to("cpu")
+        return module

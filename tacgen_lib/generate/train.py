@@ -1,7 +1,8 @@
 """Training the latent generator: the denoising objective, AdamW + EMA, early stopping, save/load.
 
 This module owns `fit_generator` (one generator per corpus x seed, on the train split's V -> T
-pairs, early-stopped on the val split's loss), its objective `diffusion_loss` and the hashed
+pairs, early-stopped on the val split's loss), the EMA training every diffusion generator shares
+(`train_ema`, the pixel DDPM's too), its objective `diffusion_loss` and the hashed
 weights file (`save_generator` / `load_generator`: EMA weights, the train-split standardisation
 statistics, the settings and the curve in one file with a sidecar, like the alignment heads).
 
@@ -13,6 +14,7 @@ seeded with `seed`, validation noise from a second generator seeded with seed + 
 from __future__ import annotations
 
 import copy
+import math
 import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -37,13 +39,16 @@ from tacgen_lib.io import hashed
 from tacgen_lib.optim import AdamW
 
 __all__ = [
+    "EMATraining",
     "GeneratorFit",
+    "ValidationDraws",
     "diffusion_loss",
     "fit_generator",
     "load_generator",
     "make_optimiser",
     "run_training_steps",
     "save_generator",
+    "train_ema",
     "training_step",
 ]
 
@@ -175,6 +180,120 @@ def run_training_steps(
 
 
 @dataclass(frozen=True)
+class ValidationDraws:
+    """What every evaluation of a fit scores: the val rows (x0, cond) and, per repeat, the same
+    timesteps ``t`` (repeats, n) and noise (repeats, n, d), drawn once from a generator seeded
+    with seed + 1; the schedule's (sqrt(abar_t), sqrt(1 - abar_t)) and the target."""
+
+    x: Tensor
+    cond: Tensor
+    t: Tensor
+    noise: Tensor
+    sqrt_abar: Tensor
+    sqrt_1m: Tensor
+    prediction: str
+
+    def loss(self, model: nn.Module, r: int, rows: slice = slice(None)) -> Tensor:
+        """`diffusion_loss` of `model` on repeat r's draws of `rows` (no condition dropped)."""
+        return diffusion_loss(
+            model,
+            self.x[rows],
+            self.cond[rows],
+            self.t[r, rows],
+            self.noise[r, rows],
+            None,
+            self.sqrt_abar,
+            self.sqrt_1m,
+            self.prediction,
+        )
+
+
+@dataclass(frozen=True)
+class EMATraining:
+    """A finished `train_ema`: the EMA module with its best state (eval mode, on the CPU), the
+    `EarlyStopping` that chose it, the last step run and the curve's rows."""
+
+    ema: nn.Module
+    stopper: EarlyStopping
+    steps_run: int
+    curve: list[dict]
+
+
+def train_ema(
+    net: nn.Module,
+    train: tuple[Tensor, Tensor],
+    val: tuple[Tensor, Tensor],
+    settings: Any,
+    seed: int,
+    device: torch.device | str,
+    *,
+    val_loss: Callable[[nn.Module, ValidationDraws], float],
+    wrap: Callable[[nn.Module], nn.Module] = lambda m: m,
+    score_untrained: bool = False,
+    progress: Callable[[str], Any],
+) -> EMATraining:
+    """Train an initialised denoiser `net` with an EMA copy, early-stopped on validation: the
+    training every diffusion generator shares (`fit_generator`, the pixel DDPM's
+    `tacgen_lib.generate.pixel.ddpm.fit_pixel_ddpm`).
+
+    1. the schedule of ``settings`` (``schedule``, ``train_steps``), the EMA copy of `net`, all
+       moved to `device` (on the CPU no move); AdamW (`make_optimiser`) over `net`
+    2. `ValidationDraws` of the val rows (`_VAL_REPEATS` repeats, from seed + 1)
+    3. `score_untrained`: the untrained EMA model scored as curve row step 0 (train loss NaN)
+       and the stopper's starting score; else the stopper starts at infinity
+    4. `run_training_steps` (draws from a generator seeded with `seed`), then the EMA copy with
+       its best state (`EarlyStopping.restore`)
+
+    `wrap` turns a module into what `diffusion_loss` calls (the pixel DDPM's rows view of its
+    U-Net); `val_loss` scores the wrapped EMA model on the draws.
+    """
+    schedule = make_schedule(settings.schedule, settings.train_steps)
+    sqrt_abar = torch.from_numpy(np.sqrt(schedule.alphas_cumprod)).float()
+    sqrt_1m = torch.from_numpy(np.sqrt(schedule.one_minus_alphas_cumprod)).float()
+    ema = copy.deepcopy(net)
+    ema.requires_grad_(False)
+    dev = torch.device(device)  # on the CPU every `.to` below is no move
+    net.to(dev)
+    ema.to(dev)
+    x_tr, c_tr, x_va, c_va = (a.to(dev) for a in (*train, *val))
+    sqrt_abar, sqrt_1m = sqrt_abar.to(dev), sqrt_1m.to(dev)
+    model, ema_model = wrap(net), wrap(ema)
+    opt = make_optimiser(list(net.parameters()), settings)
+    gen = torch.Generator().manual_seed(int(seed))
+    # Fixed validation draws: every evaluation scores the same (t, noise) for each val row.
+    vgen = torch.Generator().manual_seed(int(seed) + 1)
+    n_va = x_va.shape[0]
+    val_t = torch.randint(0, schedule.n_steps, (_VAL_REPEATS, n_va), generator=vgen).to(dev)
+    val_noise = torch.randn(_VAL_REPEATS, n_va, x_tr.shape[1], generator=vgen).to(dev)
+    draws = ValidationDraws(x_va, c_va, val_t, val_noise, sqrt_abar, sqrt_1m, settings.prediction)
+
+    def validate() -> float:
+        return val_loss(ema_model, draws)
+
+    curve: list[dict] = []
+    start = math.inf
+    if score_untrained:
+        vl0 = validate()
+        curve.append({"step": 0, "train_loss": math.nan, "val_loss": vl0})
+        start = vl0 if np.isfinite(vl0) else math.inf
+    stopper = EarlyStopping(ema, settings.patience, start)
+    step = run_training_steps(
+        model,
+        opt,
+        ema,
+        (x_tr, c_tr),
+        (sqrt_abar, sqrt_1m),
+        settings,
+        gen=gen,
+        val_loss=validate,
+        stopper=stopper,
+        curve=curve,
+        progress=progress,
+    )
+    return EMATraining(stopper.restore(ema), stopper, step, curve)
+
+
+@dataclass(frozen=True)
 class GeneratorFit(GeneratorRecord):
     """A trained generator with its torch EMA denoiser (eval mode), for training-side use."""
 
@@ -190,6 +309,16 @@ def _as_f32(x: np.ndarray, name: str) -> Tensor:
     if arr.ndim != 2 or not np.isfinite(arr).all():
         raise ValueError(f"{name}: expected a finite (n, d) array, got shape {arr.shape}")
     return torch.from_numpy(arr.astype(np.float32))
+
+
+def _val_loss(ema: nn.Module, draws: ValidationDraws) -> float:
+    """The mean over repeats of the loss on all val rows at once (NaN without val rows)."""
+    if draws.x.shape[0] == 0:
+        return float("nan")
+    ema.eval()
+    with torch.no_grad():
+        losses = [draws.loss(ema, r).item() for r in range(_VAL_REPEATS)]
+    return float(np.mean(losses))
 
 
 def fit_generator(
@@ -221,80 +350,23 @@ def fit_generator(
     c_tr = _as_f32(v_train, "v_train")
     x_va = _as_f32(std.forward(t_val), "t_val") if len(t_val) else x_tr[:0]
     c_va = _as_f32(v_val, "v_val") if len(v_val) else c_tr[:0]
-    schedule = make_schedule(settings.schedule, settings.train_steps)
-    sqrt_abar = torch.from_numpy(np.sqrt(schedule.alphas_cumprod)).float()
-    sqrt_1m = torch.from_numpy(np.sqrt(schedule.one_minus_alphas_cumprod)).float()
-    T = schedule.n_steps
-
     torch.manual_seed(int(seed))
     model = Denoiser(
         x_tr.shape[1], c_tr.shape[1], settings.hidden, settings.blocks, settings.time_dim
     )
-    ema = copy.deepcopy(model)
-    ema.requires_grad_(False)
-    dev = torch.device(device)  # on the CPU every `.to` below is no move
-    model.to(dev)
-    ema.to(dev)
-    x_tr, c_tr, x_va, c_va = (a.to(dev) for a in (x_tr, c_tr, x_va, c_va))
-    sqrt_abar, sqrt_1m = sqrt_abar.to(dev), sqrt_1m.to(dev)
-    params = list(model.parameters())
-    opt = make_optimiser(params, settings)
-    gen = torch.Generator().manual_seed(int(seed))
-    # Fixed validation draws: every evaluation scores the same (t, noise) for each val row.
-    vgen = torch.Generator().manual_seed(int(seed) + 1)
-    n_va = x_va.shape[0]
-    val_t = torch.randint(0, T, (_VAL_REPEATS, n_va), generator=vgen).to(dev)
-    val_noise = torch.randn(_VAL_REPEATS, n_va, x_tr.shape[1], generator=vgen).to(dev)
-
-    def val_loss() -> float:
-        if n_va == 0:
-            return float("nan")
-        ema.eval()
-        with torch.no_grad():
-            losses = [
-                diffusion_loss(
-                    ema,
-                    x_va,
-                    c_va,
-                    val_t[r],
-                    val_noise[r],
-                    None,
-                    sqrt_abar,
-                    sqrt_1m,
-                    settings.prediction,
-                ).item()
-                for r in range(_VAL_REPEATS)
-            ]
-        return float(np.mean(losses))
-
-    curve: list[dict] = []
-    stopper = EarlyStopping(ema, settings.patience)
-    step = run_training_steps(
-        model,
-        opt,
-        ema,
-        (x_tr, c_tr),
-        (sqrt_abar, sqrt_1m),
-        settings,
-        gen=gen,
-        val_loss=val_loss,
-        stopper=stopper,
-        curve=curve,
-        progress=say,
-    )
-    ema.load_state_dict(stopper.state)
-    ema.eval()
-    ema.to("cpu")
+    pairs = (x_tr, c_tr), (x_va, c_va)
+    fit = train_ema(model, *pairs, settings, seed, device, val_loss=_val_loss, progress=say)
+    stopper = fit.stopper
     return GeneratorFit(
         std,
         settings,
         int(seed),
-        curve,
+        fit.curve,
         stopper.step,
         stopper.score,
-        step,
+        fit.steps_run,
         stopper.stopped,
-        model=ema,
+        model=fit.ema,
     )
 
 

@@ -35,7 +35,8 @@ from dataclasses import dataclass, replace
 import mujoco
 import numpy as np
 
-from tacgen_lib.corpus.sim.scenes import Scene, validate_scene
+from tacgen_lib.corpus.sim.physics import state_problems
+from tacgen_lib.corpus.sim.scenes import Scene, disable_undeclared, validate_scene
 from tacgen_lib.policy.settings import PolicySettings
 
 __all__ = [
@@ -252,14 +253,7 @@ class GraspTask:
             task_xml(scene, settings, settings.size_range[1])
         )
         m = self.model
-        flags = 0
-        if not scene.has("gravity"):
-            flags |= mujoco.mjtDisableBit.mjDSBL_GRAVITY
-        if not scene.has("friction_shear"):
-            flags |= mujoco.mjtDisableBit.mjDSBL_FRICTIONLOSS
-            m.geom_condim[:] = 1
-        flags |= mujoco.mjtDisableBit.mjDSBL_SENSOR  # the pads are read by rays, not sensors
-        m.opt.disableflags = int(m.opt.disableflags) | int(flags)
+        disable_undeclared(m, scene, sensors=False)  # the pads are read by rays, not sensors
         self.data = mujoco.MjData(m)
         ids = mujoco.mj_name2id
         self.object_body = ids(m, mujoco.mjtObj.mjOBJ_BODY, "object")
@@ -355,11 +349,10 @@ class GraspTask:
         return float(self.data.qpos[self.lift_qpos])
 
     def check(self, where: str) -> None:
-        d = self.data
-        bad = [mujoco.mjtWarning(i).name for i in range(len(d.warning)) if d.warning[i].number > 0]
-        if bad or not np.all(np.isfinite(d.qpos)) or not np.all(np.isfinite(d.qacc)):
+        bad = state_problems(self.data)
+        if bad:
             raise RuntimeError(
-                f"scene 'grasp_lift': {where}: MuJoCo warnings {bad or ['non-finite state']} "
+                f"scene 'grasp_lift': {where}: MuJoCo warnings {bad} "
                 f"for episode {self.episode}; lower the timestep or the stiffness range"
             )
 

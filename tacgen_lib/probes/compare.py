@@ -171,52 +171,26 @@ def compare(
     fixed_v, fixed_vt = v_probe.fixed(kind), vt_probe.fixed(kind)
     common = {"metric": metric, "seed": settings.draw_seed}
     paired = PairedRows(v_train, t_train, y_tr, v_test, t_test, y_te, fusion)
+    # each control: its function and its probes (the V and the V+T probe, or the V+T probe
+    # that is refitted and the V probe), then its number of draws
+    pair = {"probe_v": fixed_v, "probe_vt": fixed_vt, **common}
+    refit = {"probe": fixed_vt, "probe_v": fixed_v, **common}
     runs = {
-        "train_resample": (
-            settings.train_resamples,
-            lambda: train_resample_diagnostic(
-                paired,
-                probe_v=fixed_v,
-                probe_vt=fixed_vt,
-                n_resamples=settings.train_resamples,
-                **common,
-            ),
-        ),
-        "tactile_permutation": (
-            settings.permutations,
-            lambda: tactile_permutation_control(
-                paired,
-                probe=fixed_vt,
-                probe_v=fixed_v,
-                n_permutations=settings.permutations,
-                **common,
-            ),
-        ),
-        "label_permutation": (
-            settings.label_permutations,
-            lambda: label_permutation_control(
-                paired,
-                probe_v=fixed_v,
-                probe_vt=fixed_vt,
-                n_permutations=settings.label_permutations,
-                **common,
-            ),
-        ),
-        "random_features": (
-            settings.random_draws,
-            lambda: random_feature_control(
-                paired,
-                probe=fixed_vt,
-                probe_v=fixed_v,
-                n_draws=settings.random_draws,
-                **common,
-            ),
-        ),
+        "train_resample": (train_resample_diagnostic, pair),
+        "tactile_permutation": (tactile_permutation_control, refit),
+        "label_permutation": (label_permutation_control, pair),
+        "random_features": (random_feature_control, refit),
+    }
+    draws = {
+        "train_resample": ("n_resamples", settings.train_resamples),
+        "tactile_permutation": ("n_permutations", settings.permutations),
+        "label_permutation": ("n_permutations", settings.label_permutations),
+        "random_features": ("n_draws", settings.random_draws),
     }
     from sklearn.exceptions import ConvergenceWarning  # only where controls are run
 
     for name in CONTROLS:
-        count, call = runs[name]
+        (control, probes), (count_name, count) = runs[name], draws[name]
         if count <= 0:
             continue
         with warnings.catch_warnings(record=True) as caught:
@@ -224,7 +198,7 @@ def compare(
             # refit; the warnings are counted into the control's notes, not flooded to the log.
             warnings.simplefilter("always", category=ConvergenceWarning)
             try:
-                row = _control_row(name, call())
+                row = _control_row(name, control(paired, **probes, **{count_name: count}))
             except ValueError as exc:  # e.g. a training resample left holding one class
                 row = {"control": name, "status": "failed", "notes": f"control failed: {exc}"}
         for w in caught:

@@ -69,18 +69,26 @@ def _one(x_train: np.ndarray, x_test: np.ndarray, y: np.ndarray, **kw) -> Refits
 
 def _t_replaced(
     rows: PairedRows,
-    refits: Refits,
+    v: tuple[np.ndarray, np.ndarray],
+    t: tuple[DesignBlock, DesignBlock],
     *,
     probe: FixedProbe,
-    probe_v: FixedProbe,
+    probe_v: FixedProbe | None,
     metric: Metric,
-    v_train: np.ndarray,
-    v_test: np.ndarray,
 ) -> dict:
     """Delta of a control that replaces T per problem (permuted, or random draws): the V+T
-    probe refitted for every problem of `refits`, the V probe once on all training rows. The
-    V probe goes through the batched solver (B = 1) when the V+T side does, so both sides of
-    every Delta share a solver."""
+    probe refitted on fuse(V, T) for every problem of the replaced blocks `t` (train, test),
+    the V probe (``probe_v``, default ``probe``) once on all training rows of `v` (train,
+    test). The V probe goes through the batched solver (B = 1) when the V+T side does, so both
+    sides of every Delta share a solver."""
+    v_train, v_test = v
+    refits = Refits(
+        (DesignBlock(v_train), t[0]),
+        (DesignBlock(v_test), t[1]),
+        np.asarray(rows.y_train),
+        fusion=rows.fusion,
+    )
+    probe_v = probe_v or probe
     batched = probe.batches(refits)
     y_train, y_test = np.asarray(rows.y_train), np.asarray(rows.y_test)
     v_refit = probe_v.refit_many(_one(v_train, v_test, y_train), batched=batched)
@@ -175,21 +183,8 @@ def tactile_permutation_control(
         raise ValueError("tactile_permutation_control: V and T must have the same rows")
     rng = np.random.default_rng(seed)
     perm_tr = permutations(v_train.shape[0], n_permutations, rng)
-    refits = Refits(
-        (DesignBlock(v_train), DesignBlock(t_train, perm_tr)),
-        (DesignBlock(v_test), DesignBlock(t_test)),  # test pairs intact
-        np.asarray(rows.y_train),
-        fusion=rows.fusion,
-    )
-    out = _t_replaced(
-        rows,
-        refits,
-        probe=probe,
-        probe_v=probe_v or probe,
-        metric=metric,
-        v_train=v_train,
-        v_test=v_test,
-    )
+    t = DesignBlock(t_train, perm_tr), DesignBlock(t_test)  # test pairs intact
+    out = _t_replaced(rows, (v_train, v_test), t, probe=probe, probe_v=probe_v, metric=metric)
     return {**out, "n_permutations": n_permutations}
 
 
@@ -253,21 +248,8 @@ def random_feature_control(
     for j in range(n_draws):
         r_tr[j] = mu + sd * rng.standard_normal(t_train.shape)
         r_te[j] = mu + sd * rng.standard_normal((n_test, d))
-    refits = Refits(
-        (DesignBlock(rows.v_train), DesignBlock(r_tr)),
-        (DesignBlock(rows.v_test), DesignBlock(r_te)),
-        np.asarray(rows.y_train),
-        fusion=rows.fusion,
-    )
-    out = _t_replaced(
-        rows,
-        refits,
-        probe=probe,
-        probe_v=probe_v or probe,
-        metric=metric,
-        v_train=rows.v_train,
-        v_test=rows.v_test,
-    )
+    v, t = (rows.v_train, rows.v_test), (DesignBlock(r_tr), DesignBlock(r_te))
+    out = _t_replaced(rows, v, t, probe=probe, probe_v=probe_v, metric=metric)
     return {**out, "n_draws": n_draws}
 
 

@@ -96,31 +96,14 @@ def fit_probe(
             ),
             notes=f"width {mlp.width}, weight decay {mlp.weight_decay:g}",
         )
-    if settings.kind == "ridge" and settings.protocol == "standardised":
-        from tacgen_lib.probes.scaling import FixedStandardisedRidge, fit_standardised_ridge
-
-        sp = fit_standardised_ridge(
-            X_train,
-            y_train,
-            settings.lambdas,
-            n_folds=min(settings.folds, len(y_train)),
-            seed=settings.seed,
-            sample_ids=train_ids,
-            repeats=settings.cv_repeats,
-        )
-        grid = sp.predict_grid(X_test, sample_ids=test_ids)
-        return FittedProbe(
-            grid[sp.best],
-            sp.lam,
-            sp.lambdas,
-            sp.cv_scores,
-            True,
-            None,
-            grid,
-            fixed_probe=FixedStandardisedRidge(sp.lam),
-        )
     if settings.kind == "ridge":
-        probe = fit_ridge_probe(
+        standardised = settings.protocol == "standardised"
+        fit_ridge = fit_ridge_probe
+        if standardised:  # scikit-learn's scaler is imported only where it is used
+            from tacgen_lib.probes.scaling import FixedStandardisedRidge, fit_standardised_ridge
+
+            fit_ridge = fit_standardised_ridge
+        probe = fit_ridge(
             X_train,
             y_train,
             settings.lambdas,
@@ -129,9 +112,20 @@ def fit_probe(
             sample_ids=train_ids,
             repeats=settings.cv_repeats,
         )
+        grid = probe.predict_grid(X_test, sample_ids=test_ids)  # same decomposition as the CV
+        if standardised:
+            return FittedProbe(
+                grid[probe.best],
+                probe.lam,
+                probe.lambdas,
+                probe.cv_scores,
+                True,
+                None,
+                grid,
+                fixed_probe=FixedStandardisedRidge(probe.lam),
+            )
         sel = probe.selection
         pred = probe.predict(X_test, sample_ids=test_ids)
-        grid = probe.predict_grid(X_test, sample_ids=test_ids)  # same decomposition as the CV
         return FittedProbe(pred, probe.lam, sel.lambdas, sel.cv_scores, True, None, grid)
     from tacgen_lib.probes.logistic import fit_logistic
 

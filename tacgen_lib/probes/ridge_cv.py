@@ -25,13 +25,26 @@ from tacgen_lib.probes.ridge_path import (
 
 
 @dataclass(frozen=True)
-class LambdaSelection:
-    """Outcome of `select_lambda_cv`."""
+class LambdaCV:
+    """A lambda chosen by K-fold CV: the chosen `lam`, the grid, the mean held-out R^2 per
+    lambda and each fold's (every ridge probe's selection: `LambdaSelection`, the standardised
+    probe of `tacgen_lib.probes.scaling`)."""
 
     lam: float
     lambdas: np.ndarray  # (L,)
     cv_scores: np.ndarray  # (L,) mean held-out R^2
     fold_scores: np.ndarray  # (K, L)
+
+    @property
+    def best(self) -> int:
+        """The chosen lambda's position in the grid."""
+        return int(np.flatnonzero(self.lambdas == self.lam)[0])
+
+
+@dataclass(frozen=True)
+class LambdaSelection(LambdaCV):
+    """Outcome of `select_lambda_cv`: the `LambdaCV` with its folds and solvers."""
+
     folds: list[np.ndarray]
     solver: list[str]  # per fold: "deletion", "gram" or "svd"
     # when a deletion path ran: ("dual", e, U) eigenpairs of the centred training Gram, or

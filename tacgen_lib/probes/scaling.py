@@ -29,6 +29,7 @@ from tacgen_lib.probes.folds import make_folds
 from tacgen_lib.probes.inputs import check_features, check_lambdas, check_target
 from tacgen_lib.probes.metrics import score_rows
 from tacgen_lib.probes.refits import Refits, Refitted
+from tacgen_lib.probes.ridge_cv import LambdaCV
 from tacgen_lib.probes.ridge_path import RidgePath, ridge_fixed, ridge_path
 
 __all__ = ["FixedStandardisedRidge", "StandardisedRidgeProbe", "fit_standardised_ridge"]
@@ -40,19 +41,12 @@ def _scaler(X: np.ndarray) -> StandardScaler:
 
 
 @dataclass(frozen=True)
-class StandardisedRidgeProbe:
-    """Scaler fitted on all training rows + the ridge path on the scaled columns."""
+class StandardisedRidgeProbe(LambdaCV):
+    """The CV's choice (`LambdaCV`), the scaler fitted on all training rows and the ridge path
+    on the scaled columns."""
 
-    lam: float
-    lambdas: np.ndarray  # (L,)
-    cv_scores: np.ndarray  # (L,) mean held-out R^2
-    fold_scores: np.ndarray  # (K, L)
     scaler: StandardScaler = field(repr=False)
     path: RidgePath = field(repr=False)
-
-    @property
-    def best(self) -> int:
-        return int(np.flatnonzero(self.lambdas == self.lam)[0])
 
     def predict_grid(self, X: np.ndarray, *, sample_ids: Sequence | np.ndarray | None = None):
         """(L, m) test predictions of the refit at every lambda of the grid."""

@@ -323,31 +323,17 @@ def test_early_stopping_keeps_best_weights():
 def test_progress_gets_one_line_per_evaluation():
     v, t = synthetic_pairs(120, 8, 8, noise=0.5, seed=3)
     lines: list[str] = []
-    res = fit_heads(
-        v,
-        t,
-        np.arange(100),
-        np.arange(100, 120),
-        tau=0.1,
-        seed=0,
-        settings=AlignSettings.tiny(steps=12, eval_every=5),
-        progress=lines.append,
-    )
+    settings = AlignSettings.tiny(steps=12, eval_every=5)
+    split = np.arange(100), np.arange(100, 120)
+    res = fit_heads(v, t, *split, tau=0.1, seed=0, settings=settings, progress=lines.append)
     assert [c["step"] for c in res.curve] == [0, 5, 10, 12]
     assert len(lines) == 4 and "val_loss" in lines[-1] and "step 12/12" in lines[-1]
 
 
 def test_save_load_project_round_trip(tmp_path):
     v, t = synthetic_pairs(150, 10, 6, noise=0.5, seed=4)
-    res = fit_heads(
-        v,
-        t,
-        np.arange(120),
-        np.arange(120, 150),
-        tau=0.1,
-        seed=3,
-        settings=AlignSettings.tiny(steps=8, eval_every=4),
-    )
+    settings = AlignSettings.tiny(steps=8, eval_every=4)
+    res = fit_heads(v, t, np.arange(120), np.arange(120, 150), tau=0.1, seed=3, settings=settings)
     path = tmp_path / "sub" / "heads.pt"
     save_heads(res, path)
     loaded = load_heads(path)

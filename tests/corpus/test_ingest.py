@@ -41,6 +41,13 @@ def assert_names(err: pytest.ExceptionInfo, *parts: object) -> None:
         assert str(part) in message, f"{part!r} not in error message: {message}"
 
 
+def assert_refused(root: Path, error: type[Exception], *parts: object, match=None) -> None:
+    """`ingest_ssvtp(root)` raises `error` (matching `match`), its message naming `parts`."""
+    with pytest.raises(error, match=match) as err:
+        ingest_ssvtp(root)
+    assert_names(err, *parts)
+
+
 @pytest.fixture
 def ssvtp_root(tmp_path: Path) -> Path:
     return write_ssvtp_fixture(tmp_path / "tvl", n=12, seed=0)
@@ -295,54 +302,40 @@ def test_ingest_is_deterministic(tmp_path: Path) -> None:
 # --------------------------------------------------------------------------- SSVTP errors
 
 
-def test_ssvtp_missing_rgb_names_path_and_sample(ssvtp_root: Path) -> None:
-    path = ssvtp_root / "ssvtp" / "images_rgb" / "image_3_rgb.jpg"
+@pytest.mark.parametrize(
+    ("missing", "names"),
+    [
+        ("images_rgb/image_3_rgb.jpg", ("ssvtp-000003", "RGB")),
+        ("images_tac/image_5_tac.jpg", ("ssvtp-000005", "tactile")),
+        ("text/labels_7.txt", ("ssvtp-000007",)),
+    ],
+)
+def test_ssvtp_missing_file_names_path_and_sample(
+    ssvtp_root: Path, missing: str, names: tuple[str, ...]
+) -> None:
+    path = ssvtp_root / "ssvtp" / missing
     path.unlink()
-    with pytest.raises(FileNotFoundError) as err:
-        ingest_ssvtp(ssvtp_root)
-    assert_names(err, path, "ssvtp-000003", "RGB")
-
-
-def test_ssvtp_missing_tactile_names_path_and_sample(ssvtp_root: Path) -> None:
-    path = ssvtp_root / "ssvtp" / "images_tac" / "image_5_tac.jpg"
-    path.unlink()
-    with pytest.raises(FileNotFoundError) as err:
-        ingest_ssvtp(ssvtp_root)
-    assert_names(err, path, "ssvtp-000005", "tactile")
-
-
-def test_ssvtp_missing_caption_file(ssvtp_root: Path) -> None:
-    path = ssvtp_root / "ssvtp" / "text" / "labels_7.txt"
-    path.unlink()
-    with pytest.raises(FileNotFoundError) as err:
-        ingest_ssvtp(ssvtp_root)
-    assert_names(err, path, "ssvtp-000007")
+    assert_refused(ssvtp_root, FileNotFoundError, path, *names)
 
 
 @pytest.mark.parametrize("content", [b"not a jpeg at all", b""])
 def test_ssvtp_unreadable_image(ssvtp_root: Path, content: bytes) -> None:
     path = ssvtp_root / "ssvtp" / "images_rgb" / "image_2_rgb.jpg"
     path.write_bytes(content)
-    with pytest.raises(ValueError, match="not a readable image") as err:
-        ingest_ssvtp(ssvtp_root)
-    assert_names(err, path, "ssvtp-000002")
+    assert_refused(ssvtp_root, ValueError, path, "ssvtp-000002", match="not a readable image")
 
 
 @pytest.mark.parametrize("caption", ["", "  \n", " , ,. ,"])
 def test_ssvtp_empty_caption(ssvtp_root: Path, caption: str) -> None:
     path = ssvtp_root / "ssvtp" / "text" / "labels_4.txt"
     path.write_text(caption)
-    with pytest.raises(ValueError, match="empty caption") as err:
-        ingest_ssvtp(ssvtp_root)
-    assert_names(err, path, "ssvtp-000004")
+    assert_refused(ssvtp_root, ValueError, path, "ssvtp-000004", match="empty caption")
 
 
 def test_ssvtp_background_missing(ssvtp_root: Path, tmp_path: Path) -> None:
     path = ssvtp_root / "ssvtp" / "tac_background.png"
     path.unlink()
-    with pytest.raises(FileNotFoundError) as err:
-        ingest_ssvtp(ssvtp_root)
-    assert_names(err, path, "ssvtp-bg", "background=")
+    assert_refused(ssvtp_root, FileNotFoundError, path, "ssvtp-bg", "background=")
     other = tmp_path / "nope.png"
     with pytest.raises(FileNotFoundError) as err:
         ingest_ssvtp(ssvtp_root, background=other)
@@ -352,9 +345,9 @@ def test_ssvtp_background_missing(ssvtp_root: Path, tmp_path: Path) -> None:
 def test_ssvtp_background_size_mismatch(ssvtp_root: Path) -> None:
     path = ssvtp_root / "ssvtp" / "tac_background.png"
     cv2.imwrite(str(path), np.zeros((10, 10, 3), np.uint8))
-    with pytest.raises(ValueError, match="equal sizes") as err:
-        ingest_ssvtp(ssvtp_root)
-    assert_names(err, path, "ssvtp-000000", "image_0_tac.jpg")
+    assert_refused(
+        ssvtp_root, ValueError, path, "ssvtp-000000", "image_0_tac.jpg", match="equal sizes"
+    )
 
 
 def test_ssvtp_bad_csv_row_names_csv_and_line(ssvtp_root: Path) -> None:
@@ -362,26 +355,32 @@ def test_ssvtp_bad_csv_row_names_csv_and_line(ssvtp_root: Path) -> None:
     with path.open("a") as handle:
         handle.write("images_rgb/picture.jpg\n")
     n_lines = len(path.read_text().splitlines())
-    with pytest.raises(ValueError, match="not an SSVTP RGB path") as err:
-        ingest_ssvtp(ssvtp_root)
-    assert_names(err, path, f"line {n_lines}", "picture.jpg")
+    assert_refused(
+        ssvtp_root,
+        ValueError,
+        path,
+        f"line {n_lines}",
+        "picture.jpg",
+        match="not an SSVTP RGB path",
+    )
 
 
 def test_ssvtp_pair_in_both_splits(ssvtp_root: Path) -> None:
     path = ssvtp_root / "ssvtp" / "test.csv"
     with path.open("a") as handle:
         handle.write("images_rgb/image_0_rgb.jpg\n")
-    with pytest.raises(ValueError, match="both") as err:
-        ingest_ssvtp(ssvtp_root)
-    assert_names(err, "ssvtp-000000", "train.csv", path)
+    assert_refused(ssvtp_root, ValueError, "ssvtp-000000", "train.csv", path, match="both")
 
 
 def test_ssvtp_listed_but_absent_pair(ssvtp_root: Path) -> None:
     with (ssvtp_root / "ssvtp" / "train.csv").open("a") as handle:
         handle.write("images_rgb/image_40_rgb.jpg\n")
-    with pytest.raises(FileNotFoundError) as err:
-        ingest_ssvtp(ssvtp_root)
-    assert_names(err, ssvtp_root / "ssvtp" / "images_rgb" / "image_40_rgb.jpg", "ssvtp-000040")
+    assert_refused(
+        ssvtp_root,
+        FileNotFoundError,
+        ssvtp_root / "ssvtp" / "images_rgb" / "image_40_rgb.jpg",
+        "ssvtp-000040",
+    )
 
 
 def test_ssvtp_wrong_root(tmp_path: Path) -> None:

@@ -33,7 +33,7 @@ CONTROLLED = {
     "sensors": 2,
     "presses": 3,
 }
-FLOATS = list(LABEL_COLUMNS)
+FLOATS = list(LABEL_COLUMNS)  # the manifest's numeric labels, every one a simulator output
 
 
 @pytest.fixture(scope="module")

@@ -5,6 +5,7 @@ import copy
 import numpy as np
 import pytest
 import yaml
+from sim_scenes import gel_heights
 
 from tacgen_lib.corpus.sim import physics, tactile
 from tacgen_lib.corpus.sim.scenes import SHAPES, compile_scene, validate_scene
@@ -25,15 +26,7 @@ def runtime(effects, **over):
 def imprint(rt, press_force):
     res = physics.press_object(rt, press_force)
     optics = tactile.GelOptics(rt.scene.gel_size, (120, 160), 0.05, 0.002, 0.0006)
-    raw = tactile.height_field_rays(
-        rt.model,
-        rt.data,
-        rt.active_geom,
-        np.zeros(3),
-        np.eye(3).ravel(),
-        optics,
-        tactile.ray_directions(optics),
-    )
+    raw = gel_heights(rt, optics)
     return res, np.minimum(raw, res.gel_depth)
 
 

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from sim_scenes import gel_heights
 
 from tacgen_lib.corpus.sim import physics, tactile
 from tacgen_lib.corpus.sim.scenes import compile_scene, validate_scene
@@ -55,15 +56,7 @@ def test_rays_match_analytic_sphere_cap():
     import mujoco
 
     mujoco.mj_forward(rt.model, rt.data)
-    got = tactile.height_field_rays(
-        rt.model,
-        rt.data,
-        rt.active_geom,
-        np.zeros(3),
-        np.eye(3).ravel(),
-        OPTICS,
-        tactile.ray_directions(OPTICS),
-    )
+    got = gel_heights(rt, OPTICS)
     assert got.max() == pytest.approx(0.0015, abs=2e-5)
     np.testing.assert_allclose(got, expected, atol=1e-9)
 

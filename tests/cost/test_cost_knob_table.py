@@ -38,9 +38,11 @@ def _get(config, dotted):
 def test_every_swept_knob_names_existing_keys_a_reader_and_rules():
     ctx = {"sim": COST["sim_sweep"]["corpus"]}
     for name, knob in KNOBS.items():
-        assert knob.free or knob.reads in READERS, name
-        if knob.free:
-            assert not knob.keys and not knob.reruns, name
+        assert knob.reads in READERS, name
+        if knob.free:  # its keys are the stage grid it reads
+            assert knob.keys and not knob.reruns and not knob.moves, name
+            for key in knob.keys:
+                _get(CONFIG, key)
             continue
         assert knob.reruns and knob.moves, name
         for key in knob.keys:
@@ -114,7 +116,7 @@ def test_replicates_vary_the_resample_seed_from_the_run_s_probe_seed():
 def test_unknown_free_and_empty_knobs_are_refused():
     with pytest.raises(UnknownKnobError, match="'align_stepz'.*align_steps"):
         knob_settings("align_stepz", {"values": [1]}, CONFIG)
-    with pytest.raises(ValueError, match="stage's own grid"):
+    with pytest.raises(ValueError, match=r"stage's own grid \(generate\.samplers\)"):
         knob_settings("generate_steps", {"values": [5]}, CONFIG)
     assert knob_settings("policy_width", {}, CONFIG) == []
     with pytest.raises(ValueError, match="no values"):

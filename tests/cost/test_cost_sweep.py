@@ -12,7 +12,12 @@ from scipy import stats
 
 from tacgen_lib.cost.pareto import improvement, knob_sentence, marginal_table, pareto_front
 from tacgen_lib.cost.points import POINT_COLUMNS, check_points
-from tacgen_lib.cost.spread import replicate_seconds, retrieval_bootstrap, sd_interval
+from tacgen_lib.cost.spread import (
+    replicate_seconds,
+    retrieval_bootstrap,
+    sd_interval,
+    setting_seconds,
+)
 from tacgen_lib.cost.sweeps import (
     Seconds,
     align_points,
@@ -20,31 +25,29 @@ from tacgen_lib.cost.sweeps import (
     bootstrap_spread_points,
     generate_points,
     permutation_points,
+    point,
     policy_points,
 )
 from tacgen_lib.runtime.benchmarks import Benchmark
 
 
 def points(knob, metric, rows, direction="higher"):
-    """rows: (label, setting, is_default, value, ci_low, ci_high, wall_s)."""
+    """rows: (label, setting, is_default, value, ci_low, ci_high, wall_s); CPU = wall, 1 job."""
     return check_points(
         pd.DataFrame(
             [
-                dict(
-                    knob=knob,
-                    stage="probes",
-                    setting=s,
-                    label=lab,
-                    is_default=d,
-                    metric=metric,
-                    value=v,
-                    ci_low=lo,
-                    ci_high=hi,
-                    uncertainty="test",
-                    wall_s=w,
-                    cpu_s=w,
-                    n_jobs=1,
-                    direction=direction,
+                point(
+                    knob,
+                    "probes",
+                    s,
+                    lab,
+                    d,
+                    metric,
+                    v,
+                    (lo, hi),
+                    "test",
+                    Seconds(w, w, 1),
+                    direction,
                 )
                 for lab, s, d, v, lo, hi, w in rows
             ]
@@ -104,6 +107,17 @@ def test_replicate_seconds_is_the_mean_of_one_run():
     assert (wall, cpu, n) == (3.0, 2.0, 2)
     with pytest.raises(ValueError, match="no benchmark"):
         replicate_seconds([])
+
+
+def test_setting_seconds_sums_a_runs_jobs_and_averages_replicate_runs():
+    nan = float("nan")
+    one = setting_seconds([[Benchmark(2.0, 1.0, 10), Benchmark(4.0, 3.0, 20)]])
+    assert one == Seconds(6.0, 4.0, 2)  # one run: its jobs add up
+    reps = setting_seconds(
+        [[Benchmark(2.0, 1.0, 10), Benchmark(4.0, nan, 5)], [Benchmark(8.0, 3.0, 1)]]
+    )
+    assert (reps.wall, reps.n_jobs) == (7.0, 3)  # the mean of the runs' sums: (6 + 8) / 2
+    assert reps.cpu == 3.0  # a run whose CPU time is unknown drops out of the mean
 
 
 # ------------------------------------------------------------------------------ points

@@ -142,11 +142,11 @@ def test_crops_of_a_flat_frame_without_jitter_keep_its_colour_or_its_grey():
     assert 0 < n_grey < 4 * 16  # greyscale is applied to some views, not all
 
 
-def pretrain(images, *, arch: str, image_size: int, progress=None, **settings):
-    """`pretrain_dino` with the recipe given as `DinoSettings` fields (defaults: the config's)."""
-    return pretrain_dino(
-        images, DinoSettings(**settings), arch=arch, image_size=image_size, progress=progress
-    )
+def pretrain(images, *, arch="vit_tiny", image_size=28, progress=None, **changes):
+    """`pretrain_dino` of a ViT-tiny on 28-pixel frames with `DinoSettings.tiny` (14-pixel
+    local crops), `changes` overriding its fields."""
+    settings = DinoSettings.tiny(local_size=14, **changes)
+    return pretrain_dino(images, settings, arch=arch, image_size=image_size, progress=progress)
 
 
 def _tiny_images(n: int, seed: int) -> np.ndarray:
@@ -155,8 +155,7 @@ def _tiny_images(n: int, seed: int) -> np.ndarray:
 
 def test_pretrain_dino_is_deterministic_and_reports_a_curve():
     imgs = _tiny_images(12, 0)
-    kw = dict(arch="vit_tiny", image_size=28, epochs=2, batch_size=6, lr=1e-3, seed=11)
-    kw |= dict(n_local_crops=2, local_size=14, out_dim=64, hidden_dim=32, bottleneck_dim=16)
+    kw = dict(epochs=2, batch_size=6, seed=11)
     msgs: list[str] = []
     a = pretrain(imgs, progress=msgs.append, **kw)
     b = pretrain(imgs, **kw)
@@ -178,20 +177,7 @@ def test_pretrain_dino_is_deterministic_and_reports_a_curve():
 
 def test_pretrain_dino_moves_the_teacher_and_loads_as_backbone():
     imgs = _tiny_images(8, 1)
-    res = pretrain(
-        imgs,
-        arch="vit_tiny",
-        image_size=28,
-        epochs=1,
-        batch_size=4,
-        lr=1e-3,
-        seed=0,
-        n_local_crops=2,
-        local_size=14,
-        out_dim=64,
-        hidden_dim=32,
-        bottleneck_dim=16,
-    )
+    res = pretrain(imgs)
     torch.manual_seed(0)
     init = build_vit("vit_tiny", img_size=28).state_dict()
     assert not torch.equal(
@@ -204,18 +190,7 @@ def test_pretrain_dino_moves_the_teacher_and_loads_as_backbone():
 def test_pretrain_dino_degenerate_data_stays_finite():
     # all frames identical, and a single frame: every batch is degenerate
     one = np.full((1, 28, 28, 3), 90, np.uint8)
-    kw = dict(
-        arch="vit_tiny",
-        image_size=28,
-        epochs=2,
-        lr=1e-3,
-        seed=0,
-        n_local_crops=1,
-        local_size=14,
-        out_dim=32,
-        hidden_dim=16,
-        bottleneck_dim=8,
-    )
+    kw = dict(epochs=2, n_local_crops=1, out_dim=32, hidden_dim=16, bottleneck_dim=8)
     for imgs, bs in ((np.repeat(one, 6, axis=0), 3), (one, 4)):
         res = pretrain(imgs, batch_size=bs, **kw)
         assert all(np.isfinite(r["loss"]) for r in res.curve)
@@ -224,7 +199,7 @@ def test_pretrain_dino_degenerate_data_stays_finite():
 
 def test_pretrain_dino_input_errors():
     imgs = _tiny_images(4, 2)
-    kw = dict(arch="vit_tiny", epochs=1, batch_size=2, lr=1e-3, seed=0)
+    kw = dict(batch_size=2)
     with pytest.raises(ValueError, match="multiple of 14"):
         pretrain(imgs, image_size=30, **kw)
     with pytest.raises(ValueError, match="uint8 frames"):
@@ -379,20 +354,8 @@ def test_pretrain_dino_teacher_does_not_collapse_on_four_texture_classes():
     # information survives in each target). Stricter: the halfway mark ln K - ln(C)/2 is only
     # just met at lr 5e-4 and missed at 1e-3 (targets drift towards uniform in short runs).
     c, k = 4, 16
-    res = pretrain(
-        _pattern_classes(64, 28, 0),
-        arch="vit_tiny",
-        image_size=28,
-        epochs=8,
-        batch_size=16,
-        lr=5e-4,
-        seed=0,
-        n_local_crops=2,
-        local_size=14,
-        out_dim=k,
-        hidden_dim=64,
-        bottleneck_dim=32,
-    )
+    recipe = dict(epochs=8, batch_size=16, lr=5e-4, out_dim=k, hidden_dim=64, bottleneck_dim=32)
+    res = pretrain(_pattern_classes(64, 28, 0), **recipe)
     for row in res.curve:
         assert row["teacher_batch_entropy"] >= math.log(c), row
         assert row["teacher_entropy"] <= math.log(k) - math.log(c) / 4, row

@@ -18,7 +18,7 @@ import pandas as pd
 import pytest
 import torch
 import yaml
-from generate_worlds import toy_specs, toy_world, train_ids
+from generate_worlds import evaluate_one, small_probes, toy_specs, toy_world, train_ids
 from scipy import linalg
 from snakemake.utils import update_config
 from snakemake_run import ROOT
@@ -62,7 +62,6 @@ from tacgen_lib.io.config import validate_config
 from tacgen_lib.probes.fit import fit_probe
 from tacgen_lib.probes.logistic import FixedLogistic
 from tacgen_lib.probes.rows import family_rows
-from tacgen_lib.probes.settings import ProbeSettings
 from tacgen_lib.report.findings import generation_findings
 
 SCHEMA = ROOT / "config" / "config.schema.yaml"
@@ -301,27 +300,10 @@ def test_guidance_extremes_stay_finite_and_w0_is_unconditional(guidance):
 def test_batch_of_one_and_identical_conditions():
     model = random_denoiser().arrays()
     sch = make_schedule("linear", 100)
-    one = sample(
-        model,
-        sch,
-        np.ones((1, 5), np.float32),
-        sampler="ddpm",
-        steps=100,
-        guidance=2.0,
-        seed=0,
-        prediction="v",
-    )
+    kw = dict(sampler="ddpm", steps=100, guidance=2.0, seed=0, prediction="v")
+    one = sample(model, sch, np.ones((1, 5), np.float32), **kw)
     assert one.shape == (1, 6) and np.isfinite(one).all()
-    same = sample(
-        model,
-        sch,
-        np.ones((32, 5), np.float32),
-        sampler="ddpm",
-        steps=100,
-        guidance=2.0,
-        seed=0,
-        prediction="v",
-    )
+    same = sample(model, sch, np.ones((32, 5), np.float32), **kw)
     assert np.isfinite(same).all()
     assert np.unique(same.round(6), axis=0).shape[0] == 32  # the noise still varies rows
     # one-row guidance equals the batched computation row by row
@@ -582,34 +564,19 @@ def test_evaluation_real_touch_helps_where_generated_touch_cannot():
     fit = fit_generator(t[train.to_numpy()], v[train.to_numpy()], t[val], v[val], s, seed=0)
     gen = generate(fit.weights(), v, sampler="ddim", steps=10, guidance=1.0, seed=0)
     rows = family_rows(manifest, splits, corpus="toy", target="force_p50", kind="ridge")
-    ps = dataclasses.replace(
-        ProbeSettings.from_config(
-            {
-                "lambdas": [0.1, 1, 10],
-                "C": [1],
-                "folds": 3,
-                "bootstrap": 500,
-                "train_resamples": 0,
-                "permutations": 0,
-                "label_permutations": 0,
-                "random_draws": 0,
-            },
-            "ridge",
-            0,
-        )
-    )
+    ps = small_probes("ridge", [0.1, 1, 10], [1], bootstrap=500)
     spec = TargetSpec("force_p50", rows, ps)
     vision, t_real = dict(zip(ids, v, strict=True)), dict(zip(ids, t, strict=True))
-    summary, perms = evaluate_generator(
-        [spec],
-        corpus="toy",
+    t_gen = {("ddim", "1", "10"): dict(zip(ids, gen, strict=True))}
+    generator_train_ids = train_ids(splits)
+    summary, perms = evaluate_one(
+        spec,
+        vision,
+        t_real,
+        t_gen,
         seed=0,
-        vision=vision,
-        t_real=t_real,
-        t_gen={("ddim", "1", "10"): dict(zip(ids, gen, strict=True))},
-        baselines={"force_p50": fit_baselines(spec, vision, t_real, gammas=(1.0,))},
         permutations=100,
-        generator_train_ids=train_ids(splits),
+        generator_train_ids=generator_train_ids,
     )
     by = summary.set_index("input")
     assert set(by.index) == {
@@ -713,38 +680,15 @@ def test_logistic_c_is_chosen_on_the_reference_cell_and_reused():
     rng = np.random.default_rng(3)
     manifest["hardness"] = np.where(manifest["force_p50"] > 0, "hard", "soft")
     rows = family_rows(manifest, splits, corpus="toy", target="hardness", kind="logistic")
-    ps = ProbeSettings.from_config(
-        {
-            "lambdas": [1],
-            "C": [0.01, 1, 100],
-            "folds": 3,
-            "bootstrap": 200,
-            "train_resamples": 0,
-            "permutations": 0,
-            "label_permutations": 0,
-            "random_draws": 0,
-        },
-        "logistic",
-        0,
-    )
+    ps = small_probes("logistic", [1], [0.01, 1, 100])
     cells = {
         ("ddim", str(w), "5"): dict(zip(ids, v @ rng.normal(size=(4, 4)) + w * t, strict=True))
         for w in (0, 1, 3)
     }
     spec = TargetSpec("hardness", rows, ps)
     vision, t_real = dict(zip(ids, v, strict=True)), dict(zip(ids, t, strict=True))
-    summary, _ = evaluate_generator(
-        [spec],
-        corpus="toy",
-        seed=0,
-        vision=vision,
-        t_real=t_real,
-        t_gen=cells,
-        baselines={"hardness": fit_baselines(spec, vision, t_real, gammas=(1.0,))},
-        permutations=10,
-        generator_train_ids=train_ids(splits),
-        reference=("ddim", "1", "5"),
-    )
+    kw = dict(seed=0, permutations=10, generator_train_ids=train_ids(splits))
+    summary, _ = evaluate_one(spec, vision, t_real, cells, **kw, reference=("ddim", "1", "5"))
     gen = summary[summary["input"].isin(["t_gen", "t_gen_shuffled"])].set_index(
         ["input", "guidance"]
     )

@@ -167,20 +167,11 @@ def test_curve_point_trains_on_generated_rows_and_probes_real_touch():
         return _identity_heads(v, t, tr, va)
 
     rows = {}
-    for p in (0.0, 0.5, 1.0):
+    point = dict(corpus="toy", generator="pix2pix", seed=0, pairing="generated")
+    data = dict(vision=vision, t_real=t_real, t_gen=t_gen, head_ids=head_ids)
+    for p in (0.0, 0.5, 1.0):  # the same point but for the fraction replaced
         rows[p] = curve.curve_point(
-            specs,
-            corpus="toy",
-            generator="pix2pix",
-            seed=0,
-            fraction=p,
-            pairing="generated",
-            vision=vision,
-            t_real=t_real,
-            t_gen=t_gen,
-            head_ids=head_ids,
-            fit_heads=heads,
-            project=_identity_project,
+            specs, fraction=p, **point, **data, fit_heads=heads, project=_identity_project
         )
         n_fit = len(head_ids["train"]) + len(head_ids["val"])
         n_gen = int(np.sum(np.all(seen["t"] == 7.0, axis=1)))

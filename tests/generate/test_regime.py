@@ -11,6 +11,7 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
+from generate_worlds import small_probes
 from sklearn.linear_model import LogisticRegression, Ridge
 from sklearn.preprocessing import StandardScaler
 from threadpoolctl import threadpool_limits
@@ -49,19 +50,8 @@ from tacgen_lib.probes.settings import ProbeSettings
 N_CLASSES = 6
 
 
-def probe_settings(kind: str, **kw) -> ProbeSettings:
-    cfg = {
-        "bootstrap": 200,
-        "train_resamples": 2,
-        "permutations": 2,
-        "label_permutations": 2,
-        "random_draws": 2,
-        "lambdas": [0.1, 1, 10, 100],
-        "C": [0.1, 1, 10],
-        "folds": 3,
-        **kw,
-    }
-    return ProbeSettings.from_config(cfg, kind, 42)
+def probe_settings(kind: str) -> ProbeSettings:
+    return small_probes(kind, [0.1, 1, 10, 100], [0.1, 1, 10], controls=2, seed=42)
 
 
 def world(n: int = 240, *, rho: float, seed: int = 0, d_v: int = 10, d_t: int = 6):

@@ -86,10 +86,10 @@ def test_a_generator_equal_to_ridge_scores_as_ridge_in_the_evaluation():
     """evaluate_generator fits the ridge generator on the generator's train rows: a diffusion
     cell that returns exactly its mean has Delta_gen - ridge = 0 with a [0, 0] interval, and
     the ridge rows carry their own fidelity (matched cosine above off-diagonal on a linear map)."""
-    from tacgen_lib.generate.baselines import TargetSpec, fit_baselines
-    from tacgen_lib.generate.evaluate import evaluate_generator
+    from generate_worlds import evaluate_one, small_probes
+
+    from tacgen_lib.generate.baselines import TargetSpec
     from tacgen_lib.probes.rows import family_rows
-    from tacgen_lib.probes.settings import ProbeSettings
 
     ids, vision, t_real = linear_world(90, 4, 3, seed=4)
     split = ["test" if k % 5 == 0 else "val" if k % 5 == 1 else "train" for k in range(90)]
@@ -98,23 +98,12 @@ def test_a_generator_equal_to_ridge_scores_as_ridge_in_the_evaluation():
         {"sample_id": ids, "corpus": "toy", "force_p50": [t_real[i][0] for i in ids]}
     )
     rows = family_rows(manifest, splits, corpus="toy", target="force_p50", kind="ridge")
-    cfg = {"lambdas": [0.1, 1, 10], "C": [1], "folds": 3, "bootstrap": 200}
-    cfg |= dict.fromkeys(("train_resamples", "permutations", "label_permutations"), 0)
-    spec = TargetSpec(
-        "force_p50", rows, ProbeSettings.from_config(cfg | {"random_draws": 0}, "ridge", 0)
-    )
+    spec = TargetSpec("force_p50", rows, small_probes("ridge", [0.1, 1, 10], [1]))
     train = [i for i, s in zip(ids, split, strict=True) if s == "train"]
     ridge = ridge_generate(vision, t_real, train, seed=3)
-    summary, _ = evaluate_generator(
-        [spec],
-        corpus="toy",
-        seed=3,
-        vision=vision,
-        t_real=t_real,
-        t_gen={("ddim", "1", "5"): ridge.mean},
-        baselines={"force_p50": fit_baselines(spec, vision, t_real, gammas=(1.0,))},
-        permutations=20,
-        generator_train_ids=train,
+    t_gen = {("ddim", "1", "5"): ridge.mean}
+    summary, _ = evaluate_one(
+        spec, vision, t_real, t_gen, seed=3, permutations=20, generator_train_ids=train
     )
     by = summary.set_index("input")
     gen = by.loc["t_gen"]

@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
+from generate_worlds import small_probes
 from threadpoolctl import threadpool_limits
 
 from tacgen_lib.generate.visibility import (
@@ -20,17 +21,7 @@ from tacgen_lib.probes.settings import ProbeSettings
 
 
 def _probe() -> ProbeSettings:
-    cfg = {
-        "bootstrap": 200,
-        "train_resamples": 2,
-        "permutations": 2,
-        "label_permutations": 2,
-        "random_draws": 2,
-        "lambdas": [1.0],
-        "C": [0.1, 1, 10],
-        "folds": 3,
-    }
-    return ProbeSettings.from_config(cfg, "logistic", 42)
+    return small_probes("logistic", [1.0], [0.1, 1, 10], controls=2, seed=42)
 
 
 def _corpus(n: int = 300, seed: int = 0) -> VisibilityCorpus:

@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 import pytest
 import yaml
-from probe_worlds import synthetic_family_rows
+from probe_worlds import probe_settings, synthetic_family_rows
 from sklearn.linear_model import Ridge
 from sklearn.metrics import r2_score
 
@@ -31,19 +31,9 @@ FUSIONS = ["concat", "mean"]
 
 
 def settings(kind, seed=42, **kw):
-    base = dict(
-        kind=kind,
-        lambdas=(0.1, 1.0, 10.0, 100.0),
-        C=(0.1, 1.0),
-        folds=3,
-        bootstrap=400,
-        train_resamples=8,
-        permutations=16,
-        label_permutations=8,
-        random_draws=4,
-        seed=seed,
-    )
-    return ps_settings.ProbeSettings(**{**base, **kw})
+    draws = dict(train_resamples=8, permutations=16, label_permutations=8, random_draws=4)
+    grid = dict(lambdas=(0.1, 1.0, 10.0, 100.0), C=(0.1, 1.0), folds=3, bootstrap=400)
+    return probe_settings(kind, **(grid | draws | kw), seed=seed)
 
 
 def world(kind, *, carries, n_train=120, n_test=60, d_v=12, d_t=8, seed=0):

@@ -8,6 +8,7 @@ import dataclasses
 import numpy as np
 import pandas as pd
 import pytest
+from probe_worlds import probe_settings
 from scipy import stats
 from sklearn.compose import TransformedTargetRegressor
 from sklearn.linear_model import LogisticRegression, Ridge
@@ -50,21 +51,9 @@ def class_data(n=90, m=30, p=8, seed=1):
 
 
 def settings(kind="ridge", protocol="raw", **kw):
-    return ProbeSettings(
-        kind=kind,
-        lambdas=LAMBDAS,
-        C=(0.1, 1.0, 10.0),
-        folds=4,
-        bootstrap=200,
-        train_resamples=0,
-        permutations=0,
-        label_permutations=0,
-        random_draws=0,
-        seed=3,
-        protocol=protocol,
-        mlp=MLPGrid(widths=(8, 16), weight_decays=(0.01, 1.0), folds=3, max_iter=300),
-        **kw,
-    )
+    mlp = MLPGrid(widths=(8, 16), weight_decays=(0.01, 1.0), folds=3, max_iter=300)
+    grid = dict(folds=4, bootstrap=200, seed=3, protocol=protocol, mlp=mlp)
+    return probe_settings(kind, LAMBDAS, (0.1, 1.0, 10.0), **grid, **kw)
 
 
 # --------------------------------------------------------------------------- standardised

@@ -9,6 +9,7 @@ import pytest
 import scipy.optimize
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from probe_worlds import probe_settings
 from sklearn.exceptions import ConvergenceWarning
 from sklearn.linear_model import LogisticRegression, Ridge
 from sklearn.metrics import accuracy_score, r2_score
@@ -364,7 +365,6 @@ def test_nonlinear_baseline_fits_its_logistic_cv_one_fold_at_a_time(monkeypatch)
     """On V + an RBF Nystroem map the batched solve rarely finishes within its budget: the
     nonlinear baseline never starts it."""
     from tacgen_lib.generate.baselines import nonlinear_baseline
-    from tacgen_lib.probes.settings import ProbeSettings
 
     def refuse(*args, **kwargs):
         raise AssertionError("the batched solver ran")
@@ -373,18 +373,7 @@ def test_nonlinear_baseline_fits_its_logistic_cv_one_fold_at_a_time(monkeypatch)
     rng = np.random.default_rng(2)
     v = rng.standard_normal((200, 6))
     y = np.where(np.sin(2 * v[:, 0]) + 0.3 * rng.standard_normal(200) > 0, "a", "b").astype(object)
-    settings = ProbeSettings(
-        kind="logistic",
-        lambdas=(1.0,),
-        C=(0.1, 1.0),
-        folds=3,
-        bootstrap=10,
-        train_resamples=0,
-        permutations=0,
-        label_permutations=0,
-        random_draws=0,
-        seed=0,
-    )
+    settings = probe_settings("logistic", (1.0,), (0.1, 1.0), folds=3, bootstrap=10, seed=0)
     nl = nonlinear_baseline(
         v[:150], v[150:], y[:150], settings, gammas=[1.0], n_components=6, seed=0
     )

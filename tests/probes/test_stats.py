@@ -268,23 +268,25 @@ def test_tactile_permutation_generic_fusion_and_logistic():
     assert out["deltas"].shape == (5,) and np.isfinite(out["deltas"]).all()
 
 
-def test_label_permutation_batched_equals_loop():
-    v_tr, t_tr, y_tr, v_te, t_te, y_te = control_data()
+def refit_deltas(data, fits, lam_v: float, lam_vt: float) -> list[float]:
+    """The loop a batched control must equal: per (train rows, their labels) of `fits`, the
+    test R² of the concat V+T ridge at `lam_vt` minus the V ridge's at `lam_v`, both refitted
+    on those rows."""
+    v_tr, t_tr, y_tr, v_te, t_te, y_te = data
     x_tr, x_te = fuse("concat", v_tr, t_tr), fuse("concat", v_te, t_te)
-    out = label_permutation_control(
-        PairedRows(v_tr, t_tr, y_tr, v_te, t_te, y_te),
-        probe_v=FixedRidge(1.0),
-        probe_vt=FixedRidge(3.0),
-        metric="r2",
-        n_permutations=10,
-        seed=6,
-    )
-    perm = np.argsort(np.random.default_rng(6).random((10, 70)), axis=1, kind="stable")
-    ref = [
-        r2_score(y_te, FixedRidge(3.0).fit_predict(x_tr, y_tr[p], x_te))
-        - r2_score(y_te, FixedRidge(1.0).fit_predict(v_tr, y_tr[p], v_te))
-        for p in perm
+    return [
+        r2_score(y_te, FixedRidge(lam_vt).fit_predict(x_tr[rows], y_tr[labels], x_te))
+        - r2_score(y_te, FixedRidge(lam_v).fit_predict(v_tr[rows], y_tr[labels], v_te))
+        for rows, labels in fits
     ]
+
+
+def test_label_permutation_batched_equals_loop():
+    data = control_data()
+    probes = dict(probe_v=FixedRidge(1.0), probe_vt=FixedRidge(3.0), metric="r2")
+    out = label_permutation_control(PairedRows(*data), **probes, n_permutations=10, seed=6)
+    perm = np.argsort(np.random.default_rng(6).random((10, 70)), axis=1, kind="stable")
+    ref = refit_deltas(data, [(slice(None), p) for p in perm], 1.0, 3.0)
     np.testing.assert_allclose(out["deltas"], ref, rtol=1e-9, atol=1e-12)
     assert out["vt_score_mean"] < 0.2  # permuted labels carry nothing to the test rows
 
@@ -305,22 +307,11 @@ def test_random_feature_control_is_seeded_and_dimension_matched():
 
 
 def test_train_resample_diagnostic_equals_loop():
-    v_tr, t_tr, y_tr, v_te, t_te, y_te = control_data()
-    x_tr, x_te = fuse("concat", v_tr, t_tr), fuse("concat", v_te, t_te)
-    out = train_resample_diagnostic(
-        PairedRows(v_tr, t_tr, y_tr, v_te, t_te, y_te),
-        probe_v=FixedRidge(1.0),
-        probe_vt=FixedRidge(1.0),
-        metric="r2",
-        n_resamples=8,
-        seed=3,
-    )
+    data = control_data()
+    probes = dict(probe_v=FixedRidge(1.0), probe_vt=FixedRidge(1.0), metric="r2")
+    out = train_resample_diagnostic(PairedRows(*data), **probes, n_resamples=8, seed=3)
     idx = resample_indices(70, 8, seed=3)
-    ref = [
-        r2_score(y_te, FixedRidge(1.0).fit_predict(x_tr[i], y_tr[i], x_te))
-        - r2_score(y_te, FixedRidge(1.0).fit_predict(v_tr[i], y_tr[i], v_te))
-        for i in idx
-    ]
+    ref = refit_deltas(data, [(i, i) for i in idx], 1.0, 1.0)
     np.testing.assert_allclose(out["deltas"], ref, rtol=1e-10)
     assert out["delta_sd"] > 0
 
@@ -361,6 +352,8 @@ def test_criterion_and_bootstrap_refuse_non_finite():
 # tol 1e-6), while no test row lies within 1e-3 of the boundary (1.04e-3 the closest): 500x
 # apart; another CPU moves each stop within the same tolerance, so no label can flip.
 TIGHT = FixedLogistic(1.0, tol=1e-10)
+#: the V and the V+T probe of the logistic controls' tests, scored by accuracy
+TIGHT_PAIR = dict(probe_v=TIGHT, probe_vt=TIGHT, metric="accuracy")
 
 
 def class_data(n_tr=80, n_te=40, seed=0, n_classes=2):
@@ -388,16 +381,10 @@ def test_logistic_tactile_permutation_batched_equals_refit_loop(n_classes):
 
 
 def test_logistic_label_permutation_batched_equals_refit_loop():
-    v_tr, t_tr, y_tr, v_te, t_te, y_te = class_data(n_classes=3, seed=1)
+    data = class_data(n_classes=3, seed=1)
+    v_tr, t_tr, y_tr, v_te, t_te, y_te = data
     x_tr, x_te = fuse("concat", v_tr, t_tr), fuse("concat", v_te, t_te)
-    out = label_permutation_control(
-        PairedRows(v_tr, t_tr, y_tr, v_te, t_te, y_te),
-        probe_v=TIGHT,
-        probe_vt=TIGHT,
-        metric="accuracy",
-        n_permutations=6,
-        seed=6,
-    )
+    out = label_permutation_control(PairedRows(*data), **TIGHT_PAIR, n_permutations=6, seed=6)
     perm = np.argsort(np.random.default_rng(6).random((6, 80)), axis=1, kind="stable")
     vt = [accuracy_score(y_te, TIGHT.fit_predict(x_tr, y_tr[p], x_te)) for p in perm]
     v = [accuracy_score(y_te, TIGHT.fit_predict(v_tr, y_tr[p], v_te)) for p in perm]
@@ -426,14 +413,8 @@ def test_logistic_train_resample_batched_equals_loop_with_missing_class_resample
     y_tr[:] = np.where(y_tr == 2, 1, y_tr)
     y_tr[:2] = 2  # a class of two rows: about one resample in eight misses it
     x_tr, x_te = fuse("concat", v_tr, t_tr), fuse("concat", v_te, t_te)
-    out = train_resample_diagnostic(
-        PairedRows(v_tr, t_tr, y_tr, v_te, t_te, y_te),
-        probe_v=TIGHT,
-        probe_vt=TIGHT,
-        metric="accuracy",
-        n_resamples=16,
-        seed=3,
-    )
+    rows = PairedRows(v_tr, t_tr, y_tr, v_te, t_te, y_te)
+    out = train_resample_diagnostic(rows, **TIGHT_PAIR, n_resamples=16, seed=3)
     idx = resample_indices(30, 16, seed=3)
     missing = [len(np.unique(y_tr[i])) < 3 for i in idx]
     assert any(missing) and not all(missing)  # both paths are exercised

@@ -39,6 +39,7 @@ __all__ = [
     "apply_object",
     "press_object",
     "PhysicsWarning",
+    "state_problems",
 ]
 
 GRAVITY = 9.81
@@ -259,12 +260,21 @@ def presentation_pose(rt: SceneRuntime) -> None:
     mujoco.mj_forward(rt.model, d)
 
 
-def _check(rt: SceneRuntime, where: str) -> None:
-    d = rt.data
+def state_problems(data: mujoco.MjData) -> list[str]:
+    """What is wrong with a simulation's state: the MuJoCo warnings raised, else
+    ["non-finite state"] where a position or acceleration is not finite; empty if nothing."""
+    d = data
     bad = [mujoco.mjtWarning(i).name for i in range(len(d.warning)) if d.warning[i].number > 0]
     if bad or not np.all(np.isfinite(d.qpos)) or not np.all(np.isfinite(d.qacc)):
+        return bad or ["non-finite state"]
+    return []
+
+
+def _check(rt: SceneRuntime, where: str) -> None:
+    bad = state_problems(rt.data)
+    if bad:
         raise PhysicsWarning(
-            f"scene {rt.scene.name!r}: {where}: MuJoCo warnings {bad or ['non-finite state']} "
+            f"scene {rt.scene.name!r}: {where}: MuJoCo warnings {bad} "
             f"for object {rt.active}; lower the timestep or the stiffness range"
         )
 

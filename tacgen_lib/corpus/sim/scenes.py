@@ -35,6 +35,7 @@ __all__ = [
     "validate_scene",
     "validate_scenes",
     "compile_scene",
+    "disable_undeclared",
     "scene_xml",
 ]
 
@@ -366,18 +367,25 @@ def scene_xml(scene: Scene) -> str:
     return _press_xml(scene)
 
 
-def compile_scene(scene: Scene) -> mujoco.MjModel:
-    """Compile a validated scene to an MjModel with undeclared physics disabled."""
-    model = mujoco.MjModel.from_xml_string(scene_xml(scene))
+def disable_undeclared(model: mujoco.MjModel, scene: Scene, *, sensors: bool) -> None:
+    """Switch off in `model` the physics `scene` does not declare: gravity without
+    ``gravity``, friction loss (and every geom's contact to one dimension) without
+    ``friction_shear``, and MuJoCo's sensors unless `sensors`."""
     flags = 0
     if not scene.has("gravity"):
         flags |= mujoco.mjtDisableBit.mjDSBL_GRAVITY
     if not scene.has("friction_shear"):
         flags |= mujoco.mjtDisableBit.mjDSBL_FRICTIONLOSS
         model.geom_condim[:] = 1
-    if not scene.has("tactile"):
+    if not sensors:
         flags |= mujoco.mjtDisableBit.mjDSBL_SENSOR
     model.opt.disableflags = int(model.opt.disableflags) | int(flags)
+
+
+def compile_scene(scene: Scene) -> mujoco.MjModel:
+    """Compile a validated scene to an MjModel with undeclared physics disabled."""
+    model = mujoco.MjModel.from_xml_string(scene_xml(scene))
+    disable_undeclared(model, scene, sensors=scene.has("tactile"))
     if not scene.has("shadows"):
         model.light_castshadow[:] = 0
     return model

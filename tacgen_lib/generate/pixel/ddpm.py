@@ -28,24 +28,22 @@ one numpy Generator seeded with its `seed`.
 
 from __future__ import annotations
 
-import copy
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import pandas as pd
 import torch
 from diffusers.models.unets.unet_2d import UNet2DModel
 from torch import Tensor, nn
 
 from tacgen_lib.generate.cells import guidance_passes
+from tacgen_lib.generate.pixel.fit import PixelFit
 from tacgen_lib.generate.pixel.settings import PixelDDPMSettings, frames_tensor
 from tacgen_lib.generate.sampling import ddim_step, ddim_timesteps, predicted_x0_eps
 from tacgen_lib.generate.schedules import Schedule, make_schedule
-from tacgen_lib.generate.stopping import EarlyStopping
-from tacgen_lib.generate.train import diffusion_loss, make_optimiser, run_training_steps
+from tacgen_lib.generate.train import ValidationDraws, train_ema
 
 __all__ = [
     "CURVE_COLUMNS",
@@ -61,8 +59,6 @@ __all__ = [
 
 #: Columns of `PixelDDPMFit.curve`; row step 0 is the untrained model (train_loss NaN).
 CURVE_COLUMNS = ("step", "train_loss", "val_loss")
-#: Each validation row is scored at this many fixed (t, noise) draws.
-_VAL_REPEATS = 4
 #: Frames per forward pass when scoring the validation rows.
 _VAL_BATCH = 256
 
@@ -126,24 +122,12 @@ class RowDenoiser(nn.Module):
 
 
 @dataclass(frozen=True, eq=False)
-class PixelDDPMFit:
-    """A trained pixel DDPM: its EMA U-Net (eval mode) and how it was trained.
-
-    curve: one row per evaluation (`CURVE_COLUMNS`; step 0 is the untrained model).
-    best_step, best_val: the evaluation whose EMA weights are kept and its val loss (the
-    training loss if there are no val rows). scale: `data_scale` of the train frames (the
-    model denoises frames times scale; `sample_pixel_ddpm` divides it out).
+class PixelDDPMFit(PixelFit):
+    """A trained pixel DDPM: its EMA U-Net (eval mode) and how it was trained (`PixelFit`;
+    curve columns `CURVE_COLUMNS`, best_val a val loss). scale: `data_scale` of the train
+    frames (the model denoises frames times scale; `sample_pixel_ddpm` divides it out).
     """
 
-    model: UNet2DModel
-    settings: PixelDDPMSettings
-    seed: int
-    size: tuple[int, int]
-    curve: pd.DataFrame
-    best_step: int
-    best_val: float
-    steps_run: int
-    stopped_early: bool
     scale: float = 1.0
 
     @property
@@ -169,6 +153,23 @@ def _rows(
     return x.reshape(x.shape[0], -1), c.reshape(c.shape[0], -1), hw
 
 
+def _val_loss(ema_rows: nn.Module, draws: ValidationDraws) -> float:
+    """The mean loss over every val row and repeat, scored `_VAL_BATCH` rows at a time (NaN
+    without val rows)."""
+    n_va = draws.x.shape[0]
+    if n_va == 0:
+        return math.nan
+    ema_rows.eval()
+    repeats = draws.t.shape[0]
+    total = 0.0
+    with torch.no_grad():
+        for r in range(repeats):
+            for s in range(0, n_va, _VAL_BATCH):
+                rows = slice(s, s + _VAL_BATCH)
+                total += draws.loss(ema_rows, r, rows).item() * draws.x[rows].shape[0]
+    return total / (repeats * n_va)
+
+
 def fit_pixel_ddpm(
     rgb_train: np.ndarray,
     tac_train: np.ndarray,
@@ -181,8 +182,8 @@ def fit_pixel_ddpm(
 ) -> PixelDDPMFit:
     """Train the eps- (or v-) prediction U-Net on train pairs, early-stopped on val pairs.
 
-    The latent generator's loop (`train.run_training_steps`): a minibatch of ``batch_size`` pairs drawn with
-    replacement, t uniform in 0..T-1, eps ~ N(0, I), the RGB condition dropped with
+    The latent generator's training (`train.train_ema`): a minibatch of ``batch_size`` pairs
+    drawn with replacement, t uniform in 0..T-1, eps ~ N(0, I), the RGB condition dropped with
     probability ``p_uncond``; the denoising loss (`train.diffusion_loss`, DDPM eq. 14 or
     its v-target), fused AdamW, then the EMA. Every ``eval_every`` steps (and at the last)
     the EMA model's loss on the val pairs at fixed (t, noise) draws; the best EMA weights are
@@ -200,83 +201,31 @@ def fit_pixel_ddpm(
     x_va, c_va, _ = _rows(rgb_val, tac_val, "val", divisor, size)
     scale = data_scale(x_tr)
     x_tr, x_va = x_tr * scale, x_va * scale
-    schedule = make_schedule(settings.schedule, settings.train_steps)
-    sqrt_abar = torch.from_numpy(np.sqrt(schedule.alphas_cumprod)).float()
-    sqrt_1m = torch.from_numpy(np.sqrt(schedule.one_minus_alphas_cumprod)).float()
-    T, d = schedule.n_steps, x_tr.shape[1]
-
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(int(seed))
         unet = make_unet(settings, size)
-    ema = copy.deepcopy(unet)
-    ema.requires_grad_(False)
-    dev = torch.device(device)  # on the CPU every `.to` below is no move
-    unet.to(dev)
-    ema.to(dev)
-    x_tr, c_tr, x_va, c_va = (a.to(dev) for a in (x_tr, c_tr, x_va, c_va))
-    sqrt_abar, sqrt_1m = sqrt_abar.to(dev), sqrt_1m.to(dev)
-    model, ema_rows = RowDenoiser(unet, size), RowDenoiser(ema, size)
-    params = list(unet.parameters())
-    opt = make_optimiser(params, settings)
-    gen = torch.Generator().manual_seed(int(seed))
-    # Fixed validation draws: every evaluation scores the same (t, noise) for each val row.
-    vgen = torch.Generator().manual_seed(int(seed) + 1)
-    n_va = x_va.shape[0]
-    val_t = torch.randint(0, T, (_VAL_REPEATS, n_va), generator=vgen).to(dev)
-    val_noise = torch.randn(_VAL_REPEATS, n_va, d, generator=vgen).to(dev)
-
-    def val_loss() -> float:
-        if n_va == 0:
-            return math.nan
-        ema.eval()
-        total = 0.0
-        with torch.no_grad():
-            for r in range(_VAL_REPEATS):
-                for s in range(0, n_va, _VAL_BATCH):
-                    rows = slice(s, s + _VAL_BATCH)
-                    loss = diffusion_loss(
-                        ema_rows,
-                        x_va[rows],
-                        c_va[rows],
-                        val_t[r, rows],
-                        val_noise[r, rows],
-                        None,
-                        sqrt_abar,
-                        sqrt_1m,
-                        settings.prediction,
-                    )
-                    total += loss.item() * x_va[rows].shape[0]
-        return total / (_VAL_REPEATS * n_va)
-
-    vl0 = val_loss()
-    curve: list[dict] = [{"step": 0, "train_loss": math.nan, "val_loss": vl0}]
-    stopper = EarlyStopping(ema, settings.patience, vl0 if np.isfinite(vl0) else math.inf)
-    step = run_training_steps(
-        model,
-        opt,
-        ema,
-        (x_tr, c_tr),
-        (sqrt_abar, sqrt_1m),
+    rows = lambda m: RowDenoiser(m, size)  # noqa: E731 (the U-Net as diffusion_loss calls it)
+    data = (x_tr, c_tr), (x_va, c_va)
+    fit = train_ema(
+        unet,
+        *data,
         settings,
-        gen=gen,
-        val_loss=val_loss,
-        stopper=stopper,
-        curve=curve,
+        seed,
+        device,
+        val_loss=_val_loss,
+        wrap=rows,
+        score_untrained=True,
         progress=say,
     )
-    ema.load_state_dict(stopper.state)
-    ema.eval()
-    ema.to("cpu")
-    return PixelDDPMFit(
-        model=ema,
+    return PixelDDPMFit.from_training(
+        fit.ema,
+        fit.stopper,
+        fit.curve,
+        CURVE_COLUMNS,
         settings=settings,
-        seed=int(seed),
+        seed=seed,
         size=size,
-        curve=pd.DataFrame(curve, columns=list(CURVE_COLUMNS)),
-        best_step=stopper.step,
-        best_val=float(stopper.score),
-        steps_run=step,
-        stopped_early=stopper.stopped,
+        steps_run=fit.steps_run,
         scale=scale,
     )
 

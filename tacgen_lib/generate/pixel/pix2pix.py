@@ -26,11 +26,11 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import pandas as pd
 import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
+from tacgen_lib.generate.pixel.fit import PixelFit
 from tacgen_lib.generate.pixel.settings import Pix2PixSettings, frames_tensor
 from tacgen_lib.generate.stopping import EarlyStopping
 from tacgen_lib.optim import AdamW
@@ -157,23 +157,11 @@ def receptive_field(disc_channels: Sequence[int]) -> int:
 
 
 @dataclass(frozen=True, eq=False)
-class Pix2PixFit:
-    """A trained translator (eval mode) and how it was trained.
-
-    curve: one row per evaluation (`CURVE_COLUMNS`; step 0 is the untrained G, the training
-    columns are means over the steps since the previous row). best_step, best_val: the
-    evaluation whose G is kept and its val L1 (the training L1 if there are no val rows).
+class Pix2PixFit(PixelFit):
+    """A trained translator G (eval mode) and how it was trained (`PixelFit`; curve columns
+    `CURVE_COLUMNS`, the training columns means over the steps since the previous row;
+    best_val a val L1).
     """
-
-    model: UNetTranslator
-    settings: Pix2PixSettings
-    seed: int
-    size: tuple[int, int]
-    curve: pd.DataFrame
-    best_step: int
-    best_val: float
-    steps_run: int
-    stopped_early: bool
 
 
 def translate(model: UNetTranslator, rgb: np.ndarray, batch: int = 256) -> np.ndarray:
@@ -351,17 +339,13 @@ def fit_pix2pix(
                 )
                 if stopper.update(vl if np.isfinite(vl) else l1m, step, g):
                     break
-    g.load_state_dict(stopper.state)
-    g.eval()
-    g.to("cpu")
-    return Pix2PixFit(
-        model=g,
+    return Pix2PixFit.from_training(
+        stopper.restore(g),
+        stopper,
+        curve,
+        CURVE_COLUMNS,
         settings=settings,
-        seed=int(seed),
+        seed=seed,
         size=size,
-        curve=pd.DataFrame(curve, columns=list(CURVE_COLUMNS)),
-        best_step=stopper.step,
-        best_val=float(stopper.score),
         steps_run=step,
-        stopped_early=stopper.stopped,
     )
