@@ -9,19 +9,16 @@ still an arrow a reader follows). `from package import name` is an arrow to the 
 (the parent packages' `__init__` that Python runs on the way are not counted: none of them
 imports anything).
 
-Floors (`FLOORS`): each package, or a module kept on a lower floor than its package, stands on
-one floor; an import between two packages goes strictly down (within one package any floor, its
-circles being caught by the circle test):
+Floors (`FLOORS`): each package stands on one floor; an import between two packages goes
+strictly down (within one package anything goes, its circles being caught by the circle test):
 
 0. the ground, which imports no other package of tacgen_lib: `io` (edges, hashed files, logs,
    config), `runtime` (the job runtime: the preloaded interpreter, the scheduler patch, device,
    workers, benchmark files) and `optim` (the optimiser);
-1. the data and the report's words: `corpus`, `preprocess`; `report_pages` (the page names the
-   DAG reads at parse time), `report.format` and `report.claims` (numbers and sentences, which
-   the cost stage's Pareto table writes too);
+1. the data: `corpus`, `preprocess`; `report_pages` (the page names the DAG reads at parse
+   time);
 2. the measurements: `probes`, `align`;
-3. what reads probes: `language`; `cost.scores` (one score's bootstrap CI, which the features
-   stage's pretrained-vs-random table reads);
+3. what reads probes: `language`;
 4. `features`;
 5. the stages built on features and heads: `generate`, `policy`;
 6. what reads every stage's settings or edges: `cost` (the cost of accuracy), `estimate` (the
@@ -40,7 +37,8 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = "tacgen_lib"
 MAX_LINES = 450
 
-#: module or package -> its floor (the longest prefix of a module's name that is a key wins)
+#: package (or top-level module) -> its floor (the longest prefix of a module's name that is a key
+#: wins)
 FLOORS: dict[str, int] = {
     "tacgen_lib": 0,  # the package's own __init__ (its version)
     "tacgen_lib.io": 0,
@@ -49,12 +47,9 @@ FLOORS: dict[str, int] = {
     "tacgen_lib.corpus": 1,
     "tacgen_lib.preprocess": 1,
     "tacgen_lib.report_pages": 1,
-    "tacgen_lib.report.format": 1,
-    "tacgen_lib.report.claims": 1,
     "tacgen_lib.probes": 2,
     "tacgen_lib.align": 2,
     "tacgen_lib.language": 3,
-    "tacgen_lib.cost.scores": 3,
     "tacgen_lib.features": 4,
     "tacgen_lib.generate": 5,
     "tacgen_lib.policy": 5,

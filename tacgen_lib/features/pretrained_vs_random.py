@@ -3,7 +3,7 @@
 A linear (logistic) probe on frozen features of each backbone, fitted on the train rows and
 scored on the fixed test rows; the difference in accuracy gets a fixed-test bootstrap CI
 (tacgen_lib.probes.bootstrap.fixed_test_bootstrap), so "pretraining helps" is a statement with an interval;
-each accuracy gets its own CI on the same resamples (tacgen_lib.cost.scores.score_ci).
+each accuracy gets its own CI on the same resamples (tacgen_lib.probes.score_ci.score_ci).
 
 With `features.pretrain.epochs: 0` (the embedded default) no pretraining runs:
 the "pretrained" backbone is the random-init one (`random_backbone`, same seed), Delta is 0 by
@@ -16,10 +16,10 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from tacgen_lib.cost.scores import score_ci
 from tacgen_lib.features.vit import random_backbone
 from tacgen_lib.probes.bootstrap import fixed_test_bootstrap
 from tacgen_lib.probes.logistic import fit_logistic
+from tacgen_lib.probes.score_ci import score_ci
 
 __all__ = ["pretrained_vs_random", "random_backbone"]
 

@@ -3,7 +3,7 @@
 Input is the points of every knob (`tacgen_lib.cost.points`, one table per knob). The page
 has a figure (one row of panels per knob, one panel per metric: metric ± uncertainty against
 wall seconds on a log axis, the default ringed, the Pareto front drawn), one sentence per knob
-and metric written from the numbers (`cost.pareto.knob_sentence`), the points as a table and
+and metric written from the numbers (`report.pareto.knob_sentence`), the points as a table and
 the marginal accuracy per extra minute between consecutive Pareto points.
 """
 
@@ -17,8 +17,8 @@ import numpy as np
 import pandas as pd
 from matplotlib.ticker import FuncFormatter, NullFormatter
 
-from tacgen_lib.cost.pareto import knob_sentence, marginal_table, pareto_front
 from tacgen_lib.report import PALETTE
+from tacgen_lib.report.pareto import knob_sentence, marginal_table, pareto_front
 from tacgen_lib.report.tables import to_html
 from tacgen_lib.report.write import panel_grid
 

@@ -15,8 +15,8 @@ from tacgen_lib.cost.knob_metrics import (
     metric_row,
 )
 from tacgen_lib.cost.points import POINT_COLUMNS
-from tacgen_lib.cost.scores import score_ci
 from tacgen_lib.probes.bootstrap import fixed_test_bootstrap, resample_indices
+from tacgen_lib.probes.score_ci import score_ci
 from tacgen_lib.runtime.benchmarks import Benchmark
 
 

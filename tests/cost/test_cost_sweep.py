@@ -1,5 +1,5 @@
 """Knob sweeps: the spread of replicate seeds, the Pareto front, the sentences and the marginal
-table of the cost page (tacgen_lib.cost.spread, tacgen_lib.cost.pareto), on hand-made numbers."""
+table of the cost page (tacgen_lib.cost.spread, tacgen_lib.report.pareto), on hand-made numbers."""
 
 from __future__ import annotations
 
@@ -10,7 +10,6 @@ import pandas as pd
 import pytest
 from scipy import stats
 
-from tacgen_lib.cost.pareto import improvement, knob_sentence, marginal_table, pareto_front
 from tacgen_lib.cost.points import POINT_COLUMNS, check_points
 from tacgen_lib.cost.spread import (
     replicate_seconds,
@@ -28,6 +27,7 @@ from tacgen_lib.cost.sweeps import (
     point,
     policy_points,
 )
+from tacgen_lib.report.pareto import improvement, knob_sentence, marginal_table, pareto_front
 from tacgen_lib.runtime.benchmarks import Benchmark
 
 

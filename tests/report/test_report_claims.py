@@ -15,11 +15,11 @@ from hypothesis import given
 from hypothesis import strategies as st
 from scipy.stats import binomtest
 
-from tacgen_lib.cost.pareto import knob_sentence, marginal_table
 from tacgen_lib.policy import oracle
 from tacgen_lib.policy.settings import PolicySettings
 from tacgen_lib.report import claims, findings
 from tacgen_lib.report import format as fmt
+from tacgen_lib.report.pareto import knob_sentence, marginal_table
 from tacgen_lib.report.tables import to_html
 from tacgen_lib.report.write import MAX_FIGURE_PX, figure_problems, panel_grid, write_figure
 from tacgen_lib.report_pages import PAGES, category, page_of

@@ -2,7 +2,7 @@
 
 `fixed_test_bootstrap` gives the CI of a difference Delta; the cost-of-accuracy points and the
 pretrained-vs-random table also need the CI of one score (the force probe's R^2, a backbone's
-accuracy). Kept apart from `knob_metrics` so the features stage imports only this.
+accuracy). A probes module: the features stage's table reads it, and the cost stage.
 """
 
 from __future__ import annotations
