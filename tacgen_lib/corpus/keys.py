@@ -1,6 +1,6 @@
 """The cross-key rules of a simulated corpus's config (`corpora.<name>`): what a JSON schema
 cannot say. Shared by `CorpusSettings` (tacgen_lib.corpus.sim.corpus) and the config's
-validation before any job runs (tacgen_lib.io.config), without importing the simulator."""
+validation before any job runs (tacgen_lib.workflow_config), without importing the simulator."""
 
 from __future__ import annotations
 

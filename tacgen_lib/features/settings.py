@@ -1,8 +1,8 @@
 """The features stage's settings: DINO pretraining from config ``features.pretrain``.
 
-Every field that changes a pretrained backbone is a key of ``features.pretrain`` (the schema,
-config/config.schema.yaml, gives the optional ones their defaults, which are these fields'
-defaults), so a run can be reproduced from its config alone. ``corpus`` and ``variant`` (which
+Every field that changes a pretrained backbone is a key of ``features.pretrain``, whose default
+and bounds config/config.schema.yaml states (`io.schema.setting`), so a run can be reproduced
+from its config alone. ``corpus`` and ``variant`` (which
 frames the backbone learns from) are read by the rules, not here. `DinoSettings.tiny()` is a
 seconds-long run for tests.
 """
@@ -14,8 +14,35 @@ from dataclasses import dataclass, replace
 from typing import Any, Literal
 
 from tacgen_lib.io.config import settings_from
+from tacgen_lib.io.schema import check_settings, setting
 
-__all__ = ["DinoSettings", "MaeSettings", "backbones_pretrained"]
+__all__ = ["DinoSettings", "FeatureSettings", "MaeSettings", "backbones_pretrained"]
+
+
+@dataclass(frozen=True)
+class FeatureSettings:
+    """How a frozen backbone's features are extracted (config ``features``; `extract`).
+
+    Frames are resized to `image_size` pixels and run through the backbone `batch_size` at a
+    time; a frame's vector is its CLS token or the mean of its patch tokens (`pool`). The pixel
+    features are the frame resized to `pixel_size` (H, W). `threads`: the torch threads of
+    an extraction job (outputs are bit-identical at one count, not across counts).
+    """
+
+    image_size: int = setting("features.image_size")
+    pool: Literal["cls", "mean_patch"] = setting("features.pool")
+    batch_size: int = setting("features.batch_size")
+    pixel_size: tuple[int, int] = setting("features.pixel_size")
+    threads: int = setting("features.threads")
+
+    def __post_init__(self) -> None:
+        check_settings(self)
+
+    @classmethod
+    def from_config(cls, features: Mapping[str, Any]) -> FeatureSettings:
+        """Settings from config ``features`` (its subsections have their own objects)."""
+        subsections = ("backbones", "pretrain", "mae", "pretrained_vs_random", "visibility")
+        return settings_from(cls, features, where="features", ignore=subsections)
 
 
 @dataclass(frozen=True)
@@ -33,29 +60,32 @@ class DinoSettings:
     Augmentation: colour `jitter` strength.
     """
 
-    epochs: int = 8
-    batch_size: int = 64
-    lr: float = 5e-4
-    seed: int = 0
-    n_local_crops: int = 4
-    local_size: int | None = None
-    out_dim: int = 1024
-    hidden_dim: int = 512
-    bottleneck_dim: int = 128
-    student_temp: float = 0.1
-    teacher_temp: float = 0.04
-    warmup_teacher_temp: float | None = None
-    warmup_teacher_temp_epochs: int = 0
-    centering: Literal["sinkhorn_knopp", "centre"] = "sinkhorn_knopp"
-    sinkhorn_iterations: int = 3
-    center_momentum: float = 0.9
-    koleo_weight: float = 0.1
-    freeze_last_layer_epochs: int = 1
-    momentum_teacher: float = 0.99
-    weight_decay: float = 0.04
-    warmup_epochs: int = 1
-    clip_grad: float = 3.0
-    jitter: float = 0.4
+    epochs: int = setting("features.pretrain.epochs")
+    batch_size: int = setting("features.pretrain.batch_size")
+    lr: float = setting("features.pretrain.lr")
+    seed: int = setting("features.pretrain.seed")
+    n_local_crops: int = setting("features.pretrain.n_local_crops")
+    local_size: int | None = setting("features.pretrain.local_size")
+    out_dim: int = setting("features.pretrain.out_dim")
+    hidden_dim: int = setting("features.pretrain.hidden_dim")
+    bottleneck_dim: int = setting("features.pretrain.bottleneck_dim")
+    student_temp: float = setting("features.pretrain.student_temp")
+    teacher_temp: float = setting("features.pretrain.teacher_temp")
+    warmup_teacher_temp: float | None = setting("features.pretrain.warmup_teacher_temp")
+    warmup_teacher_temp_epochs: int = setting("features.pretrain.warmup_teacher_temp_epochs")
+    centering: Literal["sinkhorn_knopp", "centre"] = setting("features.pretrain.centering")
+    sinkhorn_iterations: int = setting("features.pretrain.sinkhorn_iterations")
+    center_momentum: float = setting("features.pretrain.center_momentum")
+    koleo_weight: float = setting("features.pretrain.koleo_weight")
+    freeze_last_layer_epochs: int = setting("features.pretrain.freeze_last_layer_epochs")
+    momentum_teacher: float = setting("features.pretrain.momentum_teacher")
+    weight_decay: float = setting("features.pretrain.weight_decay")
+    warmup_epochs: int = setting("features.pretrain.warmup_epochs")
+    clip_grad: float = setting("features.pretrain.clip_grad")
+    jitter: float = setting("features.pretrain.jitter")
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
     @classmethod
     def from_config(cls, pretrain: Mapping[str, Any]) -> DinoSettings:
@@ -87,17 +117,20 @@ class MaeSettings:
     `norm_pix_loss`: targets normalised per patch (MAE's default).
     """
 
-    epochs: int = 10
-    batch_size: int = 64
-    lr: float = 1.5e-3
-    weight_decay: float = 0.05
-    warmup_epochs: int = 1
-    seed: int = 0
-    mask_ratio: float = 0.75
-    decoder_dim: int = 96
-    decoder_depth: int = 1
-    decoder_heads: int = 3
-    norm_pix_loss: bool = True
+    epochs: int = setting("features.mae.epochs")
+    batch_size: int = setting("features.mae.batch_size")
+    lr: float = setting("features.mae.lr")
+    weight_decay: float = setting("features.mae.weight_decay")
+    warmup_epochs: int = setting("features.mae.warmup_epochs")
+    seed: int = setting("features.mae.seed")
+    mask_ratio: float = setting("features.mae.mask_ratio")
+    decoder_dim: int = setting("features.mae.decoder_dim")
+    decoder_depth: int = setting("features.mae.decoder_depth")
+    decoder_heads: int = setting("features.mae.decoder_heads")
+    norm_pix_loss: bool = setting("features.mae.norm_pix_loss")
+
+    def __post_init__(self) -> None:
+        check_settings(self)
 
     @classmethod
     def from_config(cls, mae: Mapping[str, Any]) -> MaeSettings:

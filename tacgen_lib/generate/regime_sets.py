@@ -19,6 +19,7 @@ import pandas as pd
 
 from tacgen_lib.corpus.splits import LeakageError, assert_trainable
 from tacgen_lib.io.config import settings_from
+from tacgen_lib.io.schema import check_settings, setting
 
 __all__ = [
     "NATURAL_PREFIX",
@@ -105,38 +106,24 @@ class RegimeSettings:
     (the probes stage keeps the paper's, config ``probes``).
     """
 
-    n_labelled: tuple[int, ...] = (32, 128, 384)
-    n_pool: tuple[int, ...] = (256, 1024)
-    seeds: tuple[int, ...] = (0, 1)
-    label_draws: int = 3
-    pool_val_fraction: float = 0.1
-    steps: int = 1000
-    batch_size: int = 128
-    sampling_steps: int = 25
-    guidance: float = 1.0
-    gen_mean_samples: int = 8
-    knn_ks: tuple[int, ...] = (1, 2, 4, 8, 16, 32, 64)
-    look_min_rows: int = 5
-    bootstrap: int = 5000
-    C: tuple[float, ...] = (0.0001, 0.01, 0.1, 1.0, 10.0)
-    lambdas: tuple[float, ...] = (0.1, 1.0, 10.0, 100.0, 1000.0, 10000.0, 100000.0)
+    n_labelled: tuple[int, ...] = setting("regime.n_labelled")
+    n_pool: tuple[int, ...] = setting("regime.n_pool")
+    seeds: tuple[int, ...] = setting("regime.seeds")
+    label_draws: int = setting("regime.label_draws")
+    pool_val_fraction: float = setting("regime.pool_val_fraction")
+    steps: int = setting("regime.steps")
+    batch_size: int = setting("regime.batch_size")
+    sampling_steps: int = setting("regime.sampling_steps")
+    guidance: float = setting("regime.guidance")
+    gen_mean_samples: int = setting("regime.gen_mean_samples")
+    knn_ks: tuple[int, ...] = setting("regime.knn_ks")
+    look_min_rows: int = setting("regime.look_min_rows")
+    bootstrap: int = setting("regime.bootstrap")
+    C: tuple[float, ...] = setting("regime.C")
+    lambdas: tuple[float, ...] = setting("regime.lambdas")
 
     def __post_init__(self) -> None:
-        for name in ("n_labelled", "n_pool", "knn_ks"):
-            values = getattr(self, name)
-            if not values or any(int(v) != v or v < 1 for v in values):
-                raise ValueError(f"regime.{name} must be integers >= 1, got {values!r}")
-        for name in ("label_draws", "gen_mean_samples", "look_min_rows"):
-            if int(getattr(self, name)) < 1:
-                raise ValueError(f"regime.{name} must be >= 1, got {getattr(self, name)!r}")
-        for name in ("C", "lambdas"):
-            values = getattr(self, name)
-            if not values or any(float(v) <= 0 for v in values):
-                raise ValueError(f"regime.{name} must be positive numbers, got {values!r}")
-        if not 0.0 < self.pool_val_fraction < 1.0:
-            raise ValueError(
-                f"regime.pool_val_fraction must be in (0, 1), got {self.pool_val_fraction}"
-            )
+        check_settings(self)
 
     @classmethod
     def from_config(cls, regime: Mapping[str, Any]) -> RegimeSettings:

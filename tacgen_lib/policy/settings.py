@@ -7,6 +7,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from tacgen_lib.io.config import settings_from
+from tacgen_lib.io.schema import check_settings, setting
 
 __all__ = ["PolicySettings", "CONDITIONS", "LEARNED_CONDITIONS"]
 
@@ -34,67 +35,57 @@ class PolicySettings:
     batch: the default trains longer (200 epochs of batch 32 at lr 1e-3).
     """
 
-    seed: int = 2024
-    n_demos: int = 96
-    n_heldout: int = 128
-    collect_shards: int = 2
-    rollout_shards: int = 1
-    timestep: float = 0.001
-    size_range: tuple[float, float] = (0.04, 0.06)
-    density_range: tuple[float, float] = (150.0, 3000.0)
-    friction_range: tuple[float, float] = (0.3, 1.0)
-    stiffness_range: tuple[float, float] = (100.0, 5000.0)
-    crush_depth: float = 0.004
-    min_window_ratio: float = 1.6
-    max_window_ratio: float = 3.0
-    close_time: float = 0.2
-    lift_time: float = 0.4
-    hold_time: float = 0.6
-    lift_height: float = 0.05
-    slip_limit: float = 0.002
-    impratio: float = 10.0
-    noslip_iterations: int = 10
-    finger_damping: float = 5.0
-    palpation_forces: tuple[float, float] = (0.15, 0.35)
-    heft_height: float = 0.004
-    tactile_size: tuple[int, int] = (48, 48)
-    image_size: tuple[int, int] = (64, 64)
-    lift_effects: tuple[str, ...] = ("gravity", "contact_compliance", "friction_shear")
-    palpation_effects: tuple[str, ...] = (
-        "gravity",
-        "contact_compliance",
-        "friction_shear",
-        "rgb",
-        "texture",
-        "tactile",
-        "sensor_noise",
-    )
+    seed: int = setting("policy.seed")
+    n_demos: int = setting("policy.n_demos")
+    n_heldout: int = setting("policy.n_heldout")
+    collect_shards: int = setting("policy.collect_shards")
+    rollout_shards: int = setting("policy.rollout_shards")
+    timestep: float = setting("policy.timestep")
+    size_range: tuple[float, float] = setting("policy.size_range")
+    density_range: tuple[float, float] = setting("policy.density_range")
+    friction_range: tuple[float, float] = setting("policy.friction_range")
+    stiffness_range: tuple[float, float] = setting("policy.stiffness_range")
+    crush_depth: float = setting("policy.crush_depth")
+    min_window_ratio: float = setting("policy.min_window_ratio")
+    max_window_ratio: float = setting("policy.max_window_ratio")
+    close_time: float = setting("policy.close_time")
+    lift_time: float = setting("policy.lift_time")
+    hold_time: float = setting("policy.hold_time")
+    lift_height: float = setting("policy.lift_height")
+    slip_limit: float = setting("policy.slip_limit")
+    impratio: float = setting("policy.impratio")
+    noslip_iterations: int = setting("policy.noslip_iterations")
+    finger_damping: float = setting("policy.finger_damping")
+    palpation_forces: tuple[float, float] = setting("policy.palpation_forces")
+    heft_height: float = setting("policy.heft_height")
+    tactile_size: tuple[int, int] = setting("policy.tactile_size")
+    image_size: tuple[int, int] = setting("policy.image_size")
+    lift_effects: tuple[str, ...] = setting("policy.lift_effects")
+    palpation_effects: tuple[str, ...] = setting("policy.palpation_effects")
     # the alignment cell whose heads project the palpation frames (one per alignment seed)
-    heads_from: str = "sim_paired"
-    heads_variant: str = "clip128"
-    heads_tau: float = 0.07
-    heads_n_train: str = "all"
-    heads_seed: int = 42
-    hidden: int = 512
-    layers: int = 3
-    epochs: int = 200
-    lr: float = 1.0e-3
-    weight_decay: float = 0.01
-    batch_size: int = 32
-    seeds: tuple[int, ...] = (42,)
-    sweep_hidden: tuple[int, ...] = (128, 512)
-    sweep_epochs: tuple[int, ...] = (200,)
-    sweep_seeds: tuple[int, ...] = (42,)
-    bootstrap: int = 5000
-    ceiling_draws: int = 4000
-    force_grid: int = 64
+    heads_from: str = setting("policy.heads_from")
+    heads_variant: str = setting("policy.heads_variant")
+    heads_tau: float = setting("policy.heads_tau")
+    heads_n_train: int | str = setting("policy.heads_n_train")
+    heads_seed: int = setting("policy.heads_seed")
+    hidden: int = setting("policy.hidden")
+    layers: int = setting("policy.layers")
+    epochs: int = setting("policy.epochs")
+    lr: float = setting("policy.lr")
+    weight_decay: float = setting("policy.weight_decay")
+    batch_size: int = setting("policy.batch_size")
+    seeds: tuple[int, ...] = setting("policy.seeds")
+    sweep_hidden: tuple[int, ...] = setting("policy.sweep_hidden")
+    sweep_epochs: tuple[int, ...] = setting("policy.sweep_epochs")
+    sweep_seeds: tuple[int, ...] = setting("policy.sweep_seeds")
+    bootstrap: int = setting("policy.bootstrap")
+    ceiling_draws: int = setting("policy.ceiling_draws")
+    force_grid: int = setting("policy.force_grid")
 
     @classmethod
     def from_config(cls, cfg: Mapping[str, Any] | None) -> PolicySettings:
         """Build from config `policy:`; unknown keys and bad values are named."""
-        out = settings_from(cls, cfg, where="policy")
-        out.validate()
-        return out
+        return settings_from(cls, cfg, where="policy")
 
     @classmethod
     def tiny(cls) -> PolicySettings:
@@ -115,26 +106,16 @@ class PolicySettings:
             image_size=(32, 32),
         )
 
-    def validate(self) -> None:
+    def __post_init__(self) -> None:
+        """The schema's bounds (`io.schema.check_settings`), then the rules between keys."""
+        check_settings(self)
         for name in _PAIRS:
             lo, hi = getattr(self, name)
-            if not 0 < lo <= hi:
-                raise ValueError(f"config policy.{name}: need 0 < low <= high, got {[lo, hi]}")
-        for name in (
-            "n_demos",
-            "n_heldout",
-            "collect_shards",
-            "rollout_shards",
-            "hidden",
-            "epochs",
-        ):
-            if int(getattr(self, name)) < 1:
-                raise ValueError(f"config policy.{name}: must be >= 1")
-        if not 0 < self.timestep <= 0.005:
-            raise ValueError(f"config policy.timestep: {self.timestep} not in (0, 0.005] s")
-        if not 1 < self.min_window_ratio <= self.max_window_ratio:
+            if not lo <= hi:
+                raise ValueError(f"config policy.{name}: need low <= high, got {[lo, hi]}")
+        if not self.min_window_ratio <= self.max_window_ratio:
             raise ValueError(
-                "config policy: need 1 < min_window_ratio <= max_window_ratio (a window must exist)"
+                "config policy: need min_window_ratio <= max_window_ratio (a window must exist)"
             )
         lo_crush = self.stiffness_range[0] * self.crush_depth
         if max(self.palpation_forces) >= lo_crush:
