@@ -20,11 +20,17 @@ allowed for training (held-out `test` rows always; `val` unless the caller allow
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
+from tacgen_lib.io.config import settings_from
+from tacgen_lib.io.schema import check_settings, setting
+
 __all__ = [
+    "SplitSettings",
     "SPLITS",
     "LeakageError",
     "make_splits",
@@ -226,3 +232,23 @@ def assert_trainable(
             f"rule {rule}: refusing to train on {int(bad.sum())} held-out row(s); "
             f"sample_id {ids[first]!r} is in split {found.iloc[first]!r} (allowed: {sorted(allowed)})"
         )
+
+
+@dataclass(frozen=True)
+class SplitSettings:
+    """How the splits are made (config ``splits``; `make_splits`): the `seed`, the train / val
+    / test `fractions` of a stratified split, and the corpora split `by_scale` or `by_object`
+    instead (corpus -> their scales or shares)."""
+
+    seed: int = setting("splits.seed")
+    fractions: Mapping[str, float] = setting("splits.fractions")
+    by_scale: Mapping[str, Mapping[str, Any]] = setting("splits.by_scale")
+    by_object: Mapping[str, Mapping[str, Any]] = setting("splits.by_object")
+
+    def __post_init__(self) -> None:
+        check_settings(self)
+
+    @classmethod
+    def from_config(cls, splits: Mapping[str, Any]) -> SplitSettings:
+        """Settings from config ``splits``."""
+        return settings_from(cls, splits, where="splits")

@@ -16,7 +16,13 @@ from typing import Any, Literal
 from tacgen_lib.io.config import settings_from
 from tacgen_lib.io.schema import check_settings, setting
 
-__all__ = ["DinoSettings", "FeatureSettings", "MaeSettings", "backbones_pretrained"]
+__all__ = [
+    "DinoSettings",
+    "FeatureSettings",
+    "MaeSettings",
+    "PretrainedVsRandomSettings",
+    "backbones_pretrained",
+]
 
 
 @dataclass(frozen=True)
@@ -141,6 +147,25 @@ class MaeSettings:
     def tiny(cls, **changes: Any) -> MaeSettings:
         """Two epochs of a narrow decoder on small batches, for tests; `changes` override."""
         return replace(cls(epochs=2, batch_size=8, decoder_dim=16, decoder_heads=2), **changes)
+
+
+@dataclass(frozen=True)
+class PretrainedVsRandomSettings:
+    """The pretrained-vs-random check (config ``features.pretrained_vs_random``): a logistic
+    probe of `targets` (modality -> manifest column) on `corpus`'s frames, from the pretrained
+    and the random-init backbone, with `bootstrap` test resamples."""
+
+    corpus: str = setting("features.pretrained_vs_random.corpus")
+    targets: Mapping[str, str] = setting("features.pretrained_vs_random.targets")
+    bootstrap: int = setting("features.pretrained_vs_random.bootstrap")
+
+    def __post_init__(self) -> None:
+        check_settings(self)
+
+    @classmethod
+    def from_config(cls, check: Mapping[str, Any]) -> PretrainedVsRandomSettings:
+        """Settings from config ``features.pretrained_vs_random``."""
+        return settings_from(cls, check, where="features.pretrained_vs_random")
 
 
 def backbones_pretrained(features: Mapping[str, Any]) -> bool:

@@ -52,7 +52,8 @@ def config_schema() -> Mapping[str, Any]:
 
 
 def schema_node(key: str) -> Mapping[str, Any]:
-    """The schema of dotted config key `key` (``probes.robustness.mlp.folds``).
+    """The schema of dotted config key `key` (``probes.robustness.mlp.folds``); ``*`` stands
+    for any name of a mapping of declarations (``probes.families.*.kind``).
 
     Raises KeyError naming the key where the schema has no such property.
     """
@@ -62,6 +63,9 @@ def schema_node(key: str) -> Mapping[str, Any]:
         if "$ref" in node:
             node = root["$defs"][node["$ref"].split("/")[-1]]
         props = node.get("properties", {})
+        if part == "*" and isinstance(node.get("additionalProperties"), Mapping):
+            node = node["additionalProperties"]
+            continue
         if part not in props:
             raise KeyError(f"config/config.schema.yaml has no key {key!r}")
         node = props[part]
@@ -242,7 +246,19 @@ def _violation(value: Any, spec: Mapping[str, Any], where: str = "") -> tuple | 
                 if inner is not None:
                     return inner
     if isinstance(value, Mapping):
+        if len(value) < spec.get("minProperties", 0):
+            return bad
+        missing = [k for k in spec.get("required", ()) if k not in value]
+        if missing:
+            return (f"{where}.{missing[0]}", "given", None)
         for k, v in value.items():
+            if k in spec.get("properties", {}):
+                inner = _violation(v, spec["properties"][k], f"{where}.{k}")
+                if inner is not None:
+                    return inner
+                continue
+            if spec.get("additionalProperties") is False:
+                return (f"{where}.{k}", "a known key", k)
             if "propertyNames" in spec and _violation(k, spec["propertyNames"]) is not None:
                 return (f"{where}.{k}", f"a key {describe(spec['propertyNames'])}", k)
             if isinstance(spec.get("additionalProperties"), Mapping):
@@ -254,6 +270,6 @@ def _violation(value: Any, spec: Mapping[str, Any], where: str = "") -> tuple | 
 
 _KNOWN = frozenset(
     {"type", "enum", "const", "anyOf", "items", "contains", "minLength", "uniqueItems"}
-    | {"propertyNames", "additionalProperties"}
+    | {"propertyNames", "additionalProperties", "properties", "required", "minProperties"}
     | {"minItems", "maxItems", "multipleOf", *_BOUND_WORDS}
 )

@@ -13,12 +13,20 @@ from __future__ import annotations
 import itertools
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
+from typing import Literal
 
 from tacgen_lib.io.config import settings_from
 from tacgen_lib.io.schema import check_settings, not_config, setting
 from tacgen_lib.probes.variants import check_protocol, same_as_raw
 
-__all__ = ["ALIGNED_VISION", "MLPGrid", "RobustnessSettings", "check_families", "has_aligned_rows"]
+__all__ = [
+    "ALIGNED_VISION",
+    "MLPGrid",
+    "ProbeFamily",
+    "RobustnessSettings",
+    "check_families",
+    "has_aligned_rows",
+]
 
 
 #: The V features the alignment heads project: only families with this V have aligned rows.
@@ -54,6 +62,28 @@ def check_families(families: Mapping[str, Mapping]) -> None:
                 "vision"
             )
         seen[key] = name
+
+
+@dataclass(frozen=True)
+class ProbeFamily:
+    """One probe family (config ``probes.families.<name>``): a `kind` probe (ridge | logistic)
+    of manifest column `target` on `corpus`'s rows, V from its `vision` features (pixel | vit),
+    its aligned rows from the heads trained on corpus `heads_from`."""
+
+    name: str = not_config()  # the family's name (its key under probes.families)
+    corpus: str = setting("probes.families.*.corpus")
+    heads_from: str = setting("probes.families.*.heads_from")
+    target: str = setting("probes.families.*.target")
+    kind: Literal["ridge", "logistic"] = setting("probes.families.*.kind")
+    vision: Literal["pixel", "vit"] = setting("probes.families.*.vision")
+
+    def __post_init__(self) -> None:
+        check_settings(self)
+
+    @classmethod
+    def from_config(cls, name: str, spec: Mapping) -> ProbeFamily:
+        """Family `name` from its declaration ``probes.families.<name>``."""
+        return settings_from(cls, spec, where=f"probes.families.{name}", name=name)
 
 
 @dataclass(frozen=True)

@@ -7,34 +7,47 @@ import ast
 import dataclasses
 import importlib
 import math
+import re
 from pathlib import Path
 
 import pytest
 from snakemake_run import ROOT, validated
 
 from tacgen_lib.align.settings import AlignSettings
-from tacgen_lib.features.settings import DinoSettings, FeatureSettings, MaeSettings
-from tacgen_lib.generate.pixel.settings import Pix2PixSettings, PixelDDPMSettings
+from tacgen_lib.corpus.splits import SplitSettings
+from tacgen_lib.features.settings import (
+    DinoSettings,
+    FeatureSettings,
+    MaeSettings,
+    PretrainedVsRandomSettings,
+)
+from tacgen_lib.generate.pixel.settings import Pix2PixSettings, PixelDDPMSettings, PixelSettings
 from tacgen_lib.generate.regime_sets import RegimeSettings
 from tacgen_lib.generate.settings import GenerateSettings
 from tacgen_lib.generate.visibility import VisibilitySettings
 from tacgen_lib.io.schema import check_settings, config_key, schema_node
 from tacgen_lib.policy.settings import PolicySettings
-from tacgen_lib.probes.settings import MLPGrid, ProbeSettings, RobustnessSettings
+from tacgen_lib.probes.settings import MLPGrid, ProbeFamily, ProbeSettings, RobustnessSettings
 from tacgen_lib.probes.transfer import TransferSettings
 
 #: every settings class, and how the default config builds one (the base each bound is tried on)
 BUILDERS = {
+    SplitSettings: lambda c: SplitSettings.from_config(c["splits"]),
     AlignSettings: lambda c: AlignSettings.from_config(c["align"]),
     FeatureSettings: lambda c: FeatureSettings.from_config(c["features"]),
     DinoSettings: lambda c: DinoSettings.from_config(c["features"]["pretrain"]),
     MaeSettings: lambda c: MaeSettings.from_config(c["features"]["mae"]),
+    PretrainedVsRandomSettings: lambda c: PretrainedVsRandomSettings.from_config(
+        c["features"]["pretrained_vs_random"]
+    ),
     VisibilitySettings: lambda c: VisibilitySettings.from_config(c["features"]["visibility"]),
     GenerateSettings: lambda c: GenerateSettings.from_config(c["generate"]),
     RegimeSettings: lambda c: RegimeSettings.from_config(c["regime"]),
+    PixelSettings: lambda c: PixelSettings.from_config(c["pixel"]),
     Pix2PixSettings: lambda c: Pix2PixSettings.from_config(c["pixel"]["pix2pix"]),
     PixelDDPMSettings: lambda c: PixelDDPMSettings.from_config(c["pixel"]["ddpm"]),
     PolicySettings: lambda c: PolicySettings.from_config(c["policy"]),
+    ProbeFamily: lambda c: ProbeFamily.from_config("mass", c["probes"]["families"]["mass"]),
     MLPGrid: lambda c: MLPGrid.from_config(c["probes"]["robustness"]["mlp"]),
     RobustnessSettings: lambda c: RobustnessSettings.from_config(c["probes"]["robustness"]),
     ProbeSettings: lambda c: ProbeSettings.from_config(c["probes"], "ridge", 0),
@@ -133,7 +146,7 @@ def test_field_is_held_to_the_schema_bounds(case, bases):
         return
     node = schema_node(key)
     for bad in _bad_values(node):
-        with pytest.raises(ValueError, match=key.replace(".", r"\.")):
+        with pytest.raises(ValueError, match=re.escape(key)):
             dataclasses.replace(bases[cls], **{f.name: bad})
     for edge in _edge_values(node):
         value = float(edge) if node.get("type") == "number" else edge

@@ -378,7 +378,7 @@ def test_nonlinear_baseline_fits_its_logistic_cv_one_fold_at_a_time(monkeypatch)
         lambdas=(1.0,),
         C=(0.1, 1.0),
         folds=3,
-        bootstrap=10,
+        bootstrap=100,
         train_resamples=0,
         permutations=0,
         label_permutations=0,

@@ -21,7 +21,7 @@ from torch import Tensor
 from tacgen_lib.io.config import settings_from
 from tacgen_lib.io.schema import check_settings, setting
 
-__all__ = ["PixelDDPMSettings", "Pix2PixSettings", "frames_tensor"]
+__all__ = ["PixelDDPMSettings", "PixelSettings", "Pix2PixSettings", "frames_tensor"]
 
 
 def frames_tensor(x: np.ndarray, name: str, *, divisor: int = 1) -> Tensor:
@@ -152,3 +152,31 @@ class PixelDDPMSettings:
             lr=2e-3,
         )
         return replace(small, **changes)
+
+
+@dataclass(frozen=True)
+class PixelSettings:
+    """The pixel stage's settings (config ``pixel``; its grids, corpora, seeds, DDPM cells and
+    the curve, are the rules'): the generated frame `size` (H, W), `batch` frames per sampling
+    batch, `bootstrap` resamples of the reconstruction CIs, and each model's settings."""
+
+    size: tuple[int, int] = setting("pixel.size")
+    batch: int = setting("pixel.batch")
+    bootstrap: int = setting("pixel.bootstrap")
+    pix2pix: Pix2PixSettings = setting("pixel.pix2pix", default_factory=Pix2PixSettings)
+    ddpm: PixelDDPMSettings = setting("pixel.ddpm", default_factory=PixelDDPMSettings)
+
+    def __post_init__(self) -> None:
+        check_settings(self)
+
+    @classmethod
+    def from_config(cls, pixel: Mapping[str, Any]) -> PixelSettings:
+        """Settings from config ``pixel``."""
+        return settings_from(
+            cls,
+            pixel,
+            where="pixel",
+            ignore=("corpora", "seeds", "ddpm_cells", "curve", "pix2pix", "ddpm"),
+            pix2pix=Pix2PixSettings.from_config(pixel.get("pix2pix") or {}),
+            ddpm=PixelDDPMSettings.from_config(pixel.get("ddpm") or {}),
+        )
