@@ -15,6 +15,7 @@ from snakemake_run import ROOT, validated
 
 from tacgen_lib.align.settings import AlignSettings
 from tacgen_lib.corpus.splits import SplitSettings
+from tacgen_lib.features.families import BackboneSpec
 from tacgen_lib.features.settings import (
     DinoSettings,
     FeatureSettings,
@@ -34,6 +35,7 @@ from tacgen_lib.probes.transfer import TransferSettings
 BUILDERS = {
     SplitSettings: lambda c: SplitSettings.from_config(c["splits"]),
     AlignSettings: lambda c: AlignSettings.from_config(c["align"]),
+    BackboneSpec: lambda c: BackboneSpec.from_config(c["features"]["backbones"]["vision"]),
     FeatureSettings: lambda c: FeatureSettings.from_config(c["features"]),
     DinoSettings: lambda c: DinoSettings.from_config(c["features"]["pretrain"]),
     MaeSettings: lambda c: MaeSettings.from_config(c["features"]["mae"]),
