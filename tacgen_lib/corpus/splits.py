@@ -21,13 +21,11 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from tacgen_lib.io.config import settings_from
-from tacgen_lib.io.schema import check_settings, setting
+from tacgen_lib.io.schema import SchemaSettings, schema_fields
 
 __all__ = [
     "SplitSettings",
@@ -235,20 +233,8 @@ def assert_trainable(
 
 
 @dataclass(frozen=True)
-class SplitSettings:
+@schema_fields("splits")
+class SplitSettings(SchemaSettings):
     """How the splits are made (config ``splits``; `make_splits`): the `seed`, the train / val
     / test `fractions` of a stratified split, and the corpora split `by_scale` or `by_object`
     instead (corpus -> their scales or shares)."""
-
-    seed: int = setting("splits.seed")
-    fractions: Mapping[str, float] = setting("splits.fractions")
-    by_scale: Mapping[str, Mapping[str, Any]] = setting("splits.by_scale")
-    by_object: Mapping[str, Mapping[str, Any]] = setting("splits.by_object")
-
-    def __post_init__(self) -> None:
-        check_settings(self)
-
-    @classmethod
-    def from_config(cls, splits: Mapping[str, Any]) -> SplitSettings:
-        """Settings from config ``splits``."""
-        return settings_from(cls, splits, where="splits")

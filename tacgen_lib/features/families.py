@@ -20,7 +20,7 @@ from typing import Any
 
 from tacgen_lib.features.archs import arch_family
 from tacgen_lib.io.config import ConfigError, settings_from
-from tacgen_lib.io.schema import check_settings, setting
+from tacgen_lib.io.schema import SchemaSettings, schema_fields
 
 __all__ = [
     "BackboneSpec",
@@ -35,21 +35,14 @@ MODALITIES = ("vision", "tactile")
 
 
 @dataclass(frozen=True)
-class BackboneSpec:
+@schema_fields("features.backbones.vision")
+class BackboneSpec(SchemaSettings):
     """One modality's backbone: arch, official checkpoint (or None), pretraining objective.
 
     Every backbone declaration (features.backbones.vision and .tactile, a family's under
     backbones.families) is one schema ($defs/backbone); the fields name the keys of the
     vision one.
     """
-
-    arch: str = setting("features.backbones.vision.arch")
-    checkpoint: str | None = setting("features.backbones.vision.checkpoint")
-    objective: str = setting("features.backbones.vision.objective")
-    num_register_tokens: int = setting("features.backbones.vision.num_register_tokens")
-
-    def __post_init__(self) -> None:
-        check_settings(self)
 
     @classmethod
     def from_config(

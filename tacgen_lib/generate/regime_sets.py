@@ -18,8 +18,7 @@ import numpy as np
 import pandas as pd
 
 from tacgen_lib.corpus.splits import LeakageError, assert_trainable
-from tacgen_lib.io.config import settings_from
-from tacgen_lib.io.schema import check_settings, setting
+from tacgen_lib.io.schema import SchemaSettings, schema_fields
 
 __all__ = [
     "NATURAL_PREFIX",
@@ -88,7 +87,8 @@ PAIRINGS = ("real", "shuffled")
 
 
 @dataclass(frozen=True)
-class RegimeSettings:
+@schema_fields("regime", skip=("corpus", "rhos", "targets"))
+class RegimeSettings(SchemaSettings):
     """The regime grid and how its arms are fitted (config ``regime``).
 
     ``n_labelled`` / ``n_pool``: the label and pool sizes of the grid; ``seeds``: one per set
@@ -105,29 +105,6 @@ class RegimeSettings:
     reach penalties strong enough for a probe to fall back to the majority class or the mean
     (the probes stage keeps the paper's, config ``probes``).
     """
-
-    n_labelled: tuple[int, ...] = setting("regime.n_labelled")
-    n_pool: tuple[int, ...] = setting("regime.n_pool")
-    seeds: tuple[int, ...] = setting("regime.seeds")
-    label_draws: int = setting("regime.label_draws")
-    pool_val_fraction: float = setting("regime.pool_val_fraction")
-    steps: int = setting("regime.steps")
-    batch_size: int = setting("regime.batch_size")
-    sampling_steps: int = setting("regime.sampling_steps")
-    guidance: float = setting("regime.guidance")
-    gen_mean_samples: int = setting("regime.gen_mean_samples")
-    knn_ks: tuple[int, ...] = setting("regime.knn_ks")
-    look_min_rows: int = setting("regime.look_min_rows")
-    bootstrap: int = setting("regime.bootstrap")
-    C: tuple[float, ...] = setting("regime.C")
-    lambdas: tuple[float, ...] = setting("regime.lambdas")
-
-    def __post_init__(self) -> None:
-        check_settings(self)
-
-    @classmethod
-    def from_config(cls, regime: Mapping[str, Any]) -> RegimeSettings:
-        return settings_from(cls, regime, where="regime", ignore=("targets", "corpus", "rhos"))
 
 
 @dataclass(frozen=True)

@@ -1,9 +1,9 @@
 """The generate stage's settings: one frozen object from config ``generate`` (one per stage, read by `io.config.settings_from`).
 
 `GenerateSettings.from_config(config["generate"])` reads what training, sampling and evaluating
-the generator need (each field's default and bounds are its key's in config/config.schema.yaml,
-`io.schema.setting`); the grid
-itself (corpora, seeds, guidance, samplers x steps) is expanded by the rules into wildcards.
+the generator need (its fields, their types, defaults and bounds are the keys of ``generate`` in
+config/config.schema.yaml, `io.schema.schema_fields`); the grid itself (corpora, seeds,
+guidance, samplers x steps) is expanded by the rules into wildcards.
 `GenerateSettings.tiny()` is a seconds-long budget for tests.
 """
 
@@ -11,10 +11,9 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from typing import Any, Literal
+from typing import Any
 
-from tacgen_lib.io.config import settings_from
-from tacgen_lib.io.schema import check_settings, setting
+from tacgen_lib.io.schema import SchemaSettings, schema_fields
 
 __all__ = ["GenerateSettings", "SAMPLERS", "check_grid"]
 
@@ -23,7 +22,8 @@ SAMPLERS = ("ddim", "ddpm")
 
 
 @dataclass(frozen=True)
-class GenerateSettings:
+@schema_fields("generate", skip=("corpora", "variant", "seeds", "guidance", "samplers"))
+class GenerateSettings(SchemaSettings):
     """How one generator is trained (`train.fit_generator`), sampled and evaluated.
 
     Model: ``blocks`` residual blocks of width ``hidden`` (paper: 8 x 2048), eps- or
@@ -40,40 +40,6 @@ class GenerateSettings:
     (repeated K-fold: on a few hundred rows one draw's choice of the logistic C moved a
     verdict).
     """
-
-    schedule: Literal["cosine", "linear"] = setting("generate.schedule")
-    train_steps: int = setting("generate.train_steps")
-    prediction: Literal["eps", "v"] = setting("generate.prediction")
-    hidden: int = setting("generate.hidden")
-    blocks: int = setting("generate.blocks")
-    time_dim: int = setting("generate.time_dim")
-    p_uncond: float = setting("generate.p_uncond")
-    lr: float = setting("generate.lr")
-    weight_decay: float = setting("generate.weight_decay")
-    batch_size: int = setting("generate.batch_size")
-    steps: int = setting("generate.steps")
-    clip_grad: float = setting("generate.clip_grad")
-    ema_decay: float = setting("generate.ema_decay")
-    eval_every: int = setting("generate.eval_every")
-    patience: int = setting("generate.patience")
-    eta: float = setting("generate.eta")
-    batch: int = setting("generate.batch")
-    permutations: int = setting("generate.permutations")
-    nonlinear_gammas: tuple[float, ...] = setting("generate.nonlinear_gammas")
-    cv_repeats: int = setting("generate.cv_repeats")
-
-    def __post_init__(self) -> None:
-        check_settings(self)
-
-    @classmethod
-    def from_config(cls, generate: Mapping[str, Any]) -> GenerateSettings:
-        """Settings from config ``generate`` (its grid keys are the rules': they expand them)."""
-        return settings_from(
-            cls,
-            generate,
-            where="generate",
-            ignore=("corpora", "guidance", "samplers", "seeds", "variant"),
-        )
 
     @classmethod
     def tiny(cls, **changes: Any) -> GenerateSettings:

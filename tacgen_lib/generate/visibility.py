@@ -26,8 +26,7 @@ import pandas as pd
 from tacgen_lib.corpus.looks import FACTORS
 from tacgen_lib.generate.blocks import feature_block
 from tacgen_lib.generate.small_probes import fit_small_nonlinear, fit_small_probe
-from tacgen_lib.io.config import settings_from
-from tacgen_lib.io.schema import check_settings, setting
+from tacgen_lib.io.schema import SchemaSettings, schema_fields
 from tacgen_lib.probes.bootstrap import resample_indices, score_interval
 from tacgen_lib.probes.metrics import score
 from tacgen_lib.probes.settings import ProbeSettings
@@ -61,24 +60,12 @@ PROBES = ("linear", "nonlinear")
 
 
 @dataclass(frozen=True)
-class VisibilitySettings:
+@schema_fields("features.visibility")
+class VisibilitySettings(SchemaSettings):
     """The visibility check (config ``features.visibility``): the RBF gamma multiples (of the
     median heuristic) the nonlinear probe chooses among by CV, the fixed-test bootstrap
     resamples, the CV folds of both probes (one draw), and the gate: factor -> the accuracy V must reach on a regime corpus for the
     regime to be read (`visibility_gate`)."""
-
-    gammas: tuple[float, ...] = setting("features.visibility.gammas")
-    bootstrap: int = setting("features.visibility.bootstrap")
-    folds: int = setting("features.visibility.folds")
-    gate: Mapping[str, float] = setting("features.visibility.gate")
-
-    def __post_init__(self) -> None:
-        check_settings(self)
-
-    @classmethod
-    def from_config(cls, visibility: Mapping[str, Any]) -> VisibilitySettings:
-        """Settings from config ``features.visibility``."""
-        return settings_from(cls, visibility, where="features.visibility")
 
 
 @dataclass(frozen=True)

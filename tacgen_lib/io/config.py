@@ -148,7 +148,7 @@ def settings_from(
 ) -> T:
     """A settings dataclass from a config section: the one reader every settings object uses.
 
-    Each field is read from its key (the key `io.schema.setting` declared it with, or
+    Each field is read from its key (the key `io.schema.schema_fields` or `setting` gave it, or
     `rename`: field -> config key where the two differ) or taken from `given` (what the caller
     knows that is not config: a family's kind, a seed); a `io.schema.not_config` field is
     never read from the section.
@@ -162,6 +162,7 @@ def settings_from(
     settings.
     """
     section = dict(section or {})
+    ignore = {*ignore, *getattr(cls, "schema_skip", ())}  # keys `io.schema.schema_fields` skipped
     rename = {**_schema_renames(cls, where), **(rename or {})}
     hints = typing.get_type_hints(cls)
     names = [
@@ -186,7 +187,7 @@ def settings_from(
 
 
 def _schema_renames(cls: type, where: str) -> dict[str, str]:
-    """field -> config key of the fields declared with `io.schema.setting` whose key, under
+    """field -> config key of the fields from the schema (`io.schema.setting`) whose key, under
     section `where`, is not the field's name (``align.features`` for `feature`)."""
     out = {}
     for f in dataclasses.fields(cls):

@@ -1,15 +1,17 @@
 """The configuration schema as the one statement of each setting: settings fields read from it.
 
 config/config.schema.yaml states each setting's default, type, bounds and meaning. A stage's
-settings dataclass declares a field with `setting("align.epochs")`: its default is the schema's
-(read once per process, lists as tuples, a ``number`` as a float), and `check_settings` holds a
-value to the schema's type and bounds, naming the config key. A field that is not a config key
-(what a caller knows: a family's kind, a seed) says so with `not_config`, so that a test can
-require every other field to be a key of the schema with the schema's default.
+settings dataclass takes a field per key of its config section from it (`schema_fields`: the
+field's type from the key's schema, its default the schema's, read once per process, lists as
+tuples, a ``number`` as a float), or declares one with `setting("align.epochs")`; and
+`check_settings` holds a value to the schema's type and bounds, naming the config key. A field
+that is not a config key (what a caller knows: a family's kind, a seed) says so with
+`not_config`, so that a test can require every other field to be a key of the schema with the
+schema's default.
 
 The checker here covers the JSON-schema keywords the settings' keys use (types, bounds, enums,
 list lengths and items); a keyword it does not know stops `check_settings` rather than pass
-silently. The whole config is validated by jsonschema at start-up (`io.config.validate_config`);
+silently. The whole config is validated by jsonschema at start-up (`io.config.validate_schema`);
 this is what a settings object built in code (`tiny()`, `replace`) is held to.
 """
 
@@ -18,19 +20,25 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-from collections.abc import Mapping
+import operator
+from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar, Literal, Self, TypeVar
 
 import yaml
 
+from tacgen_lib.io.config import settings_from
+
 __all__ = [
     "SCHEMA_PATH",
+    "SchemaSettings",
     "check_settings",
     "config_key",
     "config_schema",
     "not_config",
+    "schema_fields",
     "schema_node",
+    "schema_type",
     "setting",
 ]
 
@@ -42,6 +50,8 @@ _ANNOTATIONS = frozenset({"description", "default", "title", "$comment"})
 
 #: The metadata key of a settings field: its dotted config key, or None (not a config key).
 _KEY = "config_key"
+
+C = TypeVar("C", bound=type)
 
 
 @functools.cache
@@ -99,6 +109,86 @@ def setting(key: str, **field_args: Any) -> Any:
     return dataclasses.field(metadata={_KEY: key}, **field_args)
 
 
+def schema_type(spec: Mapping[str, Any]) -> Any:
+    """The Python type of a value of schema `spec`: an enum or const a Literal, integer int,
+    number float, string str, boolean bool, an object a mapping, an array a tuple of its items'
+    type, a list of types or ``anyOf`` their union (null: None)."""
+    spec = _resolved(spec)
+    if "enum" in spec:
+        return Literal[tuple(spec["enum"])]
+    if "const" in spec:
+        return Literal[spec["const"]]
+    if "anyOf" in spec:
+        return functools.reduce(operator.or_, [schema_type(s) for s in spec["anyOf"]])
+    types = spec.get("type")
+    if isinstance(types, list):
+        return functools.reduce(operator.or_, [schema_type({**spec, "type": t}) for t in types])
+    if types == "array":
+        return tuple[schema_type(spec.get("items", {})), ...]
+    simple = {"integer": int, "number": float, "string": str, "boolean": bool}
+    if types == "object":
+        return Mapping[str, Any]
+    return type(None) if types == "null" else simple.get(types, Any)
+
+
+def schema_fields(
+    section: str, *, skip: Iterable[str] = (), names: Mapping[str, str] | None = None
+) -> Callable[[C], C]:
+    """Class decorator (under ``@dataclass``): a field per key of config section `section`
+    (but `skip`, keys other code reads), after the class's own fields, in the schema's order
+    (those without a default first), typed by `schema_type`, with `setting`'s default and key. `names`: config key -> field
+    name where the two differ. So a settings object's fields, types, defaults and bounds are
+    written once, in the schema; the class keeps what the schema cannot say."""
+    skip = set(skip)
+    names = dict(names or {})
+
+    def add_fields(cls: C) -> C:
+        annotations = dict(cls.__dict__.get("__annotations__", {}))
+        keys = [k for k in _resolved(schema_node(section))["properties"] if k not in skip]
+        # the keys without a default first: a dataclass field without one cannot follow one with
+        keys.sort(key=lambda k: "default" in schema_node(f"{section}.{k}"))
+        for key in keys:
+            spec = schema_node(f"{section}.{key}")
+            name = names.get(key, key)
+            if name in annotations:
+                raise TypeError(f"{cls.__name__}.{name}: declared in the class and the schema")
+            annotations[name] = schema_type(spec)
+            setattr(cls, name, setting(f"{section}.{key}"))
+        cls.__annotations__ = annotations
+        cls.schema_section = section
+        cls.schema_skip = tuple(sorted(skip))  # what `io.config.settings_from` leaves alone
+        return cls
+
+    return add_fields
+
+
+class SchemaSettings:
+    """Base of a settings dataclass whose fields are a config section's keys (`schema_fields`
+    names the section): `from_config` reads the section (`io.config.settings_from`; the keys
+    `schema_fields` skipped are left to the rules), and every object, however built (`tiny()`,
+    `replace`), is held to the schema's bounds (`check_settings`). A class adds only what the
+    schema cannot say: rules between keys (in its own ``__post_init__``, after this one's),
+    budgets for tests, derived values."""
+
+    schema_section: ClassVar[str] = ""
+    schema_skip: ClassVar[tuple[str, ...]] = ()
+
+    def __post_init__(self) -> None:
+        check_settings(self)
+
+    @classmethod
+    def from_config(cls, section: Mapping[str, Any] | None) -> Self:
+        """Settings from the class's config section (`schema_section`)."""
+        return settings_from(cls, section, where=cls.schema_section)
+
+
+def _resolved(node: Mapping[str, Any]) -> Mapping[str, Any]:
+    """`node`, or the definition its ``$ref`` names."""
+    if "$ref" in node:
+        return config_schema()["$defs"][node["$ref"].split("/")[-1]]
+    return node
+
+
 def not_config(default: Any = dataclasses.MISSING, **field_args: Any) -> Any:
     """A dataclass field that is not a config key (a value the caller gives, or a constant of
     the method): the schema-vs-settings test exempts it."""
@@ -109,7 +199,7 @@ def config_key(f: dataclasses.Field) -> str | None:
     """The config key of a settings field (`setting`), None for `not_config`; KeyError for a
     field declared with neither."""
     if _KEY not in f.metadata:
-        raise KeyError(f"field {f.name!r} is declared with neither setting() nor not_config()")
+        raise KeyError(f"field {f.name!r} is not from the schema and not marked not_config()")
     return f.metadata[_KEY]
 
 

@@ -2,12 +2,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
 
-from tacgen_lib.io.config import settings_from
-from tacgen_lib.io.schema import check_settings, setting
+from tacgen_lib.io.schema import SchemaSettings, check_settings, schema_fields
 
 __all__ = ["PolicySettings", "CONDITIONS", "LEARNED_CONDITIONS"]
 
@@ -19,7 +16,8 @@ _PAIRS = ("size_range", "density_range", "friction_range", "stiffness_range")
 
 
 @dataclass(frozen=True)
-class PolicySettings:
+@schema_fields("policy")
+class PolicySettings(SchemaSettings):
     """Every knob of the policy stage; lengths m, forces N, times s.
 
     Task: object ranges (size visible; density, friction, stiffness invisible), crush depth
@@ -34,58 +32,6 @@ class PolicySettings:
     steps; here a demonstration is one (observation, grip force) pair, so 96 demos make one
     batch: the default trains longer (200 epochs of batch 32 at lr 1e-3).
     """
-
-    seed: int = setting("policy.seed")
-    n_demos: int = setting("policy.n_demos")
-    n_heldout: int = setting("policy.n_heldout")
-    collect_shards: int = setting("policy.collect_shards")
-    rollout_shards: int = setting("policy.rollout_shards")
-    timestep: float = setting("policy.timestep")
-    size_range: tuple[float, float] = setting("policy.size_range")
-    density_range: tuple[float, float] = setting("policy.density_range")
-    friction_range: tuple[float, float] = setting("policy.friction_range")
-    stiffness_range: tuple[float, float] = setting("policy.stiffness_range")
-    crush_depth: float = setting("policy.crush_depth")
-    min_window_ratio: float = setting("policy.min_window_ratio")
-    max_window_ratio: float = setting("policy.max_window_ratio")
-    close_time: float = setting("policy.close_time")
-    lift_time: float = setting("policy.lift_time")
-    hold_time: float = setting("policy.hold_time")
-    lift_height: float = setting("policy.lift_height")
-    slip_limit: float = setting("policy.slip_limit")
-    impratio: float = setting("policy.impratio")
-    noslip_iterations: int = setting("policy.noslip_iterations")
-    finger_damping: float = setting("policy.finger_damping")
-    palpation_forces: tuple[float, float] = setting("policy.palpation_forces")
-    heft_height: float = setting("policy.heft_height")
-    tactile_size: tuple[int, int] = setting("policy.tactile_size")
-    image_size: tuple[int, int] = setting("policy.image_size")
-    lift_effects: tuple[str, ...] = setting("policy.lift_effects")
-    palpation_effects: tuple[str, ...] = setting("policy.palpation_effects")
-    # the alignment cell whose heads project the palpation frames (one per alignment seed)
-    heads_from: str = setting("policy.heads_from")
-    heads_variant: str = setting("policy.heads_variant")
-    heads_tau: float = setting("policy.heads_tau")
-    heads_n_train: int | str = setting("policy.heads_n_train")
-    heads_seed: int = setting("policy.heads_seed")
-    hidden: int = setting("policy.hidden")
-    layers: int = setting("policy.layers")
-    epochs: int = setting("policy.epochs")
-    lr: float = setting("policy.lr")
-    weight_decay: float = setting("policy.weight_decay")
-    batch_size: int = setting("policy.batch_size")
-    seeds: tuple[int, ...] = setting("policy.seeds")
-    sweep_hidden: tuple[int, ...] = setting("policy.sweep_hidden")
-    sweep_epochs: tuple[int, ...] = setting("policy.sweep_epochs")
-    sweep_seeds: tuple[int, ...] = setting("policy.sweep_seeds")
-    bootstrap: int = setting("policy.bootstrap")
-    ceiling_draws: int = setting("policy.ceiling_draws")
-    force_grid: int = setting("policy.force_grid")
-
-    @classmethod
-    def from_config(cls, cfg: Mapping[str, Any] | None) -> PolicySettings:
-        """Build from config `policy:`; unknown keys and bad values are named."""
-        return settings_from(cls, cfg, where="policy")
 
     @classmethod
     def tiny(cls) -> PolicySettings:

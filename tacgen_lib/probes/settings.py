@@ -13,10 +13,9 @@ from __future__ import annotations
 import itertools
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from typing import Literal
 
 from tacgen_lib.io.config import settings_from
-from tacgen_lib.io.schema import check_settings, not_config, setting
+from tacgen_lib.io.schema import SchemaSettings, check_settings, not_config, schema_fields, setting
 from tacgen_lib.probes.variants import check_protocol, same_as_raw
 
 __all__ = [
@@ -65,20 +64,13 @@ def check_families(families: Mapping[str, Mapping]) -> None:
 
 
 @dataclass(frozen=True)
-class ProbeFamily:
+@schema_fields("probes.families.*")
+class ProbeFamily(SchemaSettings):
     """One probe family (config ``probes.families.<name>``): a `kind` probe (ridge | logistic)
     of manifest column `target` on `corpus`'s rows, V from its `vision` features (pixel | vit),
     its aligned rows from the heads trained on corpus `heads_from`."""
 
     name: str = not_config()  # the family's name (its key under probes.families)
-    corpus: str = setting("probes.families.*.corpus")
-    heads_from: str = setting("probes.families.*.heads_from")
-    target: str = setting("probes.families.*.target")
-    kind: Literal["ridge", "logistic"] = setting("probes.families.*.kind")
-    vision: Literal["pixel", "vit"] = setting("probes.families.*.vision")
-
-    def __post_init__(self) -> None:
-        check_settings(self)
 
     @classmethod
     def from_config(cls, name: str, spec: Mapping) -> ProbeFamily:
@@ -87,21 +79,9 @@ class ProbeFamily:
 
 
 @dataclass(frozen=True)
-class MLPGrid:
+@schema_fields("probes.robustness.mlp")
+class MLPGrid(SchemaSettings):
     """The 2-layer probe's CV grid and solver budget (config ``probes.robustness.mlp``)."""
-
-    widths: tuple[int, ...] = setting("probes.robustness.mlp.widths")
-    weight_decays: tuple[float, ...] = setting("probes.robustness.mlp.weight_decays")
-    folds: int = setting("probes.robustness.mlp.folds")
-    max_iter: int = setting("probes.robustness.mlp.max_iter")
-
-    @classmethod
-    def from_config(cls, mlp: Mapping | None) -> MLPGrid:
-        """From ``probes.robustness.mlp`` (None: the defaults)."""
-        return settings_from(cls, mlp, where="probes.robustness.mlp")
-
-    def __post_init__(self) -> None:
-        check_settings(self)
 
     @property
     def points(self) -> list[tuple[float, int]]:

@@ -30,8 +30,7 @@ import numpy as np
 import pandas as pd
 
 from tacgen_lib.corpus.derangement import sattolo_cycle
-from tacgen_lib.io.config import settings_from
-from tacgen_lib.io.schema import check_settings, not_config, setting
+from tacgen_lib.io.schema import SchemaSettings, not_config, schema_fields
 from tacgen_lib.probes.bootstrap import resample_counts, resample_indices
 from tacgen_lib.probes.folds import make_folds
 from tacgen_lib.probes.metrics import balanced_accuracy, balanced_accuracy_resamples
@@ -81,26 +80,14 @@ TRANSFER_COLUMNS = (
 
 
 @dataclass(frozen=True)
-class TransferSettings:
+@schema_fields("transfer", skip=("corpus", "source", "floor"))
+class TransferSettings(SchemaSettings):
     """Config ``transfer`` (its corpora are read by the rules): ``classes`` mass-quantile
     classes; ``probe_seeds``; ``fit_fraction`` of the train objects each seed fits on; the
     logistic ``C`` grid and object-level CV ``folds``; ``bootstrap`` object resamples."""
 
-    classes: int = setting("transfer.classes")
-    probe_seeds: tuple[int, ...] = setting("transfer.probe_seeds")
-    fit_fraction: float = setting("transfer.fit_fraction")
-    C: tuple[float, ...] = setting("transfer.C")
-    folds: int = setting("transfer.folds")
-    bootstrap: int = setting("transfer.bootstrap")
     max_iter: int = not_config(2000)  # the logistic solver's budget and tolerance
     tol: float = not_config(1e-4)
-
-    def __post_init__(self) -> None:
-        check_settings(self)
-
-    @classmethod
-    def from_config(cls, section: Mapping) -> TransferSettings:
-        return settings_from(cls, section, where="transfer", ignore=("corpus", "source", "floor"))
 
 
 @dataclass(frozen=True)

@@ -12,14 +12,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import torch
 from torch import Tensor
 
 from tacgen_lib.io.config import settings_from
-from tacgen_lib.io.schema import check_settings, setting
+from tacgen_lib.io.schema import SchemaSettings, schema_fields, setting
 
 __all__ = ["PixelDDPMSettings", "PixelSettings", "Pix2PixSettings", "frames_tensor"]
 
@@ -50,7 +50,8 @@ def frames_tensor(x: np.ndarray, name: str, *, divisor: int = 1) -> Tensor:
 
 
 @dataclass(frozen=True)
-class Pix2PixSettings:
+@schema_fields("pixel.pix2pix")
+class Pix2PixSettings(SchemaSettings):
     """How one pix2pix translator is trained (`pix2pix.fit_pix2pix`; Isola et al. 2017).
 
     Model: a U-Net whose encoder widths are ``channels`` (the decoder mirrors them), decoder
@@ -60,25 +61,6 @@ class Pix2PixSettings:
     ``batch_size`` frames, at most ``steps`` steps, validation L1 every ``eval_every`` steps
     with early stopping after ``patience`` evaluations without improvement (0: never stop).
     """
-
-    channels: tuple[int, ...] = setting("pixel.pix2pix.channels")
-    disc_channels: tuple[int, ...] = setting("pixel.pix2pix.disc_channels")
-    dropout: float = setting("pixel.pix2pix.dropout")
-    lambda_l1: float = setting("pixel.pix2pix.lambda_l1")
-    lr: float = setting("pixel.pix2pix.lr")
-    beta1: float = setting("pixel.pix2pix.beta1")
-    batch_size: int = setting("pixel.pix2pix.batch_size")
-    steps: int = setting("pixel.pix2pix.steps")
-    eval_every: int = setting("pixel.pix2pix.eval_every")
-    patience: int = setting("pixel.pix2pix.patience")
-
-    def __post_init__(self) -> None:
-        check_settings(self)
-
-    @classmethod
-    def from_config(cls, section: Mapping[str, Any]) -> Pix2PixSettings:
-        """Settings from config ``pixel.pix2pix``."""
-        return settings_from(cls, section, where="pixel.pix2pix")
 
     @classmethod
     def tiny(cls, **changes: Any) -> Pix2PixSettings:
@@ -96,7 +78,8 @@ class Pix2PixSettings:
 
 
 @dataclass(frozen=True)
-class PixelDDPMSettings:
+@schema_fields("pixel.ddpm")
+class PixelDDPMSettings(SchemaSettings):
     """How one pixel DDPM is trained (`ddpm.fit_pixel_ddpm`) and sampled.
 
     Model: a diffusers ``UNet2DModel`` with ``block_out_channels`` = ``channels`` (multiples
@@ -110,33 +93,10 @@ class PixelDDPMSettings:
     No gradient clipping (`clip_grad` is 0 and not a config key).
     """
 
-    channels: tuple[int, ...] = setting("pixel.ddpm.channels")
-    layers_per_block: int = setting("pixel.ddpm.layers_per_block")
-    schedule: Literal["cosine", "linear"] = setting("pixel.ddpm.schedule")
-    train_steps: int = setting("pixel.ddpm.train_steps")
-    prediction: Literal["eps", "v"] = setting("pixel.ddpm.prediction")
-    p_uncond: float = setting("pixel.ddpm.p_uncond")
-    lr: float = setting("pixel.ddpm.lr")
-    weight_decay: float = setting("pixel.ddpm.weight_decay")
-    batch_size: int = setting("pixel.ddpm.batch_size")
-    steps: int = setting("pixel.ddpm.steps")
-    ema_decay: float = setting("pixel.ddpm.ema_decay")
-    eval_every: int = setting("pixel.ddpm.eval_every")
-    patience: int = setting("pixel.ddpm.patience")
-    eta: float = setting("pixel.ddpm.eta")
-
-    def __post_init__(self) -> None:
-        check_settings(self)
-
     @property
     def clip_grad(self) -> float:
         """0: `train.training_step` (which this model's training reuses) clips no gradient."""
         return 0.0
-
-    @classmethod
-    def from_config(cls, section: Mapping[str, Any]) -> PixelDDPMSettings:
-        """Settings from config ``pixel.ddpm``."""
-        return settings_from(cls, section, where="pixel.ddpm")
 
     @classmethod
     def tiny(cls, **changes: Any) -> PixelDDPMSettings:
@@ -155,19 +115,14 @@ class PixelDDPMSettings:
 
 
 @dataclass(frozen=True)
-class PixelSettings:
+@schema_fields("pixel", skip=("corpora", "seeds", "ddpm_cells", "curve", "pix2pix", "ddpm"))
+class PixelSettings(SchemaSettings):
     """The pixel stage's settings (config ``pixel``; its grids, corpora, seeds, DDPM cells and
     the curve, are the rules'): the generated frame `size` (H, W), `batch` frames per sampling
     batch, `bootstrap` resamples of the reconstruction CIs, and each model's settings."""
 
-    size: tuple[int, int] = setting("pixel.size")
-    batch: int = setting("pixel.batch")
-    bootstrap: int = setting("pixel.bootstrap")
     pix2pix: Pix2PixSettings = setting("pixel.pix2pix", default_factory=Pix2PixSettings)
     ddpm: PixelDDPMSettings = setting("pixel.ddpm", default_factory=PixelDDPMSettings)
-
-    def __post_init__(self) -> None:
-        check_settings(self)
 
     @classmethod
     def from_config(cls, pixel: Mapping[str, Any]) -> PixelSettings:
@@ -176,7 +131,6 @@ class PixelSettings:
             cls,
             pixel,
             where="pixel",
-            ignore=("corpora", "seeds", "ddpm_cells", "curve", "pix2pix", "ddpm"),
             pix2pix=Pix2PixSettings.from_config(pixel.get("pix2pix") or {}),
             ddpm=PixelDDPMSettings.from_config(pixel.get("ddpm") or {}),
         )
