@@ -25,9 +25,7 @@ from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 from typing import Any, ClassVar, Literal, Self, TypeVar
 
-import yaml
-
-from tacgen_lib.io.config import settings_from
+from tacgen_lib.io.config import load_schema, settings_from
 
 __all__ = [
     "SCHEMA_PATH",
@@ -56,9 +54,8 @@ C = TypeVar("C", bound=type)
 
 @functools.cache
 def config_schema() -> Mapping[str, Any]:
-    """The schema (config/config.schema.yaml), read once per process with libyaml's loader."""
-    with open(SCHEMA_PATH) as fh:
-        return yaml.load(fh, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))  # noqa: S506
+    """The schema (config/config.schema.yaml), read once per process (`io.config.load_schema`)."""
+    return load_schema(SCHEMA_PATH)
 
 
 def schema_node(key: str) -> Mapping[str, Any]:
@@ -136,9 +133,10 @@ def schema_fields(
 ) -> Callable[[C], C]:
     """Class decorator (under ``@dataclass``): a field per key of config section `section`
     (but `skip`, keys other code reads), after the class's own fields, in the schema's order
-    (those without a default first), typed by `schema_type`, with `setting`'s default and key. `names`: config key -> field
-    name where the two differ. So a settings object's fields, types, defaults and bounds are
-    written once, in the schema; the class keeps what the schema cannot say."""
+    (those without a default first), typed by `schema_type`, with `setting`'s default and
+    key. `names`: config key -> field name where the two differ. So a settings object's
+    fields, types, defaults and bounds are written once, in the schema; the class keeps what
+    the schema cannot say."""
     skip = set(skip)
     names = dict(names or {})
 

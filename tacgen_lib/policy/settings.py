@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from tacgen_lib.io.schema import SchemaSettings, check_settings, schema_fields
+from tacgen_lib.io.schema import SchemaSettings, schema_fields
 
 __all__ = ["PolicySettings", "CONDITIONS", "LEARNED_CONDITIONS"]
 
@@ -53,8 +53,8 @@ class PolicySettings(SchemaSettings):
         )
 
     def __post_init__(self) -> None:
-        """The schema's bounds (`io.schema.check_settings`), then the rules between keys."""
-        check_settings(self)
+        """The schema's bounds (`SchemaSettings`), then the rules between keys."""
+        super().__post_init__()
         for name in _PAIRS:
             lo, hi = getattr(self, name)
             if not lo <= hi:

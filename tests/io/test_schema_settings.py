@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import ast
 import dataclasses
+import hashlib
 import importlib
+import json
 import math
 import re
 from pathlib import Path
@@ -26,6 +28,7 @@ from tacgen_lib.generate.pixel.settings import Pix2PixSettings, PixelDDPMSetting
 from tacgen_lib.generate.regime_sets import RegimeSettings
 from tacgen_lib.generate.settings import GenerateSettings
 from tacgen_lib.generate.visibility import VisibilitySettings
+from tacgen_lib.io.config import load_schema, schema_copy
 from tacgen_lib.io.schema import check_settings, config_key, schema_node
 from tacgen_lib.policy.settings import PolicySettings
 from tacgen_lib.probes.settings import MLPGrid, ProbeFamily, ProbeSettings, RobustnessSettings
@@ -186,3 +189,14 @@ def test_settings_modules_state_no_default_but_the_schemas():
                     "setting",
                     "not_config",
                 ), f"{cls.__name__}.{ast.unparse(stmt.target)}"
+
+
+def test_the_schema_is_read_from_its_json_copy_only_where_the_copy_is_current(tmp_path):
+    path = tmp_path / "schema.yaml"
+    path.write_text("a: 1\n")
+    assert load_schema(path) == {"a": 1}  # no copy
+    digest = hashlib.sha256(path.read_bytes()).hexdigest()
+    schema_copy(path).write_text(json.dumps({"source_sha256": digest, "schema": {"a": 2}}))
+    assert load_schema(path) == {"a": 2}  # the copy of these bytes
+    path.write_text("a: 3\n")
+    assert load_schema(path) == {"a": 3}  # a stale copy is passed over
