@@ -121,7 +121,7 @@ def schema_json(schema_path: Path) -> str:
     source_sha256 is the YAML's: parsing the YAML costs a job ~30 ms, the copy ~0.3 ms)."""
     raw = schema_path.read_bytes()
     copy = {"source_sha256": hashlib.sha256(raw).hexdigest(), "schema": load_yaml(schema_path)}
-    return json.dumps(copy, indent=1) + "\n"
+    return json.dumps(copy, separators=(",", ":")) + "\n"
 
 
 def main(argv: list[str] | None = None) -> int:
