@@ -42,6 +42,7 @@ rule family_backbone:
         device=DEVICE,  # config device (tacgen_lib.runtime.device)
         backbone=lambda w: FAMILIES.families[w.family][w.modality].__dict__,
         pretrain=PRETRAIN,
+        corpus=PRETRAIN["corpus"],  # whose train frames DINO and MAE pretrain on
         mae=lambda w: (
             FEAT["mae"] if family_spec(w.family, w.modality).objective == "mae" else {}
         ),
@@ -79,7 +80,7 @@ rule family_probe:
         mem_mb=2000,
         runtime=30,
     params:
-        probes={p: probe_family(p) for p in FAMILIES.probes},
+        probes={p: PROBES["families"][p] for p in FAMILIES.probes},
         corpora={c: CORPORA[c] for c in FAMILY_CORPORA},
         settings=PROBE_SETTINGS,
         protocols=FAMILIES.protocols,

@@ -10,7 +10,7 @@ from tacgen_lib.features.families import BackboneSpec as _Spec
 
 for _m in MODALITIES:
     check_backbone(
-        _Spec.from_config(FEAT["backbones"][_m]),
+        _Spec.from_config(FEAT["backbones"][_m], f"features.backbones.{_m}"),
         where=f"features.backbones.{_m}",
         dino_epochs=int(PRETRAIN["epochs"]),
         mae_epochs=int(FEAT["mae"]["epochs"]),

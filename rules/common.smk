@@ -5,7 +5,8 @@ import re
 from pathlib import Path
 
 from tacgen_lib.generate.regime_sets import natural_grid_ends, regime_corpora
-from tacgen_lib.io.config import load_yaml, validate_config
+from tacgen_lib.io.config import load_yaml
+from tacgen_lib.workflow_config import validate_config
 from tacgen_lib.io.imports import code_inputs
 from tacgen_lib.report_pages import category
 

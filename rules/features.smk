@@ -55,6 +55,7 @@ rule pretrain_backbone:
         device=DEVICE,  # config device (tacgen_lib.runtime.device)
         backbone=lambda w: FEAT["backbones"][w.modality],
         pretrain=PRETRAIN,
+        corpus=PRETRAIN["corpus"],  # whose train frames DINO and MAE pretrain on
         # MAE's settings only where a backbone is MAE-pretrained: a change reruns only those
         mae=lambda w: (
             FEAT["mae"] if FEAT["backbones"][w.modality]["objective"] == "mae" else {}
@@ -211,6 +212,9 @@ rule pretrained_vs_random:
     params:
         device=DEVICE,  # config device (tacgen_lib.runtime.device)
         features=FEAT,
+        pretrain=PRETRAIN,
+        check=FEAT["pretrained_vs_random"],
+        archs={m: FEAT["backbones"][m]["arch"] for m in ("vision", "tactile")},
         C=[0.1, 1.0, 10.0],
     script:
         "../workflow/scripts/pretrained_vs_random.py"
@@ -218,7 +222,7 @@ rule pretrained_vs_random:
 
 # what V sees (tacgen_lib.generate.visibility): every simulated corpus's visible factors
 # decoded from its vision features; the report page What vision sees and the regime's gate
-VISIBILITY = FEAT.get("visibility") or {"gammas": [1.0], "bootstrap": 2000, "gate": {}}
+VISIBILITY = FEAT["visibility"]  # the schema fills its defaults
 VISIBILITY_EDGE = "results/features/visibility.parquet"
 # every simulated corpus, and of the regime's rho grid its first corpus only: at every rho
 # the appearance class is uniform and a frame depends on its look (colour, texture, shape,

@@ -43,14 +43,16 @@ rule probe:
         mem_mb=3000,
         runtime=30,
     params:
-        family=lambda w: probe_family(w.family),
+        family=lambda w: PROBES["families"][w.family],
         corpus=lambda w: CORPORA[probe_family(w.family)["corpus"]],
         settings=PROBE_SETTINGS,
         fusions=PROBES["fusions"],
         heads_variant=PROBES["heads"]["variant"],
         variants=config["preprocess"]["variants"],
         align_seeds=lambda w: probe_align_seeds(w.family),
-        run=lambda w: probe_run_options(w.protocol),
+        # the protocol variant's budget: headline comparisons only? controls?
+        headline_only=lambda w: ROBUST.headline_only(w.protocol),
+        controls=lambda w: ROBUST.run_controls(w.protocol),
     script:
         "../workflow/scripts/probe.py"
 
@@ -127,9 +129,10 @@ rule probe_training_size:
         mem_mb=2000,
         runtime=30,
     params:
-        family=lambda w: probe_family(w.family),
+        family=lambda w: PROBES["families"][w.family],
         corpus=lambda w: CORPORA[probe_family(w.family)["corpus"]],
         settings=PROBE_SETTINGS,
+        robustness=PROBES["robustness"],
         heads_variant=PROBES["heads"]["variant"],
         variants=config["preprocess"]["variants"],
     script:
@@ -157,9 +160,10 @@ rule probe_within_scale:
         mem_mb=2000,
         runtime=30,
     params:
-        family=lambda w: probe_family(w.family),
+        family=lambda w: PROBES["families"][w.family],
         corpus=lambda w: CORPORA[probe_family(w.family)["corpus"]],
         settings=PROBE_SETTINGS,
+        robustness=PROBES["robustness"],
         heads_variant=PROBES["heads"]["variant"],
         variants=config["preprocess"]["variants"],
     script:

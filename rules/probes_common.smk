@@ -39,14 +39,6 @@ def probe_job_edges(edge):
     ]
 
 
-def probe_run_options(protocol):
-    """How much a protocol variant runs (headline comparisons only? controls?)."""
-    return {
-        "headline_only": ROBUST.headline_only(protocol),
-        "controls": ROBUST.run_controls(protocol),
-    }
-
-
 def probe_family(family):
     return {"name": family, **PROBES["families"][family]}
 

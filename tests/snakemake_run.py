@@ -102,7 +102,7 @@ def validated(overlay: str | None = None) -> dict:
     against the schema (its defaults filled in)."""
     from snakemake.utils import update_config
 
-    from tacgen_lib.io.config import validate_config
+    from tacgen_lib.workflow_config import validate_config
 
     cfg = yaml.safe_load((ROOT / "config/config.yaml").read_text())
     if overlay:

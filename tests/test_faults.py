@@ -497,7 +497,7 @@ def _build_every_settings_object(cfg: dict) -> None:
 @example(where=("align", "lr"), value=float("inf"))  # found by this test once: kept as a case
 @example(where=("corpora", "sim_transfer", "n"), value=1)  # 1 object of 6 contacts: found once
 def test_fuzzed_config_validates_or_names_the_key(where, value):
-    from tacgen_lib.io.config import ConfigError, validate_config
+    from tacgen_lib.workflow_config import ConfigError, validate_config
 
     cfg = copy.deepcopy(_BASE)
     node = cfg

@@ -50,7 +50,9 @@ from __future__ import annotations
 import csv
 import os
 import re
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
@@ -286,6 +288,15 @@ def _hct_data_folders(hct: Path) -> list[Path]:
             f"no HCT data folders under {hct}: expected <folder>/train.csv or <folder>/test.csv"
         )
     return folders
+
+
+def ingest_declared(root: Path, corpus: Mapping[str, Any]) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(samples, sensors) of the real corpus `corpus` declares (``corpora.<name>`` with its
+    ``name``: kind ssvtp, with an optional tactile ``background`` image, or hct) from `root`."""
+    if corpus["kind"] == "ssvtp":
+        background = Path(corpus["background"]) if corpus.get("background") else None
+        return ingest_ssvtp(root, corpus=corpus["name"], background=background)
+    return ingest_hct(root, corpus=corpus["name"])
 
 
 def ingest_hct(root: Path, *, corpus: str = "hct") -> tuple[pd.DataFrame, pd.DataFrame]:

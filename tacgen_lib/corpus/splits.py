@@ -20,11 +20,15 @@ allowed for training (held-out `test` rows always; `val` unless the caller allow
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 
+from tacgen_lib.io.schema import SchemaSettings, schema_fields
+
 __all__ = [
+    "SplitSettings",
     "SPLITS",
     "LeakageError",
     "make_splits",
@@ -226,3 +230,11 @@ def assert_trainable(
             f"rule {rule}: refusing to train on {int(bad.sum())} held-out row(s); "
             f"sample_id {ids[first]!r} is in split {found.iloc[first]!r} (allowed: {sorted(allowed)})"
         )
+
+
+@dataclass(frozen=True)
+@schema_fields("splits")
+class SplitSettings(SchemaSettings):
+    """How the splits are made (config ``splits``; `make_splits`): the `seed`, the train / val
+    / test `fractions` of a stratified split, and the corpora split `by_scale` or `by_object`
+    instead (corpus -> their scales or shares)."""

@@ -11,13 +11,16 @@ kept; the aspect change is the same for every frame of a modality.
 
 from __future__ import annotations
 
-from typing import Literal
+from typing import TYPE_CHECKING, Literal
 
 import cv2
 import numpy as np
 import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
+
+if TYPE_CHECKING:
+    from tacgen_lib.features.settings import FeatureSettings
 
 __all__ = [
     "IMAGENET_MEAN",
@@ -112,6 +115,24 @@ def extract_features(
         model.train(was_training)
         model.to(home)
     return out
+
+
+def extract_with(
+    model: nn.Module,
+    images: np.ndarray,
+    settings: FeatureSettings,
+    *,
+    device: torch.device | str = "cpu",
+) -> np.ndarray:
+    """`extract_features` at the config's image size, batch and pool (config ``features``)."""
+    return extract_features(
+        model,
+        images,
+        image_size=settings.image_size,
+        batch_size=settings.batch_size,
+        pool=settings.pool,
+        device=device,
+    )
 
 
 def pixel_features(images: np.ndarray, size: tuple[int, int] = (16, 16)) -> np.ndarray:

@@ -14,12 +14,13 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 from tacgen_lib.features.archs import arch_family
-from tacgen_lib.io.config import ConfigError
+from tacgen_lib.io.config import ConfigError, settings_from
+from tacgen_lib.io.schema import SchemaSettings, schema_fields
 
 __all__ = [
     "BackboneSpec",
@@ -31,26 +32,26 @@ __all__ = [
 ]
 
 MODALITIES = ("vision", "tactile")
-OBJECTIVES = ("dino", "mae", "random")
 
 
 @dataclass(frozen=True)
-class BackboneSpec:
-    """One modality's backbone: arch, official checkpoint (or None), pretraining objective."""
+@schema_fields("features.backbones.vision")
+class BackboneSpec(SchemaSettings):
+    """One modality's backbone: arch, official checkpoint (or None), pretraining objective.
 
-    arch: str
-    checkpoint: str | None = None
-    objective: str = "dino"
-    num_register_tokens: int = 0
+    Every backbone declaration (features.backbones.vision and .tactile, a family's under
+    backbones.families) is one schema ($defs/backbone); the fields name the keys of the
+    vision one.
+    """
 
     @classmethod
-    def from_config(cls, spec: Mapping[str, Any]) -> BackboneSpec:
-        return cls(
-            arch=str(spec["arch"]),
-            checkpoint=spec.get("checkpoint") or None,
-            objective=str(spec.get("objective", "dino")),
-            num_register_tokens=int(spec.get("num_register_tokens", 0)),
-        )
+    def from_config(
+        cls, spec: Mapping[str, Any], where: str = "features.backbones.vision"
+    ) -> BackboneSpec:
+        """The backbone a declaration `spec` (at config key `where`) gives; an empty
+        checkpoint is none."""
+        out = settings_from(cls, spec, where=where)
+        return replace(out, checkpoint=out.checkpoint or None)
 
     @property
     def network(self) -> str:
@@ -72,8 +73,6 @@ def check_backbone(spec: BackboneSpec, *, where: str, dino_epochs: int, mae_epoc
     features.pretrain, whose 0 epochs mean the seeded random init), "mae" (a ViT; features.mae,
     at least 1 epoch), "random" (any arch: the seeded random init). A ResNet has no in-workflow
     pretraining: without a checkpoint it must say "random"."""
-    if spec.objective not in OBJECTIVES:
-        raise ConfigError(f"config {where}.objective: {spec.objective!r}, choose from {OBJECTIVES}")
     if spec.checkpoint:
         return
     if spec.network == "resnet" and spec.objective != "random":
@@ -145,7 +144,10 @@ class FamilySettings:
     def from_config(cls, config: Mapping[str, Any]) -> FamilySettings:
         cfg = config.get("backbones") or {}
         families = {
-            name: {m: BackboneSpec.from_config(spec[m]) for m in MODALITIES}
+            name: {
+                m: BackboneSpec.from_config(spec[m], f"backbones.families.{name}.{m}")
+                for m in MODALITIES
+            }
             for name, spec in (cfg.get("families") or {}).items()
         }
         run = tuple(cfg.get("run", ()))

@@ -1,9 +1,10 @@
-"""The features stage's settings: DINO pretraining from config ``features.pretrain``.
+"""The features stage's settings: feature extraction (config ``features``), DINO and MAE
+pretraining (``features.pretrain``, ``features.mae``) and the pretrained-vs-random check.
 
-Every field that changes a pretrained backbone is a key of ``features.pretrain`` (the schema,
-config/config.schema.yaml, gives the optional ones their defaults, which are these fields'
-defaults), so a run can be reproduced from its config alone. ``corpus`` and ``variant`` (which
-frames the backbone learns from) are read by the rules, not here. `DinoSettings.tiny()` is a
+Every field that changes a pretrained backbone is a key of ``features.pretrain``, whose type,
+default and bounds config/config.schema.yaml states (`io.schema.schema_fields`), so a run can be
+reproduced from its config alone. ``corpus`` and ``variant`` (which frames the backbone learns
+from) are read by the rules, not here. `DinoSettings.tiny()` is a
 seconds-long run for tests.
 """
 
@@ -11,15 +12,36 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from typing import Any, Literal
+from typing import Any
 
-from tacgen_lib.io.config import settings_from
+from tacgen_lib.io.schema import SchemaSettings, schema_fields
 
-__all__ = ["DinoSettings", "MaeSettings", "backbones_pretrained"]
+__all__ = [
+    "DinoSettings",
+    "FeatureSettings",
+    "MaeSettings",
+    "PretrainedVsRandomSettings",
+    "backbones_pretrained",
+]
 
 
 @dataclass(frozen=True)
-class DinoSettings:
+@schema_fields(
+    "features", skip=("backbones", "pretrain", "mae", "pretrained_vs_random", "visibility")
+)
+class FeatureSettings(SchemaSettings):
+    """How a frozen backbone's features are extracted (config ``features``; `extract`).
+
+    Frames are resized to `image_size` pixels and run through the backbone `batch_size` at a
+    time; a frame's vector is its CLS token or the mean of its patch tokens (`pool`). The pixel
+    features are the frame resized to `pixel_size` (H, W). `threads`: the torch threads of
+    an extraction job (outputs are bit-identical at one count, not across counts).
+    """
+
+
+@dataclass(frozen=True)
+@schema_fields("features.pretrain", skip=("corpus", "variant"))
+class DinoSettings(SchemaSettings):
     """DINO self-distillation with DINOv2's safeguards; see `dino.pretrain_dino` for each term.
 
     epochs, batch_size, lr, seed: the run. Crops: `n_local_crops` local crops of `local_size`
@@ -32,35 +54,6 @@ class DinoSettings:
     warm-up, gradient clipping at `clip_grad`; teacher EMA from `momentum_teacher` to 1.
     Augmentation: colour `jitter` strength.
     """
-
-    epochs: int = 8
-    batch_size: int = 64
-    lr: float = 5e-4
-    seed: int = 0
-    n_local_crops: int = 4
-    local_size: int | None = None
-    out_dim: int = 1024
-    hidden_dim: int = 512
-    bottleneck_dim: int = 128
-    student_temp: float = 0.1
-    teacher_temp: float = 0.04
-    warmup_teacher_temp: float | None = None
-    warmup_teacher_temp_epochs: int = 0
-    centering: Literal["sinkhorn_knopp", "centre"] = "sinkhorn_knopp"
-    sinkhorn_iterations: int = 3
-    center_momentum: float = 0.9
-    koleo_weight: float = 0.1
-    freeze_last_layer_epochs: int = 1
-    momentum_teacher: float = 0.99
-    weight_decay: float = 0.04
-    warmup_epochs: int = 1
-    clip_grad: float = 3.0
-    jitter: float = 0.4
-
-    @classmethod
-    def from_config(cls, pretrain: Mapping[str, Any]) -> DinoSettings:
-        """Settings from config ``features.pretrain`` (its corpus and variant are the rules')."""
-        return settings_from(cls, pretrain, where="features.pretrain", ignore=("corpus", "variant"))
 
     @classmethod
     def tiny(cls, **changes: Any) -> DinoSettings:
@@ -78,7 +71,8 @@ class DinoSettings:
 
 
 @dataclass(frozen=True)
-class MaeSettings:
+@schema_fields("features.mae")
+class MaeSettings(SchemaSettings):
     """Masked-autoencoder pretraining (`mae.pretrain_mae`), from config ``features.mae``.
 
     epochs, batch_size, lr, weight_decay, warmup_epochs, seed: the run (AdamW, betas 0.9/0.95,
@@ -87,27 +81,18 @@ class MaeSettings:
     `norm_pix_loss`: targets normalised per patch (MAE's default).
     """
 
-    epochs: int = 10
-    batch_size: int = 64
-    lr: float = 1.5e-3
-    weight_decay: float = 0.05
-    warmup_epochs: int = 1
-    seed: int = 0
-    mask_ratio: float = 0.75
-    decoder_dim: int = 96
-    decoder_depth: int = 1
-    decoder_heads: int = 3
-    norm_pix_loss: bool = True
-
-    @classmethod
-    def from_config(cls, mae: Mapping[str, Any]) -> MaeSettings:
-        """Settings from config ``features.mae``."""
-        return settings_from(cls, mae, where="features.mae")
-
     @classmethod
     def tiny(cls, **changes: Any) -> MaeSettings:
         """Two epochs of a narrow decoder on small batches, for tests; `changes` override."""
         return replace(cls(epochs=2, batch_size=8, decoder_dim=16, decoder_heads=2), **changes)
+
+
+@dataclass(frozen=True)
+@schema_fields("features.pretrained_vs_random")
+class PretrainedVsRandomSettings(SchemaSettings):
+    """The pretrained-vs-random check (config ``features.pretrained_vs_random``): a logistic
+    probe of `targets` (modality -> manifest column) on `corpus`'s frames, from the pretrained
+    and the random-init backbone, with `bootstrap` test resamples."""
 
 
 def backbones_pretrained(features: Mapping[str, Any]) -> bool:

@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from tacgen_lib.corpus.splits import LeakageError, assert_trainable
-from tacgen_lib.io.config import settings_from
+from tacgen_lib.io.schema import SchemaSettings, schema_fields
 
 __all__ = [
     "NATURAL_PREFIX",
@@ -87,7 +87,8 @@ PAIRINGS = ("real", "shuffled")
 
 
 @dataclass(frozen=True)
-class RegimeSettings:
+@schema_fields("regime", skip=("corpus", "rhos", "targets"))
+class RegimeSettings(SchemaSettings):
     """The regime grid and how its arms are fitted (config ``regime``).
 
     ``n_labelled`` / ``n_pool``: the label and pool sizes of the grid; ``seeds``: one per set
@@ -104,43 +105,6 @@ class RegimeSettings:
     reach penalties strong enough for a probe to fall back to the majority class or the mean
     (the probes stage keeps the paper's, config ``probes``).
     """
-
-    n_labelled: tuple[int, ...] = (32, 128, 384)
-    n_pool: tuple[int, ...] = (256, 1024)
-    seeds: tuple[int, ...] = (0, 1)
-    label_draws: int = 3
-    pool_val_fraction: float = 0.1
-    steps: int = 1000
-    batch_size: int = 128
-    sampling_steps: int = 25
-    guidance: float = 1.0
-    gen_mean_samples: int = 8
-    knn_ks: tuple[int, ...] = (1, 2, 4, 8, 16, 32, 64)
-    look_min_rows: int = 5
-    bootstrap: int = 5000
-    C: tuple[float, ...] = (0.0001, 0.01, 0.1, 1.0, 10.0)
-    lambdas: tuple[float, ...] = (0.1, 1.0, 10.0, 100.0, 1000.0, 10000.0, 100000.0)
-
-    def __post_init__(self) -> None:
-        for name in ("n_labelled", "n_pool", "knn_ks"):
-            values = getattr(self, name)
-            if not values or any(int(v) != v or v < 1 for v in values):
-                raise ValueError(f"regime.{name} must be integers >= 1, got {values!r}")
-        for name in ("label_draws", "gen_mean_samples", "look_min_rows"):
-            if int(getattr(self, name)) < 1:
-                raise ValueError(f"regime.{name} must be >= 1, got {getattr(self, name)!r}")
-        for name in ("C", "lambdas"):
-            values = getattr(self, name)
-            if not values or any(float(v) <= 0 for v in values):
-                raise ValueError(f"regime.{name} must be positive numbers, got {values!r}")
-        if not 0.0 < self.pool_val_fraction < 1.0:
-            raise ValueError(
-                f"regime.pool_val_fraction must be in (0, 1), got {self.pool_val_fraction}"
-            )
-
-    @classmethod
-    def from_config(cls, regime: Mapping[str, Any]) -> RegimeSettings:
-        return settings_from(cls, regime, where="regime", ignore=("targets", "corpus", "rhos"))
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ held-out scale), has nothing a probe could decode and gets no row.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -25,8 +25,8 @@ import pandas as pd
 
 from tacgen_lib.corpus.looks import FACTORS
 from tacgen_lib.generate.blocks import feature_block
-from tacgen_lib.generate.settings import check_gamma_multiples
 from tacgen_lib.generate.small_probes import fit_small_nonlinear, fit_small_probe
+from tacgen_lib.io.schema import SchemaSettings, schema_fields
 from tacgen_lib.probes.bootstrap import resample_indices, score_interval
 from tacgen_lib.probes.metrics import score
 from tacgen_lib.probes.settings import ProbeSettings
@@ -60,38 +60,12 @@ PROBES = ("linear", "nonlinear")
 
 
 @dataclass(frozen=True)
-class VisibilitySettings:
+@schema_fields("features.visibility")
+class VisibilitySettings(SchemaSettings):
     """The visibility check (config ``features.visibility``): the RBF gamma multiples (of the
     median heuristic) the nonlinear probe chooses among by CV, the fixed-test bootstrap
     resamples, the CV folds of both probes (one draw), and the gate: factor -> the accuracy V must reach on a regime corpus for the
     regime to be read (`visibility_gate`)."""
-
-    gammas: tuple[float, ...] = (1.0,)
-    bootstrap: int = 2000
-    folds: int = 3
-    gate: Mapping[str, float] = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        check_gamma_multiples(self.gammas, "features.visibility.gammas")
-        if int(self.bootstrap) < 1:
-            raise ValueError(f"features.visibility.bootstrap must be >= 1, got {self.bootstrap}")
-        if int(self.folds) < 2:
-            raise ValueError(f"features.visibility.folds must be >= 2, got {self.folds}")
-        for factor, t in self.gate.items():
-            if factor not in FACTORS or not 0.0 <= float(t) <= 1.0:
-                raise ValueError(
-                    f"features.visibility.gate: {factor!r}: {t!r} (factors {', '.join(FACTORS)}; "
-                    "accuracies in [0, 1])"
-                )
-
-    @classmethod
-    def from_config(cls, visibility: Mapping[str, Any]) -> VisibilitySettings:
-        return cls(
-            gammas=tuple(float(g) for g in visibility.get("gammas", (1.0,))),
-            bootstrap=int(visibility.get("bootstrap", 2000)),
-            folds=int(visibility.get("folds", 3)),
-            gate={str(k): float(v) for k, v in (visibility.get("gate") or {}).items()},
-        )
 
 
 @dataclass(frozen=True)

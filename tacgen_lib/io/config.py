@@ -1,4 +1,4 @@
-"""Configuration validation: JSON schema first, then the cross-references a schema cannot see.
+"""Configuration reading: the JSON schema's validation and defaults, and the settings reader.
 
 Errors name the key as a dotted path (`align.taus[1]`) and the file, so a bad value stops the
 run before any job starts with a message that says what to fix.
@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import hashlib
+import json
 import math
 import os
 import types
@@ -18,13 +20,18 @@ from typing import TYPE_CHECKING, Any, TypeVar
 
 import yaml
 
-from tacgen_lib.corpus.keys import corpus_key_errors
-
 if TYPE_CHECKING:  # jsonschema is imported where a config is validated (at parse time), not by
     # the jobs, which only read their settings (`settings_from`): ~0.1 s less per job
     import jsonschema
 
-__all__ = ["ConfigError", "validate_config", "load_yaml", "settings_from"]
+__all__ = [
+    "ConfigError",
+    "load_schema",
+    "load_yaml",
+    "schema_copy",
+    "settings_from",
+    "validate_schema",
+]
 
 T = TypeVar("T")
 
@@ -45,6 +52,26 @@ def load_yaml(path: str | Path) -> Any:
         return yaml.load(fh, Loader=SAFE_LOADER)  # noqa: S506 - a safe loader
 
 
+def schema_copy(path: str | Path) -> Path:
+    """Where the JSON copy of the schema at `path` lives (beside it; tools/config_reference.py
+    writes it): ``{"source_sha256": <the YAML's bytes' sha256>, "schema": <the schema>}``."""
+    return Path(path).with_suffix(".json")
+
+
+def load_schema(path: str | Path) -> Any:
+    """The YAML schema at `path`: from its JSON copy (`schema_copy`) where that copy was
+    written from these very bytes, else parsed from the YAML (~30 ms with libyaml against
+    ~0.3 ms for the copy: every job that builds a settings object reads the schema)."""
+    raw = Path(path).read_bytes()
+    try:
+        copy_ = json.loads(schema_copy(path).read_text())
+        if copy_.get("source_sha256") == hashlib.sha256(raw).hexdigest():
+            return copy_["schema"]
+    except (OSError, ValueError, AttributeError):
+        pass
+    return yaml.load(raw, Loader=SAFE_LOADER)  # noqa: S506 - a safe loader
+
+
 #: (resolved schema path, mtime_ns, size) -> (schema, its validator): the fuzzed-config test and
 #: the settings tests validate hundreds of configs against one schema; read it once per process
 #: and again only when it changes. The schema is never mutated (`_fill_defaults` copies defaults).
@@ -56,7 +83,7 @@ def _schema(path: str | Path) -> tuple[dict, jsonschema.Draft202012Validator]:
     stat = os.stat(resolved)
     key = (resolved, stat.st_mtime_ns, stat.st_size)
     if key not in _SCHEMAS:
-        schema = load_yaml(resolved)
+        schema = load_schema(resolved)
         _SCHEMAS[key] = (schema, _validator_class()(schema))
     return _SCHEMAS[key]
 
@@ -108,12 +135,13 @@ def _non_finite_numbers(node: Any, path: tuple = ()) -> list[tuple[tuple, float]
     return []
 
 
-def validate_config(config: dict, schema_path: str | Path, *, source: str = "config") -> dict:
-    """Validate `config` in place against the schema, fill defaults, check cross-references.
+def validate_schema(config: dict, schema_path: str | Path, *, source: str = "config") -> dict:
+    """Validate `config` in place against the schema and fill the defaults it declares.
 
     Raises ConfigError naming the key (e.g. `align.taus[0]: -0.1 is less than or equal to the
     minimum of 0`). NaN and infinity are refused everywhere: no setting takes them, and a
-    JSON-schema bound such as `exclusiveMinimum: 0` lets `.inf` through.
+    JSON-schema bound such as `exclusiveMinimum: 0` lets `.inf` through. The cross-references
+    a schema cannot see are checked above io (`tacgen_lib.workflow_config.validate_config`).
     """
     bad = _non_finite_numbers(config)
     if bad:
@@ -132,73 +160,6 @@ def validate_config(config: dict, schema_path: str | Path, *, source: str = "con
         lines += [f"{_key_path(e.absolute_path)}: {e.message}" for e in errors if e is not err][:4]
         raise ConfigError(f"{source}: invalid configuration\n  " + "\n  ".join(lines))
     _fill_defaults(config, schema, schema)
-    scenes_file = Path(config["scenes_file"])
-    scenes = load_yaml(scenes_file) if scenes_file.exists() else None
-    for name, corpus in config["corpora"].items():
-        if corpus["kind"] == "simulated":
-            for key, message in corpus_key_errors(corpus):
-                raise ConfigError(f"{source}: corpora.{name}.{key}: {message}")
-            if scenes is None:
-                raise ConfigError(f"{source}: scenes_file: {scenes_file} does not exist")
-            if corpus["scene"] not in scenes:
-                raise ConfigError(
-                    f"{source}: corpora.{name}.scene: unknown scene {corpus['scene']!r} "
-                    f"(scenes in {scenes_file}: {', '.join(sorted(scenes))})"
-                )
-    for name in config["splits"].get("by_scale", {}):
-        if name not in config["corpora"]:
-            raise ConfigError(
-                f"{source}: splits.by_scale.{name}: unknown corpus {name!r} "
-                f"(corpora: {', '.join(sorted(config['corpora']))})"
-            )
-    corpora = set(config["corpora"])
-    refs = [
-        ("features.pretrain.corpus", config["features"]["pretrain"]["corpus"]),
-        (
-            "features.pretrained_vs_random.corpus",
-            config["features"]["pretrained_vs_random"]["corpus"],
-        ),
-    ]
-    refs += [(f"align.corpora[{i}]", c) for i, c in enumerate(config["align"]["corpora"])]
-    for fam, spec in config["probes"]["families"].items():
-        refs += [
-            (f"probes.families.{fam}.corpus", spec["corpus"]),
-            (f"probes.families.{fam}.heads_from", spec["heads_from"]),
-        ]
-    for key, name in refs:
-        if name not in corpora:
-            raise ConfigError(
-                f"{source}: {key}: unknown corpus {name!r} (corpora: {', '.join(sorted(corpora))})"
-            )
-    for fam, spec in config["probes"]["families"].items():
-        if spec["heads_from"] not in config["align"]["corpora"]:
-            raise ConfigError(
-                f"{source}: probes.families.{fam}.heads_from: {spec['heads_from']!r} is not in align.corpora, "
-                "so no heads are trained on it"
-            )
-    variants = set(config["preprocess"]["variants"])
-    vrefs = [
-        ("features.pretrain.variant", config["features"]["pretrain"]["variant"]),
-        ("probes.heads.variant", config["probes"]["heads"]["variant"]),
-    ]
-    vrefs += [(f"align.variants[{i}]", v) for i, v in enumerate(config["align"]["variants"])]
-    for key, name in vrefs:
-        if name not in variants:
-            raise ConfigError(f"{source}: {key}: variant {name!r} is not in preprocess.variants")
-    heads = config["probes"]["heads"]
-    if heads["variant"] not in config["align"]["variants"]:
-        raise ConfigError(
-            f"{source}: probes.heads.variant: {heads['variant']!r} is not in align.variants"
-        )
-    if heads["tau"] not in config["align"]["taus"]:
-        raise ConfigError(f"{source}: probes.heads.tau: {heads['tau']} is not in align.taus")
-    if heads["n_train"] not in config["align"]["n_train"]:
-        raise ConfigError(
-            f"{source}: probes.heads.n_train: {heads['n_train']} is not in align.n_train"
-        )
-    fr = config["splits"]["fractions"]
-    if abs(sum(fr.values()) - 1.0) > 1e-9:
-        raise ConfigError(f"{source}: splits.fractions: must sum to 1, got {sum(fr.values()):g}")
     return config
 
 
@@ -216,8 +177,10 @@ def settings_from(
 ) -> T:
     """A settings dataclass from a config section: the one reader every settings object uses.
 
-    Each field is read from its key (`rename`: field -> config key where the two differ) or
-    taken from `given` (what the caller knows that is not config: a family's kind, a seed).
+    Each field is read from its key (the key `io.schema.schema_fields` or `setting` gave it, or
+    `rename`: field -> config key where the two differ) or taken from `given` (what the caller
+    knows that is not config: a family's kind, a seed); a `io.schema.not_config` field is
+    never read from the section.
     One rule for a missing key: the field keeps its default; a field without a default raises
     ConfigError naming `where.key`. A key that is neither a field's nor in `ignore` (keys of
     the section the rules read themselves, such as grids) raises ConfigError naming it. Values
@@ -228,9 +191,12 @@ def settings_from(
     settings.
     """
     section = dict(section or {})
-    rename = dict(rename or {})
+    ignore = {*ignore, *getattr(cls, "schema_skip", ())}  # keys `io.schema.schema_fields` skipped
+    rename = {**_schema_renames(cls, where), **(rename or {})}
     hints = typing.get_type_hints(cls)
-    names = [f.name for f in dataclasses.fields(cls)]
+    names = [
+        f.name for f in dataclasses.fields(cls) if f.metadata.get("config_key", "") is not None
+    ]
     keys = {rename.get(n, n): n for n in names if n not in given}
     unknown = sorted(set(section) - set(keys) - set(ignore))
     if unknown:
@@ -239,7 +205,7 @@ def settings_from(
         )
     values = dict(given)
     for f in dataclasses.fields(cls):
-        if f.name in given:
+        if f.name in given or f.name not in names:
             continue
         key = rename.get(f.name, f.name)
         if key in section:
@@ -247,6 +213,17 @@ def settings_from(
         elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
             raise ConfigError(f"config {where}.{key}: missing (this setting has no default)")
     return cls(**values)
+
+
+def _schema_renames(cls: type, where: str) -> dict[str, str]:
+    """field -> config key of the fields from the schema (`io.schema.setting`) whose key, under
+    section `where`, is not the field's name (``align.features`` for `feature`)."""
+    out = {}
+    for f in dataclasses.fields(cls):
+        key = f.metadata.get("config_key")
+        if key and key.startswith(f"{where}.") and key[len(where) + 1 :] != f.name:
+            out[f.name] = key[len(where) + 1 :]
+    return out
 
 
 def _coerce(tp: Any, value: Any, where: str) -> Any:

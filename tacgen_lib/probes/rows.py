@@ -11,8 +11,10 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from tacgen_lib.corpus.splits import assert_trainable
+from tacgen_lib.io import edges
 from tacgen_lib.probes.metrics import score
-from tacgen_lib.probes.settings import ProbeSettings
+from tacgen_lib.probes.settings import ProbeFamily, ProbeSettings
 from tacgen_lib.probes.subsets import within_scale_split
 
 #: Targets whose uncertainty bands travel with the results: target -> (low, high) columns.
@@ -79,6 +81,10 @@ class FamilyRows:
     @property
     def n_test(self) -> int:
         return int(self.test_ids.size)
+
+    def read_block(self, path: str, column: str) -> tuple[np.ndarray, np.ndarray]:
+        """`train_test` of vector column `column` of the edge at `path` (read and verified)."""
+        return self.train_test(edges.read(path, require={column: "vector"}), column)
 
     def train_test(self, edge, column: str) -> tuple[np.ndarray, np.ndarray]:
         """(train, test) arrays of one vector column of a verified edge
@@ -200,6 +206,31 @@ def family_rows(
 
 #: Manifest columns of what vision can see of an object (the appearance-controlled design).
 VISIBLE = ("shape", "scale")
+
+
+def trainable_family_rows(
+    manifest: pd.DataFrame,
+    splits: pd.DataFrame,
+    family: ProbeFamily,
+    corpus: Mapping,
+    *,
+    rule: str,
+    within_scale: tuple[float, int] | None = None,
+) -> FamilyRows:
+    """`family_rows` of `family` on its corpus (declaration `corpus`: the bootstrap's strata),
+    refusing any test row among the rows its probes train on (`assert_trainable`, naming
+    `rule`): they train on train + val rows, test rows only score them."""
+    rows = family_rows(
+        manifest,
+        splits,
+        corpus=family.corpus,
+        target=family.target,
+        kind=family.kind,
+        strata=strata_for(corpus),
+        within_scale=within_scale,
+    )
+    assert_trainable(rows.train_ids, splits, rule=rule, allowed=("train", "val"))
+    return rows
 
 
 def visible_design(

@@ -12,12 +12,20 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Mapping
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 
 from tacgen_lib.io.config import settings_from
-from tacgen_lib.probes.variants import PROTOCOLS, check_protocol, same_as_raw
+from tacgen_lib.io.schema import SchemaSettings, check_settings, not_config, schema_fields, setting
+from tacgen_lib.probes.variants import check_protocol, same_as_raw
 
-__all__ = ["ALIGNED_VISION", "MLPGrid", "RobustnessSettings", "check_families", "has_aligned_rows"]
+__all__ = [
+    "ALIGNED_VISION",
+    "MLPGrid",
+    "ProbeFamily",
+    "RobustnessSettings",
+    "check_families",
+    "has_aligned_rows",
+]
 
 
 #: The V features the alignment heads project: only families with this V have aligned rows.
@@ -56,31 +64,24 @@ def check_families(families: Mapping[str, Mapping]) -> None:
 
 
 @dataclass(frozen=True)
-class MLPGrid:
-    """The 2-layer probe's CV grid and solver budget (config ``probes.robustness.mlp``)."""
+@schema_fields("probes.families.*")
+class ProbeFamily(SchemaSettings):
+    """One probe family (config ``probes.families.<name>``): a `kind` probe (ridge | logistic)
+    of manifest column `target` on `corpus`'s rows, V from its `vision` features (pixel | vit),
+    its aligned rows from the heads trained on corpus `heads_from`."""
 
-    widths: tuple[int, ...] = (64,)
-    weight_decays: tuple[float, ...] = (0.01, 1.0)
-    folds: int = 3
-    max_iter: int = 200
+    name: str = not_config()  # the family's name (its key under probes.families)
 
     @classmethod
-    def from_config(cls, mlp: Mapping | None) -> MLPGrid:
-        """From ``probes.robustness.mlp`` (None: the defaults)."""
-        return settings_from(cls, mlp, where="probes.robustness.mlp")
+    def from_config(cls, name: str, spec: Mapping) -> ProbeFamily:
+        """Family `name` from its declaration ``probes.families.<name>``."""
+        return settings_from(cls, spec, where=f"probes.families.{name}", name=name)
 
-    def __post_init__(self) -> None:
-        if not self.widths or min(self.widths) < 1:
-            raise ValueError(f"probes.robustness.mlp.widths: need widths >= 1, got {self.widths}")
-        if not self.weight_decays or min(self.weight_decays) < 0:
-            raise ValueError(
-                f"probes.robustness.mlp.weight_decays: need values >= 0, got {self.weight_decays}"
-            )
-        if self.folds < 2 or self.max_iter < 1:
-            raise ValueError(
-                f"probes.robustness.mlp: need folds >= 2 and max_iter >= 1, got {self.folds}, "
-                f"{self.max_iter}"
-            )
+
+@dataclass(frozen=True)
+@schema_fields("probes.robustness.mlp")
+class MLPGrid(SchemaSettings):
+    """The 2-layer probe's CV grid and solver budget (config ``probes.robustness.mlp``)."""
 
     @property
     def points(self) -> list[tuple[float, int]]:
@@ -93,48 +94,29 @@ class RobustnessSettings:
     """Config ``probes.robustness``: which families run under which protocol variants, how
     much of each, the training-size sweep and the within-scale diagnosis."""
 
-    protocols: tuple[str, ...] = ("raw", "standardised", "mlp2")
-    families: tuple[str, ...] = ()
-    comparisons: str = "headline"  # "headline" | "all" comparisons under a non-raw protocol
-    controls: bool = False  # controls under a non-raw protocol
-    mlp: MLPGrid = field(default_factory=MLPGrid)
-    size_families: tuple[str, ...] = ()
-    size_n_train: tuple[int | str, ...] = (50, "all")
-    size_seeds: tuple[int, ...] = (42,)
-    within_families: tuple[str, ...] = ()
-    within_test_fraction: float = 0.33
-    within_seed: int = 42
+    protocols: tuple[str, ...] = setting("probes.robustness.protocols")
+    families: tuple[str, ...] = setting("probes.robustness.families")
+    # "headline" | "all" comparisons, and controls or not, under a non-raw protocol
+    comparisons: str = setting("probes.robustness.comparisons")
+    controls: bool = setting("probes.robustness.controls")
+    mlp: MLPGrid = setting("probes.robustness.mlp", default_factory=MLPGrid)
+    size_families: tuple[str, ...] = setting("probes.robustness.training_size.families")
+    size_n_train: tuple[int | str, ...] = setting("probes.robustness.training_size.n_train")
+    size_seeds: tuple[int, ...] = setting("probes.robustness.training_size.seeds")
+    within_families: tuple[str, ...] = setting("probes.robustness.within_scale.families")
+    within_test_fraction: float = setting("probes.robustness.within_scale.test_fraction")
+    within_seed: int = setting("probes.robustness.within_scale.seed")
 
     def __post_init__(self) -> None:
-        for p in self.protocols:
-            if p not in PROTOCOLS:
-                raise ValueError(
-                    f"probes.robustness.protocols: unknown {p!r}; choose from {sorted(PROTOCOLS)}"
-                )
-        if "raw" not in self.protocols:
-            raise ValueError("probes.robustness.protocols must include 'raw' (the reference)")
-        if self.comparisons not in ("headline", "all"):
-            raise ValueError(
-                f"probes.robustness.comparisons must be 'headline' or 'all', got {self.comparisons!r}"
-            )
-        if not 0.0 < self.within_test_fraction < 1.0:
-            raise ValueError(
-                "probes.robustness.within_scale.test_fraction must be in (0, 1), got "
-                f"{self.within_test_fraction}"
-            )
-        for n in self.size_n_train:
-            if n != "all" and (not isinstance(n, int) or n < 2):
-                raise ValueError(
-                    f"probes.robustness.training_size.n_train: {n!r} is not 'all' or an int >= 2"
-                )
+        check_settings(self)
 
     @classmethod
     def from_config(cls, cfg: Mapping, families: Mapping[str, Mapping] | None = None):
         """From ``probes.robustness``; `families` (``probes.families``) checks the names."""
-        # the two nested sections are read as the fields' prefixed names
-        flat = {k: v for k, v in cfg.items() if k not in ("mlp", "training_size", "within_scale")}
-        flat |= {f"size_{k}": v for k, v in cfg["training_size"].items()}
-        flat |= {f"within_{k}": v for k, v in cfg["within_scale"].items()}
+        # the two nested sections are read as dotted keys (the fields' `setting` keys)
+        nested = ("training_size", "within_scale")
+        flat = {k: v for k, v in cfg.items() if k not in ("mlp", *nested)}
+        flat |= {f"{n}.{k}": v for n in nested for k, v in (cfg.get(n) or {}).items()}
         out = settings_from(
             cls, flat, where="probes.robustness", mlp=MLPGrid.from_config(cfg.get("mlp"))
         )
@@ -185,31 +167,32 @@ class RobustnessSettings:
 class ProbeSettings:
     """Everything a comparison needs from config ``probes`` for one family and probe seed."""
 
-    kind: str  # "ridge" | "logistic"
-    lambdas: tuple[float, ...]
-    C: tuple[float, ...]
-    folds: int
-    bootstrap: int
-    train_resamples: int
-    permutations: int
-    label_permutations: int
-    random_draws: int
-    seed: int
-    min_delta: float = 0.03
-    protocol: str = "raw"  # a name of `variants.PROTOCOLS`
+    kind: str = not_config()  # "ridge" | "logistic": the family's
+    lambdas: tuple[float, ...] = setting("probes.lambdas")
+    C: tuple[float, ...] = setting("probes.C")
+    folds: int = setting("probes.folds")
+    bootstrap: int = setting("probes.bootstrap")
+    train_resamples: int = setting("probes.train_resamples")
+    permutations: int = setting("probes.permutations")
+    label_permutations: int = setting("probes.label_permutations")
+    random_draws: int = setting("probes.random_draws")
+    seed: int = not_config()  # the probe seed (a grid value of probes.seeds)
+    #: the smallest gain the comparisons call meaningful (the paper's, not a config key)
+    min_delta: float = not_config(0.03)
+    protocol: str = not_config("raw")  # a name of `variants.PROTOCOLS`
     #: seed of the bootstrap resamples and control draws; None: `seed` (which also draws the
     #: CV folds). The cost sweep's probe knobs vary it alone to measure Monte Carlo error.
-    resample_seed: int | None = None
+    resample_seed: int | None = setting("probes.resample_seed")
     #: draws of the CV folds whose mean held-out score chooses the regulariser (repeated K-fold)
-    cv_repeats: int = 1
-    mlp: MLPGrid = field(default_factory=MLPGrid)  # the ``mlp2`` probe's grid
+    cv_repeats: int = setting("probes.cv_repeats")
+    #: the ``mlp2`` probe's grid
+    mlp: MLPGrid = setting("probes.robustness.mlp", default_factory=MLPGrid)
 
     def __post_init__(self) -> None:
         if self.kind not in ("ridge", "logistic"):
             raise ValueError(f"ProbeSettings.kind must be 'ridge' or 'logistic', got {self.kind!r}")
         check_protocol(self.protocol)
-        if int(self.cv_repeats) != self.cv_repeats or self.cv_repeats < 1:
-            raise ValueError(f"probes.cv_repeats must be an integer >= 1, got {self.cv_repeats!r}")
+        check_settings(self)
 
     @property
     def metric(self) -> str:

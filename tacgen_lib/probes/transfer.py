@@ -30,7 +30,7 @@ import numpy as np
 import pandas as pd
 
 from tacgen_lib.corpus.derangement import sattolo_cycle
-from tacgen_lib.io.config import settings_from
+from tacgen_lib.io.schema import SchemaSettings, not_config, schema_fields
 from tacgen_lib.probes.bootstrap import resample_counts, resample_indices
 from tacgen_lib.probes.folds import make_folds
 from tacgen_lib.probes.metrics import balanced_accuracy, balanced_accuracy_resamples
@@ -80,31 +80,14 @@ TRANSFER_COLUMNS = (
 
 
 @dataclass(frozen=True)
-class TransferSettings:
+@schema_fields("transfer", skip=("corpus", "source", "floor"))
+class TransferSettings(SchemaSettings):
     """Config ``transfer`` (its corpora are read by the rules): ``classes`` mass-quantile
     classes; ``probe_seeds``; ``fit_fraction`` of the train objects each seed fits on; the
     logistic ``C`` grid and object-level CV ``folds``; ``bootstrap`` object resamples."""
 
-    classes: int = 3
-    probe_seeds: tuple[int, ...] = (42, 43, 44, 45, 46)
-    fit_fraction: float = 0.8
-    C: tuple[float, ...] = (0.01, 0.1, 1.0)
-    folds: int = 3
-    bootstrap: int = 5000
-    max_iter: int = 2000
-    tol: float = 1e-4
-
-    def __post_init__(self) -> None:
-        if not 0.0 < float(self.fit_fraction) <= 1.0:
-            raise ValueError(f"transfer.fit_fraction must be in (0, 1], got {self.fit_fraction}")
-        if not self.probe_seeds:
-            raise ValueError("transfer.probe_seeds must name at least one seed")
-        if int(self.folds) < 2:
-            raise ValueError(f"transfer.folds must be >= 2, got {self.folds}")
-
-    @classmethod
-    def from_config(cls, section: Mapping) -> TransferSettings:
-        return settings_from(cls, section, where="transfer", ignore=("corpus", "source", "floor"))
+    max_iter: int = not_config(2000)  # the logistic solver's budget and tolerance
+    tol: float = not_config(1e-4)
 
 
 @dataclass(frozen=True)

@@ -367,7 +367,7 @@ def test_pretrain_dino_recipe_errors():
     kw = dict(arch="vit_tiny", image_size=28, epochs=1, batch_size=2, lr=1e-3, seed=0)
     with pytest.raises(ValueError, match="centering must be"):
         pretrain(imgs, centering="mean", **kw)
-    with pytest.raises(ValueError, match="must be >= 0"):
+    with pytest.raises(ValueError, match="koleo_weight must be a finite number >= 0"):
         pretrain(imgs, koleo_weight=-0.1, **kw)
 
 

@@ -58,11 +58,11 @@ from tacgen_lib.generate.train import (
     save_generator,
     training_step,
 )
-from tacgen_lib.io.config import validate_config
 from tacgen_lib.probes.fit import fit_probe
 from tacgen_lib.probes.logistic import FixedLogistic
 from tacgen_lib.probes.rows import family_rows
 from tacgen_lib.report.findings import generation_findings
+from tacgen_lib.workflow_config import validate_config
 
 SCHEMA = ROOT / "config" / "config.schema.yaml"
 

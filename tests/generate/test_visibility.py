@@ -97,7 +97,7 @@ def test_the_gate_reads_the_better_probe_and_fails_a_factor_not_shown():
 def test_settings_refuse_an_unknown_factor_or_a_gate_outside_0_1():
     with pytest.raises(ValueError, match="'weight'"):
         VisibilitySettings(gate={"weight": 0.5})
-    with pytest.raises(ValueError, match="'colour': 1.5"):
+    with pytest.raises(ValueError, match=r"gate\.colour must be .* <= 1, got 1\.5"):
         VisibilitySettings.from_config({"gate": {"colour": 1.5}})
 
 

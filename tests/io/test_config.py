@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from tacgen_lib.io.config import ConfigError, validate_config
+from tacgen_lib.workflow_config import ConfigError, validate_config
 
 ROOT = Path(__file__).resolve().parents[2]
 SCHEMA = ROOT / "config" / "config.schema.yaml"

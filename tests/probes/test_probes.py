@@ -373,7 +373,7 @@ def test_nonlinear_baseline_fits_its_logistic_cv_one_fold_at_a_time(monkeypatch)
     rng = np.random.default_rng(2)
     v = rng.standard_normal((200, 6))
     y = np.where(np.sin(2 * v[:, 0]) + 0.3 * rng.standard_normal(200) > 0, "a", "b").astype(object)
-    settings = probe_settings("logistic", (1.0,), (0.1, 1.0), folds=3, bootstrap=10, seed=0)
+    settings = probe_settings("logistic", (1.0,), (0.1, 1.0), folds=3, bootstrap=100, seed=0)
     nl = nonlinear_baseline(
         v[:150], v[150:], y[:150], settings, gammas=[1.0], n_components=6, seed=0
     )

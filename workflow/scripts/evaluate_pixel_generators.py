@@ -10,13 +10,17 @@ import pandas as pd
 import torch
 from threadpoolctl import threadpool_limits
 
+from tacgen_lib.corpus.keys import corpus_labels
 from tacgen_lib.corpus.splits import ids_in_split
 from tacgen_lib.features.backbones import read_backbone
-from tacgen_lib.features.extract import extract_features
-from tacgen_lib.generate.baselines import baselines_from_frame, target_specs
+from tacgen_lib.features.extract import extract_with
+from tacgen_lib.features.settings import FeatureSettings
+from tacgen_lib.generate.job import GeneratorJob
 from tacgen_lib.generate.pixel.frames import resize_frames, tactile_units
 from tacgen_lib.generate.pixel.quality import reconstruction_row
+from tacgen_lib.generate.pixel.settings import PixelSettings
 from tacgen_lib.generate.pixel.utility import REAL_LOWRES, arm_generator, evaluate_arms
+from tacgen_lib.generate.settings import GenerateSettings
 from tacgen_lib.io import edges, log
 from tacgen_lib.preprocess.frames import decode_frames
 from tacgen_lib.runtime.device import torch_device
@@ -24,27 +28,12 @@ from tacgen_lib.runtime.device import torch_device
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
 w, params = snakemake.wildcards, snakemake.params
-cfg, feat = params.settings, params.features
-size = tuple(cfg["size"])
-splits = edges.read(snakemake.input.splits).frame
-generator_train_ids = sorted(ids_in_split(splits, "train", w.corpus))
-test_ids = sorted(ids_in_split(splits, "test", w.corpus))
-targets = target_specs(
-    edges.read(snakemake.input.manifest).frame,
-    splits,
-    corpus=w.corpus,
-    targets=params.targets,
-    corpus_config=params.corpus,
-    probes_config=params.probes,
-    probe_seed=params.probe_seed,
-    rule=snakemake.rule,
-    cv_repeats=params.generate["cv_repeats"],
-)
-baselines = baselines_from_frame(
-    edges.read(snakemake.input.baselines).frame, targets, source=snakemake.input.baselines
-)
-vision = edges.read_vector_map(snakemake.input.v, "vit")
-t_real = edges.read_vector_map(snakemake.input.t, "vit")
+pixel = PixelSettings.from_config(params.settings)
+feat = FeatureSettings.from_config(params.features)
+generate = GenerateSettings.from_config(params.generate)
+size = pixel.size
+job = GeneratorJob.read(snakemake, cv_repeats=generate.cv_repeats)
+test_ids = sorted(ids_in_split(job.splits, "test", w.corpus))
 
 # the real frames at the generators' size, through the same ViT: the resolution-matched reference
 tactile = edges.read(snakemake.input.tactile, columns=["tactile_proc"])
@@ -54,14 +43,7 @@ real_u8 = resize_frames(
     size,
 )
 backbone = read_backbone(snakemake.input.backbone)
-real_lowres = extract_features(
-    backbone,
-    real_u8,
-    image_size=feat["image_size"],
-    batch_size=feat["batch_size"],
-    pool=feat["pool"],
-    device=torch_device(params.device),
-)
+real_lowres = extract_with(backbone, real_u8, feat, device=torch_device(params.device))
 arms = {REAL_LOWRES: dict(zip(ids, real_lowres, strict=True))}
 position = {sid: k for k, sid in enumerate(ids)}
 test_pos = np.array([position[i] for i in test_ids])
@@ -91,7 +73,7 @@ for arm, path in zip(params.arms, snakemake.input.arms, strict=True):
             gen_test,
             real_test_units,
             tactile_units(gen_test),
-            n_resamples=int(cfg["bootstrap"]),
+            n_resamples=pixel.bootstrap,
             seed=params.probe_seed,
         )
         recon.append(
@@ -119,17 +101,12 @@ for arm, path in zip(params.arms, snakemake.input.arms, strict=True):
         )
 with threadpool_limits(snakemake.threads):
     rows, perms = evaluate_arms(
-        targets,
-        corpus=w.corpus,
-        seed=int(w.seed),
-        vision=vision,
-        t_real=t_real,
+        job.targets,
+        **job.keywords(),
         arms=arms,
-        baselines=baselines,
-        permutations=int(params.generate["permutations"]),
-        generator_train_ids=generator_train_ids,
+        permutations=generate.permutations,
         reference=params.arms[0],
-        labels={"design": params.corpus.get("design", params.corpus["kind"])},
+        labels={"design": corpus_labels(params.corpus)["design"]},
         progress=logger.info,
     )
 edges.write(snakemake.output.rows, rows, key="row_id", producer=snakemake.rule)

@@ -8,27 +8,22 @@ run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpre
 import torch
 
 from tacgen_lib.features.backbones import read_backbone
-from tacgen_lib.features.extract import extract_features, pixel_features
+from tacgen_lib.features.extract import extract_with, pixel_features
+from tacgen_lib.features.settings import FeatureSettings
 from tacgen_lib.io import edges, log
 from tacgen_lib.preprocess.frames import decode_frames
 from tacgen_lib.runtime.device import torch_device
 
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
-cfg, column = snakemake.params.features, snakemake.params.column
+settings = FeatureSettings.from_config(snakemake.params.features)
+column = snakemake.params.column
 frames = edges.read(snakemake.input.frames, columns=[column])
 images = decode_frames(frames.frame, column, where=snakemake.input.frames)
 model = read_backbone(snakemake.input.weights)
-logger.info("%d frames %s -> %s features", len(images), images.shape[1:], cfg["pool"])
-vit = extract_features(
-    model,
-    images,
-    image_size=cfg["image_size"],
-    batch_size=cfg["batch_size"],
-    pool=cfg["pool"],
-    device=torch_device(snakemake.params.device),
-)
-pixel = pixel_features(images, size=tuple(cfg["pixel_size"]))
+logger.info("%d frames %s -> %s features", len(images), images.shape[1:], settings.pool)
+vit = extract_with(model, images, settings, device=torch_device(snakemake.params.device))
+pixel = pixel_features(images, size=settings.pixel_size)
 edges.write(
     snakemake.output[0],
     frames.frame[["sample_id"]],

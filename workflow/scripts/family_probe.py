@@ -8,10 +8,11 @@ run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpre
 import pandas as pd
 from threadpoolctl import threadpool_limits
 
-from tacgen_lib.corpus.splits import assert_trainable
+from tacgen_lib.corpus.keys import corpus_labels
 from tacgen_lib.io import edges, log
 from tacgen_lib.probes.backbone_families import backbone_family_rows
-from tacgen_lib.probes.rows import family_rows, strata_for
+from tacgen_lib.probes.rows import trainable_family_rows
+from tacgen_lib.probes.settings import ProbeFamily
 
 logger = log.for_rule(snakemake)
 family = snakemake.wildcards.family
@@ -24,16 +25,11 @@ tactile = dict(zip(corpora, snakemake.input.tactile, strict=True))
 logger.info("%s: V %s, T %s", family, labels["vision"], labels["tactile"])
 frames = []
 for probe, spec in snakemake.params.probes.items():
-    corpus = spec["corpus"]
-    rows = family_rows(
-        manifest,
-        splits,
-        corpus=corpus,
-        target=spec["target"],
-        kind=spec["kind"],
-        strata=strata_for(corpora[corpus]),
+    probe_family = ProbeFamily.from_config(probe, spec)
+    corpus = probe_family.corpus
+    rows = trainable_family_rows(
+        manifest, splits, probe_family, corpora[corpus], rule=snakemake.rule
     )
-    assert_trainable(rows.train_ids, splits, rule=snakemake.rule, allowed=("train", "val"))
     logger.info(
         "%s on %s: %d train/val rows, %d test rows", probe, corpus, rows.n_train, rows.n_test
     )
@@ -43,18 +39,14 @@ for probe, spec in snakemake.params.probes.items():
                 family,
                 probe,
                 rows,
-                vision=rows.train_test(
-                    edges.read(vision[corpus], require={"vit": "vector"}), "vit"
-                ),
-                tactile=rows.train_test(
-                    edges.read(tactile[corpus], require={"vit": "vector"}), "vit"
-                ),
+                vision=rows.read_block(vision[corpus], "vit"),
+                tactile=rows.read_block(tactile[corpus], "vit"),
                 probes_cfg=snakemake.params.settings,
-                kind=spec["kind"],
+                kind=probe_family.kind,
                 protocols=snakemake.params.protocols,
                 seed=int(snakemake.params.seed),
                 labels=labels,
-                null_corpus=bool(corpora[corpus].get("null", False)),
+                null_corpus=corpus_labels(corpora[corpus])["null_corpus"],
                 progress=logger.info,
             )
         )

@@ -7,7 +7,8 @@ run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpre
 
 from threadpoolctl import threadpool_limits
 
-from tacgen_lib.generate.baselines import baselines_frame, fit_baselines, target_specs
+from tacgen_lib.generate.baselines import baselines_frame, fit_baselines
+from tacgen_lib.generate.job import job_target_specs
 from tacgen_lib.generate.settings import GenerateSettings
 from tacgen_lib.io import edges, log
 
@@ -18,16 +19,8 @@ checked = GenerateSettings(
     nonlinear_gammas=tuple(float(g) for g in params.gammas), cv_repeats=params.cv_repeats
 )
 gammas = checked.nonlinear_gammas
-specs = target_specs(
-    edges.read(snakemake.input.manifest).frame,
-    edges.read(snakemake.input.splits).frame,
-    corpus=w.corpus,
-    targets=params.targets,
-    corpus_config=params.corpus,
-    probes_config=params.probes,
-    probe_seed=params.probe_seed,
-    rule=snakemake.rule,
-    cv_repeats=checked.cv_repeats,
+specs = job_target_specs(
+    snakemake, edges.read(snakemake.input.splits).frame, cv_repeats=checked.cv_repeats
 )
 
 

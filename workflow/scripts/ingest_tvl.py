@@ -6,17 +6,12 @@ run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpre
 
 from pathlib import Path
 
-from tacgen_lib.corpus.ingest import ingest_hct, ingest_ssvtp
+from tacgen_lib.corpus.ingest import ingest_declared
 from tacgen_lib.io import edges, log
 
 logger = log.for_rule(snakemake)
-corpus = snakemake.params.corpus
 root = Path(snakemake.input.root)
-if corpus["kind"] == "ssvtp":
-    background = Path(corpus["background"]) if corpus.get("background") else None
-    samples, sensors = ingest_ssvtp(root, corpus=corpus["name"], background=background)
-else:
-    samples, sensors = ingest_hct(root, corpus=corpus["name"])
+samples, sensors = ingest_declared(root, snakemake.params.corpus)
 edges.write(snakemake.output.samples, samples, producer=snakemake.rule)
 edges.write(snakemake.output.sensors, sensors, key="sensor_id", producer=snakemake.rule)
 logger.info("ingested %d samples, %d sensor backgrounds from %s", len(samples), len(sensors), root)

@@ -4,22 +4,20 @@ from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
 
 run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
 
-from tacgen_lib.corpus.splits import make_splits
+from tacgen_lib.corpus.splits import SplitSettings, make_splits
 from tacgen_lib.io import edges, log
 
 logger = log.for_rule(snakemake)
-cfg = snakemake.params.splits
+settings = SplitSettings.from_config(snakemake.params.splits)
 # corpora split by object group their rows by appearance_id and stratify on mass
-columns = ["corpus", "stratum", "scale"] + (
-    ["appearance_id", "mass"] if cfg.get("by_object") else []
-)
+columns = ["corpus", "stratum", "scale"] + (["appearance_id", "mass"] if settings.by_object else [])
 manifest = edges.read(snakemake.input.manifest, columns=columns).frame
 splits = make_splits(
     manifest,
-    seed=cfg["seed"],
-    fractions=cfg["fractions"],
-    by_scale=cfg.get("by_scale"),
-    by_object=cfg.get("by_object"),
+    seed=settings.seed,
+    fractions=settings.fractions,
+    by_scale=settings.by_scale,
+    by_object=settings.by_object,
 )
 edges.write(snakemake.output[0], splits, producer=snakemake.rule)
 for (corpus, split), n in splits.groupby(["corpus", "split"]).size().items():

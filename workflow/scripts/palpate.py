@@ -8,6 +8,7 @@ import pandas as pd
 import torch
 
 from tacgen_lib.align import checkpoint as align_checkpoint
+from tacgen_lib.features.settings import FeatureSettings
 from tacgen_lib.features.vit_checkpoint import load_backbone
 from tacgen_lib.io import edges, log
 from tacgen_lib.policy.features import palpation_features
@@ -19,7 +20,7 @@ from tacgen_lib.runtime.device import torch_device
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
 settings = PolicySettings.from_config(snakemake.params.settings)
-feat = snakemake.params.features
+feat = FeatureSettings.from_config(snakemake.params.features)
 names = frame_names(len(settings.palpation_forces))
 parts = [edges.read(p).frame for p in snakemake.input.episodes]
 episodes = pd.concat(parts, ignore_index=True).sort_values("episode_id", ignore_index=True)
@@ -45,9 +46,9 @@ out = palpation_features(
     load_backbone(snakemake.input.tactile),
     heads,
     variant=settings.heads_variant,
-    image_size=feat["image_size"],
-    batch_size=feat["batch_size"],
-    pool=feat["pool"],
+    image_size=feat.image_size,
+    batch_size=feat.batch_size,
+    pool=feat.pool,
     device=torch_device(snakemake.params.device),
 )
 labels = episodes[

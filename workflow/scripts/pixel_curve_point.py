@@ -17,7 +17,7 @@ from tacgen_lib.align.heads import project
 from tacgen_lib.align.settings import AlignSettings
 from tacgen_lib.align.train import fit_heads
 from tacgen_lib.corpus.splits import assert_trainable
-from tacgen_lib.generate.baselines import target_specs
+from tacgen_lib.generate.job import job_target_specs
 from tacgen_lib.generate.pixel.curve import PAIRINGS, curve_point
 from tacgen_lib.io import edges, log
 from tacgen_lib.runtime.device import torch_device
@@ -32,17 +32,7 @@ splits = edges.read(snakemake.input.splits).frame
 head_ids = align_grid.cell_ids(splits, corpus=w.corpus, n_train="all", seed=seed)
 assert_trainable(head_ids["train"], splits, rule=snakemake.rule, allowed=("train",))
 assert_trainable(head_ids["val"], splits, rule=snakemake.rule, allowed=("val",))
-targets = target_specs(
-    edges.read(snakemake.input.manifest).frame,
-    splits,
-    corpus=w.corpus,
-    targets=params.targets,
-    corpus_config=params.corpus,
-    probes_config=params.probes,
-    probe_seed=params.probe_seed,
-    rule=snakemake.rule,
-    cv_repeats=1,
-)
+targets = job_target_specs(snakemake, splits, cv_repeats=1)
 vision = edges.read_vector_map(snakemake.input.v, "vit")
 t_real = edges.read_vector_map(snakemake.input.t, "vit")
 t_gen = edges.read_vector_map(snakemake.input.t_gen, "vit")

@@ -32,7 +32,7 @@ column = "rgb" if modality == "vision" else "tactile_proc"
 def train_frames():
     """The pretraining corpus's train frames of this modality (never val or test rows)."""
     splits = edges.read(snakemake.input.splits).frame
-    train_ids = ids_in_split(splits, "train", corpus=pretrain["corpus"])
+    train_ids = ids_in_split(splits, "train", corpus=snakemake.params.corpus)
     frames = edges.read(snakemake.input.frames).subset(train_ids)
     assert_trainable(frames.ids, splits, rule=snakemake.rule)
     return decode_frames(frames.frame, column, where=snakemake.input.frames)

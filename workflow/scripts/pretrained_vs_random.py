@@ -8,8 +8,9 @@ import pandas as pd
 import torch
 from threadpoolctl import threadpool_limits
 
-from tacgen_lib.features.extract import extract_features
+from tacgen_lib.features.extract import extract_with
 from tacgen_lib.features.pretrained_vs_random import pretrained_vs_random, random_backbone
+from tacgen_lib.features.settings import DinoSettings, FeatureSettings, PretrainedVsRandomSettings
 from tacgen_lib.io import edges, log
 from tacgen_lib.preprocess.frames import decode_frames
 from tacgen_lib.report.tables import pretrained_vs_random_view
@@ -18,28 +19,28 @@ from tacgen_lib.runtime.device import torch_device
 
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
-cfg = snakemake.params.features
-check = cfg["pretrained_vs_random"]
-corpus = check["corpus"]
+params = snakemake.params
+features = FeatureSettings.from_config(params.features)
+pretrain = DinoSettings.from_config(params.pretrain)
+check = PretrainedVsRandomSettings.from_config(params.check)
+corpus = check.corpus
 splits = edges.read(snakemake.input.splits).frame
 manifest = edges.read(snakemake.input.manifest).frame.set_index("sample_id")
 rows = []
 for modality, column in (("vision", "rgb"), ("tactile", "tactile_proc")):
     frames = edges.read(snakemake.input[modality], columns=[column])
     pre = edges.read(snakemake.input[f"pretrained_{modality}"]).subset(frames.ids)
-    target = check["targets"][modality]
+    target = check.targets[modality]
     labels = manifest.loc[frames.ids, target].astype(str).to_numpy()
     split = splits.set_index("sample_id").loc[frames.ids, "split"].to_numpy()
     train, test = (split == "train").nonzero()[0], (split == "test").nonzero()[0]
     images = decode_frames(frames.frame, column, where=snakemake.input[modality])
-    arch = cfg["backbones"][modality]["arch"]
-    rand = extract_features(
-        random_backbone(arch, cfg["image_size"], seed=cfg["pretrain"]["seed"]),
+    arch = params.archs[modality]
+    rand = extract_with(
+        random_backbone(arch, features.image_size, seed=pretrain.seed),
         images,
-        image_size=cfg["image_size"],
-        batch_size=cfg["batch_size"],
-        pool=cfg["pool"],
-        device=torch_device(snakemake.params.device),
+        features,
+        device=torch_device(params.device),
     )
     with threadpool_limits(snakemake.threads):
         res = pretrained_vs_random(
@@ -48,9 +49,9 @@ for modality, column in (("vision", "rgb"), ("tactile", "tactile_proc")):
             labels,
             train,
             test,
-            C_grid=snakemake.params.C,
-            seed=cfg["pretrain"]["seed"],
-            n_resamples=check["bootstrap"],
+            C_grid=params.C,
+            seed=pretrain.seed,
+            n_resamples=check.bootstrap,
             sample_ids=frames.ids,
         )
     rows.append(
@@ -76,7 +77,7 @@ for modality, column in (("vision", "rgb"), ("tactile", "tactile_proc")):
 table = pd.DataFrame(rows)
 edges.write(snakemake.output.table, table, key="check_id", producer=snakemake.rule)
 title = "Pretrained vs random-init backbone: logistic probe accuracy on the test split"
-if int(cfg["pretrain"]["epochs"]) == 0:
+if pretrain.epochs == 0:
     title = (
         "Pretraining is off in this config (features.pretrain.epochs: 0): the frozen backbone IS "
         "the seeded random init, so Δ = 0 by construction; the accuracies are what its features "

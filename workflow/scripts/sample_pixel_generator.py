@@ -12,14 +12,16 @@ import torch
 
 from tacgen_lib.corpus.splits import ids_in_split
 from tacgen_lib.features.backbones import read_backbone
-from tacgen_lib.features.extract import extract_features
+from tacgen_lib.features.extract import extract_with
+from tacgen_lib.features.settings import FeatureSettings
 from tacgen_lib.generate.pixel.frames import (
-    paired_frames,
+    PairedEdges,
     rgb_units,
     tactile_units,
     to_uint8_tactile,
 )
 from tacgen_lib.generate.pixel.quality import fit_gain
+from tacgen_lib.generate.pixel.settings import PixelSettings
 from tacgen_lib.generate.pixel.utility import arm_generator
 from tacgen_lib.generate.pixel.weights import load_pixel_generator
 from tacgen_lib.io import edges, log
@@ -28,20 +30,15 @@ from tacgen_lib.runtime.device import torch_device
 
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
-w, cfg, feat = snakemake.wildcards, snakemake.params.settings, snakemake.params.features
-size = tuple(cfg["size"])
+w = snakemake.wildcards
+pixel = PixelSettings.from_config(snakemake.params.settings)
+feat = FeatureSettings.from_config(snakemake.params.features)
+size = pixel.size
 generator, guidance, steps, _ = arm_generator(w.arm)
 
-samples = edges.read(snakemake.input.samples, columns=["rgb"])
-tactile = edges.read(snakemake.input.tactile, columns=["tactile_proc"])
-ids = sorted(samples.ids)
-rgb_u8, tac_u8 = paired_frames(
-    samples.subset(ids).frame,
-    tactile.subset(ids).frame,
-    size,
-    rgb_where=snakemake.input.samples,
-    tactile_where=snakemake.input.tactile,
-)
+paired = PairedEdges(snakemake.input.samples, snakemake.input.tactile)
+ids = sorted(paired.samples.ids)
+rgb_u8, tac_u8 = paired.frames(ids, size)
 rgb = rgb_units(rgb_u8)
 fit = load_pixel_generator(snakemake.input.weights)
 device = torch_device(snakemake.params.device)
@@ -50,7 +47,7 @@ logger.info("%s: generating %d frames at %s with %s", w.corpus, len(ids), size, 
 if generator == "pix2pix":
     from tacgen_lib.generate.pixel.pix2pix import translate
 
-    gen = translate(fit.model, rgb, batch=int(cfg["batch"]))
+    gen = translate(fit.model, rgb, batch=pixel.batch)
 else:
     from tacgen_lib.generate.pixel.ddpm import sample_pixel_ddpm
     from tacgen_lib.generate.schedules import make_schedule
@@ -65,7 +62,7 @@ else:
         guidance=guidance,
         eta=s.eta,
         seed=int(w.seed),
-        batch=int(cfg["batch"]),
+        batch=pixel.batch,
         scale=fit.scale,
     )
 splits = edges.read(snakemake.input.splits).frame
@@ -85,14 +82,7 @@ backbone = read_backbone(snakemake.input.backbone)
 
 
 def vit(images):
-    return extract_features(
-        backbone,
-        images,
-        image_size=feat["image_size"],
-        batch_size=feat["batch_size"],
-        pool=feat["pool"],
-        device=device,
-    )
+    return extract_with(backbone, images, feat, device=device)
 
 
 table = pd.DataFrame(

@@ -8,34 +8,27 @@ run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpre
 import torch
 
 from tacgen_lib.corpus.splits import assert_trainable, ids_in_split
-from tacgen_lib.generate.pixel.frames import paired_frames, rgb_units, tactile_units
-from tacgen_lib.generate.pixel.settings import Pix2PixSettings, PixelDDPMSettings
+from tacgen_lib.generate.pixel.frames import PairedEdges, rgb_units, tactile_units
+from tacgen_lib.generate.pixel.settings import PixelSettings
 from tacgen_lib.generate.pixel.weights import save_pixel_generator
 from tacgen_lib.io import edges, log
 from tacgen_lib.runtime.device import torch_device
 
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
-w, cfg = snakemake.wildcards, snakemake.params.settings
-size = tuple(cfg["size"])
+w, pixel = snakemake.wildcards, PixelSettings.from_config(snakemake.params.settings)
+size = pixel.size
 splits = edges.read(snakemake.input.splits).frame
 train_ids = sorted(ids_in_split(splits, "train", w.corpus))
 val_ids = sorted(ids_in_split(splits, "val", w.corpus))
 assert_trainable(train_ids, splits, rule=snakemake.rule, allowed=("train",))
 assert_trainable(val_ids, splits, rule=snakemake.rule, allowed=("val",))
 
-samples = edges.read(snakemake.input.samples, columns=["rgb"])
-tactile = edges.read(snakemake.input.tactile, columns=["tactile_proc"])
+paired = PairedEdges(snakemake.input.samples, snakemake.input.tactile)
 
 
 def units(ids):
-    rgb, tac = paired_frames(
-        samples.subset(ids).frame,
-        tactile.subset(ids).frame,
-        size,
-        rgb_where=snakemake.input.samples,
-        tactile_where=snakemake.input.tactile,
-    )
+    rgb, tac = paired.frames(ids, size)
     return rgb_units(rgb), tactile_units(tac)
 
 
@@ -50,31 +43,23 @@ logger.info(
     size,
 )
 if w.generator == "pix2pix":
-    from tacgen_lib.generate.pixel.pix2pix import fit_pix2pix
+    from tacgen_lib.generate.pixel.pix2pix import fit_pix2pix as fit_generator
 
-    fit = fit_pix2pix(
-        rgb_tr,
-        tac_tr,
-        rgb_val,
-        tac_val,
-        Pix2PixSettings.from_config(cfg["pix2pix"]),
-        seed=int(w.seed),
-        progress=logger.info,
-        device=torch_device(snakemake.params.device),
-    )
+    model_settings = pixel.pix2pix
 else:
-    from tacgen_lib.generate.pixel.ddpm import fit_pixel_ddpm
+    from tacgen_lib.generate.pixel.ddpm import fit_pixel_ddpm as fit_generator
 
-    fit = fit_pixel_ddpm(
-        rgb_tr,
-        tac_tr,
-        rgb_val,
-        tac_val,
-        PixelDDPMSettings.from_config(cfg["ddpm"]),
-        seed=int(w.seed),
-        progress=logger.info,
-        device=torch_device(snakemake.params.device),
-    )
+    model_settings = pixel.ddpm
+fit = fit_generator(
+    rgb_tr,
+    tac_tr,
+    rgb_val,
+    tac_val,
+    model_settings,
+    seed=int(w.seed),
+    progress=logger.info,
+    device=torch_device(snakemake.params.device),
+)
 save_pixel_generator(fit, snakemake.output.weights, kind=w.generator, producer=snakemake.rule)
 curve = fit.curve.assign(eval=[f"step~{int(s)}" for s in fit.curve["step"]])
 edges.write(snakemake.output.curve, curve, key="eval", producer=snakemake.rule)

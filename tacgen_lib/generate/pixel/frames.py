@@ -107,3 +107,25 @@ def paired_frames(
     rgb_u8 = resize_frames(decode_frames(rgb, "rgb", where=rgb_where), size)
     tac_u8 = resize_frames(decode_frames(tactile, "tactile_proc", where=tactile_where), size)
     return rgb_u8, tac_u8
+
+
+class PairedEdges:
+    """A corpus's RGB frames (edge `samples`, column ``rgb``) and clip128 tactile frames (edge
+    `tactile`, column ``tactile_proc``), read once; `frames` pairs them row by row."""
+
+    def __init__(self, samples: str, tactile: str) -> None:
+        from tacgen_lib.io import edges
+
+        self.samples_path, self.tactile_path = str(samples), str(tactile)
+        self.samples = edges.read(samples, columns=["rgb"])
+        self.tactile = edges.read(tactile, columns=["tactile_proc"])
+
+    def frames(self, ids: list, size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+        """`paired_frames` of sample_ids `ids` (in that order) at `size`."""
+        return paired_frames(
+            self.samples.subset(ids).frame,
+            self.tactile.subset(ids).frame,
+            size,
+            rgb_where=self.samples_path,
+            tactile_where=self.tactile_path,
+        )

@@ -3,25 +3,25 @@ frame contract both models check.
 
 `Pix2PixSettings.from_config(config["pixel"]["pix2pix"])` and
 `PixelDDPMSettings.from_config(config["pixel"]["ddpm"])` read what training and sampling need
-(the schema has already checked types); `tiny()` is a seconds-long budget for tests.
+(each field's default and bounds are its key's in config/config.schema.yaml); `tiny()` is a seconds-long budget for tests.
 `frames_tensor` checks one array of frames (float32 NCHW, 3 channels, finite, H and W
 divisible by what the model's down-sampling needs) and views it as a torch tensor.
 """
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 import torch
 from torch import Tensor
 
 from tacgen_lib.io.config import settings_from
+from tacgen_lib.io.schema import SchemaSettings, schema_fields, setting
 
-__all__ = ["PixelDDPMSettings", "Pix2PixSettings", "frames_tensor"]
+__all__ = ["PixelDDPMSettings", "PixelSettings", "Pix2PixSettings", "frames_tensor"]
 
 
 def frames_tensor(x: np.ndarray, name: str, *, divisor: int = 1) -> Tensor:
@@ -49,28 +49,9 @@ def frames_tensor(x: np.ndarray, name: str, *, divisor: int = 1) -> Tensor:
     return torch.from_numpy(arr)
 
 
-def _check_ints(where: str, obj: object, names: tuple[tuple[str, int], ...]) -> None:
-    for name, low in names:
-        value = getattr(obj, name)
-        if isinstance(value, bool) or int(value) != value or value < low:
-            raise ValueError(f"{where}.{name} must be an integer >= {low}, got {value!r}")
-
-
-def _check_widths(where: str, name: str, widths: tuple[int, ...], multiple: int = 1) -> None:
-    if not widths or any(int(c) != c or c < 1 or c % multiple for c in widths):
-        what = f"positive multiples of {multiple}" if multiple > 1 else "positive integers"
-        raise ValueError(f"{where}.{name} must be a non-empty list of {what}, got {widths!r}")
-
-
-def _check_range(where: str, obj: object, names: tuple[tuple[str, float, float], ...]) -> None:
-    for name, lo, hi in names:
-        value = getattr(obj, name)
-        if not (math.isfinite(value) and lo <= value <= hi):
-            raise ValueError(f"{where}.{name} must be in [{lo}, {hi}], got {value!r}")
-
-
 @dataclass(frozen=True)
-class Pix2PixSettings:
+@schema_fields("pixel.pix2pix")
+class Pix2PixSettings(SchemaSettings):
     """How one pix2pix translator is trained (`pix2pix.fit_pix2pix`; Isola et al. 2017).
 
     Model: a U-Net whose encoder widths are ``channels`` (the decoder mirrors them), decoder
@@ -80,37 +61,6 @@ class Pix2PixSettings:
     ``batch_size`` frames, at most ``steps`` steps, validation L1 every ``eval_every`` steps
     with early stopping after ``patience`` evaluations without improvement (0: never stop).
     """
-
-    channels: tuple[int, ...] = (32, 64, 128)
-    disc_channels: tuple[int, ...] = (32, 64)
-    dropout: float = 0.5
-    lambda_l1: float = 100.0
-    lr: float = 2e-4
-    beta1: float = 0.5
-    batch_size: int = 32
-    steps: int = 600
-    eval_every: int = 100
-    patience: int = 3
-
-    def __post_init__(self) -> None:
-        where = "pixel.pix2pix"
-        _check_widths(where, "channels", self.channels)
-        _check_widths(where, "disc_channels", self.disc_channels)
-        _check_ints(
-            where,
-            self,
-            (("batch_size", 1), ("steps", 1), ("eval_every", 1), ("patience", 0)),
-        )
-        _check_range(where, self, (("dropout", 0.0, 0.99), ("beta1", 0.0, 0.999)))
-        for name in ("lambda_l1", "lr"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"{where}.{name} must be a finite number >= 0, got {value!r}")
-
-    @classmethod
-    def from_config(cls, section: Mapping[str, Any]) -> Pix2PixSettings:
-        """Settings from config ``pixel.pix2pix``."""
-        return settings_from(cls, section, where="pixel.pix2pix")
 
     @classmethod
     def tiny(cls, **changes: Any) -> Pix2PixSettings:
@@ -128,7 +78,8 @@ class Pix2PixSettings:
 
 
 @dataclass(frozen=True)
-class PixelDDPMSettings:
+@schema_fields("pixel.ddpm")
+class PixelDDPMSettings(SchemaSettings):
     """How one pixel DDPM is trained (`ddpm.fit_pixel_ddpm`) and sampled.
 
     Model: a diffusers ``UNet2DModel`` with ``block_out_channels`` = ``channels`` (multiples
@@ -142,59 +93,10 @@ class PixelDDPMSettings:
     No gradient clipping (`clip_grad` is 0 and not a config key).
     """
 
-    channels: tuple[int, ...] = (16, 32, 32)
-    layers_per_block: int = 1
-    schedule: Literal["cosine", "linear"] = "cosine"
-    train_steps: int = 1000
-    prediction: Literal["eps", "v"] = "v"
-    p_uncond: float = 0.1
-    lr: float = 1e-3
-    weight_decay: float = 0.01
-    batch_size: int = 32
-    steps: int = 600
-    ema_decay: float = 0.99
-    eval_every: int = 100
-    patience: int = 3
-    eta: float = 0.0
-
-    def __post_init__(self) -> None:
-        where = "pixel.ddpm"
-        _check_widths(where, "channels", self.channels, multiple=8)
-        if self.schedule not in ("cosine", "linear"):
-            raise ValueError(
-                f"{where}.schedule must be 'cosine' or 'linear', got {self.schedule!r}"
-            )
-        if self.prediction not in ("eps", "v"):
-            raise ValueError(f"{where}.prediction must be 'eps' or 'v', got {self.prediction!r}")
-        _check_ints(
-            where,
-            self,
-            (
-                ("layers_per_block", 1),
-                ("train_steps", 2),
-                ("batch_size", 1),
-                ("steps", 1),
-                ("eval_every", 1),
-                ("patience", 0),
-            ),
-        )
-        _check_range(
-            where, self, (("p_uncond", 0.0, 1.0), ("ema_decay", 0.0, 1.0), ("eta", 0.0, 1.0))
-        )
-        for name in ("lr", "weight_decay"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"{where}.{name} must be a finite number >= 0, got {value!r}")
-
     @property
     def clip_grad(self) -> float:
         """0: `train.training_step` (which this model's training reuses) clips no gradient."""
         return 0.0
-
-    @classmethod
-    def from_config(cls, section: Mapping[str, Any]) -> PixelDDPMSettings:
-        """Settings from config ``pixel.ddpm``."""
-        return settings_from(cls, section, where="pixel.ddpm")
 
     @classmethod
     def tiny(cls, **changes: Any) -> PixelDDPMSettings:
@@ -210,3 +112,25 @@ class PixelDDPMSettings:
             lr=2e-3,
         )
         return replace(small, **changes)
+
+
+@dataclass(frozen=True)
+@schema_fields("pixel", skip=("corpora", "seeds", "ddpm_cells", "curve", "pix2pix", "ddpm"))
+class PixelSettings(SchemaSettings):
+    """The pixel stage's settings (config ``pixel``; its grids, corpora, seeds, DDPM cells and
+    the curve, are the rules'): the generated frame `size` (H, W), `batch` frames per sampling
+    batch, `bootstrap` resamples of the reconstruction CIs, and each model's settings."""
+
+    pix2pix: Pix2PixSettings = setting("pixel.pix2pix", default_factory=Pix2PixSettings)
+    ddpm: PixelDDPMSettings = setting("pixel.ddpm", default_factory=PixelDDPMSettings)
+
+    @classmethod
+    def from_config(cls, pixel: Mapping[str, Any]) -> PixelSettings:
+        """Settings from config ``pixel``."""
+        return settings_from(
+            cls,
+            pixel,
+            where="pixel",
+            pix2pix=Pix2PixSettings.from_config(pixel.get("pix2pix") or {}),
+            ddpm=PixelDDPMSettings.from_config(pixel.get("ddpm") or {}),
+        )

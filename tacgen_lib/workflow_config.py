@@ -1,0 +1,91 @@
+"""The workflow's configuration checked as the Snakefile reads it (rules/common.smk).
+
+`validate_config` runs the schema's validation and defaults (`io.config.validate_schema`, the
+ground floor), then the cross-references a schema cannot see: the corpus key rules
+(`corpus.keys.corpus_key_errors`), scenes, and the keys that name a corpus, variant or heads
+cell. Errors name the key as a dotted path and the file, so a bad value stops the run before
+any job starts with a message that says what to fix.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from tacgen_lib.corpus.keys import corpus_key_errors
+from tacgen_lib.io.config import ConfigError, load_yaml, validate_schema
+
+__all__ = ["ConfigError", "validate_config"]
+
+
+def validate_config(config: dict, schema_path: str | Path, *, source: str = "config") -> dict:
+    """Validate `config` in place (`io.config.validate_schema`: schema and defaults), then
+    check its cross-references; raises ConfigError naming the key. Returns `config`."""
+    validate_schema(config, schema_path, source=source)
+    scenes_file = Path(config["scenes_file"])
+    scenes = load_yaml(scenes_file) if scenes_file.exists() else None
+    for name, corpus in config["corpora"].items():
+        if corpus["kind"] == "simulated":
+            for key, message in corpus_key_errors(corpus):
+                raise ConfigError(f"{source}: corpora.{name}.{key}: {message}")
+            if scenes is None:
+                raise ConfigError(f"{source}: scenes_file: {scenes_file} does not exist")
+            if corpus["scene"] not in scenes:
+                raise ConfigError(
+                    f"{source}: corpora.{name}.scene: unknown scene {corpus['scene']!r} "
+                    f"(scenes in {scenes_file}: {', '.join(sorted(scenes))})"
+                )
+    for name in config["splits"].get("by_scale", {}):
+        if name not in config["corpora"]:
+            raise ConfigError(
+                f"{source}: splits.by_scale.{name}: unknown corpus {name!r} "
+                f"(corpora: {', '.join(sorted(config['corpora']))})"
+            )
+    corpora = set(config["corpora"])
+    refs = [
+        ("features.pretrain.corpus", config["features"]["pretrain"]["corpus"]),
+        (
+            "features.pretrained_vs_random.corpus",
+            config["features"]["pretrained_vs_random"]["corpus"],
+        ),
+    ]
+    refs += [(f"align.corpora[{i}]", c) for i, c in enumerate(config["align"]["corpora"])]
+    for fam, spec in config["probes"]["families"].items():
+        refs += [
+            (f"probes.families.{fam}.corpus", spec["corpus"]),
+            (f"probes.families.{fam}.heads_from", spec["heads_from"]),
+        ]
+    for key, name in refs:
+        if name not in corpora:
+            raise ConfigError(
+                f"{source}: {key}: unknown corpus {name!r} (corpora: {', '.join(sorted(corpora))})"
+            )
+    for fam, spec in config["probes"]["families"].items():
+        if spec["heads_from"] not in config["align"]["corpora"]:
+            raise ConfigError(
+                f"{source}: probes.families.{fam}.heads_from: {spec['heads_from']!r} is not in align.corpora, "
+                "so no heads are trained on it"
+            )
+    variants = set(config["preprocess"]["variants"])
+    vrefs = [
+        ("features.pretrain.variant", config["features"]["pretrain"]["variant"]),
+        ("probes.heads.variant", config["probes"]["heads"]["variant"]),
+    ]
+    vrefs += [(f"align.variants[{i}]", v) for i, v in enumerate(config["align"]["variants"])]
+    for key, name in vrefs:
+        if name not in variants:
+            raise ConfigError(f"{source}: {key}: variant {name!r} is not in preprocess.variants")
+    heads = config["probes"]["heads"]
+    if heads["variant"] not in config["align"]["variants"]:
+        raise ConfigError(
+            f"{source}: probes.heads.variant: {heads['variant']!r} is not in align.variants"
+        )
+    if heads["tau"] not in config["align"]["taus"]:
+        raise ConfigError(f"{source}: probes.heads.tau: {heads['tau']} is not in align.taus")
+    if heads["n_train"] not in config["align"]["n_train"]:
+        raise ConfigError(
+            f"{source}: probes.heads.n_train: {heads['n_train']} is not in align.n_train"
+        )
+    fr = config["splits"]["fractions"]
+    if abs(sum(fr.values()) - 1.0) > 1e-9:
+        raise ConfigError(f"{source}: splits.fractions: must sum to 1, got {sum(fr.values()):g}")
+    return config
