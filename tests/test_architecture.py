@@ -23,7 +23,8 @@ strictly down (within one package anything goes, its circles being caught by the
 5. the stages built on features and heads: `generate`, `policy`;
 6. what reads every stage's settings or edges: `cost` (the cost of accuracy), `estimate` (the
    run-time estimate);
-7. `report`: the pages.
+7. the top: `report` (the pages) and `workflow_config` (the config as the Snakefile checks it:
+   the schema, then the corpus key rules and cross-references).
 """
 
 from __future__ import annotations
@@ -56,6 +57,7 @@ FLOORS: dict[str, int] = {
     "tacgen_lib.cost": 6,
     "tacgen_lib.estimate": 6,
     "tacgen_lib.report": 7,
+    "tacgen_lib.workflow_config": 7,
 }
 
 

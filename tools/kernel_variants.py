@@ -65,6 +65,8 @@ NOT_NUMERIC = (
     "tests/io/test_code_inputs.py",
     "tests/io/test_config.py",
     "tests/io/test_settings.py",
+    "tests/io/test_schema_settings.py",
+    "tests/test_architecture.py",  # the import graph and module sizes, read from the source
     "tests/test_docs.py",
     "tests/runtime/test_scheduler.py",  # Snakemake's scheduler timers
     # its tests that are not workflow runs: config fuzzing, path and pickle refusals, and the

@@ -174,7 +174,7 @@ def test_phase_cannot_declare_an_effect_the_scene_lacks():
 
 def test_training_refuses_held_out_episodes():
     frame = data.collect_episodes(
-        dataclasses.replace(PolicySettings.tiny(), n_demos=2, n_heldout=2), DECL, "heldout", 0, 1
+        dataclasses.replace(PolicySettings.tiny(), n_demos=4, n_heldout=4), DECL, "heldout", 0, 1
     )
     with pytest.raises(LeakageError, match="held-out"):
         data.training_rows(frame, frame["episode_id"], rule="train_policy")
