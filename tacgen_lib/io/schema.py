@@ -60,13 +60,20 @@ def config_schema() -> Mapping[str, Any]:
 
 def schema_node(key: str) -> Mapping[str, Any]:
     """The schema of dotted config key `key` (``probes.robustness.mlp.folds``); ``*`` stands
-    for any name of a mapping of declarations (``probes.families.*.kind``).
+    for any name of a mapping of declarations (``probes.families.*.kind``); a key that starts
+    with ``$defs.NAME`` is read in the schema's definition NAME (``$defs.simulated_corpus.n``:
+    a declaration whose place in the config has a name of the user's, ``corpora.<name>``).
 
     Raises KeyError naming the key where the schema has no such property.
     """
     root = config_schema()
     node: Mapping[str, Any] = root
-    for part in key.split("."):
+    parts = key.split(".")
+    if parts[0] == "$defs":
+        if len(parts) < 2 or parts[1] not in root.get("$defs", {}):
+            raise KeyError(f"config/config.schema.yaml has no definition {key!r}")
+        node, parts = root["$defs"][parts[1]], parts[2:]
+    for part in parts:
         if "$ref" in node:
             node = root["$defs"][node["$ref"].split("/")[-1]]
         props = node.get("properties", {})

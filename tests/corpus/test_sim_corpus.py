@@ -184,9 +184,9 @@ def test_repeated_contacts_frames_and_labels(paired):
 
 
 def test_bad_contacts_are_refused():
-    with pytest.raises(ValueError, match=r"corpus 'p': n=10 is not a whole number of objects"):
+    with pytest.raises(ValueError, match=r"corpora\.p\.n: n=10 is not a whole number of objects"):
         samples.CorpusSettings.from_config(dict(PAIRED, contacts=3))
-    with pytest.raises(ValueError, match=r"corpus 'c': key 'contacts' belongs to design 'paired'"):
+    with pytest.raises(ValueError, match=r"corpora\.c\.contacts: key 'contacts' belongs to design"):
         samples.CorpusSettings.from_config(dict(CONTROLLED, contacts=2))
-    with pytest.raises(ValueError, match=r"contacts' must be >= 1"):
+    with pytest.raises(ValueError, match=r"corpora\.p\.contacts must be an integer >= 1, got 0"):
         samples.CorpusSettings.from_config(dict(PAIRED, contacts=0))

@@ -131,7 +131,9 @@ def test_natural_corpus_simulates_and_records_material_and_appearance():
 
 
 def test_rho_outside_the_natural_design_or_the_unit_interval_is_refused():
-    with pytest.raises(ValueError, match=r"'rho' must be in \[0, 1\], got 1.5"):
+    with pytest.raises(
+        ValueError, match=r"corpora\.nat\.rho must be a finite number >= 0 and <= 1, got 1\.5"
+    ):
         samples.CorpusSettings.from_config(dict(NATURAL, rho=1.5))
     with pytest.raises(ValueError, match="'rho' belongs to design 'natural', not 'paired'"):
         samples.CorpusSettings.from_config(dict(NATURAL, design="paired"))

@@ -43,9 +43,9 @@ group on. With c = 1 every draw is the one above (the object index is the sample
 
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass, replace
-from typing import Any, Literal
+from typing import Any
 
 import numpy as np
 
@@ -55,6 +55,7 @@ from tacgen_lib.corpus.looks import PALETTE, TEXTURE_WORDS
 from tacgen_lib.corpus.sim import physics
 from tacgen_lib.corpus.sim.scenes import Scene
 from tacgen_lib.io.config import settings_from
+from tacgen_lib.io.schema import SchemaSettings, not_config, schema_fields
 
 SOFT_RANGE = (600.0, 2000.0)  # N/m, contact stiffness of soft objects (log-uniform)
 
@@ -151,8 +152,10 @@ def scene_seed(seed: int, i: int) -> int:
 
 
 @dataclass(frozen=True)
-class CorpusSettings:
-    """One simulated corpus of config ``corpora.<name>`` (plus its ``name``), defaults filled.
+@schema_fields("$defs.simulated_corpus")
+class CorpusSettings(SchemaSettings):
+    """One simulated corpus of config ``corpora.<name>`` (plus its ``name``), defaults filled;
+    its keys, defaults and bounds are the schema's ($defs/simulated_corpus).
 
     design "paired" draws shape, size (``size_range``, m) and density per sample; "controlled"
     crosses shapes x ``scales`` (size = scale x ``size_per_scale``) x ``densities`` so that
@@ -161,52 +164,31 @@ class CorpusSettings:
     ``rho``, the appearance class (module docstring). ``null``: tactile frames from an unrelated
     sample's physics. ``presses``: repeated noisy presses per sample (the force bands);
     ``sensors``: tactile sensors (backgrounds); ``contacts``: samples per object (paired: the
-    object's draws are shared, each contact has its own presses, sensor and noise); ``image_size`` / ``tactile_size``: RGB and
-    tactile frame sizes (H, W); ``shapes``: a subset of the scene's shapes (None: all).
-    ``kind`` and ``shards`` are read by the rules.
+    object's draws are shared, each contact has its own presses, sensor and noise);
+    ``image_size`` / ``tactile_size``: RGB and tactile frame sizes (H, W); ``shapes``: a subset
+    of the scene's shapes (None: all). ``kind`` and ``shards`` are read by the rules.
     """
 
-    name: str
-    design: Literal["paired", "controlled", "natural"]
-    n: int
-    seed: int
-    scene: str
-    kind: str = "simulated"
-    shards: int = 1
-    null: bool = False
-    sensors: int = 4
-    presses: int = 8
-    image_size: Sequence[int] = (224, 224)
-    tactile_size: Sequence[int] = (120, 160)
-    shapes: Sequence[str] | None = None
-    size_range: Sequence[float] = (0.02, 0.04)
-    scales: Sequence[float] = (0.15, 0.20, 0.25)
-    size_per_scale: float = 0.15
-    densities: Sequence[float] = (500.0, 2000.0, 5000.0)
-    png_compression: int = 1
-    rho: float = 0.0
-    contacts: int = 1
+    name: str = not_config()
 
     def __post_init__(self) -> None:
-        if self.design not in ("paired", "controlled", "natural"):
-            raise ValueError(
-                f"corpus {self.name!r}: key 'design' must be 'paired', 'controlled' or 'natural'"
-            )
-        if not 0.0 <= float(self.rho) <= 1.0:
-            raise ValueError(f"corpus {self.name!r}: key 'rho' must be in [0, 1], got {self.rho}")
-        if int(self.contacts) < 1:
-            raise ValueError(f"corpus {self.name!r}: key 'contacts' must be >= 1")
-        for _key, message in corpus_key_errors(
+        where = f"corpora.{self.name}"
+        try:
+            super().__post_init__()
+        except ValueError as err:  # the schema names the definition; the user wrote the corpus
+            raise ValueError(str(err).replace("$defs.simulated_corpus", where, 1)) from None
+        for key, message in corpus_key_errors(
             {"design": self.design, "rho": self.rho, "contacts": self.contacts, "n": self.n}
         ):
-            raise ValueError(f"corpus {self.name!r}: {message}")
-        if int(self.n) < 1 or int(self.sensors) < 1 or int(self.presses) < 1:
-            raise ValueError(f"corpus {self.name!r}: n, sensors and presses must be >= 1")
+            raise ValueError(f"{where}.{key}: {message}")
 
     @classmethod
     def from_config(cls, corpus: Mapping[str, Any]) -> CorpusSettings:
-        """Settings of one corpus from its config mapping (which must include ``name``)."""
-        return settings_from(cls, corpus, where=f"corpora.{corpus.get('name', '<unnamed>')}")
+        """Settings of one corpus from its config mapping (which must include ``name``, the
+        corpus's key under ``corpora``)."""
+        name = corpus.get("name", "<unnamed>")
+        keys = {k: v for k, v in corpus.items() if k != "name"}
+        return settings_from(cls, keys, where=f"corpora.{name}", name=name)
 
     @classmethod
     def tiny(cls, **changes: Any) -> CorpusSettings:
