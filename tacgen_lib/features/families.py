@@ -20,7 +20,7 @@ from typing import Any
 
 from tacgen_lib.features.archs import arch_family
 from tacgen_lib.io.config import ConfigError, settings_from
-from tacgen_lib.io.schema import SchemaSettings, schema_fields
+from tacgen_lib.io.schema import SchemaSettings, not_config, schema_fields
 
 __all__ = [
     "BackboneSpec",
@@ -130,52 +130,50 @@ def check_checkpoint_file(
 
 
 @dataclass(frozen=True)
-class FamilySettings:
+@schema_fields("backbones", skip=("families",))
+class FamilySettings(SchemaSettings):
     """Config ``backbones``: the families compared (`run`, in order), their specs, the probe
     families (config ``probes.families`` names) each is judged on and the probe protocols
-    (raw linear and the 2-layer MLP)."""
+    (raw linear and the 2-layer MLP); keys, defaults and bounds are the schema's."""
 
-    run: tuple[str, ...]
-    families: Mapping[str, Mapping[str, BackboneSpec]]
-    probes: tuple[str, ...]
-    protocols: tuple[str, ...]
+    #: family -> modality -> its backbone, each declaration read (and held to the schema's
+    #: $defs/backbone) by `BackboneSpec`
+    families: Mapping[str, Mapping[str, BackboneSpec]] = not_config(default_factory=dict)
 
     @classmethod
     def from_config(cls, config: Mapping[str, Any]) -> FamilySettings:
-        cfg = config.get("backbones") or {}
+        """The families of the whole config's ``backbones`` (the probe families it names are
+        checked against ``probes.families``)."""
+        cfg = dict(config.get("backbones") or {})
         families = {
             name: {
                 m: BackboneSpec.from_config(spec[m], f"backbones.families.{name}.{m}")
                 for m in MODALITIES
             }
-            for name, spec in (cfg.get("families") or {}).items()
+            for name, spec in (cfg.pop("families", None) or {}).items()
         }
-        run = tuple(cfg.get("run", ()))
-        unknown = [f for f in run if f not in families]
+        settings = settings_from(cls, cfg, where="backbones", families=families)
+        unknown = [f for f in settings.run if f not in families]
         if unknown:
             raise ConfigError(
                 f"config backbones.run: unknown family {unknown[0]!r} (backbones.families: "
                 f"{sorted(families)})"
             )
-        probes = tuple(cfg.get("probes", ()))
         known = config["probes"]["families"]
-        missing = [p for p in probes if p not in known]
+        missing = [p for p in settings.probes if p not in known]
         if missing:
             raise ConfigError(
                 f"config backbones.probes: {missing[0]!r} is not a probe family "
                 f"(probes.families: {sorted(known)})"
             )
-        flat = [p for p in probes if known[p].get("vision") == "pixel"]
+        flat = [p for p in settings.probes if known[p].get("vision") == "pixel"]
         if flat:
             raise ConfigError(
                 f"config backbones.probes: {flat[0]!r} compares pixel V; a backbone family is "
                 "judged on families whose V is the backbone's (vision: vit)"
             )
-        settings = cls(
-            run=run, families=families, probes=probes, protocols=tuple(cfg.get("protocols", ()))
-        )
         feats = config["features"]
-        for name in run:
+        for name in settings.run:
             for m in MODALITIES:
                 check_backbone(
                     families[name][m],

@@ -18,7 +18,7 @@ from snakemake_run import ROOT, validated
 from tacgen_lib.align.settings import AlignSettings
 from tacgen_lib.corpus.sim.samples import CorpusSettings
 from tacgen_lib.corpus.splits import SplitSettings
-from tacgen_lib.features.families import BackboneSpec
+from tacgen_lib.features.families import BackboneSpec, FamilySettings
 from tacgen_lib.features.settings import (
     DinoSettings,
     FeatureSettings,
@@ -58,6 +58,7 @@ BUILDERS = {
     RobustnessSettings: lambda c: RobustnessSettings.from_config(c["probes"]["robustness"]),
     ProbeSettings: lambda c: ProbeSettings.from_config(c["probes"], "ridge", 0),
     TransferSettings: lambda c: TransferSettings.from_config(c["transfer"]),
+    FamilySettings: lambda c: FamilySettings.from_config(c),
     # the regime's natural corpus: every key of the definition, rho among them, applies to it
     CorpusSettings: lambda c: CorpusSettings.from_config({**c["regime"]["corpus"], "name": "p"}),
 }
