@@ -253,11 +253,8 @@ UNITS: dict[str, UnitRule] = {
         lambda c, w: (
             "",
             sum(samples(c, c["probes"]["families"][p]["corpus"]) for p in c["backbones"]["probes"])
-            * len(c["backbones"].get("protocols", ["raw", "mlp2"])),
+            * len(c["backbones"]["protocols"]),
         ),
-    ),
-    "cost_backbone_points": UnitRule(
-        "family run", lambda c, w: ("", float(len(c["backbones"]["run"])))
     ),
     "aggregate_backbones": UnitRule(
         "family run", lambda c, w: ("", float(len(c["backbones"]["run"])))
@@ -403,13 +400,7 @@ UNITS: dict[str, UnitRule] = {
     "cost_of_accuracy": _const("job"),
     # cost of accuracy: the knobs' settings are the main rules' jobs under the setting's config
     # (tacgen_lib.cost.knobs); what remains is reading points, the same kind of job everywhere
-    "cost_knob_points": UnitRule(
-        "job (priced as cost_generate_points: a points job)",
-        lambda c, w: ("", 1.0),
-        same_as="cost_generate_points",
-    ),
-    "cost_generate_points": _const("job"),
-    "cost_policy_points": _const("job"),
+    "cost_knob_points": _const("job"),
 }
 
 
