@@ -13,6 +13,7 @@ import re
 from pathlib import Path
 
 import pytest
+import yaml
 from snakemake_run import ROOT, validated
 
 from tacgen_lib.align.settings import AlignSettings
@@ -212,3 +213,15 @@ def test_the_schema_is_read_from_its_json_copy_only_where_the_copy_is_current(tm
     assert load_schema(path) == {"a": 2}  # the copy of these bytes
     path.write_text("a: 3\n")
     assert load_schema(path) == {"a": 3}  # a stale copy is passed over
+
+
+def test_the_shipped_json_copy_is_current_and_equals_the_yaml():
+    """The copy jobs read is the YAML's own content (a key or value JSON cannot hold as YAML
+    does, such as a number as a mapping key, would differ here) written from its current bytes
+    (tools/config_reference.py writes it)."""
+    path = ROOT / "config" / "config.schema.yaml"
+    copy_ = json.loads(schema_copy(path).read_text())
+    assert copy_["source_sha256"] == hashlib.sha256(path.read_bytes()).hexdigest(), (
+        "config/config.schema.json is stale: run tools/config_reference.py"
+    )
+    assert copy_["schema"] == yaml.safe_load(path.read_text())
