@@ -11,7 +11,9 @@ schema's default.
 
 The checker here covers the JSON-schema keywords the settings' keys use (types, bounds, enums,
 list lengths and items); a keyword it does not know stops `check_settings` rather than pass
-silently. The whole config is validated by jsonschema at start-up (`io.config.validate_schema`);
+silently. It is its own so that a job, which builds settings objects, need not import
+jsonschema (tens of ms at every start); tests/io/test_schema_settings.py holds its verdicts
+equal to jsonschema's on every settings key. The whole config is validated by jsonschema at start-up (`io.config.validate_schema`);
 this is what a settings object built in code (`tiny()`, `replace`) is held to.
 """
 

@@ -30,6 +30,7 @@ from tacgen_lib.generate.pixel.settings import Pix2PixSettings, PixelDDPMSetting
 from tacgen_lib.generate.regime_sets import RegimeSettings
 from tacgen_lib.generate.settings import GenerateSettings
 from tacgen_lib.generate.visibility import VisibilitySettings
+from tacgen_lib.io import schema
 from tacgen_lib.io.config import load_schema, schema_copy
 from tacgen_lib.io.schema import check_settings, config_key, schema_node
 from tacgen_lib.policy.settings import PolicySettings
@@ -225,3 +226,33 @@ def test_the_shipped_json_copy_is_current_and_equals_the_yaml():
         "config/config.schema.json is stale: run tools/config_reference.py"
     )
     assert copy_["schema"] == yaml.safe_load(path.read_text())
+
+
+def _as_json(value):
+    """A settings value as the JSON document jsonschema validates (tuples are arrays)."""
+    if isinstance(value, tuple | list):
+        return [_as_json(v) for v in value]
+    return value
+
+
+@pytest.mark.parametrize("case", FIELDS, ids=_ids)
+def test_the_settings_checker_agrees_with_jsonschema(case):
+    """io.schema checks a settings value without importing jsonschema (which a job would pay
+    for at every start); on every settings key it must judge each value as jsonschema does:
+    the key's default, the values on and past its bounds, and values of the wrong type."""
+    from jsonschema import Draft202012Validator
+
+    cls, f = case
+    key = config_key(f)
+    if key is None:
+        return
+    node = schema_node(key)
+    if "$ref" in node:  # a nested settings object: its own fields are cases of their own
+        return
+    validator = Draft202012Validator(node)
+    values = [*_bad_values(node), *_edge_values(node), "x", None, True, 2.5, -1, (), ("x",)]
+    if "default" in node:
+        values.append(node["default"])
+    for value in values:
+        ours = schema._violation(value, node) is None
+        assert ours == validator.is_valid(_as_json(value)), (key, value, ours)
