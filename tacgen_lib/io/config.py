@@ -212,7 +212,15 @@ def settings_from(
             values[f.name] = _coerce(hints[f.name], section[key], f"{where}.{key}")
         elif f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
             raise ConfigError(f"config {where}.{key}: missing (this setting has no default)")
-    return cls(**values)
+    try:
+        return cls(**values)
+    except ValueError as err:
+        # a schema bound names the key under the class's schema section; one declaration
+        # schema read at several places (a backbone, a probe family) names the place read
+        section = getattr(cls, "schema_section", "")
+        if section and section != where and str(err).startswith(f"{section}."):
+            raise ValueError(where + str(err)[len(section) :]) from None
+        raise
 
 
 def _schema_renames(cls: type, where: str) -> dict[str, str]:

@@ -256,3 +256,15 @@ def test_the_settings_checker_agrees_with_jsonschema(case):
     for value in values:
         ours = schema._violation(value, node) is None
         assert ours == validator.is_valid(_as_json(value)), (key, value, ours)
+
+
+def test_a_declaration_read_at_several_places_names_the_place_read():
+    """One schema for every backbone declaration (and every probe family): a bound broken in
+    one of them names that declaration's key, not the schema section's."""
+    bad = {"arch": "vit_tiny", "num_register_tokens": -1}
+    for where in ("features.backbones.tactile", "backbones.families.mae.vision"):
+        with pytest.raises(ValueError, match=rf"^{re.escape(where)}\.num_register_tokens must"):
+            BackboneSpec.from_config(bad, where)
+    family = {**validated("test.yaml")["probes"]["families"]["mass"], "kind": "lasso"}
+    with pytest.raises(ValueError, match=r"^probes\.families\.mass\.kind must be one of"):
+        ProbeFamily.from_config("mass", family)
