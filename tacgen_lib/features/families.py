@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from tacgen_lib.features.archs import arch_family
+from tacgen_lib.features.settings import MaeSettings
 from tacgen_lib.io.config import ConfigError, settings_from
 from tacgen_lib.io.schema import SchemaSettings, not_config, schema_fields
 
@@ -179,7 +180,7 @@ class FamilySettings(SchemaSettings):
                     families[name][m],
                     where=f"backbones.families.{name}.{m}",
                     dino_epochs=int(feats["pretrain"]["epochs"]),
-                    mae_epochs=int((feats.get("mae") or {}).get("epochs", 1)),
+                    mae_epochs=MaeSettings.from_config(feats.get("mae")).epochs,
                 )
         return settings
 
