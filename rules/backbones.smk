@@ -42,9 +42,13 @@ rule family_backbone:
         device=DEVICE,  # config device (tacgen_lib.runtime.device)
         backbone=lambda w: FAMILIES.families[w.family][w.modality].__dict__,
         pretrain=PRETRAIN,
-        corpus=PRETRAIN["corpus"],  # whose train frames DINO and MAE pretrain on
+        corpus=PRETRAIN["corpus"],  # whose train frames DINO, MAE and SimCLR pretrain on
         mae=lambda w: (
             FEAT["mae"] if family_spec(w.family, w.modality).objective == "mae" else {}
+        ),
+        # SimCLR's settings only where a backbone is SimCLR-pretrained
+        simclr=lambda w: (
+            FEAT["simclr"] if family_spec(w.family, w.modality).objective == "simclr" else {}
         ),
         image_size=FEAT["image_size"],
         batch_size=FEAT["batch_size"],

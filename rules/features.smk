@@ -29,7 +29,7 @@ EDGES += ["results/features/pretrained_vs_random.parquet"]
 
 
 rule pretrain_backbone:
-    """DINO or MAE pretraining on the pretraining corpus's train split only, an official checkpoint, or the seeded random init."""
+    """DINO, MAE (a ViT) or SimCLR (a ResNet) pretraining on the pretraining corpus's train split only, an official checkpoint, or the seeded random init."""
     input:
         frames=lambda w: backbone_frames(w.modality, PRETRAIN["corpus"]),
         splits="results/corpus/splits.parquet",
@@ -55,10 +55,14 @@ rule pretrain_backbone:
         device=DEVICE,  # config device (tacgen_lib.runtime.device)
         backbone=lambda w: FEAT["backbones"][w.modality],
         pretrain=PRETRAIN,
-        corpus=PRETRAIN["corpus"],  # whose train frames DINO and MAE pretrain on
+        corpus=PRETRAIN["corpus"],  # whose train frames DINO, MAE and SimCLR pretrain on
         # MAE's settings only where a backbone is MAE-pretrained: a change reruns only those
         mae=lambda w: (
             FEAT["mae"] if FEAT["backbones"][w.modality]["objective"] == "mae" else {}
+        ),
+        # SimCLR's settings only where a backbone is SimCLR-pretrained
+        simclr=lambda w: (
+            FEAT["simclr"] if FEAT["backbones"][w.modality]["objective"] == "simclr" else {}
         ),
         image_size=FEAT["image_size"],
     script:

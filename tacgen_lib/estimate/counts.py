@@ -13,6 +13,7 @@ from typing import Any
 from tacgen_lib.estimate.flops import (
     DINO_FORWARDS,
     MAE_FORWARDS,
+    SIMCLR_FORWARDS,
     arch_flops,
     generator_mlp_flops,
 )
@@ -75,12 +76,15 @@ def train_rows(c: Config, name: str) -> float:
 
 def pretraining(c: Config, spec: Mapping[str, Any]) -> tuple[str, int]:
     """(how a backbone is made, its pretraining epochs): "checkpoint" and "random" train
-    nothing; "dino" runs features.pretrain.epochs, "mae" features.mae.epochs."""
+    nothing; "dino" runs features.pretrain.epochs, "mae" features.mae.epochs, "simclr"
+    features.simclr.epochs."""
     if spec.get("checkpoint"):
         return "checkpoint", 0
     objective = spec.get("objective", "dino")
     if objective == "mae":
         return objective, int(c["features"].get("mae", {}).get("epochs", 10))
+    if objective == "simclr":
+        return objective, int(c["features"].get("simclr", {}).get("epochs", 30))
     if objective == "dino":
         return objective, int(c["features"]["pretrain"]["epochs"])
     return objective, 0
@@ -94,9 +98,9 @@ def pretraining_units(c: Config, spec: Mapping[str, Any]) -> tuple[str, float]:
 
 def pretraining_flops(c: Config, spec: Mapping[str, Any]) -> float:
     """FLOPs of a backbone's pretraining: its frame-epochs in forwards of its arch (DINO's or
-    MAE's count per frame and epoch)."""
+    MAE's or SimCLR's count per frame and epoch)."""
     objective, units = pretraining_units(c, spec)
-    forwards = MAE_FORWARDS if objective == "mae" else DINO_FORWARDS
+    forwards = {"mae": MAE_FORWARDS, "simclr": SIMCLR_FORWARDS}.get(objective, DINO_FORWARDS)
     return units * forwards * arch_flops(spec["arch"], c["features"]["image_size"])
 
 

@@ -17,6 +17,7 @@ __all__ = [
     "GFLOPS_PER_THREAD",
     "MAE_FORWARDS",
     "DINO_FORWARDS",
+    "SIMCLR_FORWARDS",
     "flop_seconds",
     "vit_flops",
     "resnet_flops",
@@ -80,6 +81,10 @@ def backbone_flops(c: Config, modality: str) -> float:
 #: MAE pretraining per frame and epoch, in encoder forwards: the encoder sees a quarter of the
 #: patches, forward + backward (3 forwards), plus the light decoder (about one more)
 MAE_FORWARDS = 1.75
+
+
+#: SimCLR per frame and epoch, in backbone forwards: 2 crops, forward + backward (3 forwards).
+SIMCLR_FORWARDS = 6
 
 
 #: DINO self-distillation per frame and epoch, in ViT forwards: 2 global crops through the

@@ -13,7 +13,7 @@ from torch import Tensor
 from tacgen_lib.features.extract import imagenet_normalise
 
 
-def _random_resized_crop(
+def random_resized_crop(
     x: Tensor, size: int, scale: tuple[float, float], gen: torch.Generator
 ) -> Tensor:
     """Per-image random resized crop (area fraction in `scale`, aspect 3/4..4/3) + h-flip."""
@@ -73,6 +73,6 @@ def multi_crop(
     views = []
     for i in range(2 + n_local):
         size, scale = (global_size, global_scale) if i < 2 else (local_size, local_scale)
-        v = _colour_jitter(_random_resized_crop(x, size, scale, gen), gen, jitter)
+        v = _colour_jitter(random_resized_crop(x, size, scale, gen), gen, jitter)
         views.append(imagenet_normalise(v))
     return views

@@ -2,7 +2,7 @@
 ``backbones`` (plain Python, no torch: the Snakefile reads it at parse time).
 
 A family names one backbone per modality (`features.backbones`' shape: an `arch`, an optional
-official `checkpoint`, and how it is made without one, `objective`: "dino", "mae" or "random"). The paper
+official `checkpoint`, and how it is made without one, `objective`: "dino", "mae", "simclr" or "random"). The paper
 checks that the V+T direction holds for several encoder families (DINOv2, CLIP + MAE, Sparsh);
 here the families are the DINOv2-architecture ViT, a torchvision-shaped ResNet and an MAE-
 pretrained ViT. A family whose two backbones are the main DAG's (`features.backbones`, the same
@@ -72,15 +72,20 @@ class BackboneSpec(SchemaSettings):
 def check_backbone(spec: BackboneSpec, *, where: str, dino_epochs: int, mae_epochs: int) -> None:
     """Refuse a backbone the workflow cannot make. Objectives: "dino" (a ViT; DINO with
     features.pretrain, whose 0 epochs mean the seeded random init), "mae" (a ViT; features.mae,
-    at least 1 epoch), "random" (any arch: the seeded random init). A ResNet has no in-workflow
-    pretraining: without a checkpoint it must say "random"."""
+    at least 1 epoch), "simclr" (a ResNet; features.simclr), "random" (any arch: the seeded
+    random init). A ResNet is pretrained in the workflow by SimCLR only, a ViT by DINO or MAE."""
     if spec.checkpoint:
         return
-    if spec.network == "resnet" and spec.objective != "random":
+    if spec.network == "resnet" and spec.objective not in ("random", "simclr"):
         raise ConfigError(
             f"config {where}: a ResNet ({spec.arch}) has no in-workflow {spec.objective} "
-            "pretraining here; give it a torchvision checkpoint, or objective: random (its "
-            "seeded random init)"
+            "pretraining here; give it a torchvision checkpoint, objective: simclr "
+            "(features.simclr) or objective: random (its seeded random init)"
+        )
+    if spec.network == "vit" and spec.objective == "simclr":
+        raise ConfigError(
+            f"config {where}: objective simclr pretrains a ResNet (resnet_tiny, resnet18), "
+            f"not the ViT {spec.arch}; a ViT takes dino or mae"
         )
     if spec.objective == "mae" and mae_epochs < 1:
         raise ConfigError(f"config {where}: objective mae needs features.mae.epochs >= 1")

@@ -21,13 +21,14 @@ __all__ = [
     "FeatureSettings",
     "MaeSettings",
     "PretrainedVsRandomSettings",
+    "SimclrSettings",
     "backbones_pretrained",
 ]
 
 
 @dataclass(frozen=True)
 @schema_fields(
-    "features", skip=("backbones", "pretrain", "mae", "pretrained_vs_random", "visibility")
+    "features", skip=("backbones", "pretrain", "mae", "simclr", "pretrained_vs_random", "visibility"),
 )
 class FeatureSettings(SchemaSettings):
     """How a frozen backbone's features are extracted (config ``features``; `extract`).
@@ -88,6 +89,20 @@ class MaeSettings(SchemaSettings):
 
 
 @dataclass(frozen=True)
+@schema_fields("features.simclr")
+class SimclrSettings(SchemaSettings):
+    """Contrastive pretraining of a ResNet (`simclr.pretrain_simclr`), from config
+    ``features.simclr``: epochs, batch_size, lr, weight_decay, seed (the run); `tau` (the
+    InfoNCE temperature), `crop_min` (the smallest crop's area fraction), `grey` (the
+    probability of a greyscale view), `hidden_dim` and `proj_dim` (the projection)."""
+
+    @classmethod
+    def tiny(cls, **changes: Any) -> SimclrSettings:
+        """One epoch of a narrow projection on small batches, for tests; `changes` override."""
+        return replace(cls(epochs=1, batch_size=8, hidden_dim=16, proj_dim=8), **changes)
+
+
+@dataclass(frozen=True)
 @schema_fields("features.pretrained_vs_random")
 class PretrainedVsRandomSettings(SchemaSettings):
     """The pretrained-vs-random check (config ``features.pretrained_vs_random``): a logistic
@@ -97,7 +112,9 @@ class PretrainedVsRandomSettings(SchemaSettings):
 
 def backbones_pretrained(features: Mapping[str, Any]) -> bool:
     """Whether config ``features`` gives backbones that learned anything: DINO epochs above 0,
-    or an official checkpoint for either modality (else they are the seeded random init)."""
+    an official checkpoint, or an MAE or SimCLR objective for either modality (else they are
+    the seeded random init)."""
+    specs = [features["backbones"][m] for m in ("vision", "tactile")]
     return int(features["pretrain"]["epochs"]) > 0 or any(
-        features["backbones"][m].get("checkpoint") for m in ("vision", "tactile")
+        s.get("checkpoint") or s.get("objective") in ("mae", "simclr") for s in specs
     )

@@ -29,7 +29,7 @@ from tacgen_lib.features.resnet import (
     random_resnet,
     resnet_from_state_dict,
 )
-from tacgen_lib.features.settings import DinoSettings, MaeSettings
+from tacgen_lib.features.settings import DinoSettings, MaeSettings, SimclrSettings
 from tacgen_lib.features.vit import build_vit
 from tacgen_lib.features.vit_checkpoint import save_backbone
 from tacgen_lib.io.config import ConfigError, load_yaml
@@ -258,6 +258,7 @@ def test_mae_release_patch_of_16_needs_its_own_arch(tmp_path):
         BackboneSpec("vit_tiny", objective="random"),
         BackboneSpec("vit_tiny", objective="dino"),  # 0 DINO epochs: the random init
         BackboneSpec("vit_tiny", objective="mae"),
+        BackboneSpec("resnet_tiny", objective="simclr"),
     ],
     ids=lambda s: f"{s.arch}-{s.objective}",
 )
@@ -275,9 +276,12 @@ def test_made_backbone_round_trips_through_its_saved_weights(spec, tmp_path):
         dino=DinoSettings.tiny(epochs=0),
         mae=MaeSettings.tiny(epochs=1),
         frames=train_frames,
+        simclr=SimclrSettings.tiny(),
     )
-    assert bool(calls) == (spec.objective == "mae")  # frames are read only to pretrain
-    assert len(curve) == (1 if spec.objective == "mae" else 0) and how
+    pretrained = spec.objective in ("mae", "simclr")
+    assert bool(calls) == pretrained  # frames are read only to pretrain
+    assert len(curve) == (1 if pretrained else 0) and how
+    assert all("seconds" not in row for row in curve)  # the curve edge is reproducible
     path = tmp_path / "b.pt"
     save_backbone(model, path)
     back = read_backbone(path)
@@ -340,10 +344,11 @@ def test_family_settings_find_the_main_family_and_refuse_bad_names():
         (BackboneSpec("resnet18", objective="dino"), "no in-workflow dino pretraining"),
         (BackboneSpec("resnet18", objective="mae"), "no in-workflow mae pretraining"),
         (BackboneSpec("vit_tiny", objective="mae"), "features.mae.epochs >= 1"),
+        (BackboneSpec("vit_tiny", objective="simclr"), "simclr pretrains a ResNet"),
     ],
 )
 def test_backbones_the_workflow_cannot_make_are_refused(spec, needle):
-    with pytest.raises(ValueError, match="objective must be one of 'dino', 'mae', 'random'"):
+    with pytest.raises(ValueError, match="objective must be one of 'dino', 'mae', 'simclr', 'random'"):
         BackboneSpec("vit_tiny", objective="byol")
     with pytest.raises(ConfigError, match=needle):
         check_backbone(spec, where="backbones.families.x.vision", dino_epochs=0, mae_epochs=0)

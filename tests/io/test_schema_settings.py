@@ -24,6 +24,7 @@ from tacgen_lib.features.settings import (
     DinoSettings,
     FeatureSettings,
     MaeSettings,
+    SimclrSettings,
     PretrainedVsRandomSettings,
 )
 from tacgen_lib.generate.pixel.settings import Pix2PixSettings, PixelDDPMSettings, PixelSettings
@@ -45,6 +46,7 @@ BUILDERS = {
     FeatureSettings: lambda c: FeatureSettings.from_config(c["features"]),
     DinoSettings: lambda c: DinoSettings.from_config(c["features"]["pretrain"]),
     MaeSettings: lambda c: MaeSettings.from_config(c["features"]["mae"]),
+    SimclrSettings: lambda c: SimclrSettings.from_config(c["features"].get("simclr")),
     PretrainedVsRandomSettings: lambda c: PretrainedVsRandomSettings.from_config(
         c["features"]["pretrained_vs_random"]
     ),

@@ -1,5 +1,5 @@
 """Make one modality's frozen backbone: an official checkpoint, in-workflow pretraining (DINO or
-MAE) on the pretraining corpus's train split, or the seeded random init (rules
+MAE for a ViT, SimCLR for a ResNet) on the pretraining corpus's train split, or the seeded random init (rules
 pretrain_backbone and family_backbone; the latter also extracts the backbone's features of
 every frame of each probe corpus)."""
 
@@ -14,7 +14,7 @@ from tacgen_lib.corpus.splits import assert_trainable, ids_in_split
 from tacgen_lib.features.backbones import make_backbone
 from tacgen_lib.features.extract import extract_features
 from tacgen_lib.features.families import BackboneSpec
-from tacgen_lib.features.settings import DinoSettings, MaeSettings
+from tacgen_lib.features.settings import DinoSettings, MaeSettings, SimclrSettings
 from tacgen_lib.features.vit_checkpoint import save_backbone
 from tacgen_lib.io import edges, hashed, log
 from tacgen_lib.preprocess.frames import decode_frames
@@ -44,6 +44,7 @@ model, curve_rows, how = make_backbone(
     dino=DinoSettings.from_config(pretrain),
     mae=MaeSettings.from_config(snakemake.params.mae),
     frames=train_frames,
+    simclr=SimclrSettings.from_config(snakemake.params.simclr),
     progress=logger.info,
     device=device,
 )
