@@ -48,7 +48,9 @@ rule family_backbone:
         ),
         # SimCLR's settings only where a backbone is SimCLR-pretrained
         simclr=lambda w: (
-            FEAT["simclr"] if family_spec(w.family, w.modality).objective == "simclr" else {}
+            FEAT["simclr"]
+            if family_spec(w.family, w.modality).objective == "simclr"
+            else {}
         ),
         image_size=FEAT["image_size"],
         batch_size=FEAT["batch_size"],

@@ -62,7 +62,9 @@ rule pretrain_backbone:
         ),
         # SimCLR's settings only where a backbone is SimCLR-pretrained
         simclr=lambda w: (
-            FEAT["simclr"] if FEAT["backbones"][w.modality]["objective"] == "simclr" else {}
+            FEAT["simclr"]
+            if FEAT["backbones"][w.modality]["objective"] == "simclr"
+            else {}
         ),
         image_size=FEAT["image_size"],
     script:

@@ -28,7 +28,8 @@ __all__ = [
 
 @dataclass(frozen=True)
 @schema_fields(
-    "features", skip=("backbones", "pretrain", "mae", "simclr", "pretrained_vs_random", "visibility"),
+    "features",
+    skip=("backbones", "pretrain", "mae", "simclr", "pretrained_vs_random", "visibility"),
 )
 class FeatureSettings(SchemaSettings):
     """How a frozen backbone's features are extracted (config ``features``; `extract`).

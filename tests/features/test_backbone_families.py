@@ -348,7 +348,9 @@ def test_family_settings_find_the_main_family_and_refuse_bad_names():
     ],
 )
 def test_backbones_the_workflow_cannot_make_are_refused(spec, needle):
-    with pytest.raises(ValueError, match="objective must be one of 'dino', 'mae', 'simclr', 'random'"):
+    with pytest.raises(
+        ValueError, match="objective must be one of 'dino', 'mae', 'simclr', 'random'"
+    ):
         BackboneSpec("vit_tiny", objective="byol")
     with pytest.raises(ConfigError, match=needle):
         check_backbone(spec, where="backbones.families.x.vision", dino_epochs=0, mae_epochs=0)

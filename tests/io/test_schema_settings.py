@@ -24,8 +24,8 @@ from tacgen_lib.features.settings import (
     DinoSettings,
     FeatureSettings,
     MaeSettings,
-    SimclrSettings,
     PretrainedVsRandomSettings,
+    SimclrSettings,
 )
 from tacgen_lib.generate.pixel.settings import Pix2PixSettings, PixelDDPMSettings, PixelSettings
 from tacgen_lib.generate.regime_sets import RegimeSettings
