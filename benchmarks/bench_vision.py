@@ -1,0 +1,128 @@
+"""Which vision side sees what a natural frame shows: candidate V backbones, each timed and each
+scored by the visibility check's own probes (`tacgen_lib.generate.visibility`).
+
+Reads a finished run (its corpus, splits and, for the run's own V, its feature edge) and, on one
+natural corpus (default: the first of the regime's rho grid), prints for every candidate V the
+seconds it took to make (pretraining) and to extract, and the linear / nonlinear probe accuracy
+of colour, texture and the appearance class on the corpus's test rows (fitted on every non-test
+row; pretraining reads train rows only), beside the gate of config ``features.visibility``:
+
+  run V         the run's own vision feature edge (whatever config made it)
+  pixel-V       the run's raw-pixel V (features.pixel_size), the paper's controlled baseline
+  random ResNet resnet_tiny at its seeded random init, no training (the control a learnt V
+                must beat)
+  SimCLR        resnet_tiny pretrained by `features.simclr.pretrain_simclr` on the corpus's
+                train frames, once per --grey value (greyscale views trade colour for texture)
+
+    .venv/bin/python benchmarks/bench_vision.py --results results --epochs 30 --grey 0 0.5
+
+Every figure is measured in this run; nothing is compared with a stored number.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import torch
+from threadpoolctl import threadpool_limits
+
+from tacgen_lib.corpus.looks import visible_factors
+from tacgen_lib.features.extract import extract_features
+from tacgen_lib.features.resnet import random_resnet
+from tacgen_lib.features.settings import FeatureSettings, SimclrSettings
+from tacgen_lib.features.simclr import pretrain_simclr
+from tacgen_lib.generate.visibility import VisibilityCorpus, VisibilitySettings, visibility_check
+from tacgen_lib.io import edges
+from tacgen_lib.io.config import load_yaml
+from tacgen_lib.preprocess.frames import decode_frames
+from tacgen_lib.probes.settings import ProbeSettings
+from tacgen_lib.workflow_config import validate_config
+
+FACTORS = ("colour", "texture", "appearance")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--results", default="results", help="a finished run's results folder")
+    ap.add_argument("--config", default="config/config.yaml", help="the run's config")
+    ap.add_argument("--corpus", default="sim_natural_r0", help="a natural corpus of the run")
+    ap.add_argument("--epochs", type=int, default=None, help="SimCLR epochs (config's if unset)")
+    ap.add_argument("--grey", type=float, nargs="*", default=[0.0], help="SimCLR grey values")
+    ap.add_argument("--image-size", type=int, default=None, help="default: features.image_size")
+    ap.add_argument("--threads", type=int, default=2)
+    args = ap.parse_args()
+    torch.set_num_threads(args.threads)
+    config = validate_config(load_yaml(args.config), "config/config.schema.yaml")
+    feat = config["features"]
+    size = args.image_size or FeatureSettings.from_config(feat).image_size
+    res = Path(args.results)
+
+    splits = edges.read(res / "corpus/splits.parquet").frame
+    split = splits.loc[splits["corpus"] == args.corpus].set_index("sample_id")["split"]
+    train = sorted(split.index[split != "test"])
+    test = sorted(split.index[split == "test"])
+    fit_rows = sorted(split.index[split == "train"])  # pretraining: train rows only
+    samples = edges.read(res / f"corpus/{args.corpus}/samples.parquet").frame
+    ids = samples["sample_id"].astype(str).to_numpy()
+    frames = decode_frames(samples, "rgb", where=f"{args.corpus}/samples.parquet")
+    factors = visible_factors(samples, appearance_class=True)
+    visibility = VisibilitySettings.from_config(feat.get("visibility"))
+    probe = replace(
+        ProbeSettings.from_config(config["probes"], "logistic", config["probes"]["seeds"][0]),
+        folds=visibility.folds,
+        cv_repeats=1,
+    )
+    print(
+        f"corpus {args.corpus}: {len(train)} non-test rows ({len(fit_rows)} train), "
+        f"{len(test)} test; input {size} px; torch threads {args.threads}"
+    )
+
+    def scored(name: str, vectors: np.ndarray, make_s: float, extract_s: float) -> dict:
+        corpus = VisibilityCorpus(
+            args.corpus, dict(zip(ids, vectors, strict=True)), factors, train, test
+        )
+        with threadpool_limits(1):
+            rows = visibility_check([corpus], probe, visibility, workers=args.threads)
+        out = {"V": name, "dim": vectors.shape[1], "make s": make_s, "extract s": extract_s}
+        for _, r in rows.loc[rows["factor"].isin(FACTORS)].iterrows():
+            out[f"{r['factor']} {r['probe'][:3]}"] = round(float(r["score"]), 3)
+        print(f"  {name}: done", flush=True)
+        return out
+
+    table = []
+    edge = res / f"features/{args.corpus}/vision.parquet"
+    for column, name in (("vit", "run V"), ("pixel", "pixel-V")):
+        vectors = edges.read_vector_map(edge, column)
+        vec = np.stack([vectors[i] for i in ids]).astype(np.float32)
+        table.append(scored(name, vec, float("nan"), float("nan")))
+
+    def extracted(model: torch.nn.Module) -> tuple[np.ndarray, float]:
+        t0 = time.perf_counter()
+        vec = extract_features(model, frames, image_size=size, batch_size=128)
+        return vec, time.perf_counter() - t0
+
+    vec, ext = extracted(random_resnet("resnet_tiny", seed=0))
+    table.append(scored("random ResNet", vec, 0.0, ext))
+    position = {sid: i for i, sid in enumerate(ids)}
+    train_frames = frames[[position[s] for s in fit_rows]]
+    base = SimclrSettings.from_config(feat.get("simclr"))
+    if args.epochs:
+        base = replace(base, epochs=args.epochs)
+    for grey in args.grey:
+        settings = replace(base, grey=grey)
+        t0 = time.perf_counter()
+        result = pretrain_simclr(train_frames, settings, arch="resnet_tiny", image_size=size)
+        made = time.perf_counter() - t0
+        vec, ext = extracted(result.backbone())
+        table.append(scored(f"SimCLR {settings.epochs} ep, grey {grey:g}", vec, made, ext))
+    print(pd.DataFrame(table).to_string(index=False, float_format=lambda x: f"{x:.3g}"))
+    print("gate (nonlinear):", dict(visibility.gate))
+
+
+if __name__ == "__main__":
+    main()
