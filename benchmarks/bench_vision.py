@@ -36,11 +36,15 @@ from tacgen_lib.features.extract import extract_features
 from tacgen_lib.features.resnet import random_resnet
 from tacgen_lib.features.settings import FeatureSettings, SimclrSettings
 from tacgen_lib.features.simclr import pretrain_simclr
-from tacgen_lib.generate.visibility import VisibilityCorpus, VisibilitySettings, visibility_check
+from tacgen_lib.generate.visibility import (
+    VisibilityCorpus,
+    VisibilitySettings,
+    visibility_check,
+    visibility_probe,
+)
 from tacgen_lib.io import edges
 from tacgen_lib.io.config import load_yaml
 from tacgen_lib.preprocess.frames import decode_frames
-from tacgen_lib.probes.settings import ProbeSettings
 from tacgen_lib.workflow_config import validate_config
 
 FACTORS = ("colour", "texture", "appearance")
@@ -72,11 +76,7 @@ def main() -> None:
     frames = decode_frames(samples, "rgb", where=f"{args.corpus}/samples.parquet")
     factors = visible_factors(samples, appearance_class=True)
     visibility = VisibilitySettings.from_config(feat.get("visibility"))
-    probe = replace(
-        ProbeSettings.from_config(config["probes"], "logistic", config["probes"]["seeds"][0]),
-        folds=visibility.folds,
-        cv_repeats=1,
-    )
+    probe = visibility_probe(config["probes"], config["probes"]["seeds"][0], visibility)
     print(
         f"corpus {args.corpus}: {len(train)} non-test rows ({len(fit_rows)} train), "
         f"{len(test)} test; input {size} px; torch threads {args.threads}"

@@ -56,7 +56,7 @@ from tacgen_lib.features.dino_losses import (
     koleo_loss,
     sinkhorn_knopp,
 )
-from tacgen_lib.features.extract import to_unit_tensor
+from tacgen_lib.features.extract import check_train_frames, to_unit_tensor
 from tacgen_lib.features.settings import DinoSettings
 from tacgen_lib.features.vit import PATCH_SIZE, DinoVisionTransformer, build_vit
 from tacgen_lib.optim import AdamW
@@ -126,7 +126,8 @@ class PretrainResult:
         return model.eval()
 
 
-def _cosine(start: float, end: float, n: int) -> np.ndarray:
+def cosine_schedule(start: float, end: float, n: int) -> np.ndarray:
+    """n values from `start` to `end` along a half cosine (float64; one value: `start`)."""
     if n <= 1:
         return np.full(max(n, 0), start, dtype=np.float64)
     return end + 0.5 * (start - end) * (1 + np.cos(np.pi * np.arange(n) / (n - 1)))
@@ -214,10 +215,7 @@ def pretrain_dino(
     koleo_weight, freeze_last_layer_epochs = s.koleo_weight, s.freeze_last_layer_epochs
     momentum_teacher, weight_decay = s.momentum_teacher, s.weight_decay
     warmup_epochs, clip_grad = s.warmup_epochs, s.clip_grad
-    if images.ndim != 4 or images.shape[3] != 3 or images.dtype != np.uint8:
-        raise ValueError(
-            f"pretrain_dino: expected uint8 frames (N, H, W, 3), got {images.dtype} {images.shape}"
-        )
+    check_train_frames(images, "pretrain_dino")
     if image_size % PATCH_SIZE:
         raise ValueError(
             f"pretrain_dino: image_size {image_size} is not a multiple of {PATCH_SIZE}"
@@ -282,9 +280,9 @@ def pretrain_dino(
         total = steps_per_epoch * epochs
         warm = min(total, warmup_epochs * steps_per_epoch)
         lr_sched = np.concatenate(
-            [np.linspace(lr / max(warm, 1), lr, warm), _cosine(lr, lr / 100, total - warm)]
+            [np.linspace(lr / max(warm, 1), lr, warm), cosine_schedule(lr, lr / 100, total - warm)]
         )
-        mom_sched = _cosine(momentum_teacher, 1.0, total)
+        mom_sched = cosine_schedule(momentum_teacher, 1.0, total)
         t_warm = min(total, warmup_teacher_temp_epochs * steps_per_epoch)
         tt_start = teacher_temp if warmup_teacher_temp is None else warmup_teacher_temp
         tt_sched = np.concatenate(

@@ -25,6 +25,7 @@ if TYPE_CHECKING:
 __all__ = [
     "IMAGENET_MEAN",
     "IMAGENET_STD",
+    "check_train_frames",
     "imagenet_normalise",
     "to_unit_tensor",
     "extract_features",
@@ -41,6 +42,15 @@ def _check_images(images: np.ndarray, where: str) -> None:
         raise TypeError(f"{where}: expected a uint8 array (N, H, W, 3), got {got}")
     if images.ndim != 4 or images.shape[3] != 3:
         raise ValueError(f"{where}: expected shape (N, H, W, 3), got {images.shape}")
+
+
+def check_train_frames(images: np.ndarray, where: str) -> None:
+    """Refuse pretraining frames that are not uint8 (N, H, W, 3): a ValueError naming `where`
+    (the pretraining function), the dtype and the shape."""
+    if images.ndim != 4 or images.shape[3] != 3 or images.dtype != np.uint8:
+        raise ValueError(
+            f"{where}: expected uint8 frames (N, H, W, 3), got {images.dtype} {images.shape}"
+        )
 
 
 def imagenet_normalise(x: Tensor) -> Tensor:

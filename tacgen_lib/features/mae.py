@@ -28,7 +28,7 @@ import torch
 from torch import Tensor, nn
 
 from tacgen_lib.features.dino import PretrainResult
-from tacgen_lib.features.extract import imagenet_normalise, to_unit_tensor
+from tacgen_lib.features.extract import check_train_frames, imagenet_normalise, to_unit_tensor
 from tacgen_lib.features.settings import MaeSettings
 from tacgen_lib.features.vit import Block, DinoVisionTransformer, build_vit
 from tacgen_lib.features.vit_checkpoint import (
@@ -164,10 +164,7 @@ def pretrain_mae(
     encoder's state comes back on the CPU.
     """
     s = settings
-    if images.ndim != 4 or images.shape[3] != 3 or images.dtype != np.uint8:
-        raise ValueError(
-            f"pretrain_mae: expected uint8 frames (N, H, W, 3), got {images.dtype} {images.shape}"
-        )
+    check_train_frames(images, "pretrain_mae")
     n = images.shape[0]
     if n < 1:
         raise ValueError("pretrain_mae: no frames to learn from")

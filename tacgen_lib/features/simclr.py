@@ -31,8 +31,8 @@ from torch.optim import AdamW
 from tacgen_lib.align.loss import info_nce
 from tacgen_lib.features.archs import RESNET_ARCHS
 from tacgen_lib.features.augment import random_resized_crop
-from tacgen_lib.features.dino import deterministic_algorithms
-from tacgen_lib.features.extract import imagenet_normalise, to_unit_tensor
+from tacgen_lib.features.dino import cosine_schedule, deterministic_algorithms
+from tacgen_lib.features.extract import check_train_frames, imagenet_normalise, to_unit_tensor
 from tacgen_lib.features.resnet import ResNet, build_resnet
 from tacgen_lib.features.settings import SimclrSettings
 
@@ -95,11 +95,7 @@ def pretrain_simclr(
         raise ValueError(
             f"pretrain_simclr: {arch!r} is not a ResNet; valid: {sorted(RESNET_ARCHS)}"
         )
-    if images.ndim != 4 or images.shape[3] != 3 or images.dtype != np.uint8:
-        raise ValueError(
-            f"pretrain_simclr: expected uint8 frames (N, H, W, 3), got {images.dtype} "
-            f"{images.shape}"
-        )
+    check_train_frames(images, "pretrain_simclr")
     s = settings
     n = images.shape[0]
     batch_size = min(s.batch_size, n)
@@ -125,11 +121,12 @@ def pretrain_simclr(
         steps_per_epoch = n // batch_size
         total = steps_per_epoch * s.epochs
         warm = min(total, steps_per_epoch)
-        end = s.lr / 100
-        cosine = end + 0.5 * (s.lr - end) * (
-            1 + np.cos(np.pi * np.arange(total - warm) / max(total - warm - 1, 1))
+        lr_sched = np.concatenate(
+            [
+                np.linspace(s.lr / max(warm, 1), s.lr, warm),
+                cosine_schedule(s.lr, s.lr / 100, total - warm),
+            ]
         )
-        lr_sched = np.concatenate([np.linspace(s.lr / max(warm, 1), s.lr, warm), cosine])
 
         def view(batch: Tensor) -> Tensor:
             crops = random_resized_crop(batch, image_size, (s.crop_min, 1.0), gen)

@@ -17,7 +17,7 @@ held-out scale), has nothing a probe could decode and gets no row.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -39,6 +39,7 @@ __all__ = [
     "VisibilitySettings",
     "visibility_check",
     "visibility_gate",
+    "visibility_probe",
 ]
 
 #: Columns of ``results/features/visibility.parquet`` (one row per corpus x factor x probe).
@@ -66,6 +67,19 @@ class VisibilitySettings(SchemaSettings):
     median heuristic) the nonlinear probe chooses among by CV, the fixed-test bootstrap
     resamples, the CV folds of both probes (one draw), and the gate: factor -> the accuracy V must reach on a regime corpus for the
     regime to be read (`visibility_gate`)."""
+
+
+def visibility_probe(
+    probes: Mapping[str, Any], seed: int, visibility: VisibilitySettings
+) -> ProbeSettings:
+    """The check's probe: the probes stage's logistic probe (config ``probes``, at `seed`)
+    with the check's folds and one draw of them, since the check reads each factor once, on
+    every non-test row."""
+    return replace(
+        ProbeSettings.from_config(probes, "logistic", seed),
+        folds=visibility.folds,
+        cv_repeats=1,
+    )
 
 
 @dataclass(frozen=True)

@@ -10,6 +10,7 @@ import textwrap
 import numpy as np
 import pytest
 import torch
+from pretrain_checks import assert_same_backbone
 
 from tacgen_lib.features.augment import multi_crop
 from tacgen_lib.features.dino import DINOHead, deterministic_algorithms, pretrain_dino
@@ -161,8 +162,7 @@ def test_pretrain_dino_is_deterministic_and_reports_a_curve():
     b = pretrain(imgs, **kw)
     assert len(msgs) == 2 and msgs[0].startswith("dino epoch 1/2")
     assert a.backbone_state.keys() == build_vit("vit_tiny", img_size=28).state_dict().keys()
-    for k, v in a.backbone_state.items():
-        assert torch.equal(v, b.backbone_state[k]), k
+    assert_same_backbone(a, b)
     strip = [{k: v for k, v in r.items() if k != "seconds"} for r in a.curve]
     assert strip == [{k: v for k, v in r.items() if k != "seconds"} for r in b.curve]
     for row in a.curve:

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from pretrain_checks import assert_loss_falls, assert_same_backbone
 
 from tacgen_lib.estimate.counts import pretraining
 from tacgen_lib.features.extract import extract_features
@@ -33,11 +34,8 @@ def test_pretrain_simclr_is_bit_identical_when_run_twice_and_its_loss_falls():
     torch.set_num_threads(1)
     one = pretrain_simclr(frames, settings, arch="resnet_tiny", image_size=32)
     two = pretrain_simclr(frames, settings, arch="resnet_tiny", image_size=32)
-    for k, v in one.backbone_state.items():
-        assert torch.equal(v, two.backbone_state[k]), k
-    losses = [r["loss"] for r in one.curve]
-    assert [r["epoch"] for r in one.curve] == list(range(6)) and all(np.isfinite(losses))
-    assert losses[-1] < losses[0]  # the objective is being minimised
+    assert_same_backbone(one, two)
+    assert_loss_falls(one.curve, epochs=6)
     model = one.backbone()
     random = random_resnet("resnet_tiny", seed=settings.seed)
     x = frames[:4]

@@ -5,14 +5,16 @@ from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
 
 run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
 
-from dataclasses import replace
-
 from threadpoolctl import threadpool_limits
 
 from tacgen_lib.corpus.looks import visible_factors
-from tacgen_lib.generate.visibility import VisibilityCorpus, VisibilitySettings, visibility_check
+from tacgen_lib.generate.visibility import (
+    VisibilityCorpus,
+    VisibilitySettings,
+    visibility_check,
+    visibility_probe,
+)
 from tacgen_lib.io import edges, log
-from tacgen_lib.probes.settings import ProbeSettings
 from tacgen_lib.report import visibility as report
 from tacgen_lib.report.write import write_figure, write_table
 
@@ -38,13 +40,7 @@ for corpus, path in zip(params.corpora, snakemake.input.v, strict=True):
         )
     )
     logger.info("%s: %d train, %d test rows", corpus, len(corpora[-1].train), len(corpora[-1].test))
-# the probes stage's logistic probe with the check's folds, one draw of them: the check reads
-# each factor once, on every non-test row
-probe = replace(
-    ProbeSettings.from_config(params.probes, "logistic", params.probe_seed),
-    folds=settings.folds,
-    cv_repeats=1,
-)
+probe = visibility_probe(params.probes, params.probe_seed, settings)
 # one BLAS thread in this process or in each of the job's workers (fork_map): the rows do not
 # depend on the cores Snakemake gives the job
 with threadpool_limits(1):
