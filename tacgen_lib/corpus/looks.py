@@ -34,6 +34,12 @@ __all__ = [
 ]
 
 #: An object's colour word -> its RGB (before the natural design's per-channel jitter).
+#: A texture darkens the colour it is drawn on (a MuJoCo texture multiplies the material's
+#: rgba; `scenes._assets_xml`), so the darkest colour sets how much texture a frame can show:
+#: "black" is a charcoal, about as dark as red, whose checks, stripes and speckles still differ
+#: from the ground by tens of grey levels. At (0.12, 0.12, 0.13) they differed by a few, and
+#: black was the one colour whose texture even a classifier trained on the texture labels
+#: could not read, so no vision side could see the appearance class of a black object.
 PALETTE: dict[str, tuple[float, float, float]] = {
     "red": (0.85, 0.15, 0.12),
     "orange": (0.95, 0.55, 0.1),
@@ -42,7 +48,7 @@ PALETTE: dict[str, tuple[float, float, float]] = {
     "blue": (0.15, 0.35, 0.9),
     "purple": (0.55, 0.25, 0.75),
     "white": (0.92, 0.92, 0.9),
-    "black": (0.12, 0.12, 0.13),
+    "black": (0.26, 0.26, 0.28),
 }
 
 #: An object's texture (the scene's material name) -> its caption word.
