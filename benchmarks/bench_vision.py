@@ -11,10 +11,14 @@ row; pretraining reads train rows only), beside the gate of config ``features.vi
   pixel-V       the run's raw-pixel V (features.pixel_size), the paper's controlled baseline
   random ResNet resnet_tiny at its seeded random init, no training (the control a learnt V
                 must beat)
-  SimCLR        resnet_tiny pretrained by `features.simclr.pretrain_simclr` on the corpus's
-                train frames, once per --grey value (greyscale views trade colour for texture)
+  SimCLR        resnet_tiny pretrained by `features.simclr.pretrain_simclr` on this corpus's
+                train frames (the run's V learns from every corpus of features.pretrain.corpus),
+                once per --grey value (greyscale views trade colour for texture)
 
-    .venv/bin/python benchmarks/bench_vision.py --results results --epochs 30 --grey 0 0.5
+Each ResNet is read with every pool of --pools: its last stage's average (cls) and its stage
+statistics (stages, `resnet.ResNet.stage_statistics`).
+
+    .venv/bin/python benchmarks/bench_vision.py --results results --grey 0 0.1 0.5
 
 Every figure is measured in this run; nothing is compared with a stored number.
 """
@@ -56,7 +60,12 @@ def main() -> None:
     ap.add_argument("--config", default="config/config.yaml", help="the run's config")
     ap.add_argument("--corpus", default="sim_natural_r0", help="a natural corpus of the run")
     ap.add_argument("--epochs", type=int, default=None, help="SimCLR epochs (config's if unset)")
-    ap.add_argument("--grey", type=float, nargs="*", default=[0.0], help="SimCLR grey values")
+    ap.add_argument(
+        "--grey", type=float, nargs="*", default=None, help="SimCLR grey values (config's)"
+    )
+    ap.add_argument(
+        "--pools", nargs="*", default=["cls", "stages"], help="ResNet pools (extract.POOLS)"
+    )
     ap.add_argument("--image-size", type=int, default=None, help="default: features.image_size")
     ap.add_argument("--threads", type=int, default=2)
     args = ap.parse_args()
@@ -101,25 +110,28 @@ def main() -> None:
         vec = np.stack([vectors[i] for i in ids]).astype(np.float32)
         table.append(scored(name, vec, float("nan"), float("nan")))
 
-    def extracted(model: torch.nn.Module) -> tuple[np.ndarray, float]:
+    def extracted(model: torch.nn.Module, pool: str) -> tuple[np.ndarray, float]:
         t0 = time.perf_counter()
-        vec = extract_features(model, frames, image_size=size, batch_size=128)
+        vec = extract_features(model, frames, image_size=size, batch_size=128, pool=pool)
         return vec, time.perf_counter() - t0
 
-    vec, ext = extracted(random_resnet("resnet_tiny", seed=0))
-    table.append(scored("random ResNet", vec, 0.0, ext))
+    for pool in args.pools:
+        vec, ext = extracted(random_resnet("resnet_tiny", seed=0), pool)
+        table.append(scored(f"random ResNet, {pool}", vec, 0.0, ext))
     position = {sid: i for i, sid in enumerate(ids)}
     train_frames = frames[[position[s] for s in fit_rows]]
     base = SimclrSettings.from_config(feat.get("simclr"))
     if args.epochs:
         base = replace(base, epochs=args.epochs)
-    for grey in args.grey:
+    for grey in [base.grey] if args.grey is None else args.grey:
         settings = replace(base, grey=grey)
         t0 = time.perf_counter()
         result = pretrain_simclr(train_frames, settings, arch="resnet_tiny", image_size=size)
         made = time.perf_counter() - t0
-        vec, ext = extracted(result.backbone())
-        table.append(scored(f"SimCLR {settings.epochs} ep, grey {grey:g}", vec, made, ext))
+        for pool in args.pools:
+            vec, ext = extracted(result.backbone(), pool)
+            name = f"SimCLR {settings.epochs} ep, grey {grey:g}, {pool}"
+            table.append(scored(name, vec, made, ext))
     print(pd.DataFrame(table).to_string(index=False, float_format=lambda x: f"{x:.3g}"))
     print("gate (nonlinear):", dict(visibility.gate))
 

@@ -14,7 +14,9 @@ localrules:
 rule family_backbone:
     """One family's frozen backbone of a modality (checkpoint, MAE or DINO pretraining on the pretraining corpus's train split, or the seeded random init) and its features of every frame of each probe corpus."""
     input:
-        frames=lambda w: backbone_frames(w.modality, PRETRAIN["corpus"]),
+        frames=lambda w: pretraining_frames(
+            w.modality, family_spec(w.family, w.modality)
+        ),
         splits="results/corpus/splits.parquet",
         extract=lambda w: family_frames(w.modality),
         code=imports_of("pretrain_backbone"),
@@ -42,7 +44,7 @@ rule family_backbone:
         device=DEVICE,  # config device (tacgen_lib.runtime.device)
         backbone=lambda w: FAMILIES.families[w.family][w.modality].__dict__,
         pretrain=PRETRAIN,
-        corpus=PRETRAIN["corpus"],  # whose train frames DINO, MAE and SimCLR pretrain on
+        corpora=PRETRAIN_CORPORA,  # whose train frames DINO, MAE and SimCLR pretrain on
         mae=lambda w: (
             FEAT["mae"] if family_spec(w.family, w.modality).objective == "mae" else {}
         ),
@@ -54,7 +56,7 @@ rule family_backbone:
         ),
         image_size=FEAT["image_size"],
         batch_size=FEAT["batch_size"],
-        pool=FEAT["pool"],
+        pool=lambda w: family_spec(w.family, w.modality).pool or FEAT["pool"],
     script:
         "../workflow/scripts/pretrain_backbone.py"
 

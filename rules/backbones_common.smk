@@ -14,6 +14,7 @@ for _m in MODALITIES:
         where=f"features.backbones.{_m}",
         dino_epochs=int(PRETRAIN["epochs"]),
         mae_epochs=int(FEAT["mae"]["epochs"]),
+        features_pool=FEAT["pool"],
     )
     # an official checkpoint must be here before any job runs (relative to the working
     # directory, where results/ lives)

@@ -15,17 +15,8 @@ from tacgen_lib.report_pages import category
 #: directory, not this one)
 WORKFLOW_ROOT = Path(str(workflow.current_basedir)).parent
 
-# the regime's natural corpora, one per rho of config regime (a config grid), join the corpora
-# before validation so that each is checked like any declared corpus
-for _name, _decl in regime_corpora(config.get("regime")).items():
-    _have = config.setdefault("corpora", {}).get(_name)
-    if _have is not None and _have != _decl:
-        raise ValueError(
-            f"config corpora.{_name}: the name belongs to the regime's corpus at rho = "
-            f"{_decl['rho']:g} (config regime.corpus, regime.rhos); rename your corpus"
-        )
-    config["corpora"][_name] = _decl
-
+# validate_config joins the regime's natural corpora (one per rho of config regime) to the
+# corpora first, so each is checked like any declared corpus
 _setting = (config.get("cost") or {}).get("setting")
 validate_config(
     config,

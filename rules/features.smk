@@ -1,8 +1,31 @@
 """Features stage: a DINOv2-architecture backbone per modality, frozen features per corpus."""
 
+from tacgen_lib.features.families import BackboneSpec as _Backbone
+from tacgen_lib.features.settings import pretraining_corpora
+
 FEAT = config["features"]
 PRETRAIN = FEAT["pretrain"]
+PRETRAIN_CORPORA = list(pretraining_corpora(PRETRAIN))
 MODALITIES = ["vision", "tactile"]
+
+
+def pretraining_frames(modality, spec):
+    """The frame edges a backbone (a BackboneSpec) learns from: each corpus of
+    features.pretrain.corpus, RGB or its tactile variant; none for a checkpoint or the random
+    init, which read no frames and so wait for no corpus."""
+    if not spec.pretrains(int(PRETRAIN["epochs"])):
+        return []
+    return [backbone_frames(modality, c) for c in PRETRAIN_CORPORA]
+
+
+# the pretraining corpora need the tactile variant a pretrained tactile backbone reads
+_TACTILE_PRETRAIN = (
+    set(PRETRAIN_CORPORA)
+    if _Backbone.from_config(FEAT["backbones"]["tactile"]).pretrains(
+        int(PRETRAIN["epochs"])
+    )
+    else set()
+)
 
 # corpora only the regime reads (its natural corpora) need the generator's tactile variant
 # alone, not the preprocessing ablation's every variant
@@ -11,7 +34,8 @@ _REGIME_ONLY = (
     - set(config["align"]["corpora"])
     - set(config["generate"]["corpora"])
     - {f["corpus"] for f in config["probes"]["families"].values()}
-    - {PRETRAIN["corpus"], FEAT["pretrained_vs_random"]["corpus"]}
+    - _TACTILE_PRETRAIN
+    - {FEAT["pretrained_vs_random"]["corpus"]}
 )
 # and the transfer corpus only the heads' variant (config probes.heads)
 _ONE_VARIANT = {c: config["generate"]["variant"] for c in _REGIME_ONLY}
@@ -31,7 +55,9 @@ EDGES += ["results/features/pretrained_vs_random.parquet"]
 rule pretrain_backbone:
     """DINO, MAE (a ViT) or SimCLR (a ResNet) pretraining on the pretraining corpus's train split only, an official checkpoint, or the seeded random init."""
     input:
-        frames=lambda w: backbone_frames(w.modality, PRETRAIN["corpus"]),
+        frames=lambda w: pretraining_frames(
+            w.modality, _Backbone.from_config(FEAT["backbones"][w.modality])
+        ),
         splits="results/corpus/splits.parquet",
         code=imports_of("pretrain_backbone"),
     output:
@@ -55,7 +81,7 @@ rule pretrain_backbone:
         device=DEVICE,  # config device (tacgen_lib.runtime.device)
         backbone=lambda w: FEAT["backbones"][w.modality],
         pretrain=PRETRAIN,
-        corpus=PRETRAIN["corpus"],  # whose train frames DINO, MAE and SimCLR pretrain on
+        corpora=PRETRAIN_CORPORA,  # whose train frames DINO, MAE and SimCLR pretrain on
         # MAE's settings only where a backbone is MAE-pretrained: a change reruns only those
         mae=lambda w: (
             FEAT["mae"] if FEAT["backbones"][w.modality]["objective"] == "mae" else {}

@@ -12,6 +12,8 @@ from __future__ import annotations
 from pathlib import Path
 
 from tacgen_lib.corpus.keys import corpus_key_errors
+from tacgen_lib.features.settings import pretraining_corpora
+from tacgen_lib.generate.regime_sets import regime_corpora
 from tacgen_lib.io.config import ConfigError, load_yaml, validate_schema
 
 __all__ = ["ConfigError", "validate_config"]
@@ -19,7 +21,20 @@ __all__ = ["ConfigError", "validate_config"]
 
 def validate_config(config: dict, schema_path: str | Path, *, source: str = "config") -> dict:
     """Validate `config` in place (`io.config.validate_schema`: schema and defaults), then
-    check its cross-references; raises ConfigError naming the key. Returns `config`."""
+    check its cross-references; raises ConfigError naming the key. Returns `config`.
+
+    The regime's natural corpora, one per rho of config regime (`regime_sets.regime_corpora`),
+    join config corpora first, so that each is checked like any declared corpus and other keys
+    (features.pretrain.corpus) may name them; a declared corpus of one of their names that is
+    not the regime's own is refused."""
+    for name, decl in regime_corpora(config.get("regime")).items():
+        have = config.setdefault("corpora", {}).get(name)
+        if have is not None and have != decl:
+            raise ConfigError(
+                f"{source}: corpora.{name}: the name belongs to the regime's corpus at rho = "
+                f"{decl['rho']:g} (config regime.corpus, regime.rhos); rename your corpus"
+            )
+        config["corpora"][name] = decl
     validate_schema(config, schema_path, source=source)
     scenes_file = Path(config["scenes_file"])
     scenes = load_yaml(scenes_file) if scenes_file.exists() else None
@@ -42,7 +57,10 @@ def validate_config(config: dict, schema_path: str | Path, *, source: str = "con
             )
     corpora = set(config["corpora"])
     refs = [
-        ("features.pretrain.corpus", config["features"]["pretrain"]["corpus"]),
+        (f"features.pretrain.corpus[{i}]", c)
+        for i, c in enumerate(pretraining_corpora(config["features"]["pretrain"]))
+    ]
+    refs += [
         (
             "features.pretrained_vs_random.corpus",
             config["features"]["pretrained_vs_random"]["corpus"],

@@ -17,6 +17,7 @@ from tacgen_lib.estimate.flops import (
     arch_flops,
     generator_mlp_flops,
 )
+from tacgen_lib.features.settings import pretraining_corpora
 from tacgen_lib.generate.cells import guidance_passes
 from tacgen_lib.generate.regime_sets import regime_corpora
 from tacgen_lib.io.config import load_yaml
@@ -93,7 +94,8 @@ def pretraining(c: Config, spec: Mapping[str, Any]) -> tuple[str, int]:
 def pretraining_units(c: Config, spec: Mapping[str, Any]) -> tuple[str, float]:
     """(how a backbone is made, epoch × train frame of its pretraining)."""
     objective, epochs = pretraining(c, spec)
-    return objective, epochs * train_rows(c, c["features"]["pretrain"]["corpus"])
+    corpora = pretraining_corpora(c["features"]["pretrain"])
+    return objective, epochs * sum(train_rows(c, name) for name in corpora)
 
 
 def pretraining_flops(c: Config, spec: Mapping[str, Any]) -> float:

@@ -18,6 +18,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from tacgen_lib.features.archs import arch_family
 from tacgen_lib.features.dino import pretrain_dino
 from tacgen_lib.features.families import BackboneSpec
 from tacgen_lib.features.mae import load_mae_checkpoint, pretrain_mae
@@ -32,7 +33,16 @@ from tacgen_lib.features.vit_checkpoint import (
     unwrap_state_dict,
 )
 
-__all__ = ["make_backbone", "read_backbone"]
+__all__ = ["make_backbone", "random_init", "read_backbone"]
+
+
+def random_init(arch: str, image_size: int, seed: int) -> nn.Module:
+    """The seeded random-init backbone of `arch` in eval mode, a ViT (`vit.random_backbone`)
+    or a ResNet (`resnet.random_resnet`): the frozen backbone of objective random, and the
+    baseline a pretrained one must beat (rule pretrained_vs_random)."""
+    if arch_family(arch) == "resnet":
+        return random_resnet(arch, seed=seed)
+    return random_backbone(arch, image_size, seed=seed)
 
 
 def make_backbone(
@@ -67,10 +77,7 @@ def make_backbone(
             model = load(vit, spec.checkpoint)
         return model.eval(), [], f"loaded official checkpoint {spec.checkpoint}"
     if spec.objective == "random" or (spec.objective == "dino" and dino.epochs == 0):
-        if spec.network == "resnet":
-            model = random_resnet(spec.arch, seed=dino.seed)
-        else:
-            model = random_backbone(spec.arch, image_size, seed=dino.seed)
+        model = random_init(spec.arch, image_size, seed=dino.seed)
         return model, [], f"random-init {spec.arch} (seed {dino.seed}), no pretraining"
     if spec.objective == "simclr":
         images = frames()

@@ -23,14 +23,19 @@ if TYPE_CHECKING:
     from tacgen_lib.features.settings import FeatureSettings
 
 __all__ = [
+    "POOLS",
     "IMAGENET_MEAN",
     "IMAGENET_STD",
     "check_train_frames",
     "imagenet_normalise",
     "to_unit_tensor",
     "extract_features",
+    "feature_width",
     "pixel_features",
 ]
+
+#: How a frame's feature is read from a backbone (`extract_features`).
+POOLS = ("cls", "mean_patch", "stages")
 
 IMAGENET_MEAN = (0.485, 0.456, 0.406)
 IMAGENET_STD = (0.229, 0.224, 0.225)
@@ -77,16 +82,17 @@ def extract_features(
     *,
     image_size: int,
     batch_size: int = 64,
-    pool: Literal["cls", "mean_patch"] = "cls",
+    pool: Literal["cls", "mean_patch", "stages"] = "cls",
     device: torch.device | str = "cpu",
 ) -> np.ndarray:
-    """Frozen backbone features, one float32 row per frame: (N, embed_dim).
+    """Frozen backbone features, one float32 row per frame: (N, `feature_width(model, pool)`).
 
-    `model` is a ViT (`vit.DinoVisionTransformer`) or a ResNet (`resnet.ResNet`, whose two pools
-    both give its global average; `patch_size` 1).
+    `model` is a ViT (`vit.DinoVisionTransformer`) or a ResNet (`resnet.ResNet`, whose "cls"
+    and "mean_patch" pools both give its global average; `patch_size` 1).
 
     pool="cls" takes the normalised CLS token (x_norm_clstoken); "mean_patch" averages the
-    normalised patch tokens (x_norm_patchtokens). Runs under torch.inference_mode with the model
+    normalised patch tokens (x_norm_patchtokens); "stages" (a ResNet only) reads the mean and
+    std over space of every stage's maps (`resnet.ResNet.stage_statistics`). Runs under torch.inference_mode with the model
     in eval mode (its training flag is restored afterwards). Deterministic: the same weights,
     images and batch_size give identical bytes on the same machine/torch build.
 
@@ -94,8 +100,7 @@ def extract_features(
     Frames are resized and normalised on the CPU either way, then moved: on the CPU no move.
     """
     _check_images(images, "extract_features")
-    if pool not in ("cls", "mean_patch"):
-        raise ValueError(f"extract_features: pool must be 'cls' or 'mean_patch', got {pool!r}")
+    width = feature_width(model, pool)
     if image_size % model.patch_size:
         raise ValueError(
             f"extract_features: image_size {image_size} is not a multiple of the patch size "
@@ -103,7 +108,7 @@ def extract_features(
         )
     if batch_size < 1:
         raise ValueError(f"extract_features: batch_size must be >= 1, got {batch_size}")
-    out = np.empty((images.shape[0], model.embed_dim), dtype=np.float32)
+    out = np.empty((images.shape[0], width), dtype=np.float32)
     was_training = model.training
     home = next(model.parameters()).device
     dev = torch.device(device)
@@ -115,6 +120,10 @@ def extract_features(
                 x = imagenet_normalise(
                     to_unit_tensor(images[start : start + batch_size], image_size)
                 ).to(dev)
+                if pool == "stages":
+                    z = model.stage_statistics(x)
+                    out[start : start + z.shape[0]] = z.float().cpu().numpy()
+                    continue
                 feats = model.forward_features(x)
                 if pool == "cls":
                     z = feats["x_norm_clstoken"]
@@ -125,6 +134,21 @@ def extract_features(
         model.train(was_training)
         model.to(home)
     return out
+
+
+def feature_width(model: nn.Module, pool: str) -> int:
+    """Width of the feature `extract_features` reads from `model` with `pool`. Raises
+    ValueError for an unknown pool or "stages" on a model without `stage_statistics` (a
+    ViT)."""
+    if pool not in POOLS:
+        raise ValueError(f"extract_features: pool must be one of {POOLS}, got {pool!r}")
+    if pool != "stages":
+        return int(model.embed_dim)
+    if not hasattr(model, "stage_statistics"):
+        raise ValueError(
+            f"extract_features: pool 'stages' needs a ResNet, got {type(model).__name__}"
+        )
+    return int(model.stage_statistics_dim)
 
 
 def extract_with(

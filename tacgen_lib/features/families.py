@@ -59,21 +59,43 @@ class BackboneSpec(SchemaSettings):
         """ "vit" or "resnet" (archs.arch_family)."""
         return arch_family(self.arch)
 
+    def pretrains(self, dino_epochs: int) -> bool:
+        """Whether making it trains on frames (not a checkpoint, not the random init: an
+        objective other than random, and DINO only at `dino_epochs` above 0)."""
+        if self.checkpoint or self.objective == "random":
+            return False
+        return self.objective != "dino" or dino_epochs > 0
+
     def label(self, dino_epochs: int) -> str:
         """What the report says of it: arch, then how it was made (a DINO objective at 0
         epochs of features.pretrain is the random init)."""
         if self.checkpoint:
             return f"{self.arch} (checkpoint)"
-        if self.objective == "random" or (self.objective == "dino" and dino_epochs == 0):
+        if not self.pretrains(dino_epochs):
             return f"{self.arch} (random init)"
         return f"{self.arch} ({self.objective.upper()})"
 
 
-def check_backbone(spec: BackboneSpec, *, where: str, dino_epochs: int, mae_epochs: int) -> None:
-    """Refuse a backbone the workflow cannot make. Objectives: "dino" (a ViT; DINO with
+def check_backbone(
+    spec: BackboneSpec,
+    *,
+    where: str,
+    dino_epochs: int,
+    mae_epochs: int,
+    features_pool: str = "cls",
+) -> None:
+    """Refuse a backbone the workflow cannot make or read. Objectives: "dino" (a ViT; DINO with
     features.pretrain, whose 0 epochs mean the seeded random init), "mae" (a ViT; features.mae,
     at least 1 epoch), "simclr" (a ResNet; features.simclr), "random" (any arch: the seeded
-    random init). A ResNet is pretrained in the workflow by SimCLR only, a ViT by DINO or MAE."""
+    random init). A ResNet is pretrained in the workflow by SimCLR only, a ViT by DINO or MAE.
+    Its pool (`spec.pool`, else `features_pool`, config features.pool) "stages" needs a
+    ResNet."""
+    if (spec.pool or features_pool) == "stages" and spec.network != "resnet":
+        key = "pool" if spec.pool else "features.pool"
+        raise ConfigError(
+            f"config {where}: {key} stages reads a ResNet's stage statistics; the ViT "
+            f"{spec.arch} takes pool cls or mean_patch"
+        )
     if spec.checkpoint:
         return
     if spec.network == "resnet" and spec.objective not in ("random", "simclr"):
@@ -186,6 +208,7 @@ class FamilySettings(SchemaSettings):
                     where=f"backbones.families.{name}.{m}",
                     dino_epochs=int(feats["pretrain"]["epochs"]),
                     mae_epochs=MaeSettings.from_config(feats.get("mae")).epochs,
+                    features_pool=feats.get("pool", "cls"),
                 )
         return settings
 

@@ -12,7 +12,8 @@ Names and the initialisation (Kaiming-normal fan-out convolutions, BN weight 1 a
 checked against torchvision/models/resnet.py; the code is our own. The frozen feature of a frame
 is the global average of the last stage (torchvision's `avgpool` + `flatten`): `forward_features`
 returns it under the ViT's dict keys (`x_norm_clstoken`, and the last stage's spatial cells as
-`x_norm_patchtokens`), so `extract.extract_features` pools a ResNet as it pools a ViT.
+`x_norm_patchtokens`), so `extract.extract_features` pools a ResNet as it pools a ViT. Its
+"stages" pool reads `stage_statistics` instead: every stage's mean and std over space.
 """
 
 from __future__ import annotations
@@ -108,6 +109,28 @@ class ResNet(nn.Module):
     def forward(self, x: Tensor) -> Tensor:
         """The pooled feature (B, C)."""
         return self.forward_features(x)["x_norm_clstoken"]
+
+    def stage_statistics(self, x: Tensor) -> Tensor:
+        """The mean and the standard deviation over space of every stage's maps, stage by
+        stage ([mean_1, std_1, ..., mean_4, std_4]; (B, 2 * sum(widths))): the texture
+        statistics of Gatys et al. (2015) in their first-order form. Each stage sees a
+        neighbourhood a few pixels wider than the last, so the early stages keep the fine
+        texture that the last stage's global average blurs away (pool "stages" of
+        `extract.extract_features`). The std is the population one (divided by H*W)."""
+        if x.ndim != 4 or x.shape[1] != 3:
+            raise ValueError(f"expected images (B, 3, H, W), got shape {tuple(x.shape)}")
+        x = self.maxpool(self.relu(self.bn1(self.conv1(x))))
+        parts = []
+        for i in range(1, 5):
+            x = getattr(self, f"layer{i}")(x)
+            var, mean = torch.var_mean(x.flatten(2), dim=2, correction=0)
+            parts += [mean, var.sqrt()]
+        return torch.cat(parts, dim=1)
+
+    @property
+    def stage_statistics_dim(self) -> int:
+        """Width of `stage_statistics`: twice the sum of the stage widths."""
+        return 2 * sum(self.config.widths)
 
 
 def build_resnet(arch: str) -> ResNet:

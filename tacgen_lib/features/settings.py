@@ -23,6 +23,7 @@ __all__ = [
     "PretrainedVsRandomSettings",
     "SimclrSettings",
     "backbones_pretrained",
+    "pretraining_corpora",
 ]
 
 
@@ -39,6 +40,14 @@ class FeatureSettings(SchemaSettings):
     features are the frame resized to `pixel_size` (H, W). `threads`: the torch threads of
     an extraction job (outputs are bit-identical at one count, not across counts).
     """
+
+    @classmethod
+    def for_backbone(cls, features: Mapping[str, Any], modality: str) -> FeatureSettings:
+        """The settings of config ``features`` with the pool of the `modality` backbone
+        (``features.backbones.<modality>.pool`` where it names one, else features.pool)."""
+        settings = cls.from_config(features)
+        own = features["backbones"][modality].get("pool")
+        return replace(settings, pool=own) if own else settings
 
 
 @dataclass(frozen=True)
@@ -119,3 +128,10 @@ def backbones_pretrained(features: Mapping[str, Any]) -> bool:
     return int(features["pretrain"]["epochs"]) > 0 or any(
         s.get("checkpoint") or s.get("objective") in ("mae", "simclr") for s in specs
     )
+
+
+def pretraining_corpora(pretrain: Mapping[str, Any]) -> tuple[str, ...]:
+    """The corpora whose train frames pretraining reads (config ``features.pretrain.corpus``:
+    one name or a list), in the config's order."""
+    corpus = pretrain["corpus"]
+    return (corpus,) if isinstance(corpus, str) else tuple(corpus)

@@ -23,10 +23,10 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
+from torch import nn
 
 from tacgen_lib.align.heads import AlignHeads, project
 from tacgen_lib.features.extract import extract_features
-from tacgen_lib.features.vit import DinoVisionTransformer
 from tacgen_lib.preprocess.background import background_subtract
 
 __all__ = ["tactile_moments", "palpation_features"]
@@ -46,24 +46,30 @@ def palpation_features(
     rgb: np.ndarray,
     frames: Mapping[str, np.ndarray],
     backgrounds: Mapping[str, np.ndarray],
-    vision: DinoVisionTransformer,
-    tactile: DinoVisionTransformer,
+    vision: nn.Module,
+    tactile: nn.Module,
     heads: Mapping[str, AlignHeads],
     *,
     variant: str,
     image_size: int,
     batch_size: int,
-    pool: str,
+    pools: Mapping[str, str],
     device: Any = "cpu",
 ) -> dict[str, np.ndarray]:
     """V (N, d_v), T raw (N, moments x d_t) and T aligned per heads key (N, moments x 128).
 
     rgb: (N, H, W, 3); frames: column 'tactile_<moment>_<pad>' -> (N, h, w, 3);
-    backgrounds: pad name -> (h, w, 3). `device` (a torch device or its name): where the
+    backgrounds: pad name -> (h, w, 3). pools: modality ("vision", "tactile") -> its
+    backbone's pool (`extract.extract_features`). `device` (a torch device or its name): where the
     backbones and heads run (`extract_features`, `project`).
     """
     v = extract_features(
-        vision, rgb, image_size=image_size, batch_size=batch_size, pool=pool, device=device
+        vision,
+        rgb,
+        image_size=image_size,
+        batch_size=batch_size,
+        pool=pools["vision"],
+        device=device,
     )
     moments = tactile_moments(list(frames))
     raw, aligned = [], {k: [] for k in heads}
@@ -80,7 +86,7 @@ def palpation_features(
                     proc,
                     image_size=image_size,
                     batch_size=batch_size,
-                    pool=pool,
+                    pool=pools["tactile"],
                     device=device,
                 )
             )

@@ -14,7 +14,7 @@ from snakemake_run import ROOT
 
 from tacgen_lib.features.archs import ARCHS, RESNET_ARCHS, arch_family, feature_dim
 from tacgen_lib.features.backbones import make_backbone, read_backbone
-from tacgen_lib.features.extract import extract_features
+from tacgen_lib.features.extract import extract_features, imagenet_normalise, to_unit_tensor
 from tacgen_lib.features.families import BackboneSpec, FamilySettings, check_backbone
 from tacgen_lib.features.mae import (
     encode_visible,
@@ -30,7 +30,13 @@ from tacgen_lib.features.resnet import (
     random_resnet,
     resnet_from_state_dict,
 )
-from tacgen_lib.features.settings import DinoSettings, MaeSettings, SimclrSettings
+from tacgen_lib.features.settings import (
+    DinoSettings,
+    FeatureSettings,
+    MaeSettings,
+    SimclrSettings,
+    pretraining_corpora,
+)
 from tacgen_lib.features.vit import build_vit
 from tacgen_lib.features.vit_checkpoint import save_backbone
 from tacgen_lib.io.config import ConfigError, load_yaml
@@ -80,6 +86,56 @@ def test_resnet_pools_agree_and_give_the_last_stage_width():
         cls.shape == (5, feature_dim("resnet_tiny")) == (5, RESNET_ARCHS["resnet_tiny"].widths[-1])
     )
     np.testing.assert_allclose(cls, mean, rtol=1e-6, atol=1e-7)  # two reductions of one map
+
+
+def _stage_statistics_float64(model, x: torch.Tensor) -> np.ndarray:
+    """Reference: each stage's maps taken with forward hooks, their mean and population std
+    over space in float64 numpy, stage after stage."""
+    maps = []
+    hooks = [
+        getattr(model, f"layer{i}").register_forward_hook(lambda _m, _i, out: maps.append(out))
+        for i in range(1, 5)
+    ]
+    with torch.no_grad():
+        model(x)
+    for h in hooks:
+        h.remove()
+    parts = []
+    for m in maps:
+        a = m.double().numpy().reshape(m.shape[0], m.shape[1], -1)
+        parts += [a.mean(axis=2), a.std(axis=2)]
+    return np.concatenate(parts, axis=1)
+
+
+@pytest.mark.parametrize("size", [28, 56, 70])
+def test_stages_pool_is_every_stage_mean_and_std_against_float64(size):
+    model = random_resnet("resnet_tiny", seed=1)
+    images = np.random.default_rng(size).integers(0, 256, (6, 40, 48, 3), dtype=np.uint8)
+    got = extract_features(model, images, image_size=size, batch_size=4, pool="stages")
+    assert got.shape == (6, 2 * sum(RESNET_ARCHS["resnet_tiny"].widths)) and got.dtype == np.float32
+    x = imagenet_normalise(to_unit_tensor(images, size))
+    np.testing.assert_allclose(got, _stage_statistics_float64(model, x), rtol=1e-4, atol=1e-5)
+    # the last stage's mean is the cls pool
+    w = RESNET_ARCHS["resnet_tiny"].widths
+    last = 2 * sum(w[:3])
+    np.testing.assert_allclose(
+        got[:, last : last + w[3]],
+        extract_features(model, images, image_size=size, pool="cls"),
+        rtol=1e-5,
+        atol=1e-6,
+    )
+    np.testing.assert_array_equal(
+        got, extract_features(model, images, image_size=size, batch_size=4, pool="stages")
+    )
+
+
+def test_stages_pool_refuses_a_vit_and_an_unknown_pool():
+    images = np.zeros((2, 28, 28, 3), dtype=np.uint8)
+    vit = build_vit("vit_tiny", img_size=28)
+    with pytest.raises(ValueError, match="pool 'stages' needs a ResNet, got DinoVisionTransformer"):
+        extract_features(vit, images, image_size=28, pool="stages")
+    with pytest.raises(ValueError, match="pool must be one of"):
+        extract_features(vit, images, image_size=28, pool="max")
 
 
 def test_resnet_checkpoint_drops_fc_and_names_missing_and_extra_keys():
@@ -360,6 +416,54 @@ def test_backbones_the_workflow_cannot_make_are_refused(spec, needle):
         dino_epochs=0,
         mae_epochs=0,
     )  # a checkpoint needs no pretraining
+
+
+def test_the_stages_pool_is_refused_for_a_vit_from_either_key():
+    kw = dict(where="features.backbones.tactile", dino_epochs=0, mae_epochs=0)
+    with pytest.raises(ConfigError, match="tactile: pool stages .* the ViT vit_tiny"):
+        check_backbone(BackboneSpec("vit_tiny", pool="stages"), **kw)
+    with pytest.raises(ConfigError, match="tactile: features.pool stages"):
+        check_backbone(BackboneSpec("vit_tiny"), features_pool="stages", **kw)
+    # a ViT's own pool overrides features.pool; a ResNet reads stages either way
+    check_backbone(BackboneSpec("vit_tiny", pool="cls"), features_pool="stages", **kw)
+    check_backbone(BackboneSpec("resnet_tiny", objective="random", pool="stages"), **kw)
+    check_backbone(BackboneSpec("resnet_tiny", objective="random"), features_pool="stages", **kw)
+
+
+@pytest.mark.parametrize(
+    ("spec", "dino_epochs", "pretrains"),
+    [
+        (BackboneSpec("vit_tiny"), 0, False),
+        (BackboneSpec("vit_tiny"), 3, True),
+        (BackboneSpec("vit_tiny", objective="mae"), 0, True),
+        (BackboneSpec("resnet_tiny", objective="simclr"), 0, True),
+        (BackboneSpec("resnet_tiny", objective="random"), 5, False),
+        (BackboneSpec("vit_tiny", checkpoint="w.pth"), 5, False),
+    ],
+)
+def test_a_backbone_pretrains_only_where_it_learns_from_frames(spec, dino_epochs, pretrains):
+    assert spec.pretrains(dino_epochs) is pretrains
+    assert ("random init" in spec.label(dino_epochs)) is (not pretrains and not spec.checkpoint)
+
+
+def test_pretraining_corpora_are_one_name_or_a_list_in_order():
+    assert pretraining_corpora({"corpus": "sim_paired"}) == ("sim_paired",)
+    assert pretraining_corpora({"corpus": ["b", "a"]}) == ("b", "a")
+
+
+def test_feature_settings_take_each_backbones_own_pool():
+    features = load_yaml(ROOT / "config" / "config.yaml")["features"]
+    features = {
+        **features,
+        "pool": "cls",
+        "backbones": {
+            "vision": {"arch": "resnet_tiny", "objective": "simclr", "pool": "stages"},
+            "tactile": {"arch": "vit_tiny"},
+        },
+    }
+    assert FeatureSettings.for_backbone(features, "vision").pool == "stages"
+    assert FeatureSettings.for_backbone(features, "tactile").pool == "cls"
+    assert FeatureSettings.from_config(features).pool == "cls"
 
 
 # ----------------------------------------------------------------------------- probes, report

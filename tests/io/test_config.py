@@ -79,6 +79,18 @@ def test_shipped_configs_are_valid(cfg):
             r"splits\.fractions: must sum to 1",
         ),
         (
+            lambda c: c["features"]["pretrain"].__setitem__("corpus", ["sim_paired", "ghost"]),
+            r"features\.pretrain\.corpus\[1\]: unknown corpus 'ghost'",
+        ),
+        (
+            lambda c: c["corpora"].__setitem__("sim_natural_r0", c["corpora"]["sim_paired"]),
+            r"corpora\.sim_natural_r0: the name belongs to the regime's corpus at rho = 0",
+        ),
+        (
+            lambda c: c["features"]["pretrain"].__setitem__("corpus", []),
+            r"features\.pretrain\.corpus: \[\] should be non-empty",
+        ),
+        (
             lambda c: c.__setitem__("algn", {}),
             r"\(top level\): Additional properties are not allowed \('algn' was unexpected\)",
         ),

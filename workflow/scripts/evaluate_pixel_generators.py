@@ -29,7 +29,7 @@ logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
 w, params = snakemake.wildcards, snakemake.params
 pixel = PixelSettings.from_config(params.settings)
-feat = FeatureSettings.from_config(params.features)
+feat = FeatureSettings.for_backbone(params.features, "tactile")
 generate = GenerateSettings.from_config(params.generate)
 size = pixel.size
 job = GeneratorJob.read(snakemake, cv_repeats=generate.cv_repeats)

@@ -16,8 +16,9 @@ from tacgen_lib.runtime.device import torch_device
 
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
-settings = FeatureSettings.from_config(snakemake.params.features)
 column = snakemake.params.column
+modality = "vision" if column == "rgb" else "tactile"
+settings = FeatureSettings.for_backbone(snakemake.params.features, modality)
 frames = edges.read(snakemake.input.frames, columns=[column])
 images = decode_frames(frames.frame, column, where=snakemake.input.frames)
 model = read_backbone(snakemake.input.weights)

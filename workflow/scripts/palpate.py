@@ -8,8 +8,8 @@ import pandas as pd
 import torch
 
 from tacgen_lib.align import checkpoint as align_checkpoint
+from tacgen_lib.features.backbones import read_backbone
 from tacgen_lib.features.settings import FeatureSettings
-from tacgen_lib.features.vit_checkpoint import load_backbone
 from tacgen_lib.io import edges, log
 from tacgen_lib.policy.features import palpation_features
 from tacgen_lib.policy.palpation import PAD_NAMES, frame_names, pad_background
@@ -21,6 +21,10 @@ logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
 settings = PolicySettings.from_config(snakemake.params.settings)
 feat = FeatureSettings.from_config(snakemake.params.features)
+pools = {
+    m: FeatureSettings.for_backbone(snakemake.params.features, m).pool
+    for m in ("vision", "tactile")
+}
 names = frame_names(len(settings.palpation_forces))
 parts = [edges.read(p).frame for p in snakemake.input.episodes]
 episodes = pd.concat(parts, ignore_index=True).sort_values("episode_id", ignore_index=True)
@@ -42,13 +46,13 @@ out = palpation_features(
     rgb,
     frames,
     backgrounds,
-    load_backbone(snakemake.input.vision),
-    load_backbone(snakemake.input.tactile),
+    read_backbone(snakemake.input.vision),
+    read_backbone(snakemake.input.tactile),
     heads,
     variant=settings.heads_variant,
     image_size=feat.image_size,
     batch_size=feat.batch_size,
-    pool=feat.pool,
+    pools=pools,
     device=torch_device(snakemake.params.device),
 )
 labels = episodes[

@@ -7,6 +7,7 @@ from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
 
 run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpreter takes the job
 
+import numpy as np
 import pandas as pd
 import torch
 
@@ -30,12 +31,17 @@ column = "rgb" if modality == "vision" else "tactile_proc"
 
 
 def train_frames():
-    """The pretraining corpus's train frames of this modality (never val or test rows)."""
+    """The pretraining corpora's train frames of this modality (never val or test rows), corpus
+    after corpus in the config's order."""
     splits = edges.read(snakemake.input.splits).frame
-    train_ids = ids_in_split(splits, "train", corpus=snakemake.params.corpus)
-    frames = edges.read(snakemake.input.frames).subset(train_ids)
-    assert_trainable(frames.ids, splits, rule=snakemake.rule)
-    return decode_frames(frames.frame, column, where=snakemake.input.frames)
+    parts = []
+    for corpus, path in zip(snakemake.params.corpora, snakemake.input.frames, strict=True):
+        train_ids = ids_in_split(splits, "train", corpus=corpus)
+        frames = edges.read(path).subset(train_ids)
+        assert_trainable(frames.ids, splits, rule=snakemake.rule)
+        parts.append(decode_frames(frames.frame, column, where=path))
+        logger.info("%s: %d train frames", corpus, len(parts[-1]))
+    return np.concatenate(parts)
 
 
 model, curve_rows, how = make_backbone(

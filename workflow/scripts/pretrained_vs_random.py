@@ -8,8 +8,9 @@ import pandas as pd
 import torch
 from threadpoolctl import threadpool_limits
 
+from tacgen_lib.features.backbones import random_init
 from tacgen_lib.features.extract import extract_with
-from tacgen_lib.features.pretrained_vs_random import pretrained_vs_random, random_backbone
+from tacgen_lib.features.pretrained_vs_random import pretrained_vs_random
 from tacgen_lib.features.settings import DinoSettings, FeatureSettings, PretrainedVsRandomSettings
 from tacgen_lib.io import edges, log
 from tacgen_lib.preprocess.frames import decode_frames
@@ -37,9 +38,9 @@ for modality, column in (("vision", "rgb"), ("tactile", "tactile_proc")):
     images = decode_frames(frames.frame, column, where=snakemake.input[modality])
     arch = params.archs[modality]
     rand = extract_with(
-        random_backbone(arch, features.image_size, seed=pretrain.seed),
+        random_init(arch, features.image_size, seed=pretrain.seed),
         images,
-        features,
+        FeatureSettings.for_backbone(params.features, modality),
         device=torch_device(params.device),
     )
     with threadpool_limits(snakemake.threads):

@@ -32,7 +32,7 @@ logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
 w = snakemake.wildcards
 pixel = PixelSettings.from_config(snakemake.params.settings)
-feat = FeatureSettings.from_config(snakemake.params.features)
+feat = FeatureSettings.for_backbone(snakemake.params.features, "tactile")
 size = pixel.size
 generator, guidance, steps, _ = arm_generator(w.arm)
 
