@@ -235,15 +235,15 @@ def test_backbone_families_page_has_every_family_probe_and_protocol(run_dir):
     assert set(rows["row_id"]) == want and (rows["status"] == "ok").all()
     assert rows["null_corpus"].any() and not rows["null_corpus"].all()  # the control beside
     # the main family's rows are the probe jobs' headline rows, not computed again
-    main = rows[rows["family"] == "dinov2"]
+    main = rows[rows["family"] == "simclr"]
     assert (main["notes"] == "the probes stage's headline row (rule probe)").all()
     probe = edges.read(run_dir / "results/probes/hardness/protocol~raw/seed~42.parquet").frame
     head = probe[
         (probe["input"] == "raw") & (probe["fusion"] == "concat") & (probe["control"] == "none")
     ]
-    assert main.set_index("row_id").loc["dinov2|hardness|raw", "delta"] == head["delta"].item()
+    assert main.set_index("row_id").loc["simclr|hardness|raw", "delta"] == head["delta"].item()
     # every other family made its own backbones, labelled as made
-    for family in ("resnet", "mae"):
+    for family in ("dinov2", "resnet", "mae"):
         for modality in ("vision", "tactile"):
             hashed.verify(run_dir / f"results/features/families/{family}/{modality}.pt")
     labels = dict(zip(rows["family"], rows["vision_backbone"], strict=False))

@@ -6,7 +6,7 @@ lambda/C sweep and confusion-count tables. Every function returns a DataFrame (r
 HTML with `report_tables.to_html`) or a matplotlib Figure; none reads or writes files.
 
 - `controlled_table`: families on the appearance-controlled corpus (mass, log-mass, density;
-  pixel-V headline and ViT-V sensitivity), V vs V+T for every input and fusion.
+  pixel-V headline and backbone-V sensitivity), V vs V+T for every input and fusion.
 - `paired_table`: families on the paired corpus (hardness, force), each with its null-corpus
   sibling (family name + ``_null``) in the columns beside it.
 - `sweep_table`: Delta at every lambda (test R^2, ridge) or C (CV accuracy, logistic) for
