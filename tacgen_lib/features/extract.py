@@ -91,8 +91,9 @@ def extract_features(
     and "mean_patch" pools both give its global average; `patch_size` 1).
 
     pool="cls" takes the normalised CLS token (x_norm_clstoken); "mean_patch" averages the
-    normalised patch tokens (x_norm_patchtokens); "stages" (a ResNet only) reads the mean and
-    std over space of every stage's maps (`resnet.ResNet.stage_statistics`). Runs under torch.inference_mode with the model
+    normalised patch tokens (x_norm_patchtokens); "stages" (a ResNet only) reads the last
+    stage's mean beside the std over space of the earlier stages' maps
+    (`resnet.ResNet.stage_statistics`). Runs under torch.inference_mode with the model
     in eval mode (its training flag is restored afterwards). Deterministic: the same weights,
     images and batch_size give identical bytes on the same machine/torch build.
 

@@ -13,7 +13,8 @@ checked against torchvision/models/resnet.py; the code is our own. The frozen fe
 is the global average of the last stage (torchvision's `avgpool` + `flatten`): `forward_features`
 returns it under the ViT's dict keys (`x_norm_clstoken`, and the last stage's spatial cells as
 `x_norm_patchtokens`), so `extract.extract_features` pools a ResNet as it pools a ViT. Its
-"stages" pool reads `stage_statistics` instead: every stage's mean and std over space.
+"stages" pool reads `stage_statistics` instead: the first three stages' std over space and
+the last stage's mean.
 """
 
 from __future__ import annotations
@@ -111,12 +112,13 @@ class ResNet(nn.Module):
         return self.forward_features(x)["x_norm_clstoken"]
 
     def stage_statistics(self, x: Tensor) -> Tensor:
-        """The mean and the standard deviation over space of every stage's maps, stage by
-        stage ([mean_1, std_1, ..., mean_4, std_4]; (B, 2 * sum(widths))): the texture
-        statistics of Gatys et al. (2015) in their first-order form. Each stage sees a
-        neighbourhood a few pixels wider than the last, so the early stages keep the fine
-        texture that the last stage's global average blurs away (pool "stages" of
-        `extract.extract_features`). The std is the population one (divided by H*W)."""
+        """The standard deviation over space of the first three stages' maps, then the last
+        stage's mean ([std_1, std_2, std_3, mean_4]; (B, sum(widths))). The mean is the usual
+        pooled feature; each std is a stage's texture energy, the first-order form of the
+        texture statistics of Gatys et al. (2015). The early stages see neighbourhoods of a
+        few pixels, so they keep the fine texture that the last stage's global average blurs
+        away (pool "stages" of `extract.extract_features`). The std is the population one
+        (divided by H*W)."""
         if x.ndim != 4 or x.shape[1] != 3:
             raise ValueError(f"expected images (B, 3, H, W), got shape {tuple(x.shape)}")
         x = self.maxpool(self.relu(self.bn1(self.conv1(x))))
@@ -124,13 +126,13 @@ class ResNet(nn.Module):
         for i in range(1, 5):
             x = getattr(self, f"layer{i}")(x)
             var, mean = torch.var_mean(x.flatten(2), dim=2, correction=0)
-            parts += [mean, var.sqrt()]
+            parts.append(mean if i == 4 else var.sqrt())
         return torch.cat(parts, dim=1)
 
     @property
     def stage_statistics_dim(self) -> int:
-        """Width of `stage_statistics`: twice the sum of the stage widths."""
-        return 2 * sum(self.config.widths)
+        """Width of `stage_statistics`: the sum of the stage widths."""
+        return sum(self.config.widths)
 
 
 def build_resnet(arch: str) -> ResNet:
