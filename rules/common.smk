@@ -4,6 +4,7 @@ import os
 import re
 from pathlib import Path
 
+from tacgen_lib.features.settings import pretraining_corpora
 from tacgen_lib.generate.regime_sets import natural_grid_ends, regime_corpora
 from tacgen_lib.io.config import load_yaml
 from tacgen_lib.workflow_config import validate_config
@@ -63,6 +64,18 @@ def extraction_threads(wildcards):
 def extraction_priority(wildcards):
     """The policy chain's priority (CHAIN_PRIORITY), except for the regime's natural corpora."""
     return 0 if wildcards.corpus in NATURAL_GRID else CHAIN_PRIORITY
+
+
+def pretraining_frames(modality, spec):
+    """The frame edges a backbone (a BackboneSpec) learns from: each corpus of
+    features.pretrain.corpus, RGB or its tactile variant; none for a checkpoint or the random
+    init, which read no frames and so wait for no corpus."""
+    if not spec.pretrains(int(config["features"]["pretrain"]["epochs"])):
+        return []
+    return [
+        backbone_frames(modality, c)
+        for c in pretraining_corpora(config["features"]["pretrain"])
+    ]
 
 
 def one_of(names):

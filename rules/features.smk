@@ -9,15 +9,6 @@ PRETRAIN_CORPORA = list(pretraining_corpora(PRETRAIN))
 MODALITIES = ["vision", "tactile"]
 
 
-def pretraining_frames(modality, spec):
-    """The frame edges a backbone (a BackboneSpec) learns from: each corpus of
-    features.pretrain.corpus, RGB or its tactile variant; none for a checkpoint or the random
-    init, which read no frames and so wait for no corpus."""
-    if not spec.pretrains(int(PRETRAIN["epochs"])):
-        return []
-    return [backbone_frames(modality, c) for c in PRETRAIN_CORPORA]
-
-
 # the pretraining corpora need the tactile variant a pretrained tactile backbone reads
 _TACTILE_PRETRAIN = (
     set(PRETRAIN_CORPORA)
