@@ -138,8 +138,9 @@ def _simulation_files(knob, run):
     ]
     seed, b = cfg["probes"]["seeds"][0], "results/benchmarks"
     preprocess = [(sim, v) for v in cfg["preprocess"]["variants"]]
-    if (pretrain["corpus"], pretrain["variant"]) not in preprocess:
-        preprocess.append((pretrain["corpus"], pretrain["variant"]))
+    for c in pretraining_corpora(pretrain):
+        if (c, pretrain["variant"]) not in preprocess:
+            preprocess.append((c, pretrain["variant"]))
     sims = [sim] + [
         c for c in sorted(corpora) if c != sim and corpora[c]["kind"] == "simulated"
     ]

@@ -19,6 +19,21 @@ from tacgen_lib.io.config import ConfigError, load_yaml, validate_schema
 __all__ = ["ConfigError", "validate_config"]
 
 
+def _well_formed(regime: object) -> bool:
+    """Whether config regime is a mapping whose corpus and rhos the regime's corpora can be
+    made from (`regime_sets.regime_corpora`); anything else is the schema's to refuse."""
+    if regime is None:
+        return True
+    if not isinstance(regime, dict):
+        return False
+    rhos, corpus = regime.get("rhos", []), regime.get("corpus", {})
+    return (
+        isinstance(rhos, list)
+        and all(isinstance(r, (int, float)) and not isinstance(r, bool) for r in rhos)
+        and isinstance(corpus, dict)
+    )
+
+
 def validate_config(config: dict, schema_path: str | Path, *, source: str = "config") -> dict:
     """Validate `config` in place (`io.config.validate_schema`: schema and defaults), then
     check its cross-references; raises ConfigError naming the key. Returns `config`.
@@ -27,8 +42,16 @@ def validate_config(config: dict, schema_path: str | Path, *, source: str = "con
     join config corpora first, so that each is checked like any declared corpus and other keys
     (features.pretrain.corpus) may name them; a declared corpus of one of their names that is
     not the regime's own is refused."""
-    for name, decl in regime_corpora(config.get("regime")).items():
-        have = config.setdefault("corpora", {}).get(name)
+    regime, corpora = config.get("regime"), config.setdefault("corpora", {})
+    # a malformed regime or corpora is left to the schema, which names the key
+    joined = {}
+    if _well_formed(regime) and isinstance(corpora, dict):
+        try:
+            joined = regime_corpora(regime)
+        except ValueError as err:  # names its key (regime.corpus, regime.rhos)
+            raise ConfigError(f"{source}: {err}") from err
+    for name, decl in joined.items():
+        have = corpora.get(name)
         if have is not None and have != decl:
             raise ConfigError(
                 f"{source}: corpora.{name}: the name belongs to the regime's corpus at rho = "

@@ -24,7 +24,7 @@ their points come through the same rule and the same readers as a swept knob's.
     presses           corpora.<sweep corpus>.presses            corpus → probes of that corpus
     tactile_resolution corpora.<sweep corpus>.tactile_size      corpus → probes of that corpus
     image_size        features.image_size                       backbones, features, check
-    backbone_arch     features.backbones.{vision,tactile}.arch  backbones, features, check
+    backbone_arch     features.backbones.tactile.arch           backbones, features, check
     pretrain_epochs   features.pretrain.epochs                  backbones, features, check
     backbones         (free) backbones.run                      none: the families' own jobs
     generate_steps    (free) generate.samplers (steps)          none: the sampling jobs
@@ -44,6 +44,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from tacgen_lib.features.archs import ARCHS
+from tacgen_lib.features.settings import pretraining_corpora
 from tacgen_lib.generate.regime_sets import regime_corpora
 
 __all__ = [
@@ -158,8 +159,9 @@ KNOBS: dict[str, Knob] = {k.name: k for k in (
                   "frames/s (simulate job, one core)"), **_SIM),
     Knob("image_size", stage="features", reads="features", keys=("features.image_size",),
          metrics=_ACCURACY, **_FEATURES),
+    # the tactile ViT's width (the vision side is a SimCLR ResNet, whose width is its arch's)
     Knob("backbone_arch", stage="features", reads="features", axis="width",
-         keys=("features.backbones.vision.arch", "features.backbones.tactile.arch"),
+         keys=("features.backbones.tactile.arch",),
          metrics=_ACCURACY, **_FEATURES),
     Knob("pretrain_epochs", stage="features", reads="features",
          keys=("features.pretrain.epochs",),
@@ -281,15 +283,21 @@ def _same(a: Any, b: Any) -> bool:
     return setting_label(a) == setting_label(b)
 
 
-def _without_regime(cfg: dict[str, Any]) -> None:
+def _without_regime(cfg: dict[str, Any], sweep_corpus: str) -> None:
     """A simulation setting simulates every corpus of its manifest again; the regime's
     natural corpora feed none of the sweep corpus's probes, so the setting drops them (no
-    rho left in the regime) instead of simulating them once per setting."""
+    rho left in the regime) instead of simulating them once per setting. Its backbones, which
+    it pretrains again, learn from the pretraining corpora it keeps, or from the sweep corpus
+    where it keeps none (the default's V pretrains on the natural corpora alone)."""
     regime = cfg.get("regime") or {}
-    for corpus in regime_corpora(regime):
+    dropped = set(regime_corpora(regime))
+    for corpus in dropped:
         cfg["corpora"].pop(corpus, None)
     if regime:
         cfg["regime"] = {**regime, "rhos": []}
+    pretrain = cfg["features"]["pretrain"]
+    kept = [c for c in pretraining_corpora(pretrain) if c not in dropped]
+    pretrain["corpus"] = kept or [sweep_corpus]
 
 
 def knob_settings(name: str, entry: Mapping[str, Any], config: Mapping[str, Any]) -> list[Setting]:
@@ -336,7 +344,7 @@ def knob_settings(name: str, entry: Mapping[str, Any], config: Mapping[str, Any]
             if knob.replicate_key:
                 _set(cfg, knob.replicate_key.split("."), first_seed + rep)
             if knob.reads == "simulation":
-                _without_regime(cfg)
+                _without_regime(cfg, ctx["sim"])
             cfg["cost"] = {
                 "knobs": {},
                 "grid_knobs": False,

@@ -64,8 +64,8 @@ def test_a_setting_sets_its_keys_and_nothing_else_of_the_run():
     config = {**CONFIG, "cost": COST}
     (run,) = [r for r in knob_settings("backbone_arch", {"values": ["vit_small"]}, config)]
     cfg = run.config
-    assert cfg["features"]["backbones"]["vision"]["arch"] == "vit_small"
     assert cfg["features"]["backbones"]["tactile"]["arch"] == "vit_small"
+    assert cfg["features"]["backbones"]["vision"] == CONFIG["features"]["backbones"]["vision"]
     assert cfg["cost"] == {
         "knobs": {},
         "grid_knobs": False,
@@ -80,7 +80,7 @@ def test_a_setting_sets_its_keys_and_nothing_else_of_the_run():
     assert {k: v for k, v in cfg.items() if k not in ("features", "cost")} == {
         k: v for k, v in config.items() if k not in ("features", "cost")
     }
-    assert CONFIG["features"]["backbones"]["vision"]["arch"] == "vit_tiny"
+    assert CONFIG["features"]["backbones"]["tactile"]["arch"] == "vit_tiny"
     assert run.root == "results/cost/backbone_arch/vit_small/"
     assert run.number == 384.0 and not run.is_default
 
