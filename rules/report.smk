@@ -71,7 +71,7 @@ rule pretrain_curve:
         figure=features_report_item(
             "results/report/features/{modality}_pretrain_curve.png",
             "../workflow/report/pretrain_curve.rst",
-            {"modality": "{modality}", "figure": "DINO training curve"},
+            {"modality": "{modality}", "figure": "pretraining curve"},
         ),
     log:
         "results/logs/pretrain_curve/{modality}.log",
@@ -87,6 +87,7 @@ rule pretrain_curve:
         runtime=5,
     params:
         arch=lambda w: FEAT["backbones"][w.modality]["arch"],
+        objective=lambda w: FEAT["backbones"][w.modality].get("objective", "dino"),
     script:
         "../workflow/scripts/pretrain_curve.py"
 

@@ -96,15 +96,17 @@ def pretrain_curve_figure(
     *,
     title: str,
     empty_note: str = "loaded from a checkpoint: no pretraining curve",
+    loss: str = "DINO loss",
 ) -> plt.Figure:
-    """DINO loss (and teacher entropy, where recorded) per epoch; `empty_note` says why an
-    empty curve is empty (a checkpoint, or pretraining turned off)."""
+    """The pretraining loss (named `loss`: DINO, MAE or SimCLR) and the teacher entropy, where
+    recorded, per epoch; `empty_note` says why an empty curve is empty (a checkpoint, or
+    pretraining turned off)."""
     fig, ax = plt.subplots(figsize=(5, 3.2))
     if len(curve) == 0:
         ax.text(0.5, 0.5, empty_note, ha="center", va="center")
         ax.set_axis_off()
     else:
-        ax.plot(curve["epoch"], curve["loss"], marker="o", label="DINO loss")
+        ax.plot(curve["epoch"], curve["loss"], marker="o", label=loss)
         ax.set_xlabel("epoch")
         ax.set_ylabel("loss")
         if "teacher_entropy" in curve.columns:

@@ -10,6 +10,7 @@ from threadpoolctl import threadpool_limits
 
 from tacgen_lib.features.backbones import random_init
 from tacgen_lib.features.extract import extract_with
+from tacgen_lib.features.families import BackboneSpec
 from tacgen_lib.features.pretrained_vs_random import pretrained_vs_random
 from tacgen_lib.features.settings import DinoSettings, FeatureSettings, PretrainedVsRandomSettings
 from tacgen_lib.io import edges, log
@@ -77,12 +78,16 @@ for modality, column in (("vision", "rgb"), ("tactile", "tactile_proc")):
     )
 table = pd.DataFrame(rows)
 edges.write(snakemake.output.table, table, key="check_id", producer=snakemake.rule)
-title = "Pretrained vs random-init backbone: logistic probe accuracy on the test split"
-if pretrain.epochs == 0:
-    title = (
-        "Pretraining is off in this config (features.pretrain.epochs: 0): the frozen backbone IS "
-        "the seeded random init, so Δ = 0 by construction; the accuracies are what its features "
-        "attain. Why it is off: README, Backbones (measured Δ of 8 DINO epochs), and the "
-        "pretrain_epochs knob of the cost-of-accuracy sweep (config/cost.yaml)"
+specs = {m: BackboneSpec.from_config(params.features["backbones"][m]) for m in check.targets}
+made = "; ".join(f"{m}: {s.label(pretrain.epochs)}" for m, s in specs.items())
+title = f"Pretrained vs random-init backbone ({made}): logistic probe accuracy on the test split"
+unlearnt = [m for m, s in specs.items() if not s.pretrains(pretrain.epochs)]
+if unlearnt:
+    title += (
+        f". The {' and '.join(unlearnt)} backbone IS the seeded random init (no pretraining: "
+        "features.pretrain.epochs 0 for DINO, or objective random), so its Δ = 0 by "
+        "construction; the accuracies are what its features attain. Why DINO is off: "
+        "docs/features.md, and the pretrain_epochs knob of the cost-of-accuracy sweep "
+        "(config/cost.yaml)"
     )
 write_table(pretrained_vs_random_view(table), snakemake.output.html, title=title, mono=())
