@@ -94,7 +94,8 @@ def check_backbone(
         key = "pool" if spec.pool else "features.pool"
         raise ConfigError(
             f"config {where}: {key} stages reads a ResNet's stage statistics; the ViT "
-            f"{spec.arch} takes pool cls or mean_patch"
+            f"{spec.arch} takes pool cls or mean_patch (say {where}.pool: null, or cls, where "
+            "a ViT replaces the default's ResNet vision side)"
         )
     if spec.checkpoint:
         return
