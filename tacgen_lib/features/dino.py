@@ -133,6 +133,15 @@ def cosine_schedule(start: float, end: float, n: int) -> np.ndarray:
     return end + 0.5 * (start - end) * (1 + np.cos(np.pi * np.arange(n) / (n - 1)))
 
 
+def warmup_cosine_lr(lr: float, warm: int, total: int) -> np.ndarray:
+    """The learning rate of each of `total` steps (float64): a linear warm-up from lr/warm to
+    `lr` over the first `warm` steps, then `cosine_schedule` from `lr` to lr/100 (DINO's and
+    SimCLR's schedule)."""
+    return np.concatenate(
+        [np.linspace(lr / max(warm, 1), lr, warm), cosine_schedule(lr, lr / 100, total - warm)]
+    )
+
+
 @contextlib.contextmanager
 def deterministic_algorithms(warn_only: bool = False) -> Iterator[None]:
     """torch's deterministic-algorithms mode inside the block, the previous mode (and its
@@ -279,9 +288,7 @@ def pretrain_dino(
         steps_per_epoch = max(1, n // batch_size)
         total = steps_per_epoch * epochs
         warm = min(total, warmup_epochs * steps_per_epoch)
-        lr_sched = np.concatenate(
-            [np.linspace(lr / max(warm, 1), lr, warm), cosine_schedule(lr, lr / 100, total - warm)]
-        )
+        lr_sched = warmup_cosine_lr(lr, warm, total)
         mom_sched = cosine_schedule(momentum_teacher, 1.0, total)
         t_warm = min(total, warmup_teacher_temp_epochs * steps_per_epoch)
         tt_start = teacher_temp if warmup_teacher_temp is None else warmup_teacher_temp

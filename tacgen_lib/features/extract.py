@@ -123,13 +123,10 @@ def extract_features(
                 ).to(dev)
                 if pool == "stages":
                     z = model.stage_statistics(x)
-                    out[start : start + z.shape[0]] = z.float().cpu().numpy()
-                    continue
-                feats = model.forward_features(x)
-                if pool == "cls":
-                    z = feats["x_norm_clstoken"]
+                elif pool == "cls":
+                    z = model.forward_features(x)["x_norm_clstoken"]
                 else:
-                    z = feats["x_norm_patchtokens"].mean(dim=1)
+                    z = model.forward_features(x)["x_norm_patchtokens"].mean(dim=1)
                 out[start : start + z.shape[0]] = z.float().cpu().numpy()
     finally:
         model.train(was_training)

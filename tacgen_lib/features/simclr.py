@@ -7,7 +7,8 @@ Visual Representations"): a random resized crop with a horizontal flip per view
 two-layer MLP projection behind the pooled feature, and the symmetric InfoNCE loss between the
 two views' l2-normalised projections (`align.loss.info_nce`, the alignment's own loss; each
 frame's negatives are the other frames' second views, as in MoCo v3's symmetric form). The
-projection is dropped after training: the frozen feature is the backbone's pooled last stage.
+projection is dropped after training: the frozen feature is read from the backbone by
+`extract.extract_features` (its pool: the last stage's average, or the stage statistics).
 
 Why it exists beside DINO and MAE: a ViT with 14-pixel patches at the backbone's small input
 reads colour but not the fine texture of an object (report page What vision sees), while a
@@ -31,7 +32,7 @@ from torch.optim import AdamW
 from tacgen_lib.align.loss import info_nce
 from tacgen_lib.features.archs import RESNET_ARCHS
 from tacgen_lib.features.augment import random_resized_crop
-from tacgen_lib.features.dino import cosine_schedule, deterministic_algorithms
+from tacgen_lib.features.dino import deterministic_algorithms, warmup_cosine_lr
 from tacgen_lib.features.extract import check_train_frames, imagenet_normalise, to_unit_tensor
 from tacgen_lib.features.resnet import ResNet, build_resnet
 from tacgen_lib.features.settings import SimclrSettings
@@ -121,12 +122,7 @@ def pretrain_simclr(
         steps_per_epoch = n // batch_size
         total = steps_per_epoch * s.epochs
         warm = min(total, steps_per_epoch)
-        lr_sched = np.concatenate(
-            [
-                np.linspace(s.lr / max(warm, 1), s.lr, warm),
-                cosine_schedule(s.lr, s.lr / 100, total - warm),
-            ]
-        )
+        lr_sched = warmup_cosine_lr(s.lr, warm, total)
 
         def view(batch: Tensor) -> Tensor:
             crops = random_resized_crop(batch, image_size, (s.crop_min, 1.0), gen)
