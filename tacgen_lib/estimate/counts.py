@@ -17,7 +17,7 @@ from tacgen_lib.estimate.flops import (
     arch_flops,
     generator_mlp_flops,
 )
-from tacgen_lib.features.settings import pretraining_corpora
+from tacgen_lib.features.settings import MaeSettings, SimclrSettings, pretraining_corpora
 from tacgen_lib.generate.cells import guidance_passes
 from tacgen_lib.generate.regime_sets import regime_corpora
 from tacgen_lib.io.config import load_yaml
@@ -83,9 +83,9 @@ def pretraining(c: Config, spec: Mapping[str, Any]) -> tuple[str, int]:
         return "checkpoint", 0
     objective = spec.get("objective", "dino")
     if objective == "mae":
-        return objective, int(c["features"].get("mae", {}).get("epochs", 10))
+        return objective, MaeSettings.from_config(c["features"].get("mae")).epochs
     if objective == "simclr":
-        return objective, int(c["features"].get("simclr", {}).get("epochs", 30))
+        return objective, SimclrSettings.from_config(c["features"].get("simclr")).epochs
     if objective == "dino":
         return objective, int(c["features"]["pretrain"]["epochs"])
     return objective, 0
