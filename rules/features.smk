@@ -9,23 +9,14 @@ PRETRAIN_CORPORA = list(pretraining_corpora(PRETRAIN))
 MODALITIES = ["vision", "tactile"]
 
 
-# the pretraining corpora need the tactile variant a pretrained tactile backbone reads
-_TACTILE_PRETRAIN = (
-    set(PRETRAIN_CORPORA)
-    if _Backbone.from_config(FEAT["backbones"]["tactile"]).pretrains(
-        int(PRETRAIN["epochs"])
-    )
-    else set()
-)
-
 # corpora only the regime reads (its natural corpora) need the generator's tactile variant
-# alone, not the preprocessing ablation's every variant
+# alone, not the preprocessing ablation's every variant (a pretraining corpus's frames are the
+# input of pretrain_backbone, which Snakemake makes on demand: no target needed)
 _REGIME_ONLY = (
     set(regime_corpora(config.get("regime")))
     - set(config["align"]["corpora"])
     - set(config["generate"]["corpora"])
     - {f["corpus"] for f in config["probes"]["families"].values()}
-    - _TACTILE_PRETRAIN
     - {FEAT["pretrained_vs_random"]["corpus"]}
 )
 # and the transfer corpus only the heads' variant (config probes.heads)
