@@ -77,6 +77,7 @@ rule regime_evaluate:
         probes=PROBE_SETTINGS,
         probe_seed=config["probes"]["seeds"][0],
         gammas=GENERATE["nonlinear_gammas"],
+        ceiling=VISIBILITY,  # the V ceiling's kernel probe is the visibility check's
         cells=REGIME_CELLS,
     script:
         "../workflow/scripts/regime_evaluate.py"

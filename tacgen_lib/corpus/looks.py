@@ -35,7 +35,7 @@ __all__ = [
 
 #: An object's colour word -> its RGB (before the natural design's per-channel jitter).
 #: A texture darkens the colour it is drawn on (a MuJoCo texture multiplies the material's
-#: rgba; `scenes._assets_xml`), so the darkest colour sets how much texture a frame can show:
+#: rgba; `scenes.texture_faces`), so the darkest colour sets how much texture a frame can show:
 #: "black" is a charcoal, about as dark as red, whose checks, stripes and speckles still differ
 #: from the ground by tens of grey levels. At (0.12, 0.12, 0.13) they differed by a few, and
 #: black was the one colour whose texture even a classifier trained on the texture labels

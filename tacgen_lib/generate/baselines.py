@@ -61,10 +61,23 @@ def target_specs(
     return out
 
 
-def _standardise(train: np.ndarray, test: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def standardise(train: np.ndarray, test: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Train and test rows standardised by the train rows' mean and std (a constant column
+    keeps std 1)."""
     mu, sd = train.mean(0), train.std(0)
     sd = np.where(sd > 0, sd, 1.0)
     return (train - mu) / sd, (test - mu) / sd
+
+
+def median_sq_distance(z: np.ndarray) -> float:
+    """The RBF median heuristic's scale: the median squared distance between the first 500
+    rows of `z` (1 where it is 0 or undefined); gamma = multiple / this."""
+    from scipy.spatial.distance import pdist  # SciPy: only where a nonlinear probe is fitted
+
+    sub = z[: min(len(z), 500)]
+    # pairwise squared distances i < j (pdist: no (n, n, d) temporary)
+    med = float(np.median(pdist(sub, "sqeuclidean"))) if len(sub) > 1 else 1.0
+    return med if med > 0 else 1.0
 
 
 @dataclass(frozen=True)
@@ -96,14 +109,10 @@ def nonlinear_baseline(
     score wins, the first on ties. train_ids / test_ids name rows in the probe's errors.
     """
     # imported here: the regime summary's readers take this module's columns without them
-    from scipy.spatial.distance import pdist
     from sklearn.kernel_approximation import Nystroem
 
-    z_tr, z_te = _standardise(np.asarray(v_train, np.float64), np.asarray(v_test, np.float64))
-    sub = z_tr[: min(len(z_tr), 500)]
-    # pairwise squared distances i < j (pdist: no (n, n, d) temporary)
-    med = float(np.median(pdist(sub, "sqeuclidean"))) if len(sub) > 1 else 1.0
-    med = med if med > 0 else 1.0
+    z_tr, z_te = standardise(np.asarray(v_train, np.float64), np.asarray(v_test, np.float64))
+    med = median_sq_distance(z_tr)
     best: tuple[float, NonlinearFit] | None = None
     for mult in gammas:
         gamma = float(mult) / med

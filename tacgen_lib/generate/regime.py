@@ -25,7 +25,9 @@ arm on the same test rows:
 - ``v_treal`` / linear: V + real T, the reference;
 - ``v_ceiling`` / linear and nonlinear: the V probes fitted on every non-test row with its
   true label: the best a function of V reaches with every label, the bound that matters for
-  every arm built on V;
+  every arm built on V. Its nonlinear probe is the visibility check's, the exact RBF-kernel
+  probe (`fit_kernel_probe`: an SVM, kernel ridge for a continuous target), not the arms'
+  Nystroem map, whose rank (the feature width) caps it on every non-test row;
 - ``vision_ceiling`` / oracle: the probe on the true appearance class (one-hot) and the
   visible shape and size, fitted on every non-test row: the best any function of appearance
   reaches (an oracle no arm can use).
@@ -76,7 +78,12 @@ from tacgen_lib.generate.regime_sets import (
     draw_regime_sets,
     job_regime_sets,
 )
-from tacgen_lib.generate.small_probes import SmallFit, fit_small_nonlinear, fit_small_probe
+from tacgen_lib.generate.small_probes import (
+    SmallFit,
+    fit_kernel_probe,
+    fit_small_nonlinear,
+    fit_small_probe,
+)
 from tacgen_lib.probes.bootstrap import (
     resample_indices,
 )
@@ -134,6 +141,8 @@ def evaluate_regime(
     gammas: Sequence[float],
     bootstrap: int,
     n_classes: int,
+    ceiling_gammas: Sequence[float],
+    ceiling_C: Sequence[float],
     label_draws: int = 1,
     progress: Any = None,
     workers: int = 1,
@@ -147,15 +156,16 @@ def evaluate_regime(
     labelled rows of every draw and the test rows. The (target, draw, N_L) cells are
     independent: `workers` forked processes compute them (`runtime.workers.fork_map`, the same
     rows for any number of workers), the costliest (logistic targets, large N_L) first.
+    ceiling_gammas x ceiling_C: the grid of the V ceiling's kernel probe (config
+    ``features.visibility``: the visibility check's nonlinear probe).
     Returns rows with `SUMMARY_COLUMNS`, ordered by target, draw, N_L and N_P.
     """
     say = progress or (lambda _m: None)
     base = {"corpus": corpus, "rho": float(rho), "seed": int(seed)}
     features = _CellFeatures(vision, t_real, t_gen, ladder, tuple(gammas), int(bootstrap))
-    d_t = len(next(iter(t_real.values())))
     # the ceilings of each target (fitted on every non-test row), then the cells
     ceilings = fork_map(
-        lambda tgt: _ceilings(tgt, vision, n_classes, gammas=gammas, n_components=d_t),
+        lambda tgt: _ceilings(tgt, vision, n_classes, gammas=ceiling_gammas, C=ceiling_C),
         targets,
         workers,
     )
@@ -286,11 +296,11 @@ def _ceilings(
     n_classes: int,
     *,
     gammas: Sequence[float],
-    n_components: int,
+    C: Sequence[float],
 ) -> dict[tuple[str, str], SmallFit]:
     """The arms fitted once per target on every non-test row with its true label: the V
-    ceiling (the linear and the nonlinear V probe) and the vision ceiling (the oracle probe
-    on the true appearance class + visible shape and size)."""
+    ceiling (the linear V probe, and the kernel probe with the grid `gammas` x `C`) and the
+    vision ceiling (the oracle probe on the true appearance class + visible shape and size)."""
     rows, ps = tgt.rows, replace(tgt.settings, cv_repeats=1)
     train = [str(i) for i in rows.train_ids]
     test = [str(i) for i in rows.test_ids]
@@ -304,8 +314,6 @@ def _ceilings(
     )
     return {
         ("v_ceiling", "linear"): fit_small_probe(v_tr, y, v_te, ps),
-        ("v_ceiling", "nonlinear"): fit_small_nonlinear(
-            v_tr, y, v_te, ps, gammas=gammas, n_components=n_components
-        ),
+        ("v_ceiling", "nonlinear"): fit_kernel_probe(v_tr, y, v_te, ps, gammas=gammas, C=C),
         ("vision_ceiling", "oracle"): fit_small_probe(x_tr, y, x_te, ps),
     }

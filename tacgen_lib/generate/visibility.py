@@ -2,9 +2,9 @@
 
 For every simulated corpus, each visible factor (`corpus.looks.visible_factors`: colour,
 texture, shape, size third and, on the natural design, the appearance class) is decoded from V
-by a linear probe (the probes stage's logistic probe, C by CV) and a nonlinear probe (the same
-probe on V + RBF Nystroem features of V, `small_probes.fit_small_nonlinear`), each fitted on
-every non-test row of the corpus and scored on its test split with a fixed-test bootstrap CI
+by a linear probe (the probes stage's logistic probe, C by CV) and a nonlinear probe (an
+RBF-kernel SVM on standardised V, C and gamma by CV, `small_probes.fit_kernel_probe`), each
+fitted on every non-test row of the corpus and scored on its test split with a fixed-test bootstrap CI
 beside the majority class's share of the test rows.
 
 It is the gate for reading any result that depends on what V sees: the regime's generator can
@@ -25,7 +25,7 @@ import pandas as pd
 
 from tacgen_lib.corpus.looks import FACTORS
 from tacgen_lib.generate.blocks import feature_block
-from tacgen_lib.generate.small_probes import fit_small_nonlinear, fit_small_probe
+from tacgen_lib.generate.small_probes import fit_kernel_probe, fit_small_probe
 from tacgen_lib.io.schema import SchemaSettings, schema_fields
 from tacgen_lib.probes.bootstrap import resample_indices, score_interval
 from tacgen_lib.probes.metrics import score
@@ -63,10 +63,11 @@ PROBES = ("linear", "nonlinear")
 @dataclass(frozen=True)
 @schema_fields("features.visibility")
 class VisibilitySettings(SchemaSettings):
-    """The visibility check (config ``features.visibility``): the RBF gamma multiples (of the
-    median heuristic) the nonlinear probe chooses among by CV, the fixed-test bootstrap
-    resamples, the CV folds of both probes (one draw), and the gate: factor -> the accuracy V must reach on a regime corpus for the
-    regime to be read (`visibility_gate`)."""
+    """The visibility check (config ``features.visibility``): the nonlinear probe's grid (the
+    RBF gamma multiples of the median heuristic and the SVM penalties C it chooses among by CV,
+    `fit_kernel_probe`; the regime's V ceiling is the same probe), the fixed-test bootstrap
+    resamples, the CV folds of both probes (one draw), and the gate: factor -> the accuracy V
+    must reach on a regime corpus for the regime to be read (`visibility_gate`)."""
 
 
 def visibility_probe(
@@ -154,8 +155,8 @@ def visibility_check(
         if probe == "linear":
             fitted = fit_small_probe(v_tr, y_tr, v_te, settings)
         else:
-            fitted = fit_small_nonlinear(
-                v_tr, y_tr, v_te, settings, gammas=visibility.gammas, n_components=v_tr.shape[1]
+            fitted = fit_kernel_probe(
+                v_tr, y_tr, v_te, settings, gammas=visibility.gammas, C=visibility.C
             )
         acc = score("accuracy", y_te, fitted.pred)
         lo, hi = score_interval("accuracy", y_te, fitted.pred, idx)

@@ -36,7 +36,13 @@ import mujoco
 import numpy as np
 
 from tacgen_lib.corpus.sim.physics import state_problems
-from tacgen_lib.corpus.sim.scenes import Scene, disable_undeclared, validate_scene
+from tacgen_lib.corpus.sim.scenes import (
+    Scene,
+    disable_undeclared,
+    texture_asset_xml,
+    texture_assets,
+    validate_scene,
+)
 from tacgen_lib.policy.settings import PolicySettings
 
 __all__ = [
@@ -163,14 +169,7 @@ def task_xml(scene: Scene, settings: PolicySettings, size_max: float) -> str:
     tex = scene.has("texture")
     assets = ""
     if tex:
-        assets = (
-            '<texture name="tex_checkered" type="cube" builtin="checker" rgb1="1 1 1" '
-            'rgb2="0.35 0.35 0.35" width="64" height="64"/>'
-            '<texture name="tex_striped" type="cube" builtin="checker" rgb1="1 1 1" '
-            'rgb2="0.55 0.55 0.55" width="8" height="64" mark="edge" markrgb="0.2 0.2 0.2"/>'
-            '<texture name="tex_speckled" type="cube" builtin="flat" rgb1="1 1 1" width="64" '
-            'height="64" mark="random" random="0.25" markrgb="0.25 0.25 0.25"/>'
-        )
+        assets = texture_asset_xml()
     mats = "".join(
         f'<material name="mat_{t}" rgba="0.5 0.5 0.5 1"'
         + (f' texture="tex_{t}"' if tex and t != "plain" else "")
@@ -250,7 +249,7 @@ class GraspTask:
         self.scene = scene
         self.settings = settings
         self.model = mujoco.MjModel.from_xml_string(
-            task_xml(scene, settings, settings.size_range[1])
+            task_xml(scene, settings, settings.size_range[1]), texture_assets()
         )
         m = self.model
         disable_undeclared(m, scene, sensors=False)  # the pads are read by rays, not sensors

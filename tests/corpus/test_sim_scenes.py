@@ -9,7 +9,18 @@ import yaml
 
 from tacgen_lib.corpus.sim import corpus, physics, tactile
 from tacgen_lib.corpus.sim.render import render_rgb
-from tacgen_lib.corpus.sim.scenes import EFFECTS, compile_scene, validate_scene, validate_scenes
+from tacgen_lib.corpus.sim.scenes import (
+    EFFECTS,
+    TEXTURE_FACE,
+    TEXTURE_MARK,
+    TEXTURES,
+    compile_scene,
+    texture_faces,
+    validate_scene,
+    validate_scenes,
+)
+from tacgen_lib.policy.settings import PolicySettings
+from tacgen_lib.policy.task import GraspTask, phase_scene
 
 SCENES = yaml.safe_load(open("config/scenes.yaml"))
 FAST = {"settle_steps": 60, "measure_steps": 5}
@@ -166,3 +177,35 @@ def test_a_second_sensor_differs_only_in_what_its_scene_declares():
     row = b[2].astype(float).mean(axis=1)
     spectrum = np.abs(np.fft.rfft(row - row.mean()))
     assert np.argmax(spectrum[1:]) + 1 == round(128 / 9)
+
+
+def test_each_texture_face_draws_its_caption_word():
+    faces = texture_faces()
+    assert sorted(faces) == sorted(t for t in TEXTURES if t != "plain")
+    mark = TEXTURE_MARK
+    for face in faces.values():
+        assert face.shape == (TEXTURE_FACE, TEXTURE_FACE)
+        assert set(np.unique(face)) == {mark, 1.0}
+    striped = faces["striped"]
+    assert (striped == striped[:, :1]).all()  # parallel bands: constant along one axis
+    runs = np.count_nonzero(np.diff(striped[:, 0]))  # six bands, five edges between them
+    assert runs == 5
+    checker = faces["checkered"]
+    half = TEXTURE_FACE // 2
+    quads = [checker[:half, :half], checker[:half, half:], checker[half:, :half]]
+    assert all(np.unique(q).size == 1 for q in quads)  # a 2 x 2 checkerboard
+    assert quads[0][0, 0] != quads[1][0, 0] and quads[0][0, 0] != quads[2][0, 0]
+    speck = faces["speckled"]
+    assert 0.25 < np.mean(speck == mark) < 0.45  # the marks cover about 35 % of the face
+    assert not (speck == speck[:, :1]).all()  # and make no bands
+    assert np.array_equal(texture_faces()["speckled"], speck)  # seeded: the same every run
+
+
+def test_the_textures_compile_into_the_corpus_scene_and_the_policy_task():
+    full = compile_scene(validate_scene("full", {"effects": list(EFFECTS)}))
+    names = {mujoco.mj_id2name(full, mujoco.mjtObj.mjOBJ_TEXTURE, i) for i in range(full.ntex)}
+    assert names == {f"tex_{t}" for t in texture_faces()}
+    decl = SCENES["grasp_lift"]
+    grasp = GraspTask(phase_scene(decl, ["rgb", "texture"], 0.001), PolicySettings())
+    assert grasp.model.ntex == full.ntex
+    np.testing.assert_array_equal(grasp.model.tex_data, full.tex_data)

@@ -435,6 +435,8 @@ def _evaluate(rho: float, *, n_labelled=(6, 40), t_gen_from_real: bool = False, 
         gammas=[0.5, 2.0],
         bootstrap=200,
         n_classes=6,
+        ceiling_gammas=[0.5, 2.0],
+        ceiling_C=[1.0, 100.0],
         label_draws=draws,
         workers=workers,
     )

@@ -88,6 +88,8 @@ with threadpool_limits(1):
         gammas=params.gammas,
         bootstrap=regime.bootstrap,
         n_classes=n_classes,
+        ceiling_gammas=params.ceiling["gammas"],
+        ceiling_C=params.ceiling["C"],
         label_draws=regime.label_draws,
         progress=logger.info,
         workers=snakemake.threads,

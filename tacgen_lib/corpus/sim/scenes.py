@@ -19,6 +19,7 @@ lifts an object, the policy scene). Units are SI throughout.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
@@ -263,18 +264,61 @@ def _visual_xml(scene: Scene) -> str:
     )
 
 
+#: A texture's mark level: a MuJoCo texture multiplies the material's rgba, so a mark keeps
+#: this fraction of the object's colour and the rest of the face keeps all of it.
+TEXTURE_MARK = 0.3
+
+#: Pixels of a texture face (one image, repeated on the six faces of a cube texture).
+TEXTURE_FACE = 64
+
+
+def texture_faces() -> dict[str, np.ndarray]:
+    """Texture -> its grey face, a (`TEXTURE_FACE`, `TEXTURE_FACE`) array of 1 (the object's
+    colour) and `TEXTURE_MARK` (a mark), for every texture of `TEXTURES` but plain.
+
+    The patterns are the words of the caption at the size a frame shows them: checkered, a 2 x 2
+    checkerboard per face; striped, six parallel bands per face; speckled, a fixed random 35 %
+    of 4-pixel cells (seeded, the same on every run). MuJoCo's builtin checker with edge marks,
+    which "striped" once was, draws tiles with dark rims: at the backbone's input a striped
+    object looked checkered.
+    """
+    n = TEXTURE_FACE
+    i = np.arange(n)
+    mark = TEXTURE_MARK
+    checker = np.where((i[:, None] * 2 // n + i[None, :] * 2 // n) % 2 == 0, 1.0, mark)
+    bands = np.broadcast_to(np.where((i[:, None] * 6 // n) % 2 == 0, 1.0, mark), (n, n))
+    cells = np.random.default_rng(0).random((n // 4, n // 4)) < 0.35
+    speckle = np.where(cells, mark, 1.0).repeat(4, axis=0).repeat(4, axis=1)
+    return {"checkered": checker, "striped": np.array(bands), "speckled": speckle}
+
+
+@functools.cache
+def texture_assets() -> dict[str, bytes]:
+    """The PNG files `texture_asset_xml` names (``tex_<texture>.png``), for MuJoCo's
+    ``from_xml_string(xml, assets)``: `texture_faces` as 8-bit grey RGB."""
+    from tacgen_lib.io.images import encode_png  # OpenCV: only where a scene is compiled
+
+    return {
+        f"tex_{name}.png": encode_png(
+            np.repeat(np.round(g * 255).astype(np.uint8)[:, :, None], 3, 2)
+        )
+        for name, g in texture_faces().items()
+    }
+
+
+def texture_asset_xml() -> str:
+    """The MJCF ``<texture>`` of every texture of `texture_faces`, a cube texture named
+    ``tex_<texture>`` read from `texture_assets` (the corpus scenes and the policy task)."""
+    return "".join(
+        f'<texture name="tex_{t}" type="cube" file="tex_{t}.png"/>' for t in texture_faces()
+    )
+
+
 def _assets_xml(scene: Scene) -> str:
     """Textures (only with `texture`) and one material per texture kind for the object."""
     parts = ["<asset>"]
     if scene.has("texture"):
-        parts += [
-            '<texture name="tex_checkered" type="cube" builtin="checker" rgb1="1 1 1" '
-            'rgb2="0.35 0.35 0.35" width="64" height="64"/>',
-            '<texture name="tex_striped" type="cube" builtin="checker" rgb1="1 1 1" '
-            'rgb2="0.55 0.55 0.55" width="8" height="64" mark="edge" markrgb="0.2 0.2 0.2"/>',
-            '<texture name="tex_speckled" type="cube" builtin="flat" rgb1="1 1 1" '
-            'width="64" height="64" mark="random" random="0.25" markrgb="0.25 0.25 0.25"/>',
-        ]
+        parts.append(texture_asset_xml())
     for t in TEXTURES:
         tex = f' texture="tex_{t}"' if scene.has("texture") and t != "plain" else ""
         parts.append(f'<material name="mat_{t}" rgba="0.5 0.5 0.5 1"{tex} specular="0.2"/>')
@@ -384,7 +428,7 @@ def disable_undeclared(model: mujoco.MjModel, scene: Scene, *, sensors: bool) ->
 
 def compile_scene(scene: Scene) -> mujoco.MjModel:
     """Compile a validated scene to an MjModel with undeclared physics disabled."""
-    model = mujoco.MjModel.from_xml_string(scene_xml(scene))
+    model = mujoco.MjModel.from_xml_string(scene_xml(scene), texture_assets())
     disable_undeclared(model, scene, sensors=scene.has("tactile"))
     if not scene.has("shadows"):
         model.light_castshadow[:] = 0
