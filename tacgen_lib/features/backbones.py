@@ -76,7 +76,7 @@ def make_backbone(
             load = load_mae_checkpoint if spec.objective == "mae" else load_pretrained
             model = load(vit, spec.checkpoint)
         return model.eval(), [], f"loaded official checkpoint {spec.checkpoint}"
-    if spec.objective == "random" or (spec.objective == "dino" and dino.epochs == 0):
+    if not spec.pretrains(dino.epochs):  # the checkpoint was read above
         model = random_init(spec.arch, image_size, seed=dino.seed)
         return model, [], f"random-init {spec.arch} (seed {dino.seed}), no pretraining"
     if spec.objective == "simclr":

@@ -20,6 +20,7 @@ import numpy as np
 from tacgen_lib.generate.baselines import median_sq_distance, nonlinear_baseline, standardise
 from tacgen_lib.probes.fit import fit_probe
 from tacgen_lib.probes.folds import make_folds
+from tacgen_lib.probes.metrics import score
 from tacgen_lib.probes.settings import ProbeSettings
 
 __all__ = ["SmallFit", "fit_kernel_probe", "fit_small_probe", "fit_small_nonlinear"]
@@ -106,8 +107,8 @@ def fit_kernel_probe(
     logistic family's labels by a support-vector classifier (scikit-learn ``SVC``, one-vs-one,
     penalty ``C``), a ridge family's by kernel ridge (``KernelRidge``, penalty among the
     family's lambdas). gamma = multiple / `median_sq_distance` of the train rows, the multiple
-    among `gammas`; (penalty, multiple) by the mean held-out score (accuracy; R^2 for ridge)
-    over the family's folds (`make_folds`: stratified for a logistic family, seeded by
+    among `gammas`; (penalty, multiple) by the mean held-out score (`metrics.score`: accuracy;
+    R^2 for ridge) over the family's folds (`make_folds`: stratified for a logistic family, seeded by
     ``settings.seed``, ``settings.cv_repeats`` draws), the first of the grid's order on ties
     (penalties ascending, then multiples ascending: the smoother fit). Refitted on every train
     row. Deterministic: neither solver draws random numbers.
@@ -130,7 +131,9 @@ def fit_kernel_probe(
     folds = make_folds(
         len(y), settings.folds, settings.seed, labels=labels, repeats=settings.cv_repeats
     )
+    splits = [(np.setdiff1d(np.arange(len(y)), ho, assume_unique=True), ho) for ho in folds]
     y_fit = labels if logistic else y.astype(np.float64)
+    metric = "accuracy" if logistic else "r2"
 
     def model(pen: float, mult: float):
         if logistic:
@@ -139,15 +142,9 @@ def fit_kernel_probe(
 
     def held_out(pen: float, mult: float) -> float:
         scores = []
-        for ho in folds:
-            tr = np.setdiff1d(np.arange(len(y)), ho)
+        for tr, ho in splits:
             pred = model(pen, mult).fit(z_tr[tr], y_fit[tr]).predict(z_tr[ho])
-            if logistic:
-                scores.append(float(np.mean(pred == y_fit[ho])))
-            else:
-                resid = float(np.sum((y_fit[ho] - pred) ** 2))
-                total = float(np.sum((y_fit[ho] - y_fit[ho].mean()) ** 2))
-                scores.append(1.0 - resid / total if total > 0 else -np.inf)
+            scores.append(score(metric, y_fit[ho], pred))
         return float(np.mean(scores))
 
     grid = [(pen, mult) for pen in penalties for mult in multiples]

@@ -4,8 +4,8 @@ For every simulated corpus, each visible factor (`corpus.looks.visible_factors`:
 texture, shape, size third and, on the natural design, the appearance class) is decoded from V
 by a linear probe (the probes stage's logistic probe, C by CV) and a nonlinear probe (an
 RBF-kernel SVM on standardised V, C and gamma by CV, `small_probes.fit_kernel_probe`), each
-fitted on every non-test row of the corpus and scored on its test split with a fixed-test bootstrap CI
-beside the majority class's share of the test rows.
+fitted on every non-test row of the corpus and scored on its test split with a fixed-test
+bootstrap CI beside the majority class's share of the test rows.
 
 It is the gate for reading any result that depends on what V sees: the regime's generator can
 pass on only what V holds, so where V does not decode the appearance class the regime cannot

@@ -307,10 +307,13 @@ def texture_assets() -> dict[str, bytes]:
 
 
 def texture_asset_xml() -> str:
-    """The MJCF ``<texture>`` of every texture of `texture_faces`, a cube texture named
-    ``tex_<texture>`` read from `texture_assets` (the corpus scenes and the policy task)."""
+    """The MJCF ``<texture>`` of every texture but plain (those of `texture_faces`), a cube
+    texture named ``tex_<texture>`` read from `texture_assets` (the corpus scenes and the
+    policy task)."""
     return "".join(
-        f'<texture name="tex_{t}" type="cube" file="tex_{t}.png"/>' for t in texture_faces()
+        f'<texture name="tex_{t}" type="cube" file="tex_{t}.png"/>'
+        for t in TEXTURES
+        if t != "plain"
     )
 
 
