@@ -56,6 +56,7 @@ rule pretrain_backbone:
     # one thread each, so the vision and tactile runs share 2 cores side by side (measured
     # faster than one after the other at 2 threads); reruns are bit-identical per thread count
     threads: 1
+    priority: FIRST_PRIORITY
     resources:
         mem_mb=6000,
         runtime=120,
@@ -97,7 +98,7 @@ rule extract_vision_features:
     priority: extraction_priority
     conda:
         "../envs/features.yaml"
-    threads: extraction_threads  # 2 by default; config/test.yaml's ~1-s jobs: 1, two side by side
+    threads: extraction_threads  # config features.threads (1: two jobs side by side)
     resources:
         mem_mb=4000,
         runtime=30,
@@ -128,7 +129,7 @@ rule extract_tactile_features:
     priority: extraction_priority
     conda:
         "../envs/features.yaml"
-    threads: extraction_threads  # 2 by default; config/test.yaml's ~1-s jobs: 1, two side by side
+    threads: extraction_threads  # config features.threads (1: two jobs side by side)
     resources:
         mem_mb=4000,
         runtime=30,

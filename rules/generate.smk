@@ -49,6 +49,7 @@ rule train_generator:
     # thread, so two generators training side by side finish sooner than one after the other
     # (profiles/slurm gives it 2 on a cluster; results are bit-reproducible per thread count)
     threads: 1
+    priority: CHAIN_PRIORITY  # FIRST_PRIORITY's comment (rules/common.smk)
     resources:
         mem_mb=3000,
         runtime=30,
