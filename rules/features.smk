@@ -51,12 +51,12 @@ rule pretrain_backbone:
         "results/benchmarks/pretrain_backbone/{modality}.tsv"
     wildcard_constraints:
         modality="vision|tactile",
+    priority: FIRST_PRIORITY
     conda:
         "../envs/features.yaml"
     # one thread each, so the vision and tactile runs share 2 cores side by side (measured
     # faster than one after the other at 2 threads); reruns are bit-identical per thread count
     threads: 1
-    priority: FIRST_PRIORITY
     resources:
         mem_mb=6000,
         runtime=120,

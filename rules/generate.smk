@@ -43,13 +43,13 @@ rule train_generator:
     wildcard_constraints:
         corpus=one_of(GENERATE_CORPORA),
         seed=SAMPLE_CONSTRAINTS["seed"],
+    priority: CHAIN_PRIORITY  # FIRST_PRIORITY's comment (rules/common.smk)
     conda:
         "../envs/generate.yaml"
     # one thread: the default model's GEMMs (128 x 256 x 256) gain little from a second
     # thread, so two generators training side by side finish sooner than one after the other
     # (profiles/slurm gives it 2 on a cluster; results are bit-reproducible per thread count)
     threads: 1
-    priority: CHAIN_PRIORITY  # FIRST_PRIORITY's comment (rules/common.smk)
     resources:
         mem_mb=3000,
         runtime=30,
