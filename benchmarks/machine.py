@@ -1,11 +1,24 @@
 """What every benchmark shares: one line naming the machine it ran on (its figures depend on
 the CPU's vector units: the same code measured 0.41 and 0.65 of the GEMM roofline on two 2-core
 machines), best-of timing by wall and CPU clock, and the GEMM rate a roofline is measured
-against."""
+against.
+
+Run as a script, it prints the machine's speed at that moment, to quote beside any whole-run
+timing (a cold run, `make test`): the CPU (model, family, cores, widest vector extension), the
+load average, a one-thread float32 GEMM rate, and the seconds a fresh interpreter takes to
+import the libraries every job imports (the preloaded interpreter's list,
+`tacgen_lib.runtime.preload_server.PRELOADED_MODULES`): what a short job costs, as the
+machine is loaded now. Best of `--repeats`.
+
+    .venv/bin/python benchmarks/machine.py [--repeats 3]
+"""
 
 from __future__ import annotations
 
+import argparse
 import os
+import subprocess
+import sys
 import time
 from collections.abc import Callable
 from typing import NamedTuple
@@ -47,3 +60,62 @@ def describe() -> str:
     """CPU model, cores, widest x86 vector extension and the 1-minute load average."""
     load = os.getloadavg()[0] if hasattr(os, "getloadavg") else float("nan")
     return f"{cpu_label()}, load average {load:.2f}"
+
+
+def cpu_family() -> str:
+    """``family F model M`` of the first CPU in /proc/cpuinfo (the 2-core AMD EPYC classes differ
+    in family: 25 without AVX-512, 26 with), or "family unknown"."""
+    fields: dict[str, str] = {}
+    try:
+        for line in open("/proc/cpuinfo"):
+            key, _, value = line.partition(":")
+            if key.strip() in ("cpu family", "model") and key.strip() not in fields:
+                fields[key.strip()] = value.strip()
+            if not line.strip():
+                break
+    except OSError:
+        return "family unknown"
+    return f"family {fields.get('cpu family', '?')} model {fields.get('model', '?')}"
+
+
+def import_seconds(repeats: int) -> Timing:
+    """Best wall and CPU seconds of a fresh interpreter importing what every job imports
+    (`PRELOADED_MODULES`), measured by the child itself around its imports."""
+    from tacgen_lib.runtime.preload_server import PRELOADED_MODULES
+
+    code = (
+        "import importlib, os, time\n"
+        "os.environ.setdefault('MUJOCO_GL', 'egl')\n"
+        "w, c = time.perf_counter(), time.process_time()\n"
+        f"for m in {list(PRELOADED_MODULES)!r}: importlib.import_module(m)\n"
+        "print(time.perf_counter() - w, time.process_time() - c)\n"
+    )
+    best = Timing(float("inf"), float("inf"))
+    for _ in range(repeats):
+        out = subprocess.run(
+            [sys.executable, "-c", code], capture_output=True, text=True, check=True
+        ).stdout.split()
+        best = best.min(Timing(float(out[0]), float(out[1])))
+    return best
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[1])
+    parser.add_argument("--repeats", type=int, default=3)
+    args = parser.parse_args(argv)
+    import torch
+
+    torch.set_num_threads(1)
+    n = 1024
+    gemm = gemm_peak(n, args.repeats)
+    imports = import_seconds(args.repeats)
+    print(f"machine: {describe()}, {cpu_family()}")
+    print(f"GEMM {n}^3 float32, one thread: {2 * n**3 / gemm.wall / 1e9:.1f} GFLOP/s")
+    print(
+        f"a fresh interpreter importing the jobs' libraries: {imports.wall:.2f} s wall, "
+        f"{imports.cpu:.2f} s CPU (best of {args.repeats})"
+    )
+
+
+if __name__ == "__main__":
+    main()
