@@ -7,9 +7,10 @@ sidecars) equal to the clean run's.
 
 - SIGKILL of the whole run (scheduler and jobs: its process group) while a job of each stage
   in `KILL_STAGES` is running. The stages share one run: it is started cold, killed while a
-  job of the first stage runs, resumed with `tools/resume.py` (what `make resume` runs), killed
-  again while a job of the next stage runs, and so on; the last resume runs to the end. So
-  the whole table costs about one cold run, not one per stage; that run is the session's
+  job of the first stage the scheduler reaches runs, resumed with `tools/resume.py` (what
+  `make resume` runs), killed again while a job of the next stage not yet killed runs, and so
+  on; the last resume runs to the end. So the whole table costs about one cold run, not one
+  per stage; that run is the session's
   (conftest.resumed_run, faults_run.kill_series), and test_workflow.py's determinism test
   compares its edges with the reference run's.
 - SIGKILL of one job's process; a full disk under results/ (a tmpfs the test mounts); corrupt
