@@ -23,7 +23,7 @@ import time
 from collections.abc import Callable
 from typing import NamedTuple
 
-from tacgen_lib.runtime.benchmarks import cpu_label
+from tacgen_lib.runtime.benchmarks import cpu_label, cpuinfo
 
 
 class Timing(NamedTuple):
@@ -64,18 +64,9 @@ def describe() -> str:
 
 def cpu_family() -> str:
     """``family F model M`` of the first CPU in /proc/cpuinfo (the 2-core AMD EPYC classes differ
-    in family: 25 without AVX-512, 26 with), or "family unknown"."""
-    fields: dict[str, str] = {}
-    try:
-        for line in open("/proc/cpuinfo"):
-            key, _, value = line.partition(":")
-            if key.strip() in ("cpu family", "model") and key.strip() not in fields:
-                fields[key.strip()] = value.strip()
-            if not line.strip():
-                break
-    except OSError:
-        return "family unknown"
-    return f"family {fields.get('cpu family', '?')} model {fields.get('model', '?')}"
+    in family: 25 without AVX-512, 26 with)."""
+    info = cpuinfo()
+    return f"family {info.get('cpu family', '?')} model {info.get('model', '?')}"
 
 
 def import_seconds(repeats: int) -> Timing:

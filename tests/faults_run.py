@@ -56,15 +56,10 @@ def _scripts_of_rules() -> dict[str, str]:
 SCRIPTS = _scripts_of_rules()
 
 
-def job_pids(work: Path, rule: str) -> list[int]:
-    """Live job processes of `rule` in `work` (Snakemake runs a script as
-    `python <work>/.snakemake/scripts/tmpXXXX.<script>.py`)."""
-    return running_jobs(work, [rule]).get(rule, [])
-
-
 def running_jobs(work: Path, rules: list[str]) -> dict[str, list[int]]:
-    """rule -> pids of its live job processes in `work`, for those of `rules` with one (the
-    processes are listed once for all of them)."""
+    """rule -> pids of its live job processes in `work`, for those of `rules` with one
+    (Snakemake runs a script as `python <work>/.snakemake/scripts/tmpXXXX.<script>.py`; the
+    processes are listed once for all the rules)."""
     live = [(pid, cmd) for pid, cmd in resume.live_runs(work) if ".snakemake/scripts/" in cmd]
     out: dict[str, list[int]] = {}
     for rule in rules:

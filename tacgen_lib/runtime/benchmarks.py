@@ -31,6 +31,7 @@ __all__ = [
     "benchmark_seconds",
     "benchmark_table",
     "cpu_label",
+    "cpuinfo",
 ]
 
 
@@ -125,17 +126,22 @@ def benchmark_table(root: str | os.PathLike[str] = "results/benchmarks") -> pd.D
     return pd.DataFrame(rows, columns=["rule", "job", "path", "wall", "cpu", "max_rss_mb"])
 
 
+def cpuinfo() -> dict[str, str]:
+    """/proc/cpuinfo's fields, each key's first value (the first CPU's); empty where there is
+    no /proc/cpuinfo."""
+    fields: dict[str, str] = {}
+    path = Path("/proc/cpuinfo")
+    if path.exists():
+        for line in path.read_text().splitlines():
+            key, _, value = line.partition(":")
+            fields.setdefault(key.strip(), value.strip())
+    return fields
+
+
 def cpu_label() -> str:
     """The CPU a figure was measured on: model, core count and widest x86 vector extension
     (the same code runs 2-3x slower on the 2-core class without AVX-512)."""
-    model, flags = "unknown CPU", set()
-    cpuinfo = Path("/proc/cpuinfo")
-    if cpuinfo.exists():
-        for line in cpuinfo.read_text().splitlines():
-            key, _, value = line.partition(":")
-            if key.strip() == "model name" and model == "unknown CPU":
-                model = value.strip()
-            elif key.strip() == "flags" and not flags:
-                flags = set(value.split())
+    info = cpuinfo()
+    model, flags = info.get("model name", "unknown CPU"), set(info.get("flags", "").split())
     vector = next((f for f in ("avx512f", "avx2", "avx", "sse4_2") if f in flags), "-")
     return f"{model}, {os.cpu_count()} cores, vector {vector}"
