@@ -61,15 +61,20 @@ def validate_config(config: dict, schema_path: str | Path, *, source: str = "con
     validate_schema(config, schema_path, source=source)
     scenes_file = Path(config["scenes_file"])
     scenes = load_yaml(scenes_file) if scenes_file.exists() else None
+
+    def written_at(name: str, key: str) -> str:
+        """Where the user wrote corpus `name`'s `key`: a regime corpus's under regime.corpus."""
+        return f"regime.corpus.{key} (corpus {name})" if name in joined else f"corpora.{name}.{key}"
+
     for name, corpus in config["corpora"].items():
         if corpus["kind"] == "simulated":
             for key, message in corpus_key_errors(corpus):
-                raise ConfigError(f"{source}: corpora.{name}.{key}: {message}")
+                raise ConfigError(f"{source}: {written_at(name, key)}: {message}")
             if scenes is None:
                 raise ConfigError(f"{source}: scenes_file: {scenes_file} does not exist")
             if corpus["scene"] not in scenes:
                 raise ConfigError(
-                    f"{source}: corpora.{name}.scene: unknown scene {corpus['scene']!r} "
+                    f"{source}: {written_at(name, 'scene')}: unknown scene {corpus['scene']!r} "
                     f"(scenes in {scenes_file}: {', '.join(sorted(scenes))})"
                 )
     for name in config["splits"].get("by_scale", {}):

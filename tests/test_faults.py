@@ -499,6 +499,9 @@ def _build_every_settings_object(cfg: dict) -> None:
 @given(where=st.sampled_from(_PATHS), value=_HOSTILE)
 @example(where=("align", "lr"), value=float("inf"))  # found by this test once: kept as a case
 @example(where=("corpora", "sim_transfer", "n"), value=1)  # 1 object of 6 contacts: found once
+@example(
+    where=("regime", "corpus", "scene"), value="0"
+)  # named as corpora.<regime corpus>: found once
 def test_fuzzed_config_validates_or_names_the_key(where, value):
     from tacgen_lib.workflow_config import ConfigError, validate_config
 
