@@ -9,7 +9,7 @@ from tacgen_lib.generate.regime_sets import natural_grid_ends, regime_corpora
 from tacgen_lib.io.config import load_yaml
 from tacgen_lib.workflow_config import validate_config
 from tacgen_lib.io.imports import code_inputs
-from tacgen_lib.report_pages import category
+from tacgen_lib.report_pages import DECISIONS_EDGE, category
 
 #: this workflow's own tree (the repository): where its schema, scripts and library live, also
 #: when another workflow uses it as a module (`workflow.basedir` is then that workflow's

@@ -22,14 +22,20 @@ from tacgen_lib.report import format as fmt
 
 __all__ = [
     "interval_side",
+    "mean_t_interval",
+    "seeds_interval",
     "delta_verdict",
     "probe_verdict",
     "generation_verdict",
     "ridge_verdict",
+    "PAIRING_P",
+    "pairing_decision",
     "gain_within_uncertainty",
+    "ceiling_decision",
     "ceiling_verdict",
     "proportion_interval",
     "proportion_with_ci",
+    "below_majority",
     "extreme_flag",
     "still_falling",
 ]
@@ -47,6 +53,43 @@ def interval_side(lo: float, hi: float) -> str:
     if lo == 0 or hi == 0:
         return "touches"
     return "spans"
+
+
+def mean_t_interval(values) -> tuple[float, float, float]:
+    """The mean of `values` (NaNs dropped) and its 95 % t-interval; the interval is NaN with
+    fewer than two values."""
+    v = np.asarray(values, dtype=np.float64)
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        return math.nan, math.nan, math.nan
+    m = float(v.mean())
+    if v.size < 2:
+        return m, math.nan, math.nan
+    from scipy import stats  # here: most claims need no SciPy
+
+    h = float(stats.t.ppf(0.975, v.size - 1) * v.std(ddof=1) / math.sqrt(v.size))
+    return m, m - h, m + h
+
+
+def seeds_interval(deltas, lows, highs) -> tuple[float, float, float]:
+    """One difference measured once per training seed (each seed's Δ with its own 95 %
+    interval over the test rows), read as one: the mean over the seeds and an interval that
+    holds both the seeds' spread and each seed's own uncertainty, from the lowest to the highest
+    bound of the seeds' intervals and the mean's t-interval over seeds (`mean_t_interval`).
+
+    A decision read from it holds whichever of the seeds had been trained: a difference that
+    one seed's heads show and another's do not is not called real. One seed: its own interval.
+    """
+    d = np.asarray(deltas, dtype=np.float64)
+    lo_s, hi_s = np.asarray(lows, dtype=np.float64), np.asarray(highs, dtype=np.float64)
+    keep = np.isfinite(d)
+    if not keep.any():
+        return math.nan, math.nan, math.nan
+    d, lo_s, hi_s = d[keep], lo_s[keep], hi_s[keep]
+    if d.size == 1:
+        return float(d[0]), float(lo_s[0]), float(hi_s[0])
+    m, t_lo, t_hi = mean_t_interval(d)
+    return m, float(min(t_lo, lo_s.min())), float(max(t_hi, hi_s.max()))
 
 
 def delta_verdict(delta: float, lo: float, hi: float, *, what: str = "V+T") -> str:
@@ -168,17 +211,18 @@ def ridge_verdict(
         f"for ridge's conditional mean and {gap['t_ridge_residual']:+.3f} for ridge + a sampled "
         "residual"
     )
-    if fmt.is_missing(pairing_p) or pairing_p > 0.05:
+    paired = pairing_decision(pairing, pairing_p)
+    if paired == "not measurably paired":
         fid = (
             f"Its samples are not measurably paired with the real rows (pairing p "
             f"{pairing_p:.3f}; {cos}): nothing row-specific of real touch is in them."
         )
-    elif gap["t_gen"] < gap["t_ridge_residual"]:
+    elif paired == "less paired than ridge's samples":
         fid = (
             f"Its samples are less paired with real touch than ridge's ({cos}): the diffusion "
             "generator has learnt less of the V→T map than a linear regression."
         )
-    elif gap["t_gen"] < gap["t_ridge"]:
+    elif paired == "paired between ridge's samples and its mean":
         fid = (
             f"Its samples are paired with real touch better than ridge's samples but not its "
             f"mean ({cos}): a sample carries the spread a mean averages out."
@@ -186,6 +230,26 @@ def ridge_verdict(
     else:
         fid = f"Its samples are paired with real touch at least as well as ridge's mean ({cos})."
     return f"{probe} {fid}"
+
+
+#: The pairing-permutation p below which generated samples count as paired with real touch.
+PAIRING_P = 0.05
+
+
+def pairing_decision(pairing: Mapping[str, tuple[float, float]], pairing_p: float) -> str:
+    """How the diffusion samples are paired with the real rows (`ridge_verdict`'s fidelity
+    sentence): ``not measurably paired`` (pairing p missing or above `PAIRING_P`), else by the
+    gap of matched minus off-diagonal cosine against ridge's: ``less paired than ridge's
+    samples``, ``paired between ridge's samples and its mean`` or ``paired at least as well as
+    ridge's mean``."""
+    if fmt.is_missing(pairing_p) or pairing_p > PAIRING_P:
+        return "not measurably paired"
+    gap = {k: m - off for k, (m, off) in pairing.items()}
+    if gap["t_gen"] < gap["t_ridge_residual"]:
+        return "less paired than ridge's samples"
+    if gap["t_gen"] < gap["t_ridge"]:
+        return "paired between ridge's samples and its mean"
+    return "paired at least as well as ridge's mean"
 
 
 def gain_within_uncertainty(cheap_value: float, dear_lo: float, dear_hi: float) -> bool:
@@ -197,27 +261,45 @@ def gain_within_uncertainty(cheap_value: float, dear_lo: float, dear_hi: float) 
     return bool(dear_lo <= cheap_value <= dear_hi)
 
 
+def ceiling_decision(score: float, lo: float, hi: float, ceiling: float) -> str:
+    """Where a V-only policy's success sits against the vision-only ceiling: ``not computed``,
+    ``above the ceiling`` (its interval wholly above: a defect), ``at the ceiling`` (its point
+    above, its interval reaching below: sampling noise), ``reaches the ceiling`` (within its
+    interval) or ``below the ceiling``."""
+    if fmt.is_missing(score) or fmt.is_missing(ceiling):
+        return "not computed"
+    if not fmt.is_missing(lo) and lo > ceiling:
+        return "above the ceiling"
+    if score > ceiling:
+        return "at the ceiling"
+    if fmt.is_missing(hi) or hi >= ceiling:
+        return "reaches the ceiling"
+    return "below the ceiling"
+
+
 def ceiling_verdict(
     score: float, lo: float, hi: float, ceiling: float, *, what: str = "V-only"
 ) -> str:
     """Where a V-only policy's success sits against the vision-only ceiling (the expected
-    success of the best force given what vision sees). A point estimate above the ceiling with
-    an interval reaching below it is sampling noise; an interval wholly above it is a defect."""
+    success of the best force given what vision sees; `ceiling_decision`). A point estimate
+    above the ceiling with an interval reaching below it is sampling noise; an interval wholly
+    above it is a defect."""
     s = fmt.with_ci(score, lo, hi)
     c = fmt.number(ceiling)
-    if fmt.is_missing(score) or fmt.is_missing(ceiling):
+    decided = ceiling_decision(score, lo, hi, ceiling)
+    if decided == "not computed":
         return f"{what}: not computed."
-    if not fmt.is_missing(lo) and lo > ceiling:
+    if decided == "above the ceiling":
         return (
             f"UNEXPECTED: {what} success {s} lies above the vision-only ceiling {c}: vision "
             "must see more than the ceiling assumes."
         )
-    if score > ceiling:
+    if decided == "at the ceiling":
         return (
             f"{what} success {s} is at the vision-only ceiling {c}: its point is above it by "
             "sampling noise only (the interval reaches below)."
         )
-    if fmt.is_missing(hi) or hi >= ceiling:
+    if decided == "reaches the ceiling":
         return f"{what} success {s} reaches the vision-only ceiling {c} within its interval."
     return f"{what} success {s} stays below the vision-only ceiling {c}."
 
@@ -247,13 +329,22 @@ def proportion_with_ci(p: float, lo: float, hi: float, n: int) -> str:
 
 
 def extreme_flag(
-    metric: str, v: float, vt: float, lo: float, hi: float, baseline: float = float("nan")
+    metric: str,
+    v: float,
+    vt: float,
+    lo: float,
+    hi: float,
+    baseline: float = float("nan"),
+    n_test: float = float("nan"),
 ) -> str:
     """Why a comparison's numbers are extreme, or "": an R² below −1 (the probe predicts worse
     than the train mean by more than the target's variance: too few rows for its features, or
     test rows outside the train range), or a Δ interval reaching beyond ±1 (wider than the
     metric's own range: Δ then measures one probe's failure, not what touch adds), or a V
-    accuracy below `baseline`, the majority-class rate."""
+    accuracy measurably below `baseline`, the majority-class rate: with `n_test` test rows, the
+    accuracy's 95 % Wilson interval (`proportion_interval`) lies wholly below it, so a V that
+    ties the majority within the test rows' sampling noise is not flagged on one machine and
+    passed on another; without `n_test`, any V below it."""
     reasons = []
     if metric == "r2":
         low = [name for name, x in (("V", v), ("V+T", vt)) if not fmt.is_missing(x) and x < -1]
@@ -263,14 +354,25 @@ def extreme_flag(
             )
     if any(not fmt.is_missing(x) and abs(x) > 1 for x in (lo, hi)):
         reasons.append("Δ interval beyond ±1, wider than the metric's range")
-    if metric == "accuracy" and not fmt.is_missing(baseline) and not fmt.is_missing(v):
-        if v < baseline:
-            reasons.append(
-                f"V accuracy {fmt.number(v)} below the majority-class rate "
-                f"{fmt.number(baseline)}: the V probe does worse than always guessing the "
-                "commonest train class"
-            )
+    if metric == "accuracy" and below_majority(v, baseline, n_test):
+        reasons.append(
+            f"V accuracy {fmt.number(v)} below the majority-class rate "
+            f"{fmt.number(baseline)}: the V probe does worse than always guessing the "
+            "commonest train class"
+        )
     return "; ".join(reasons)
+
+
+def below_majority(v: float, majority: float, n_test: float = float("nan")) -> bool:
+    """Whether an accuracy `v` on `n_test` rows lies measurably below the majority-class rate:
+    its 95 % Wilson interval's upper bound is below it (any `v` below it where `n_test` is
+    unknown). False where either is missing."""
+    if fmt.is_missing(v) or fmt.is_missing(majority):
+        return False
+    if fmt.is_missing(n_test) or int(n_test) <= 0:
+        return bool(v < majority)
+    n = int(n_test)
+    return bool(proportion_interval(int(round(v * n)), n)[1] < majority)
 
 
 def still_falling(steps, losses, *, tail: float = 0.2, rel: float = 0.02) -> bool:

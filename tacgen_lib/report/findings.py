@@ -1,12 +1,14 @@
 """The findings page: the headline results of every evidence branch in one table, each with
-its control beside it and a verdict sentence generated from the numbers (`claims`).
+its control beside it and a verdict sentence generated from the numbers (`claims`), and the
+decisions those verdicts state (`tacgen_lib.report.decisions`), written beside the page as an
+edge so that two runs can be compared by their conclusions.
 
-One row per finding: probes (per family, the comparison whose controls were run: V, V+T, Δ
-with its CI, Δ_ctrl with touch permuted across rows, and the criterion), generation (per corpus × target at the
-reference cell: Δ_gen over seeds against Δ_real, the shuffled-pair control and the nonlinear
-V-only baseline), policy (V+T against V with the null-touch control; V-only against the
-vision-only ceiling), backbone families, transfer to a second sensor, pixel generators; the
-regime's and the visibility check's rows are built in `tacgen_lib.report.findings_regime`. Pure functions over the stages' summary edges; none reads files.
+One row per finding: probes and generation (`tacgen_lib.report.findings_probes`), policy (V+T
+against V with the null-touch control; V-only against the vision-only ceiling), backbone
+families, transfer to a second sensor, pixel generators; the regime's and the visibility
+check's rows (`tacgen_lib.report.findings_regime`). Each branch's function returns a
+`decisions.FindingsPart`; `gather` joins them. Pure functions over the stages' summary edges;
+none reads files.
 """
 
 from __future__ import annotations
@@ -20,12 +22,14 @@ from tacgen_lib.probes.transfer import beats_shuffled_control
 from tacgen_lib.report import claims
 from tacgen_lib.report import format as fmt
 from tacgen_lib.report.backbones import direction_holds, null_gains
+from tacgen_lib.report.decisions import FindingsPart, decision, decisions_frame, side_decision
+from tacgen_lib.report.findings_probes import generation_findings, probe_findings
 from tacgen_lib.report.findings_regime import regime_findings, visibility_findings
-from tacgen_lib.report.generate import cross_seed_interval, delta_with_ci, reference_cell_rows
 from tacgen_lib.report_pages import FINDINGS_COLUMNS, category
 
 __all__ = [
     "FINDINGS_COLUMNS",
+    "gather",
     "probe_findings",
     "generation_findings",
     "policy_findings",
@@ -37,131 +41,6 @@ __all__ = [
 ]
 
 
-def _input_label(r: Mapping) -> str:
-    if r["input"] == "aligned":
-        return f"aligned heads (seed {int(r['align_seed'])})"
-    return "raw features"
-
-
-def _flag(r: Mapping) -> str:
-    flag = claims.extreme_flag(
-        r["metric"],
-        r["v_score"],
-        r["vt_score"],
-        r["ci_low"],
-        r["ci_high"],
-        r.get("baseline_score", np.nan),
-    )
-    return f" ⚠ {flag}." if flag else ""
-
-
-def probe_findings(summary: pd.DataFrame) -> pd.DataFrame:
-    """Per probe family and input, the headline comparison (concat fusion, the heads' tactile
-    variant, controls run; the first alignment seed), with its controls' largest Δ."""
-    s = summary[
-        (summary["control"] == "none")
-        & (summary["fusion"] == "concat")
-        & (summary["t_variant"] == summary["heads_variant"])
-        & summary["delta_ctrl"].notna()
-        & (summary["status"] == "ok")
-    ].copy()
-    s["_a"] = s["align_seed"].fillna(-1)
-    s = s.sort_values(["null_corpus", "family", "input", "_a"], kind="stable")
-    s = s.drop_duplicates(["family", "input"], keep="first")
-    rows = []
-    for r in s.to_dict("records"):
-        null = bool(r["null_corpus"])
-        rows.append(
-            {
-                "evidence": "probe",
-                "question": f"{r['family']}: does touch add to vision on {r['target']}? "
-                f"({r['corpus']}, {_input_label(r)}, {r['metric']})",
-                "result": f"V {fmt.number(r['v_score'])} → V+T {fmt.number(r['vt_score'])}; "
-                f"Δ {fmt.with_ci(r['delta'], r['ci_low'], r['ci_high'], sign=True)}",
-                "control": f"touch permuted across rows: Δ_ctrl {fmt.signed(r['delta_ctrl'])}"
-                + ("; null corpus: touch carries no label" if null else ""),
-                "verdict": claims.probe_verdict(
-                    r["delta"],
-                    r["ci_low"],
-                    r["ci_high"],
-                    null_corpus=null,
-                    criterion_met=None
-                    if fmt.is_missing(r["criterion_met"])
-                    else bool(r["criterion_met"]),
-                    delta_ctrl=r["delta_ctrl"],
-                )
-                + _flag(r),
-                "page": category("Probes"),
-            }
-        )
-    return pd.DataFrame(rows, columns=FINDINGS_COLUMNS)
-
-
-def _first_seed(rows: pd.DataFrame, col: str = "delta") -> tuple[float, float, float]:
-    """(Δ, lo, hi) of the first generator seed with its fixed-test bootstrap CI."""
-    if rows is None or not len(rows):
-        return (np.nan, np.nan, np.nan)
-    return delta_with_ci(_first_row(rows), col)
-
-
-def _first_row(rows: pd.DataFrame) -> pd.Series:
-    """The first generator seed's row."""
-    return rows.sort_values("seed", kind="stable").iloc[0]
-
-
-def generation_findings(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
-    """Per corpus × target at the reference sampling cell: generated touch against real touch,
-    with the shuffled-pair control, the nonlinear V-only baseline and the ridge V->T generator.
-
-    The verdict reads the first generator seed's fixed-test bootstrap CIs (they carry the test
-    rows' sampling noise; real touch and the baselines do not depend on the generator seed); the
-    mean over seeds with its t-interval, which carries only the seeds' spread, is shown beside."""
-    s = reference_cell_rows(summary, ref)
-    rows = []
-    for (corpus, target), g in s.groupby(["corpus", "target"], sort=True):
-        by = {k: v for k, v in g.groupby("input")}
-        if not {"t_gen", "t_real"} <= set(by):
-            continue
-        gen, real = _first_seed(by["t_gen"]), _first_seed(by["t_real"])
-        shuffled = _first_seed(by.get("t_gen_shuffled"))
-        nonlin = _first_seed(by.get("v_nonlinear"))
-        ridge = _first_seed(by["t_ridge"])
-        vs_ridge = _first_seed(by["t_gen"], "delta_vs_ridge")
-        first_rows = {k: _first_row(by[k]) for k in ("t_gen", "t_ridge", "t_ridge_residual")}
-        pairing = {
-            k: (float(r["cos_matched"]), float(r["cos_offdiag"])) for k, r in first_rows.items()
-        }
-        seeds = cross_seed_interval(by["t_gen"]["delta"].to_numpy())
-        n = int(g["seed"].nunique())
-        first = int(g["seed"].min())
-        rows.append(
-            {
-                "evidence": "generation",
-                "question": f"does touch generated from RGB add to vision on {target}? "
-                f"({corpus}, {g['metric'].iloc[0]})",
-                "result": f"Δ_gen {fmt.with_ci(*gen, sign=True)} (seed {first}"
-                + (f"; mean over {n} seeds {fmt.with_ci(*seeds, sign=True)}" if n > 1 else "")
-                + f"); Δ_real {fmt.with_ci(*real, sign=True)}",
-                "control": f"shuffled pairs Δ {fmt.with_ci(*shuffled, sign=True)}; nonlinear "
-                f"V only Δ {fmt.with_ci(*nonlin, sign=True)}; ridge V→T generator Δ "
-                f"{fmt.with_ci(*ridge, sign=True)}",
-                "verdict": claims.generation_verdict(gen, real, nonlin)
-                + _flag(
-                    {
-                        **first_rows["t_gen"].to_dict(),
-                        "vt_score": first_rows["t_gen"]["score"],
-                        "ci_low": gen[1],
-                        "ci_high": gen[2],
-                    }
-                )
-                + " "
-                + claims.ridge_verdict(vs_ridge, pairing, float(first_rows["t_gen"]["pairing_p"])),
-                "page": category("Generation"),
-            }
-        )
-    return pd.DataFrame(rows, columns=FINDINGS_COLUMNS)
-
-
 def _success(r: Mapping) -> str:
     # claims' function, not report.policy's wrapper: that module pulls in MuJoCo (2 s of imports)
     return claims.proportion_with_ci(r["success"], r["ci_low"], r["ci_high"], int(r["n_episodes"]))
@@ -169,15 +48,27 @@ def _success(r: Mapping) -> str:
 
 def policy_findings(
     summary: pd.DataFrame, deltas: pd.DataFrame, sweep: pd.DataFrame
-) -> pd.DataFrame:
+) -> FindingsPart:
     """V+T (aligned) against V on the same held-out episodes with the null-touch control, and
     the V-only policy against the vision-only ceiling."""
     d = deltas.set_index("condition")
     s = summary.drop_duplicates("condition").set_index("condition")
-    rows = []
+    rows, decided = [], []
     if "vt_aligned" in d.index and "v" in s.index:
         r, v, vt = d.loc["vt_aligned"], s.loc["v"], s.loc["vt_aligned"]
         null = d.loc["vt_null"] if "vt_null" in d.index else None
+        decided.append(
+            decision(
+                "policy|vt_aligned",
+                "policy",
+                "success of V+T (aligned) − V on the held-out episodes",
+                side_decision(r["ci_low"], r["ci_high"]),
+                value=r["delta"],
+                ci_low=r["ci_low"],
+                ci_high=r["ci_high"],
+                threshold=0.0,
+            )
+        )
         rows.append(
             {
                 "evidence": "policy",
@@ -201,6 +92,18 @@ def policy_findings(
         v = s.loc["v"]
         best = sweep.loc[sweep["success"].idxmax()]
         ceiling = float(sweep["vision_ceiling"].iloc[0])
+        decided.append(
+            decision(
+                "policy|v_ceiling",
+                "policy",
+                "V-only success against the vision-only ceiling",
+                claims.ceiling_decision(v["success"], v["ci_low"], v["ci_high"], ceiling),
+                value=v["success"],
+                ci_low=v["ci_low"],
+                ci_high=v["ci_high"],
+                threshold=ceiling,
+            )
+        )
         rows.append(
             {
                 "evidence": "policy",
@@ -214,18 +117,18 @@ def policy_findings(
                 "page": category("Policy"),
             }
         )
-    return pd.DataFrame(rows, columns=FINDINGS_COLUMNS)
+    return FindingsPart(pd.DataFrame(rows, columns=FINDINGS_COLUMNS), decided)
 
 
 def backbone_findings(
     summary: pd.DataFrame, main: Sequence[str], order: Sequence[str] = ()
-) -> pd.DataFrame:
+) -> FindingsPart:
     """One row per backbone family other than the main DAG's (whose rows are the probes
     stage's, already on this page): V+T − V under the linear probe on each real-corpus probe
     family, the null corpus's probe families of the same targets as the control, and the
     verdict of the family's sentence (`report.backbones.direction_holds`, `null_gains`).
     Families in `order` (config backbones.run), then any other."""
-    rows = []
+    rows, decided = [], []
     linear = summary[(summary["protocol"] == "raw") & (summary["status"] == "ok")]
     for family in dict.fromkeys([*order, *linear["family"]]):
         if family in main:
@@ -242,12 +145,30 @@ def backbone_findings(
             )
 
         first = g.iloc[0]
+        holds = direction_holds(summary[summary["family"] == family])
         verdict = (
             "The V+T direction holds: Δ > 0 on every real-corpus probe."
-            if direction_holds(summary[summary["family"] == family])
+            if holds
             else "The V+T direction does not hold on every real-corpus probe."
         )
         above = null_gains(null)
+        decided += [
+            decision(
+                f"backbones|{family}|direction",
+                "backbone families",
+                f"V+T − V > 0 on every real-corpus probe ({family}, linear probe)",
+                "holds" if holds else "does not hold",
+                value=float(real["delta"].min()) if len(real) else np.nan,
+                threshold=0.0,
+            ),
+            decision(
+                f"backbones|{family}|null_gains",
+                "backbone families",
+                f"null-corpus probes with V+T − V CI above 0 ({family})",
+                ", ".join(sorted(above["probe"])) or "none",
+                value=float(len(above)),
+            ),
+        ]
         if len(above):
             verdict += f" UNEXPECTED: a null-corpus CI lies above 0 ({', '.join(above['probe'])})."
         rows.append(
@@ -261,17 +182,17 @@ def backbone_findings(
                 "page": category("Backbone families"),
             }
         )
-    return pd.DataFrame(rows, columns=FINDINGS_COLUMNS)
+    return FindingsPart(pd.DataFrame(rows, columns=FINDINGS_COLUMNS), decided)
 
 
-def transfer_findings(summary: pd.DataFrame) -> pd.DataFrame:
+def transfer_findings(summary: pd.DataFrame) -> FindingsPart:
     """One row for the transfer to a second sensor (`tacgen_lib.probes.transfer`): the seeds'
     mean Δ balanced accuracy with the first sensor's heads and with retrained heads, the null
     corpus's heads and shuffled touch as the controls, and the verdict on the transferred
     heads' Δ, whether it beats the shuffled control and whether it beats the floor."""
     means = summary[summary["probe_seed"] == "mean"].set_index("heads")
     if "source" not in means.index:
-        return pd.DataFrame(columns=FINDINGS_COLUMNS)
+        return FindingsPart(pd.DataFrame(columns=FINDINGS_COLUMNS), [])
 
     def delta(view: str, col: str = "delta") -> str:
         if view not in means.index:
@@ -286,12 +207,46 @@ def transfer_findings(summary: pd.DataFrame) -> pd.DataFrame:
 
     src = means.loc["source"]
     verdict = claims.delta_verdict(src["delta"], src["delta_ci_low"], src["delta_ci_high"])
-    if beats_shuffled_control(src["delta_ci_low"], src["delta_shuffled_ci_high"]):
+    beats = beats_shuffled_control(src["delta_ci_low"], src["delta_shuffled_ci_high"])
+    what = "with the first sensor's heads, mass tertiles of the second sensor's test objects"
+    decided = [
+        decision(
+            "transfer|source",
+            "transfer to a second sensor",
+            f"V+T − V {what}",
+            side_decision(src["delta_ci_low"], src["delta_ci_high"]),
+            value=src["delta"],
+            ci_low=src["delta_ci_low"],
+            ci_high=src["delta_ci_high"],
+            threshold=0.0,
+        ),
+        decision(
+            "transfer|source_vs_shuffled",
+            "transfer to a second sensor",
+            f"V+T − V {what}, against the shuffled-touch control's upper bound",
+            "above the control" if beats else "not above the control",
+            value=src["delta_ci_low"],
+            threshold=src["delta_shuffled_ci_high"],
+        ),
+    ]
+    if beats:
         verdict += " It lies above the shuffled-touch control."
     else:
         verdict += " It does not separate from the shuffled-touch control."
     if "floor" in means.index:
         floor = means.loc["floor"]
+        decided.append(
+            decision(
+                "transfer|source_vs_floor",
+                "transfer to a second sensor",
+                f"V+T − V {what}, against the null corpus's heads",
+                "above the floor"
+                if src["delta_ci_low"] > floor["delta"]
+                else "not above the floor",
+                value=src["delta_ci_low"],
+                threshold=floor["delta"],
+            )
+        )
         if src["delta_ci_low"] > floor["delta"]:
             verdict += " The transferred heads beat the null corpus's heads."
         else:
@@ -299,7 +254,7 @@ def transfer_findings(summary: pd.DataFrame) -> pd.DataFrame:
                 " The null corpus's heads do as well (Δ "
                 f"{fmt.signed(floor['delta'])}): what touch adds here is not what alignment learnt."
             )
-    return pd.DataFrame(
+    rows = pd.DataFrame(
         [
             {
                 "evidence": "transfer to a second sensor",
@@ -316,16 +271,17 @@ def transfer_findings(summary: pd.DataFrame) -> pd.DataFrame:
         ],
         columns=FINDINGS_COLUMNS,
     )
+    return FindingsPart(rows, decided)
 
 
-def pixel_findings(summary: pd.DataFrame) -> pd.DataFrame:
+def pixel_findings(summary: pd.DataFrame) -> FindingsPart:
     """One row per judged corpus for the pixel generators (`tacgen_lib.generate.pixel`): per
     target the best raw generator arm's Δ (first seed) against real touch at the generators'
     frame size, the shuffled pairing as the control, and the verdict: which arms are
     utility-positive (Δ CI above 0 and above the shuffled control's interval)."""
     from tacgen_lib.report.pixel import arm_label, utility_positive
 
-    out = []
+    out, decided = [], []
     s = summary[summary["seed"] == summary["seed"].min()]
     for corpus, g in s.groupby("corpus", sort=True):
         arm = g["arm"].astype(str)
@@ -350,6 +306,22 @@ def pixel_findings(summary: pd.DataFrame) -> pd.DataFrame:
             positive += [
                 f"{arm_label(x.arm)} ({target})" for x in t.itertuples() if utility_positive(x)
             ]
+        decided += [
+            decision(
+                f"pixel|{corpus}|utility_positive",
+                "pixel generators",
+                f"pixel generator arms with V + T_gen − V above 0 and above the shuffled "
+                f"control ({corpus})",
+                ", ".join(sorted(positive)) or "none",
+                value=float(len(positive)),
+            ),
+            decision(
+                f"pixel|{corpus}|real_lowres",
+                "pixel generators",
+                f"real frames at the generators' size add to vision on every target ({corpus})",
+                "yes" if real_helps and all(real_helps) else "no",
+            ),
+        ]
         verdict = (
             "Utility-positive: " + ", ".join(positive) + "."
             if positive
@@ -372,4 +344,12 @@ def pixel_findings(summary: pd.DataFrame) -> pd.DataFrame:
                 "page": category("Pixel generators"),
             }
         )
-    return pd.DataFrame(out, columns=FINDINGS_COLUMNS)
+    return FindingsPart(pd.DataFrame(out, columns=FINDINGS_COLUMNS), decided)
+
+
+def gather(parts: Sequence[FindingsPart]) -> FindingsPart:
+    """The findings page's rows and its decisions edge (`decisions.decisions_frame`, keyed by
+    ``decision_id``) from every branch's part, in the order given."""
+    rows = [p.rows for p in parts if len(p.rows)]
+    table = pd.concat(rows, ignore_index=True) if rows else pd.DataFrame(columns=FINDINGS_COLUMNS)
+    return FindingsPart(table, decisions_frame([d for p in parts for d in p.decisions]))

@@ -10,9 +10,8 @@ from collections.abc import Mapping
 
 import pandas as pd
 
-from tacgen_lib.report import claims
-from tacgen_lib.report import format as fmt
-from tacgen_lib.report.regime_arms import arm_rows
+from tacgen_lib.report.decisions import FindingsPart, decision
+from tacgen_lib.report.regime_arms import RUNG_LABELS, arm_rows
 from tacgen_lib.report_pages import FINDINGS_COLUMNS, category
 
 __all__ = ["regime_findings", "visibility_findings"]
@@ -22,95 +21,162 @@ def _regime_row(rows: pd.DataFrame, arm: str, probe: str = "linear") -> pd.Serie
     return arm_rows(rows, arm, probe).iloc[0]
 
 
-def _with(r: pd.Series, what: str) -> str:
-    return fmt.with_ci(
-        r[f"delta_vs_{what}"], r[f"ci_low_vs_{what}"], r[f"ci_high_vs_{what}"], sign=True
-    )
+def replicates_decision(r: pd.Series, what: str) -> str:
+    """A `seed_view` row's Δ against `what` read over its replicates (seed × labelled draw):
+    ``above 0 in every replicate``, ``below 0 in every replicate``, or ``not in every
+    replicate`` (the ladder's rule, `report.regime`: a gain is one every replicate shows)."""
+    n = int(r["n_seeds"])
+    if n > 0 and int(r[f"above_vs_{what}"]) == n:
+        return "above 0 in every replicate"
+    if n > 0 and int(r[f"below_vs_{what}"]) == n:
+        return "below 0 in every replicate"
+    return "not in every replicate"
+
+
+def _ladder_decisions(view: pd.DataFrame) -> list[dict]:
+    """Per target, the ladder's two decisions (`report.regime.ladder_readings`): whether the
+    positive control works, and where the gain is lost."""
+    from tacgen_lib.report.regime import ladder_readings
+
+    out = []
+    for r in ladder_readings(view):
+        out.append(
+            decision(
+                f"regime|{r.target}|positive_control",
+                "regime",
+                f"look oracle − nonlinear V above 0 in every replicate, and at the smallest ρ in "
+                f"none ({r.where})",
+                "works" if r.control else "fails",
+                value=r.a0["delta_vs_nonlinear_v"],
+            )
+        )
+        lost = "not read: no positive control"
+        if r.control:
+            lost = "kept to A3" if r.lost is None else f"lost at {RUNG_LABELS[r.lost]}"
+        out.append(
+            decision(
+                f"regime|{r.target}|ladder",
+                "regime",
+                f"the first rung of the ladder that loses the look oracle's gain ({r.where})",
+                lost,
+            )
+        )
+    return out
 
 
 def regime_findings(
     summary: pd.DataFrame, gate: str = "", gate_passed: bool = True
-) -> pd.DataFrame:
+) -> FindingsPart:
     """Per regime target, where generated touch should help most: the largest rho, the fewest
-    labels, the largest pool, first seed and labelled draw. V + T_gen (linear probe) against
-    linear V, with the controls that could explain a gain away beside it: the shuffled-pool
-    generator, nonlinear V, generalised distillation (the pool used without generating), the
-    same cell at the smallest rho; the positive control (the look oracle against nonlinear V)
-    and the ladder's verdict (`report.regime.ladder_verdict`, over every replicate) with the
-    visibility gate's sentence `gate`."""
-    from tacgen_lib.report.regime import ladder_verdict, seed_view
+    labels, the largest pool. V + T_gen (linear probe) against linear V, with the controls
+    that could explain a gain away beside it: the shuffled-pool generator, nonlinear V,
+    generalised distillation (the pool used without generating), the same cell at the smallest
+    rho; the positive control (the look oracle against nonlinear V) and the ladder's verdict
+    (`report.regime.ladder_verdict`) with the visibility gate's sentence `gate`. Every figure
+    is the mean over the cell's replicates (seed × labelled draw) with how many replicates'
+    CIs lie above or below 0, and each decision reads every replicate (`replicates_decision`):
+    one draw of the labelled rows decides nothing."""
+    from tacgen_lib.report.regime import ladder_verdict, replicate_words, seed_view
 
-    rows = []
+    rows, decided = [], []
     if summary.empty:
-        return pd.DataFrame(rows, columns=FINDINGS_COLUMNS)
-    if "draw" not in summary:
-        summary = summary.assign(draw=0)
-    rho_hi, rho_lo = summary["rho"].max(), summary["rho"].min()
-    n_l, n_p = summary["n_labelled"].min(), summary["n_pool"].max()
-    seed = summary["seed"].min()
-    cell = summary[
-        (summary["n_labelled"] == n_l)
-        & (summary["n_pool"] == n_p)
-        & (summary["seed"] == seed)
-        & (summary["draw"] == 0)
-    ]
+        return FindingsPart(pd.DataFrame(rows, columns=FINDINGS_COLUMNS), decided)
     view = seed_view(summary)
+    rho_hi, rho_lo = view["rho"].max(), view["rho"].min()
+    n_l, n_p = view["n_labelled"].min(), view["n_pool"].max()
+    cell = view[(view["n_labelled"] == n_l) & (view["n_pool"] == n_p)]
     for target, g in cell.groupby("target", sort=True):
         hi, lo = g[g["rho"] == rho_hi], g[g["rho"] == rho_lo]
         gen, shuf = _regime_row(hi, "v_tgen"), _regime_row(hi, "v_tgen_shuffled")
         gd, gen_lo = _regime_row(hi, "distilled"), _regime_row(lo, "v_tgen")
         oracle = _regime_row(hi, "look_oracle")
         ladder = ladder_verdict(view[view["target"] == target], gate_passed=gate_passed)
+        where = f"{target}, ρ = {rho_hi:g}, N_L = {n_l}, N_P = {n_p}"
+        reading = replicates_decision(gen, "linear_v")
+        decided.append(
+            decision(
+                f"regime|{target}|v_tgen_vs_linear_v",
+                "regime",
+                f"V + T_gen − linear V over the replicates ({where})",
+                reading,
+                value=gen["delta_vs_linear_v"],
+            )
+        )
+        n = int(gen["n_seeds"])
         rows.append(
             {
                 "evidence": "regime",
                 "question": f"does touch generated by a generator trained on an unlabelled "
                 f"pool help a probe on few labels where appearance predicts material? "
-                f"({target}, {g['metric'].iloc[0]}; ρ = {rho_hi:g}, N_L = {n_l}, N_P = {n_p}, "
-                f"seed {seed}, first labelled draw)",
-                "result": f"V + T_gen − linear V {_with(gen, 'linear_v')}; − nonlinear V "
-                f"{_with(gen, 'nonlinear_v')}; − distillation {_with(gen, 'distilled')}",
+                f"({target}, {gen['metric']}; ρ = {rho_hi:g}, N_L = {n_l}, N_P = {n_p}, "
+                f"mean of {n} replicates: seed × labelled draw)",
+                "result": f"V + T_gen − linear V {replicate_words(gen, 'linear_v')}; − nonlinear V "
+                f"{replicate_words(gen, 'nonlinear_v')}; − distillation "
+                f"{replicate_words(gen, 'distilled')}",
                 "control": f"positive control: look oracle − nonlinear V "
-                f"{_with(oracle, 'nonlinear_v')}; shuffled pool − linear V "
-                f"{_with(shuf, 'linear_v')}; distillation (V only) − linear V "
-                f"{_with(gd, 'linear_v')}; V + T_gen at ρ = {rho_lo:g} − linear V "
-                f"{_with(gen_lo, 'linear_v')}",
+                f"{replicate_words(oracle, 'nonlinear_v')}; shuffled pool − linear V "
+                f"{replicate_words(shuf, 'linear_v')}; distillation (V only) − linear V "
+                f"{replicate_words(gd, 'linear_v')}; V + T_gen at ρ = {rho_lo:g} − linear V "
+                f"{replicate_words(gen_lo, 'linear_v')}",
                 "verdict": " ".join([gate, *ladder]).strip()
-                + " This draw: "
-                + claims.delta_verdict(
-                    gen["delta_vs_linear_v"],
-                    gen["ci_low_vs_linear_v"],
-                    gen["ci_high_vs_linear_v"],
-                    what="V + T_gen",
-                ),
+                + f" Over the replicates, V + T_gen − linear V: {reading}.",
                 "page": category("Where generated touch helps"),
             }
         )
-    return pd.DataFrame(rows, columns=FINDINGS_COLUMNS)
+    decided += _ladder_decisions(view)
+    return FindingsPart(pd.DataFrame(rows, columns=FINDINGS_COLUMNS), decided)
 
 
-def visibility_findings(rows: pd.DataFrame, gate: Mapping[str, float]) -> pd.DataFrame:
+def visibility_findings(rows: pd.DataFrame, gate: Mapping[str, float]) -> FindingsPart:
     """One row: what V decodes of what the frames show, on the first corpus with an
-    appearance class (the regime's; else the first corpus checked), against the gate."""
+    appearance class (the regime's; else the first corpus checked), against the gate; a
+    decision per factor of the gate and one for the gate."""
     from tacgen_lib.generate.visibility import visibility_gate
     from tacgen_lib.report.visibility import visibility_sentence
 
     if rows.empty:
-        return pd.DataFrame([], columns=FINDINGS_COLUMNS)
+        return FindingsPart(pd.DataFrame([], columns=FINDINGS_COLUMNS), [])
     with_class = sorted(rows.loc[rows["factor"] == "appearance", "corpus"].unique())
     corpus = with_class[0] if with_class else sorted(rows["corpus"].unique())[0]
-    verdict = visibility_gate(rows, corpus, gate).sentence() if gate else ""
-    return pd.DataFrame(
-        [
-            {
-                "evidence": "visibility",
-                "question": f"does V see what the frames show? ({corpus}, test accuracy, "
-                "better of a linear and a nonlinear probe on every non-test row)",
-                "result": visibility_sentence(rows, corpus),
-                "control": "each factor's majority class (beside each figure)",
-                "verdict": verdict or "No gate is configured (features.visibility.gate).",
-                "page": category("What vision sees"),
-            }
-        ],
-        columns=FINDINGS_COLUMNS,
+    decided = []
+    verdict = ""
+    if gate:
+        passed = visibility_gate(rows, corpus, gate)
+        verdict = passed.sentence()
+        for factor, threshold in passed.thresholds.items():
+            score = passed.scores[factor]
+            decided.append(
+                decision(
+                    f"visibility|{corpus}|{factor}",
+                    "visibility",
+                    f"V's test accuracy on {factor}, the better of the two probes ({corpus})",
+                    "passes" if score >= threshold else "fails",
+                    value=score,
+                    threshold=threshold,
+                )
+            )
+        decided.append(
+            decision(
+                f"visibility|{corpus}|gate",
+                "visibility",
+                f"the visibility gate ({corpus})",
+                "passes" if passed.passed else "fails",
+            )
+        )
+    return FindingsPart(
+        pd.DataFrame(
+            [
+                {
+                    "evidence": "visibility",
+                    "question": f"does V see what the frames show? ({corpus}, test accuracy, "
+                    "better of a linear and a nonlinear probe on every non-test row)",
+                    "result": visibility_sentence(rows, corpus),
+                    "control": "each factor's majority class (beside each figure)",
+                    "verdict": verdict or "No gate is configured (features.visibility.gate).",
+                    "page": category("What vision sees"),
+                }
+            ],
+            columns=FINDINGS_COLUMNS,
+        ),
+        decided,
     )

@@ -62,17 +62,7 @@ def generation_summary(
 
 def cross_seed_interval(values: np.ndarray) -> tuple[float, float, float]:
     """Mean over seeds and its 95 % t-interval (NaN half-width with one seed)."""
-    v = np.asarray(values, dtype=np.float64)
-    v = v[np.isfinite(v)]
-    if v.size == 0:
-        return math.nan, math.nan, math.nan
-    m = float(v.mean())
-    if v.size < 2:
-        return m, math.nan, math.nan
-    from scipy import stats
-
-    h = float(stats.t.ppf(0.975, v.size - 1) * v.std(ddof=1) / math.sqrt(v.size))
-    return m, m - h, m + h
+    return claims.mean_t_interval(values)
 
 
 def delta_with_ci(row: Mapping, col: str = "delta") -> tuple[float, float, float]:
@@ -114,16 +104,23 @@ def headline_table(summary: pd.DataFrame, ref: Mapping) -> pd.DataFrame:
         majority = (
             float(by["t_gen"]["baseline_score"].iloc[0]) if "baseline_score" in g else math.nan
         )
+        metric = g["metric"].iloc[0]
+        # an accuracy is below the majority rate when its Wilson interval is (claims)
+        below = (
+            claims.below_majority(v_score, majority, by["t_gen"]["n_test"].iloc[0])
+            if metric == "accuracy" and "n_test" in g
+            else v_score < majority
+        )
         out.append(
             {
                 "corpus": corpus,
                 "target": target,
-                "metric": g["metric"].iloc[0],
+                "metric": metric,
                 "V score": f"{v_score:.3f}",
                 # a V probe worse than the constant prediction is a probe failing: a Δ against
                 # it is no evidence (flagged)
                 "majority score": majority,
-                "V below majority": "yes: Δ is no evidence" if v_score < majority else "no",
+                "V below majority": "yes: Δ is no evidence" if below else "no",
                 f"Δ_gen seed {first} [bootstrap CI]": one("t_gen"),
                 f"Δ_gen mean over {g['seed'].nunique()} seeds [95% t]": _ci(m, lo, hi),
                 "Δ_real (protocol-matched)": one("t_real"),

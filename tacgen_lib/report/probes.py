@@ -134,6 +134,7 @@ def _comparison_columns(rows: pd.DataFrame) -> pd.DataFrame:
                     r.ci_low,
                     r.ci_high,
                     getattr(r, "baseline_score", math.nan),
+                    getattr(r, "n_test", math.nan),
                 )
                 for r in rows.itertuples()
             ],

@@ -12,6 +12,7 @@ the mean over replicates and how many replicates' fixed-test CIs lie above (or b
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import pandas as pd
 
@@ -22,12 +23,15 @@ from tacgen_lib.report.regime_figures import curves_figure, heatmap_figure
 __all__ = [
     "ARM_LABELS",
     "ladder_table",
+    "LadderReading",
+    "ladder_readings",
     "ladder_verdict",
     "arm_rows",
     "curves_figure",
     "heatmap_figure",
     "hypothesis_sentences",
     "panel_sentences",
+    "replicate_words",
     "regime_table",
     "seed_view",
 ]
@@ -162,6 +166,44 @@ _LOSS = {
 }
 
 
+@dataclass(frozen=True)
+class LadderReading:
+    """The ladder of one target at the largest pool, the largest rho and the smallest N_L:
+    the look oracle's rows there and at the smallest rho, whether the positive control works
+    (the oracle gains over nonlinear V in every replicate there, in none at the smallest rho),
+    and the first rung below the oracle that loses the gain (None: every rung keeps it)."""
+
+    target: str
+    where: str
+    top: pd.DataFrame
+    a0: pd.Series
+    a0_low: pd.Series
+    control: bool
+    lost: str | None
+
+
+def ladder_readings(view: pd.DataFrame) -> list[LadderReading]:
+    """The `LadderReading` of every target whose look oracle ran (`seed_view` rows)."""
+    out = []
+    rhos = sorted(view["rho"].unique())
+    ls = sorted(view["n_labelled"].unique())
+    n_p = view["n_pool"].max()
+    big = view[view["n_pool"] == n_p]
+    for target, t in big.groupby("target", sort=True):
+        top = t[(t["rho"] == rhos[-1]) & (t["n_labelled"] == ls[0])]
+        low = t[(t["rho"] == rhos[0]) & (t["n_labelled"] == ls[0])]
+        a0, a0_low = arm_rows(top, "look_oracle", "linear"), arm_rows(low, "look_oracle", "linear")
+        if a0.empty or a0_low.empty:
+            continue
+        a0, a0_low = a0.iloc[0], a0_low.iloc[0]
+        control = _gains(a0) and int(a0_low["above_vs_nonlinear_v"]) == 0
+        rungs = list(RUNG_LABELS)
+        lost = next((r for r in rungs[1:] if not _gains(arm_rows(top, r, "linear").iloc[0])), None)
+        where = f"{target}, ρ = {rhos[-1]:g}, N_L = {ls[0]}, N_P = {n_p}"
+        out.append(LadderReading(str(target), where, top, a0, a0_low, control, lost))
+    return out
+
+
 def ladder_verdict(
     view: pd.DataFrame, gates: Sequence[str] = (), gate_passed: bool = True
 ) -> list[str]:
@@ -176,40 +218,28 @@ def ladder_verdict(
        helps.
     """
     out = list(gates)
-    rhos = sorted(view["rho"].unique())
-    ls = sorted(view["n_labelled"].unique())
-    n_p = view["n_pool"].max()
-    big = view[view["n_pool"] == n_p]
-    for target, t in big.groupby("target", sort=True):
-        top = t[(t["rho"] == rhos[-1]) & (t["n_labelled"] == ls[0])]
-        low = t[(t["rho"] == rhos[0]) & (t["n_labelled"] == ls[0])]
-        a0, a0_low = arm_rows(top, "look_oracle", "linear"), arm_rows(low, "look_oracle", "linear")
-        if a0.empty or a0_low.empty:
-            continue
-        a0, a0_low = a0.iloc[0], a0_low.iloc[0]
-        where = f"{target}, ρ = {rhos[-1]:g}, N_L = {ls[0]}, N_P = {n_p}"
-        control = _gains(a0) and int(a0_low["above_vs_nonlinear_v"]) == 0
-        if not control:
+    rho_lo = view["rho"].min()
+    for r in ladder_readings(view):
+        a0, a0_low, top = r.a0, r.a0_low, r.top
+        if not r.control:
             out.append(
-                f"Positive control fails ({where}): the look oracle (A0) − nonlinear V "
-                f"{_delta_words(a0, 'nonlinear_v')}; at ρ = {rhos[0]:g} "
-                f"{_delta_words(a0_low, 'nonlinear_v')}. A generator with perfect vision shows "
+                f"Positive control fails ({r.where}): the look oracle (A0) − nonlinear V "
+                f"{replicate_words(a0, 'nonlinear_v')}; at ρ = {rho_lo:g} "
+                f"{replicate_words(a0_low, 'nonlinear_v')}. A generator with perfect vision shows "
                 "no gain the probes detect, so the regime cannot say whether generated touch "
                 "helps: the probe or the evaluation lacks the power."
             )
             continue
         out.append(
-            f"Positive control works ({where}): the look oracle (A0) − nonlinear V "
-            f"{_delta_words(a0, 'nonlinear_v')}, and nothing at ρ = {rhos[0]:g} "
-            f"({_delta_words(a0_low, 'nonlinear_v')}): the probes detect a gain that exists."
+            f"Positive control works ({r.where}): the look oracle (A0) − nonlinear V "
+            f"{replicate_words(a0, 'nonlinear_v')}, and nothing at ρ = {rho_lo:g} "
+            f"({replicate_words(a0_low, 'nonlinear_v')}): the probes detect a gain that exists."
         )
-        rungs = list(RUNG_LABELS)
-        lost = next((r for r in rungs[1:] if not _gains(arm_rows(top, r, "linear").iloc[0])), None)
-        if lost is None:
+        gen = arm_rows(top, "v_tgen", "linear").iloc[0]
+        if r.lost is None:
             out.append(
-                f"{target}: every rung down to one diffusion sample (A3) keeps the gain "
-                f"({_delta_words(arm_rows(top, 'v_tgen', 'linear').iloc[0], 'nonlinear_v')} "
-                "against nonlinear V)."
+                f"{r.target}: every rung down to one diffusion sample (A3) keeps the gain "
+                f"({replicate_words(gen, 'nonlinear_v')} against nonlinear V)."
                 + (
                     ""
                     if gate_passed
@@ -217,15 +247,16 @@ def ladder_verdict(
                 )
             )
             continue
-        kept = rungs[: rungs.index(lost)]
-        r = arm_rows(top, lost, "linear").iloc[0]
+        rungs = list(RUNG_LABELS)
+        kept = rungs[: rungs.index(r.lost)]
+        lost = arm_rows(top, r.lost, "linear").iloc[0]
         out.append(
-            f"{target}: the gain survives down to {RUNG_LABELS[kept[-1]]} and is lost at "
-            f"{RUNG_LABELS[lost]} ({_delta_words(r, 'nonlinear_v')} against nonlinear V): "
-            f"{_LOSS[lost]}."
+            f"{r.target}: the gain survives down to {RUNG_LABELS[kept[-1]]} and is lost at "
+            f"{RUNG_LABELS[r.lost]} ({replicate_words(lost, 'nonlinear_v')} against nonlinear V): "
+            f"{_LOSS[r.lost]}."
             + (
                 f" The workflow's own generator (A3) − nonlinear V "
-                f"{_delta_words(arm_rows(top, 'v_tgen', 'linear').iloc[0], 'nonlinear_v')}."
+                f"{replicate_words(gen, 'nonlinear_v')}."
             )
             + (
                 ""
@@ -237,7 +268,7 @@ def ladder_verdict(
     return out
 
 
-def _delta_words(r: pd.Series, what: str) -> str:
+def replicate_words(r: pd.Series, what: str) -> str:
     """A `seed_view` row's mean Delta against `what` (linear_v | nonlinear_v | distilled) and
     how many seeds' CIs lie above or below 0, in words."""
     d, n = r[f"delta_vs_{what}"], int(r["n_seeds"])
@@ -307,11 +338,11 @@ def hypothesis_sentences(view: pd.DataFrame) -> list[str]:
         out.append(
             f"H2 (ρ = {rhos[-1]:g}, N_L = {ls[0]}, N_P = {n_p}: V + T_gen beats linear V), "
             f"{probe} probe: Δ vs linear V "
-            f"{_delta_words(r, 'linear_v')}"
+            f"{replicate_words(r, 'linear_v')}"
             f"; vs nonlinear V "
-            f"{_delta_words(r, 'nonlinear_v')}"
+            f"{replicate_words(r, 'nonlinear_v')}"
             f"; vs distillation "
-            f"{_delta_words(r, 'distilled')}."
+            f"{replicate_words(r, 'distilled')}."
         )
     # H3: the gain shrinks as N_L grows
     g = arm_rows(view[(view["rho"] == rhos[-1]) & (view["n_pool"] == n_p)], "v_tgen", "linear")
@@ -338,9 +369,9 @@ def hypothesis_sentences(view: pd.DataFrame) -> list[str]:
         out.append(
             f"The pool without generation ({target}, ρ = {rhos[-1]:g}, N_L = {ls[0]}, N_P = "
             f"{n_p}): generalised distillation (linear student on V) vs linear V "
-            f"{_delta_words(d, 'linear_v')}"
+            f"{replicate_words(d, 'linear_v')}"
             f"; V + T_gen vs distillation "
-            f"{_delta_words(gen, 'distilled')}"
+            f"{replicate_words(gen, 'distilled')}"
             + (
                 ": generation adds nothing the pool does not give without it."
                 if pool_only

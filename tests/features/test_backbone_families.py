@@ -647,10 +647,15 @@ def test_findings_row_per_other_family_with_the_null_corpus_beside():
             row("resnet", "force_null", "raw", 0.2, 0.1, True),
         ]
     )
-    got = backbone_findings(summary, main=["dinov2"])
+    got, decided = backbone_findings(summary, main=["dinov2"])
+    by_id = {d["decision_id"]: d["decision"] for d in decided}
+    assert by_id == {
+        "backbones|resnet|direction": "holds",
+        "backbones|resnet|null_gains": "force_null",
+    }
     assert list(got.columns) == FINDINGS_COLUMNS and list(got["evidence"]) == ["backbone families"]
     r = got.iloc[0]
     assert "resnet" in r["question"] and r["result"] == "V+T − V: force +0.300 [+0.200, +0.400]"
     assert r["control"].startswith("null corpus V+T − V: force_null +0.200")
     assert r["verdict"].startswith("The V+T direction holds") and "UNEXPECTED" in r["verdict"]
-    assert backbone_findings(summary[summary["family"] == "dinov2"], main=["dinov2"]).empty
+    assert backbone_findings(summary[summary["family"] == "dinov2"], main=["dinov2"]).rows.empty

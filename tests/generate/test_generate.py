@@ -877,7 +877,11 @@ def test_report_tables_and_figures_from_a_summary():
     assert flags["sim_controlled"] == "yes: Δ is no evidence" and flags["sim_paired"] == "no"
     mean, lo, hi = rep.cross_seed_interval(np.array([0.0, 0.05]))
     assert mean == pytest.approx(0.025) and lo < 0 < hi
-    found = generation_findings(summary, ref).set_index("question")
+    part = generation_findings(summary, ref)
+    found = part.rows.set_index("question")
+    by_id = {d["decision_id"]: d["decision"] for d in part.decisions}
+    assert by_id["generation|sim_controlled|density|v_vs_majority"] == "below majority"
+    assert by_id["generation|sim_controlled|density|vs_ridge"] == "below 0"
     controlled = found.loc[found.index.str.contains("sim_controlled"), "verdict"].iloc[0]
     assert "⚠ V accuracy 0.500 below the majority-class rate 0.600" in controlled
     assert "V + T_gen scores below V + ridge V→T" in controlled  # Δ_gen − ridge CI < 0

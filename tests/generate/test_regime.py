@@ -496,7 +496,9 @@ def test_findings_and_report_read_the_summary():
     from tacgen_lib.report.findings import regime_findings
 
     summary = pd.concat([_evaluate(0.0), _evaluate(1.0)], ignore_index=True)
-    found = regime_findings(summary)
+    found, decided = regime_findings(summary)
+    ids = {d["decision_id"] for d in decided}
+    assert {"regime|hardness|v_tgen_vs_linear_v", "regime|hardness|positive_control"} <= ids
     assert list(found["evidence"]) == ["regime", "regime"]
     hard = found[found["question"].str.contains("hardness")].iloc[0]
     gen = summary[
@@ -505,8 +507,11 @@ def test_findings_and_report_read_the_summary():
         & (summary["target"] == "hardness")
         & (summary["arm"] == "v_tgen")
         & (summary["probe"] == "linear")
-    ].iloc[0]
-    assert f"{gen['delta_vs_linear_v']:+.3f}" in hard["result"]
+    ]
+    # the mean over the cell's replicates (seed x labelled draw), not one draw
+    assert len(gen) == 2
+    assert f"{gen['delta_vs_linear_v'].mean():+.3f}" in hard["result"]
+    assert "of 2 replicates" in hard["result"]
     assert "ρ = 1, N_L = 6, N_P = 100" in hard["question"]
     assert "look oracle − nonlinear V" in hard["control"]
     view = rep.seed_view(summary)

@@ -174,7 +174,12 @@ def test_the_page_reads_the_summary():
     assert "scores below the frozen features' V" in flagged and "against the frozen V" in flagged
     fig = report.transfer_figure(out, "sim_transfer")
     assert figure_problems(fig) == []
-    row = findings.transfer_findings(out).iloc[0]
+    part = findings.transfer_findings(out)
+    row = part.rows.iloc[0]
+    assert [d["decision_id"] for d in part.decisions][:2] == [
+        "transfer|source",
+        "transfer|source_vs_shuffled",
+    ]
     assert row["page"].endswith("Transfer to a second sensor")
     assert "heads from sim_paired" in row["result"] and "not run" in row["result"]
     assert row["verdict"].startswith(("No measurable difference", "V+T"))

@@ -243,6 +243,7 @@ def _probe_summary():
         corpus="sim_paired",
         metric="accuracy",
         align_seed=math.nan,
+        probe_seed=42,
         input="raw",
     )
     return pd.DataFrame(
@@ -294,13 +295,64 @@ def _probe_summary():
 
 
 def test_findings_rows_carry_result_control_verdict_and_page():
-    rows = findings.probe_findings(_probe_summary())
+    rows, decided = findings.probe_findings(_probe_summary())
     assert list(rows.columns) == findings.FINDINGS_COLUMNS
     assert len(rows) == 2  # one per family with its controls; the max fusion is not a finding
     main = rows.iloc[0]
     assert "Δ +0.300 [+0.220, +0.370]" in main["result"]
     assert "criterion met" in main["verdict"] and main["page"] == category("Probes")
     assert rows.iloc[1]["verdict"].startswith("As expected on the null corpus")
+    # every verdict's decisions, keyed by what they decide
+    by_id = {d["decision_id"]: d for d in decided}
+    assert by_id["probe|hardness|raw"]["decision"] == "above 0"
+    assert by_id["probe|hardness|raw|criterion"]["decision"] == "met"
+    assert by_id["probe|hardness_null|raw"]["decision"] == "no measurable difference"
+
+
+def test_aligned_findings_read_every_heads_seed():
+    """Heads trained with two seeds: a gain one seed's heads show and the other's do not is
+    no measurable difference, and one the seeds agree on is read from both intervals."""
+    base = _probe_summary().iloc[0].to_dict()
+
+    def aligned(seed, delta, lo, hi, ctrl=0.01):
+        return {
+            **base,
+            "input": "aligned",
+            "align_seed": seed,
+            "delta": delta,
+            "ci_low": lo,
+            "ci_high": hi,
+            "delta_ctrl": ctrl,
+        }
+
+    disagree = pd.DataFrame(
+        [aligned(42, 0.13, -0.25, 0.49), aligned(43, 0.59, 0.39, 0.78, math.nan)]
+    )
+    rows, decided = findings.probe_findings(disagree)
+    assert len(rows) == 1 and "per seed 42: +0.130" in rows.iloc[0]["result"]
+    (d,) = [d for d in decided if d["decision_id"] == "probe|hardness|aligned"]
+    assert d["decision"] == "no measurable difference" and d["ci_low"] <= -0.25
+    assert d["value"] == pytest.approx(0.36)
+    agree = pd.DataFrame([aligned(42, 0.30, 0.25, 0.35), aligned(43, 0.301, 0.26, 0.36, math.nan)])
+    _, decided = findings.probe_findings(agree)
+    (d,) = [d for d in decided if d["decision_id"] == "probe|hardness|aligned"]
+    assert d["decision"] == "above 0" and d["ci_low"] > 0 and d["ci_high"] >= 0.36
+
+
+def test_seeds_interval_holds_each_seed_and_their_spread():
+    assert claims.seeds_interval([0.2], [0.1], [0.3]) == (0.2, 0.1, 0.3)
+    m, lo, hi = claims.seeds_interval([0.2, 0.4, np.nan], [0.1, 0.35, 0.0], [0.3, 0.45, 0.0])
+    t_m, t_lo, t_hi = claims.mean_t_interval([0.2, 0.4])
+    assert m == pytest.approx(0.3) and lo == min(t_lo, 0.1) and hi == max(t_hi, 0.45)
+    assert all(math.isnan(x) for x in claims.seeds_interval([np.nan], [0.0], [1.0]))
+
+
+def test_below_majority_needs_the_wilson_interval_below_it():
+    # 114 of 240 right (0.475) against a majority of 0.52: within the test rows' noise
+    assert not claims.below_majority(0.475, 0.52, 240)
+    assert claims.below_majority(0.40, 0.52, 240)
+    assert claims.below_majority(0.475, 0.52)  # no row count: the point decides
+    assert not claims.below_majority(math.nan, 0.52, 240)
 
 
 def test_policy_findings_use_the_ceiling_claim():
@@ -337,7 +389,8 @@ def test_policy_findings_use_the_ceiling_claim():
     sweep = pd.DataFrame(
         {"success": [0.38, 0.44], "gap_closed": [-0.09, 0.02], "vision_ceiling": [0.363, 0.363]}
     )
-    rows = findings.policy_findings(summary, deltas, sweep)
+    rows, decided = findings.policy_findings(summary, deltas, sweep)
+    assert [d["decision"] for d in decided] == ["above 0", "at the ceiling"]
     assert rows["verdict"].iloc[0].startswith("Touch helps")
     # all 128 successes: the Wilson interval, not a bootstrap of width 0
     assert "V+T 1.000 [0.971, 1.000] (Wilson: all 128/128 alike)" in rows["result"].iloc[0]

@@ -1,5 +1,5 @@
 """The findings page: every evidence branch's headline with its control and a verdict
-generated from the numbers (rule findings)."""
+generated from the numbers, and the decisions edge of those verdicts (rule findings)."""
 
 from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
 
@@ -58,7 +58,8 @@ if snakemake.params.backbones:
     )
 if snakemake.params.transfer:
     parts.append(findings.transfer_findings(edges.read(snakemake.input.transfer).frame))
-table = pd.concat(parts, ignore_index=True)
+table, decided = findings.gather(parts)
+edges.write(snakemake.output.decisions, decided, key="decision_id", producer=snakemake.rule)
 write_table(
     table,
     snakemake.output.html,
@@ -75,3 +76,4 @@ write_table(
 )
 for r in table.itertuples():
     logger.info("%s: %s", r.evidence, r.verdict)
+logger.info("%d decisions -> %s", len(decided), snakemake.output.decisions)
