@@ -94,6 +94,14 @@ def ddpm(data, request):
         torch.set_num_threads(before)
 
 
+def rounding_atol(frames: np.ndarray, passes: int = 1) -> float:
+    """How far two computations of the same frames may differ where only kernels differ
+    (another batch shape, or a reloaded model's kernel path): one U-Net pass rounds at a few
+    eps x |x|, and each of `passes` DDIM steps combines two outputs with coefficients <= 1 and
+    may add as much again: 16 passes eps32 max(1, |x|)."""
+    return 16 * passes * EPS32 * max(1.0, float(np.abs(frames).max()))
+
+
 def sample_kw(fit, **changes):
     kw = {
         "schedule": fit.schedule,
@@ -233,18 +241,16 @@ def test_same_seed_same_frames_bit_for_bit(p2p, ddpm, data):
 
 @pytest.mark.parametrize("w, eta", [(1.0, 0.0), (3.0, 1.0)])
 def test_batch_one_vs_batch_n_within_float32_rounding(p2p, ddpm, data, w, eta):
-    """The noise covers all rows up front, so only the U-Net's batched kernels differ. One
-    pass rounds at a few eps x |x|; each of the S DDIM steps combines two outputs with
-    coefficients <= 1 and may add as much again: tolerance 16 S eps32 max(1, |x|)."""
+    """The noise covers all rows up front, so only the U-Net's batched kernels differ: within
+    `rounding_atol` of the S DDIM steps."""
     rgb = data["rgb_va"][:8]
     steps = 5
     kw = sample_kw(ddpm, steps=steps, guidance=w, eta=eta)
     one = sample_pixel_ddpm(ddpm.model, rgb, batch=1, **kw)
     many = sample_pixel_ddpm(ddpm.model, rgb, batch=8, **kw)
-    atol = 16 * steps * EPS32 * max(1.0, float(np.abs(many).max()))
-    np.testing.assert_allclose(one, many, rtol=0, atol=atol)
+    np.testing.assert_allclose(one, many, rtol=0, atol=rounding_atol(many, steps))
     g1, g8 = translate(p2p.model, rgb, batch=1), translate(p2p.model, rgb, batch=8)
-    np.testing.assert_allclose(g1, g8, rtol=0, atol=16 * EPS32 * max(1.0, np.abs(g8).max()))
+    np.testing.assert_allclose(g1, g8, rtol=0, atol=rounding_atol(g8))
 
 
 # ------------------------------------------------------------------ learning
@@ -302,14 +308,25 @@ def test_weights_round_trip_and_same_bytes(kind, p2p, ddpm, data, tmp_path):
     for f in ("seed", "size", "best_step", "best_val", "steps_run", "stopped_early"):
         assert getattr(back, f) == getattr(fit, f), f
     pd.testing.assert_frame_equal(back.curve, fit.curve)
+    # the file gives back every weight bit for bit (a data move)...
+    state, back_state = fit.model.state_dict(), back.model.state_dict()
+    assert state.keys() == back_state.keys()
+    for k, v in state.items():
+        assert torch.equal(back_state[k], v), k
+    # ...but the reloaded model is another computation: torch may pick its kernels by the
+    # weights' flags (the fit's EMA U-Net needs no gradient, the loaded one's weights do), so
+    # the two models' frames agree within rounding (`rounding_atol`), not bit for bit
     rgb = data["rgb_va"][:5]
     if kind == "pix2pix":
-        np.testing.assert_array_equal(translate(back.model, rgb), translate(fit.model, rgb))
+        got, want = translate(back.model, rgb), translate(fit.model, rgb)
+        np.testing.assert_allclose(got, want, rtol=0, atol=rounding_atol(want))
     else:
         kw = sample_kw(fit, guidance=2.0, eta=1.0)
-        np.testing.assert_array_equal(
-            sample_pixel_ddpm(back.model, rgb, **kw), sample_pixel_ddpm(fit.model, rgb, **kw)
+        got, want = (
+            sample_pixel_ddpm(back.model, rgb, **kw),
+            sample_pixel_ddpm(fit.model, rgb, **kw),
         )
+        np.testing.assert_allclose(got, want, rtol=0, atol=rounding_atol(want, kw["steps"]))
     with pytest.raises(ValueError, match="does not match the fit"):
         save_pixel_generator(fit, tmp_path / "c", kind="ddpm" if kind == "pix2pix" else "pix2pix")
 

@@ -119,7 +119,12 @@ def test_standardised_logistic_is_raw():
     np.testing.assert_array_equal(raw.pred_test, std.pred_test)
     assert same_as_raw("standardised", "logistic") and not same_as_raw("standardised", "ridge")
     ref = make_pipeline(StandardScaler(), LogisticRegression(C=raw.reg, tol=1e-6, max_iter=5000))
-    np.testing.assert_array_equal(raw.pred_test, ref.fit(X, y).predict(Xt))
+    ref.fit(X, y)
+    # scikit-learn's lbfgs and the probe's (`probes.lbfgs`) are two computations of the same
+    # iterates, whose decisions agree within 1e-5 (tests/probes/test_lbfgs.py): the labels
+    # are compared exactly where no test row lies within 1e-4 of the boundary
+    assert np.abs(ref.decision_function(Xt)).min() > 1e-4
+    np.testing.assert_array_equal(raw.pred_test, ref.predict(Xt))
 
 
 # --------------------------------------------------------------------------- mlp2

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 import scipy.stats
@@ -22,7 +24,7 @@ from tacgen_lib.probes.controls import (
     train_resample_diagnostic,
 )
 from tacgen_lib.probes.fusion import fuse
-from tacgen_lib.probes.logistic import FixedLogistic
+from tacgen_lib.probes.logistic import FixedLogistic, fit_logistic_once
 from tacgen_lib.probes.metrics import r2
 from tacgen_lib.probes.objective import DesignBlock
 from tacgen_lib.probes.refits import Refits, Refitted
@@ -216,7 +218,7 @@ def test_tactile_permutation_batched_equals_loop_with_intact_test():
     kw = dict(metric="accuracy", n_permutations=6, seed=5)
     fast = tactile_permutation_control(rows, probe=TIGHT, **kw)
     assert fast["solver"] == {"batched_logistic": 6}
-    loop = tactile_permutation_control(rows, probe=SpyProbe(TIGHT), probe_v=TIGHT, **kw)
+    loop = tactile_permutation_control(rows, probe=SpyProbe(CHECKED_TIGHT), probe_v=TIGHT, **kw)
     np.testing.assert_array_equal(fast["vt_scores"], loop["vt_scores"])
 
 
@@ -349,11 +351,38 @@ def test_criterion_and_bootstrap_refuse_non_finite():
 # Both paths at the optimum, so their labels are compared exactly although the batched
 # solver and scikit-learn's lbfgs are different computations: at tol 1e-10 their decision
 # values agree within 2e-6 on the problems below (measured: 3e-7 to 1.9e-6, against 3e-5 at
-# tol 1e-6), while no test row lies within 1e-3 of the boundary (1.04e-3 the closest): 500x
-# apart; another CPU moves each stop within the same tolerance, so no label can flip.
+# tol 1e-6), while no test row lies within TIE_MARGIN of the boundary (`tight_predict` checks
+# it in every reference fit): 50x apart; another CPU moves each stop within the same
+# tolerance, so no label can flip.
 TIGHT = FixedLogistic(1.0, tol=1e-10)
 #: the V and the V+T probe of the logistic controls' tests, scored by accuracy
 TIGHT_PAIR = dict(probe_v=TIGHT, probe_vt=TIGHT, metric="accuracy")
+#: how far from a tie every test row's decision must lie for the labels of two solvers
+#: stopped at TIGHT's tolerance to be compared exactly
+TIE_MARGIN = 1e-4
+
+
+def tight_predict(X_train, y_train, X_test):
+    """`TIGHT.fit_predict` (the same fit), after checking that no test row's decision (|d|;
+    with more classes the gap of the two largest logits) lies within TIE_MARGIN of a tie."""
+    fit = fit_logistic_once(
+        np.asarray(X_train, dtype=np.float64),
+        np.asarray(y_train),
+        TIGHT.C,
+        TIGHT.max_iter,
+        TIGHT.max_iter_cap,
+        TIGHT.tol,
+    )
+    x_te = np.asarray(X_test, dtype=np.float64)
+    d = fit.model.decision_function(x_te)
+    top2 = np.sort(d, axis=1)[:, -2:] if d.ndim == 2 else None
+    margin = np.abs(d) if top2 is None else top2[:, 1] - top2[:, 0]
+    assert margin.min() > TIE_MARGIN, margin.min()
+    return fit.model.predict(x_te)
+
+
+#: `tight_predict` as a probe for `SpyProbe`'s refit loop
+CHECKED_TIGHT = SimpleNamespace(fit_predict=tight_predict)
 
 
 def class_data(n_tr=80, n_te=40, seed=0, n_classes=2):
@@ -373,7 +402,7 @@ def test_logistic_tactile_permutation_batched_equals_refit_loop(n_classes):
     loop = [
         accuracy_score(
             y_te,
-            TIGHT.fit_predict(fuse("concat", v_tr, t_tr[a]), y_tr, fuse("concat", v_te, t_te)),
+            tight_predict(fuse("concat", v_tr, t_tr[a]), y_tr, fuse("concat", v_te, t_te)),
         )
         for a in p_tr
     ]
@@ -386,8 +415,8 @@ def test_logistic_label_permutation_batched_equals_refit_loop():
     x_tr, x_te = fuse("concat", v_tr, t_tr), fuse("concat", v_te, t_te)
     out = label_permutation_control(PairedRows(*data), **TIGHT_PAIR, n_permutations=6, seed=6)
     perm = np.argsort(np.random.default_rng(6).random((6, 80)), axis=1, kind="stable")
-    vt = [accuracy_score(y_te, TIGHT.fit_predict(x_tr, y_tr[p], x_te)) for p in perm]
-    v = [accuracy_score(y_te, TIGHT.fit_predict(v_tr, y_tr[p], v_te)) for p in perm]
+    vt = [accuracy_score(y_te, tight_predict(x_tr, y_tr[p], x_te)) for p in perm]
+    v = [accuracy_score(y_te, tight_predict(v_tr, y_tr[p], v_te)) for p in perm]
     np.testing.assert_array_equal(out["vt_scores"], vt)
     np.testing.assert_array_equal(out["v_scores"], v)
 
@@ -402,7 +431,7 @@ def test_logistic_random_features_batched_equals_refit_loop():
     for _ in range(4):
         r_tr = mu + sd * rng.standard_normal(t_tr.shape)
         r_te = mu + sd * rng.standard_normal(t_te.shape)
-        pred = TIGHT.fit_predict(np.hstack([v_tr, r_tr]), y_tr, np.hstack([v_te, r_te]))
+        pred = tight_predict(np.hstack([v_tr, r_tr]), y_tr, np.hstack([v_te, r_te]))
         loop.append(accuracy_score(y_te, pred))
     np.testing.assert_array_equal(fast["vt_scores"], loop)
 
@@ -418,8 +447,8 @@ def test_logistic_train_resample_batched_equals_loop_with_missing_class_resample
     idx = resample_indices(30, 16, seed=3)
     missing = [len(np.unique(y_tr[i])) < 3 for i in idx]
     assert any(missing) and not all(missing)  # both paths are exercised
-    vt = [accuracy_score(y_te, TIGHT.fit_predict(x_tr[i], y_tr[i], x_te)) for i in idx]
-    v = [accuracy_score(y_te, TIGHT.fit_predict(v_tr[i], y_tr[i], v_te)) for i in idx]
+    vt = [accuracy_score(y_te, tight_predict(x_tr[i], y_tr[i], x_te)) for i in idx]
+    v = [accuracy_score(y_te, tight_predict(v_tr[i], y_tr[i], v_te)) for i in idx]
     np.testing.assert_array_equal(out["vt_scores"], vt)
     np.testing.assert_array_equal(out["v_scores"], v)
 
