@@ -10,7 +10,7 @@ policy) takes the run's device spec through its rule's params (`device_spec`: th
   every random draw is made on the CPU (seeded torch and numpy generators), then moved to the
   device: on the CPU that move is no move at all, so the edges are the same bytes as before the
   key existed.
-- ``cuda``: the first CUDA GPU; a run stops, saying so, where torch has no CUDA or sees no GPU.
+- ``cuda``: a CUDA GPU; a run stops, saying so, where torch has no CUDA or sees no GPU.
   The random draws are the CPU's (the same numbers as on the CPU), the arithmetic the GPU's:
   results agree with the CPU's within float tolerance, and two runs on the same GPU with the
   same seeds agree within tolerance, not bit for bit (cuBLAS and cuDNN choose kernels and
@@ -18,7 +18,10 @@ policy) takes the run's device spec through its rule's params (`device_spec`: th
   deterministic kernels, which narrows but does not remove the differences). Float32 matrix
   products and convolutions are computed in float32: TF32 (a 10-bit mantissa on Ampere and
   later GPUs, which cuDNN's convolutions use by default) is off unless config `allow_tf32`.
-- ``auto``: cuda where torch sees a GPU, else cpu.
+  Where a job sees several GPUs, it takes one no other job holds
+  (`tacgen_lib.runtime.gpus.claim_gpu`) before CUDA is first touched.
+- ``auto``: cuda where torch sees a GPU, else cpu (refused on a cluster executor:
+  `tacgen_lib.runtime.gpus.run_uses_gpu`).
 
 Imports torch only when called (the preloaded interpreter's modules import this one).
 """
@@ -27,6 +30,8 @@ from __future__ import annotations
 
 import os
 from typing import TYPE_CHECKING
+
+from tacgen_lib.runtime.gpus import claim_gpu, visible_gpus
 
 if TYPE_CHECKING:
     import torch
@@ -95,14 +100,19 @@ def configure_cuda_math(allow_tf32: bool) -> None:
 def torch_device(spec: str) -> torch.device:
     """The torch device of the device spec `spec` (`device_spec`; a bare `DEVICES` value).
     ``cuda`` where no GPU can be used stops with the reason; ``auto`` falls back to the CPU
-    there. On a GPU cuBLAS is given its deterministic workspace (CUBLAS_WORKSPACE_CONFIG,
-    unless set) and `configure_cuda_math`
+    there. On a GPU: where the job sees several, it takes one no other job holds
+    (CUDA_VISIBLE_DEVICES narrowed to it, before CUDA is first touched); cuBLAS is given its
+    deterministic workspace (CUBLAS_WORKSPACE_CONFIG, unless set) and `configure_cuda_math`
     sets the arithmetic."""
     import torch
 
     name, allow_tf32 = parse_device_spec(spec)
     if name == "cpu":
         return torch.device("cpu")
+    if torch.version.cuda is not None:
+        gpu = claim_gpu(visible_gpus())
+        if gpu is not None:
+            os.environ["CUDA_VISIBLE_DEVICES"] = gpu
     why = cuda_unavailable()
     if why is not None:
         if name == "auto":
