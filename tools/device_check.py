@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import shutil
 import subprocess
 import sys
@@ -77,13 +78,22 @@ def snakemake_command(device: str, configfile: str, cores: int, extra: Sequence[
 
 
 def run(folder: Path, command: list[str]) -> float:
-    """Run `command` in a fresh copy of the workflow in `folder`; its wall seconds. Its output
+    """Run `command` in a fresh copy of the workflow in `folder`; its wall seconds. The copy's
+    library comes first on PYTHONPATH, so every job, also those the preloaded interpreter
+    runs (it does not put the working directory on its path), uses the copy's code. Output
     goes to folder/device_check.log; a failure stops the check naming it."""
     copy_workflow(folder)
     log = folder / "device_check.log"
+    path = os.pathsep.join(p for p in (str(folder), os.environ.get("PYTHONPATH", "")) if p)
     started = time.perf_counter()
     with log.open("w") as out:
-        proc = subprocess.run(command, cwd=folder, stdout=out, stderr=subprocess.STDOUT)
+        proc = subprocess.run(
+            command,
+            cwd=folder,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+            env={**os.environ, "PYTHONPATH": path},
+        )
     seconds = time.perf_counter() - started
     if proc.returncode != 0:
         tail = log.read_text()[-3000:]
