@@ -2,9 +2,10 @@
 VENV ?= .venv
 BIN := $(VENV)/bin
 CORES ?= 2
-# which torch build setup installs: cpu (default), cuda (or a backend such as cu126), auto
-# (cuda where an NVIDIA driver is loaded): tools/torch_build.py
-TORCH ?= cpu
+# which torch build setup installs: cpu, cuda (or a backend such as cu126), auto (cuda where
+# an NVIDIA driver is loaded); left empty, the build .venv was last set up with (cpu for a new
+# one), so `make setup TORCH=cuda` then a plain `make run` keeps CUDA: tools/torch_build.py
+TORCH ?=
 
 .PHONY: setup setup-test run report test test-kernels lint resume estimate
 

@@ -10,6 +10,7 @@ from tacgen_lib.io.config import load_yaml
 from tacgen_lib.workflow_config import validate_config
 from tacgen_lib.io.imports import code_inputs
 from tacgen_lib.report_pages import DECISIONS_EDGE, category
+from tacgen_lib.runtime.device import device_spec
 
 #: this workflow's own tree (the repository): where its schema, scripts and library live, also
 #: when another workflow uses it as a module (`workflow.basedir` is then that workflow's
@@ -31,9 +32,10 @@ SCENES = (
     load_yaml(config["scenes_file"]) if os.path.exists(config["scenes_file"]) else {}
 )
 CORPORA = config["corpora"]
-#: config device (cpu | cuda | auto): where every torch job computes, passed in its params
-#: (tacgen_lib.runtime.device.torch_device reads it; cpu is bit-identical to a CPU-only run)
-DEVICE = config["device"]
+#: config device (cpu | cuda | auto), with +tf32 where config allow_tf32 lets a GPU use it:
+#: where every torch job computes, passed in its params (tacgen_lib.runtime.device.torch_device
+#: reads it; cpu is bit-identical to a CPU-only run)
+DEVICE = device_spec(config["device"], config["allow_tf32"])
 #: config probes without the families and seeds the rules expand: what every rule that fits
 #: probes passes on (tacgen_lib.probes.settings.ProbeSettings.from_config reads it)
 PROBE_SETTINGS = {

@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Set up a machine for TacGen workflow: Debian's Mesa (EGL/OSMesa) for MuJoCo rendering on the
 # CPU, then a virtual environment with the pinned torch (CPU build by default; TORCH=cuda for a
-# GPU: tools/torch_build.py) and the project installed.
+# GPU: tools/torch_build.py) and the project installed. Without TORCH, the build this
+# environment was last set up with (remembered in VENV/.tacgen-torch), so a plain `make run`
+# after `make setup TORCH=cuda` keeps CUDA. Writes no tracked file.
 # Idempotent: a second run checks and returns in seconds.
 # With --browser (make test), also Debian's Chromium and its driver: the report's browser test
 # opens results/report.html in headless Chromium through Selenium.
@@ -40,17 +42,19 @@ fi
 
 # 2. Python environment. Which torch build, from where (tools/torch_build.py, tested offline):
 #    TORCH=cpu the CPU build, from a local wheel folder (/opt/wheels) where it holds one, else
-#    PyTorch's CPU index (the default); TORCH=cuda (or cuNNN) a CUDA build; TORCH=auto cuda
-#    where an NVIDIA driver is loaded, else cpu. constraints.txt pins torch's version.
-TORCH=${TORCH:-cpu}
+#    PyTorch's CPU index; TORCH=cuda (or cuNNN) a CUDA build, from a local CUDA wheel where there
+#    is one, else the CUDA index; TORCH=auto cuda where an NVIDIA driver is loaded, else cpu;
+#    no TORCH: the one remembered from this environment's last setup, else cpu.
+#    constraints.txt pins torch's version.
 if [ ! -x "$VENV/bin/python" ]; then
   echo "setup: creating $VENV"
   "$PYTHON" -m venv "$VENV"
 fi
+TORCH=$("$VENV/bin/python" tools/torch_build.py chosen --asked "${TORCH:-}" --venv "$VENV")
 stamp="$VENV/.tacgen-installed"
 want=$( (cat pyproject.toml constraints.txt tools/torch_build.py; echo "TORCH=$TORCH") | sha256sum | cut -c1-16)
 if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
-  echo "setup: installing the project into $VENV"
+  echo "setup: installing the project into $VENV (TORCH=$TORCH)"
   installed=$("$VENV/bin/python" tools/torch_build.py build 2>/dev/null || true)
   # uv (from PyPI) installs and byte-compiles on every core: on a 2-core machine about half
   # pip's time, most of which was pip compiling one file at a time. pip where uv cannot come.
@@ -65,10 +69,11 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
   fi
   echo "$want" > "$stamp"
 fi
-# the build installed is the one asked for, else stop naming both; envs/*.yaml (--sdm conda)
-# name the same build
+# the build installed is the one asked for, else stop naming both; a CUDA build computes on
+# the GPU (else stop naming the driver and the wheel's CUDA); then it is remembered
 "$VENV/bin/python" tools/torch_build.py check --asked "$TORCH"
-"$VENV/bin/python" tools/torch_build.py envs "$TORCH"
+"$VENV/bin/python" tools/torch_build.py gpu-check
+"$VENV/bin/python" tools/torch_build.py remember --venv "$VENV" "$TORCH"
 "$VENV/bin/python" - <<'PY'
 import sys
 import torch

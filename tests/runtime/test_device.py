@@ -1,8 +1,9 @@
-"""The config key `device` (tacgen_lib.runtime.device): how each value resolves here, that the
-schema offers exactly those values, and, where a CUDA GPU can be used, config/test.yaml's torch
-rules run on it and the GPU's numbers agree with the CPU's within float tolerance. Where no GPU
-can be used the GPU tests skip, saying why (`cuda_unavailable`). The CPU path's bit identity is
-the workflow tests' business (every edge of config/test.yaml, which runs with device: cpu)."""
+"""The config key `device` (tacgen_lib.runtime.device): how each value resolves here, the device
+spec a rule passes (with `allow_tf32`), the TF32 setting, that the schema offers exactly those
+values, and, where a CUDA GPU can be used, config/test.yaml's torch rules run on it and the
+GPU's numbers agree with the CPU's within the stated tolerances. Where no GPU can be used the
+GPU tests skip, saying why (`cuda_unavailable`). The CPU path's bit identity is the workflow
+tests' business (every edge of config/test.yaml, which runs with device: cpu)."""
 
 from __future__ import annotations
 
@@ -12,7 +13,14 @@ import torch
 import yaml
 from snakemake_run import ROOT, copy_tree, smk
 
-from tacgen_lib.runtime.device import DEVICES, cuda_unavailable, torch_device
+from tacgen_lib.runtime.device import (
+    DEVICES,
+    configure_cuda_math,
+    cuda_unavailable,
+    device_spec,
+    parse_device_spec,
+    torch_device,
+)
 
 NO_GPU = cuda_unavailable()
 needs_gpu = pytest.mark.skipif(NO_GPU is not None, reason=f"no CUDA GPU: {NO_GPU}")
@@ -34,10 +42,61 @@ def test_cuda_without_a_gpu_stops_saying_why():
         torch_device("cuda")
 
 
-def test_the_schema_offers_exactly_these_values_and_defaults_to_cpu():
+def test_the_schema_offers_exactly_these_values_and_defaults_to_cpu_without_tf32():
     schema = yaml.safe_load((ROOT / "config" / "config.schema.yaml").read_text())
     key = schema["properties"]["device"]
     assert tuple(key["enum"]) == DEVICES and key["default"] == "cpu"
+    tf32 = schema["properties"]["allow_tf32"]
+    assert tf32["type"] == "boolean" and tf32["default"] is False
+
+
+def test_the_device_spec_carries_tf32_only_where_a_gpu_may_compute():
+    """A rule's params: the config's device, +tf32 where allow_tf32 and the device can be a
+    GPU; cpu stays cpu (its params, and so a CPU run's jobs, never change with the key)."""
+    assert device_spec("cpu", False) == device_spec("cpu", True) == "cpu"
+    assert (device_spec("cuda", False), device_spec("cuda", True)) == ("cuda", "cuda+tf32")
+    assert device_spec("auto", True) == "auto+tf32"
+    for spec, parsed in [("cpu", ("cpu", False)), ("cuda+tf32", ("cuda", True))]:
+        assert parse_device_spec(spec) == parsed
+    for bad in ("gpu", "cuda+fp16", "cpu+"):
+        with pytest.raises(ValueError, match="expected one of cpu, cuda, auto"):
+            parse_device_spec(bad)
+    with pytest.raises(ValueError, match="'gpu'"):
+        device_spec("gpu", False)
+    assert torch_device("auto+tf32").type == ("cpu" if NO_GPU else "cuda")
+
+
+@pytest.fixture
+def cuda_math_flags():
+    """torch's process-wide GPU arithmetic flags, put back after the test."""
+    b = torch.backends
+    saved = (
+        b.cudnn.benchmark,
+        b.cudnn.deterministic,
+        b.cuda.matmul.allow_tf32,
+        b.cudnn.allow_tf32,
+    )
+    yield
+    (
+        b.cudnn.benchmark,
+        b.cudnn.deterministic,
+        b.cuda.matmul.allow_tf32,
+        b.cudnn.allow_tf32,
+    ) = saved
+
+
+def test_tf32_is_off_unless_allowed(cuda_math_flags):
+    """cuBLAS matrix products and cuDNN convolutions in float32 by default (torch's own default
+    lets cuDNN's convolutions use TF32); allow_tf32 turns both on. The flags are settable on a
+    CPU build, so this runs everywhere; torch's matmul precision reads back without the error
+    it raises for a mix of its two TF32 interfaces."""
+    b = torch.backends
+    configure_cuda_math(False)
+    assert (b.cuda.matmul.allow_tf32, b.cudnn.allow_tf32) == (False, False)
+    assert (b.cudnn.benchmark, b.cudnn.deterministic) == (False, True)
+    assert torch.get_float32_matmul_precision() == "highest"
+    configure_cuda_math(True)
+    assert (b.cuda.matmul.allow_tf32, b.cudnn.allow_tf32) == (True, True)
 
 
 @needs_gpu
@@ -93,13 +152,29 @@ def test_gpu_numbers_agree_with_the_cpus_within_tolerance():
 
 
 @needs_gpu
-def test_config_test_torch_rules_run_on_the_gpu(tmp_path):
-    """config/test.yaml with device: cuda, every rule (the torch ones on the GPU): the run
-    succeeds and its generated vectors are finite."""
+@pytest.mark.workflow
+@pytest.mark.timeout(3000)  # the CPU reference run (if this session has not made it) and this one
+def test_config_test_on_the_gpu_agrees_with_the_cpu_run_stage_by_stage(reference_run, tmp_path):
+    """config/test.yaml with device: cuda, every rule (the torch ones on the GPU, each holding
+    the `gpu` resource): every stage's vector edges within its tolerance of the session's CPU
+    run (tacgen_lib.io.run_compare.STAGE_TOLERANCES, docs/cluster.md), the findings' decisions
+    the same where the run states them, and the generated vectors finite."""
     from tacgen_lib.io import edges
+    from tacgen_lib.io.run_compare import compare_decisions, stage_differences
 
     work = copy_tree(tmp_path / "gpu")
-    smk(work, "--config", "device=cuda", timeout=1800)
+    smk(work, "--config", "device=cuda", timeout=2400)
+    stages = stage_differences(reference_run, work)
+    assert {s.stage for s in stages} >= {"features", "align", "generate", "pixel", "policy"}
+    report = "\n".join(
+        f"{s.stage}: {s.max_rel:.3g} (tolerance {s.tolerance:g}) at {s.worst.edge} "
+        f"[{s.worst.column}] {s.worst.worst_key!r} {s.worst.note}"
+        for s in stages
+    )
+    print(report)
+    assert all(s.within for s in stages), report
+    decisions = compare_decisions(reference_run, work)
+    assert decisions is None or decisions.agree, decisions
     outs = sorted((work / "results" / "generate").rglob("t_gen.parquet"))
     assert outs, "no generated vectors"
     for path in outs:
