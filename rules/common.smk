@@ -9,7 +9,8 @@ from tacgen_lib.generate.regime_sets import natural_grid_ends, regime_corpora
 from tacgen_lib.io.config import load_yaml
 from tacgen_lib.workflow_config import validate_config
 from tacgen_lib.io.imports import code_inputs
-from tacgen_lib.report_pages import DECISIONS_EDGE, category
+from tacgen_lib.io.run_compare import DECISIONS
+from tacgen_lib.report_pages import category
 from tacgen_lib.runtime.device import device_spec
 
 #: this workflow's own tree (the repository): where its schema, scripts and library live, also

@@ -141,9 +141,9 @@ rule findings:
             category=category("Findings"),
             labels={"table": "headline results, controls and verdicts"},
         ),
-        # one row per decision the page states (tacgen_lib.report.decisions): what
-        # tools/compare_runs.py compares between two runs
-        decisions=f"results/{DECISIONS_EDGE}",
+        # one row per decision the page states (tacgen_lib.report.decisions): what two runs
+        # are compared by (tools/device_check.py --compare)
+        decisions=str(DECISIONS),
     log:
         "results/logs/findings.log",
     benchmark:

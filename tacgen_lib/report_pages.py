@@ -9,11 +9,7 @@ apart from `tacgen_lib.report` (which loads matplotlib) because the DAG reads it
 
 from __future__ import annotations
 
-__all__ = ["DECISIONS_EDGE", "FINDINGS_COLUMNS", "PAGES", "category", "page_of"]
-
-#: Where rule findings writes the decisions its page states (`tacgen_lib.report.decisions`),
-#: relative to the run's ``results/``.
-DECISIONS_EDGE = "report/findings/decisions.parquet"
+__all__ = ["FINDINGS_COLUMNS", "PAGES", "category", "page_of"]
 
 #: The columns of the findings page's table, one row per finding (`tacgen_lib.report.findings`).
 FINDINGS_COLUMNS = ["evidence", "question", "result", "control", "verdict", "page"]

@@ -129,7 +129,8 @@ def stage_table(stages: list[StageDifference]) -> str:
 
 
 def decisions_line(found: DecisionComparison | None) -> str:
-    """One line on the findings' decisions of both runs."""
+    """One line on the findings' decisions of both runs, then one per decision that differs
+    or that one run states alone, with both runs' values."""
     if found is None:
         return "decisions: not produced by this run"
     if found.agree:
@@ -140,7 +141,7 @@ def decisions_line(found: DecisionComparison | None) -> str:
             parts.append(f"{len(ids)} {label}: {', '.join(ids)}")
     if found.only_b:
         parts.append(f"{len(found.only_b)} only in b: {', '.join(found.only_b)}")
-    return f"decisions: of {found.decisions}, " + "; ".join(parts)
+    return "\n".join([f"decisions: of {found.decisions}, " + "; ".join(parts), *found.lines])
 
 
 def seconds_table(run_a: Path, run_b: Path, labels: Sequence[str], top: int = 20) -> str:

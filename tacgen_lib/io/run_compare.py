@@ -1,16 +1,21 @@
-"""Two runs of one config compared: how far their vector edges are apart, stage by stage, and
+"""Two runs of one config compared: how far their edges' numbers are apart, stage by stage, and
 whether the findings' decisions agree. What a change of machine (a GPU against the CPU, another
-CPU class) is checked by: `tools/device_check.py` prints it, and the device test's end-to-end
-case (tests/runtime/test_device.py) asserts it against `STAGE_TOLERANCES`.
+CPU class, other kernels on one CPU) is checked by: `tools/device_check.py` prints it (its
+``--compare`` mode for two finished runs), and the device test's end-to-end case
+(tests/runtime/test_device.py) asserts it against `STAGE_TOLERANCES`.
 
-A vector edge is a hashed Parquet edge whose sidecar lists vector columns (`tacgen_lib.io.edges`);
-its stage is the first folder under results/ (features, align, generate, pixel, policy, ...).
-For each vector column the rows are joined on the edge's key, and a row's relative difference is
+An edge's stage is the first folder under results/ (features, align, generate, pixel, policy,
+...). Its numbers are compared with the rows joined on its key: each vector column by the rows'
+relative difference
 
     ||a_i - b_i||_2 / max(||a_i||_2, ||b_i||_2)      (0 where both rows are zero)
 
-the distance of the two vectors over the longer one's length, so a stage's tolerance does not
-depend on the scale of its features. A stage's difference is the largest over its edges' rows.
+the distance of the two vectors over the longer one's length, and each float scalar column
+(a summary's scores, Δs and interval bounds) by |a_i - b_i| / max|column| over both runs, its
+difference on the column's own scale; neither depends on the scale of a feature or a metric.
+A stage's difference is the largest over its edges' columns and rows. The decisions are
+compared by id (`compare_decisions`): two machines may round a value differently and still
+decide alike, which is what must hold.
 """
 
 from __future__ import annotations
@@ -32,7 +37,9 @@ __all__ = [
     "StageDifference",
     "compare_decisions",
     "stage_differences",
-    "vector_edge_differences",
+    "edge_differences",
+    "relative_column_differences",
+    "relative_row_differences",
 ]
 
 #: a stage's largest relative vector difference (above) a GPU run may show against the CPU's
@@ -89,30 +96,46 @@ class StageDifference:
 
 @dataclass(frozen=True)
 class DecisionComparison:
-    """The findings' decisions of both runs: how many each states, and the ids whose decision
-    differs or that only one run states."""
+    """The findings' decisions of both runs: how many each states, the ids whose decision
+    differs or that only one run states, and for each of those a line with both runs'
+    decisions, values and intervals (`lines`)."""
 
     decisions: int
     differ: tuple[str, ...]
     only_a: tuple[str, ...]
     only_b: tuple[str, ...]
+    lines: tuple[str, ...] = ()
 
     @property
     def agree(self) -> bool:
         return not (self.differ or self.only_a or self.only_b)
 
 
-def _vector_edges(run: Path) -> dict[str, list[str]]:
-    """Edge path (relative to `run`) -> its vector columns, from the sidecars under results/."""
+#: Parquet column types (a sidecar's ``columns``) compared as float scalars.
+_FLOAT_TYPES = frozenset({"double", "float", "halffloat"})
+
+
+def _numeric_edges(run: Path) -> dict[str, list[str]]:
+    """Edge path (relative to `run`) -> its vector and float scalar columns (vectors first),
+    from the sidecars of the keyed edges under results/ (a hashed file without a key, such as
+    weights, has none)."""
     out = {}
     for side in sorted((run / "results").rglob("*.sha256.json")):
         try:
-            vectors = json.loads(side.read_text()).get("vectors") or {}
+            meta = json.loads(side.read_text())
         except json.JSONDecodeError:
             continue
-        if vectors:
+        if not meta.get("key"):
+            continue
+        vectors = sorted(meta.get("vectors") or {})
+        floats = sorted(
+            c
+            for c, t in (meta.get("columns") or {}).items()
+            if t in _FLOAT_TYPES and c not in vectors
+        )
+        if vectors or floats:
             edge = side.with_name(side.name[: -len(".sha256.json")])
-            out[edge.relative_to(run).as_posix()] = sorted(vectors)
+            out[edge.relative_to(run).as_posix()] = vectors + floats
     return out
 
 
@@ -127,36 +150,66 @@ def relative_row_differences(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
+def relative_column_differences(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Per row, |a_i - b_i| / max(|a|, |b|) over both columns, in float64: a scalar column's
+    difference on its own scale. NaN in both at a row is 0 there, NaN in one only inf; 0
+    everywhere where both columns are all zero."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    nan_a, nan_b = np.isnan(a), np.isnan(b)
+    finite = ~(nan_a | nan_b)
+    scale = max(
+        float(np.abs(a[finite]).max(initial=0.0)), float(np.abs(b[finite]).max(initial=0.0))
+    )
+    out = np.zeros(a.shape, dtype=np.float64)
+    if scale > 0:
+        out[finite] = np.abs(a[finite] - b[finite]) / scale
+    out[nan_a ^ nan_b] = math.inf
+    return out
+
+
+def _read_column(path: Path, column: str) -> tuple[np.ndarray, np.ndarray]:
+    """(keys, values) of one column of a verified edge: a vector (N, d) or a float scalar
+    (N,)."""
+    meta = json.loads((path.parent / (path.name + ".sha256.json")).read_text())
+    if column in (meta.get("vectors") or {}):
+        return edges.read_vectors(path, column)
+    edge = edges.read(path, columns=[column])
+    return edge.ids, edge.frame[column].to_numpy(dtype=np.float64)
+
+
 def _column_difference(run_a: Path, run_b: Path, edge: str, column: str) -> EdgeDifference:
-    ids_a, a = edges.read_vectors(run_a / edge, column)
+    ids_a, a = _read_column(run_a / edge, column)
     try:
-        ids_b, b = edges.read_vectors(run_b / edge, column)
-    except edges.EdgeError as exc:
+        ids_b, b = _read_column(run_b / edge, column)
+    except (edges.EdgeError, FileNotFoundError, KeyError) as exc:
         return EdgeDifference(edge, column, len(ids_a), math.inf, note=f"run b: {exc}")
     if set(ids_a) != set(ids_b):
         only = sorted(set(ids_a) ^ set(ids_b))
         return EdgeDifference(
             edge, column, len(ids_a), math.inf, note=f"keys differ ({len(only)}, e.g. {only[0]!r})"
         )
-    if a.shape[1] != b.shape[1]:
+    if a.ndim != b.ndim or (a.ndim == 2 and a.shape[1] != b.shape[1]):
+        width = [x.shape[1] if x.ndim == 2 else "scalar" for x in (a, b)]
         return EdgeDifference(
-            edge, column, len(ids_a), math.inf, note=f"dimension {a.shape[1]} vs {b.shape[1]}"
+            edge, column, len(ids_a), math.inf, note=f"dimension {width[0]} vs {width[1]}"
         )
     if not len(ids_a):
         return EdgeDifference(edge, column, 0, 0.0)
     where = {k: i for i, k in enumerate(ids_b)}
-    rel = relative_row_differences(a, b[[where[k] for k in ids_a]])
+    b = b[[where[k] for k in ids_a]]
+    rel = relative_row_differences(a, b) if a.ndim == 2 else relative_column_differences(a, b)
     worst = int(np.argmax(rel))
     return EdgeDifference(edge, column, len(ids_a), float(rel[worst]), str(ids_a[worst]))
 
 
-def vector_edge_differences(run_a: str | Path, run_b: str | Path) -> list[EdgeDifference]:
-    """Every vector column of every vector edge of run `run_a` (a workflow directory with
-    results/) against the same edge of `run_b`, rows joined on the key; an edge `run_b` lacks
-    (or with other keys or dimensions) has an infinite difference and a note. Edges only
-    `run_b` has are listed too."""
+def edge_differences(run_a: str | Path, run_b: str | Path) -> list[EdgeDifference]:
+    """Every vector and float scalar column of every keyed edge of run `run_a` (a workflow
+    directory with results/) against the same edge of `run_b`, rows joined on the key; an edge
+    `run_b` lacks (or with other keys or dimensions) has an infinite difference and a note.
+    Edges only `run_b` has are listed too."""
     run_a, run_b = Path(run_a), Path(run_b)
-    in_a, in_b = _vector_edges(run_a), _vector_edges(run_b)
+    in_a, in_b = _numeric_edges(run_a), _numeric_edges(run_b)
     out = [
         _column_difference(run_a, run_b, edge, column)
         for edge, columns in in_a.items()
@@ -176,12 +229,12 @@ def stage_differences(
     run_b: str | Path,
     tolerances: dict[str, float] | None = None,
 ) -> list[StageDifference]:
-    """Per stage (sorted), the largest relative difference of its vector edges between the two
-    runs (`vector_edge_differences`), with its tolerance (`tolerances`, by default
+    """Per stage (sorted), the largest relative difference of its edges' columns between the
+    two runs (`edge_differences`), with its tolerance (`tolerances`, by default
     `STAGE_TOLERANCES`; `DEFAULT_TOLERANCE` for a stage not named)."""
     tolerances = STAGE_TOLERANCES if tolerances is None else tolerances
     by_stage: dict[str, list[EdgeDifference]] = {}
-    for diff in vector_edge_differences(run_a, run_b):
+    for diff in edge_differences(run_a, run_b):
         by_stage.setdefault(diff.stage, []).append(diff)
     out = []
     for stage, diffs in sorted(by_stage.items()):
@@ -198,20 +251,35 @@ def stage_differences(
     return out
 
 
+def _decision_text(row: dict | None) -> str:
+    if row is None:
+        return "not stated"
+    value = row["value"]
+    text = f"{row['decision']}"
+    if value == value:  # not NaN
+        text += f" ({value:.4g}"
+        if row["ci_low"] == row["ci_low"]:
+            text += f" [{row['ci_low']:.4g}, {row['ci_high']:.4g}]"
+        text += ")"
+    return text
+
+
 def compare_decisions(run_a: str | Path, run_b: str | Path) -> DecisionComparison | None:
     """The findings' decisions (`DECISIONS`: one row per decision the findings page states,
-    keyed by `decision_id`, its verdict in `decision`) of both runs compared; None where a run
-    did not produce the edge."""
+    keyed by `decision_id`, its verdict in `decision`, with its value, interval and threshold)
+    of both runs compared; None where a run did not produce the edge."""
     paths = [Path(run_a) / DECISIONS, Path(run_b) / DECISIONS]
     if not all(p.exists() for p in paths):
         return None
+    cols = ["decision_id", "decision", "value", "ci_low", "ci_high", "threshold"]
     a, b = (
-        dict(zip(e.frame["decision_id"], e.frame["decision"].astype(str), strict=True))
-        for e in (edges.read(p, columns=["decision_id", "decision"]) for p in paths)
+        {r["decision_id"]: r for r in edges.read(p, columns=cols).frame.to_dict("records")}
+        for p in paths
     )
-    return DecisionComparison(
-        decisions=len(a),
-        differ=tuple(sorted(k for k in a.keys() & b.keys() if a[k] != b[k])),
-        only_a=tuple(sorted(a.keys() - b.keys())),
-        only_b=tuple(sorted(b.keys() - a.keys())),
+    differ = tuple(sorted(k for k in a.keys() & b.keys() if a[k]["decision"] != b[k]["decision"]))
+    only_a, only_b = tuple(sorted(a.keys() - b.keys())), tuple(sorted(b.keys() - a.keys()))
+    lines = tuple(
+        f"{k}: a {_decision_text(a.get(k))}; b {_decision_text(b.get(k))}"
+        for k in (*differ, *only_a, *only_b)
     )
+    return DecisionComparison(len(a), differ, only_a, only_b, lines)

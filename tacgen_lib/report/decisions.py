@@ -3,9 +3,9 @@ interval, the threshold it is read against, and the decision taken.
 
 A verdict sentence on the findings page (`tacgen_lib.report.findings`) is written from
 decisions (`tacgen_lib.report.claims`); the same decisions are written as an edge (rule
-findings, ``results/report/findings/decisions.parquet``), so two runs of one config on other
-machines, kernels or devices can be compared by their conclusions, not their bytes
-(`compare_decisions`, `tools/compare_runs.py`).
+findings, `tacgen_lib.io.run_compare.DECISIONS`), so two runs of one config on other machines,
+kernels or devices can be compared by their conclusions, not their bytes
+(`tacgen_lib.io.run_compare.compare_decisions`, `tools/device_check.py --compare`).
 
 A decision is a short word from a fixed vocabulary per kind of claim (`SIDE_DECISIONS` for a
 difference read against 0, ``passes`` / ``fails`` for a gate, ...), never a sentence, so that
@@ -21,15 +21,11 @@ from typing import NamedTuple
 import pandas as pd
 
 from tacgen_lib.report import claims
-from tacgen_lib.report_pages import DECISIONS_EDGE
 
 __all__ = [
     "DECISION_COLUMNS",
-    "DECISION_COMPARISON_COLUMNS",
-    "DECISIONS_EDGE",
     "SIDE_DECISIONS",
     "FindingsPart",
-    "compare_decisions",
     "decision",
     "decisions_frame",
     "side_decision",
@@ -55,19 +51,6 @@ SIDE_DECISIONS = {
     "spans": "no measurable difference",
     "none": "no interval",
 }
-
-#: The columns of `compare_decisions`.
-DECISION_COMPARISON_COLUMNS = [
-    "decision_id",
-    "status",  # same | differs | only in a | only in b
-    "decision_a",
-    "decision_b",
-    "value_a",
-    "value_b",
-    "ci_a",
-    "ci_b",
-    "threshold",
-]
 
 
 class FindingsPart(NamedTuple):
@@ -126,44 +109,3 @@ def decisions_frame(rows: Iterable[Mapping]) -> pd.DataFrame:
     for col in ("value", "ci_low", "ci_high", "threshold"):
         frame[col] = frame[col].astype("float64")
     return frame
-
-
-def _ci(r: Mapping, suffix: str) -> str:
-    lo, hi = r.get(f"ci_low{suffix}"), r.get(f"ci_high{suffix}")
-    if lo is None or hi is None or (pd.isna(lo) and pd.isna(hi)):
-        return ""
-    return f"[{lo:.4g}, {hi:.4g}]"
-
-
-def compare_decisions(a: pd.DataFrame, b: pd.DataFrame) -> pd.DataFrame:
-    """Two runs' decisions joined on ``decision_id`` (`DECISION_COMPARISON_COLUMNS`): ``same``
-    where both state the same decision, ``differs`` where not, ``only in a`` / ``only in b``
-    where one run states a decision the other does not. Values and intervals are shown beside,
-    not compared: two machines may round a value differently and still decide alike."""
-    m = a.merge(b, on="decision_id", how="outer", suffixes=("_a", "_b"), indicator=True)
-    rows = []
-    for r in m.to_dict("records"):
-        if r["_merge"] == "left_only":
-            status = "only in a"
-        elif r["_merge"] == "right_only":
-            status = "only in b"
-        else:
-            status = "same" if r["decision_a"] == r["decision_b"] else "differs"
-        threshold = r.get("threshold_a")
-        if threshold is None or pd.isna(threshold):
-            threshold = r.get("threshold_b")
-        rows.append(
-            {
-                "decision_id": r["decision_id"],
-                "status": status,
-                "decision_a": r.get("decision_a"),
-                "decision_b": r.get("decision_b"),
-                "value_a": r.get("value_a"),
-                "value_b": r.get("value_b"),
-                "ci_a": _ci(r, "_a"),
-                "ci_b": _ci(r, "_b"),
-                "threshold": threshold,
-            }
-        )
-    out = pd.DataFrame(rows, columns=DECISION_COMPARISON_COLUMNS)
-    return out.sort_values("decision_id", ignore_index=True)

@@ -18,9 +18,10 @@ from tacgen_lib.io.run_compare import (
     DEFAULT_TOLERANCE,
     STAGE_TOLERANCES,
     compare_decisions,
+    edge_differences,
+    relative_column_differences,
     relative_row_differences,
     stage_differences,
-    vector_edge_differences,
 )
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -63,14 +64,26 @@ def test_the_relative_difference_of_rows():
     np.testing.assert_allclose(relative_row_differences(a * 1e6, b * 1e6), got)
 
 
-def test_each_vector_column_is_compared_on_its_key(runs):
+def test_the_relative_difference_of_a_scalar_column():
+    a = np.array([1.0, -2.0, np.nan, 0.5, np.nan])
+    b = np.array([1.0, -1.0, np.nan, 0.5, 3.0])
+    got = relative_column_differences(a, b)
+    np.testing.assert_allclose(got[:4], [0.0, 0.5, 0.0, 0.0])  # on the column's scale, 2
+    assert math.isinf(got[4])  # NaN in one run only
+    np.testing.assert_allclose(relative_column_differences(a[:2] * 1e-6, b[:2] * 1e-6), got[:2])
+    assert not relative_column_differences(np.zeros(3), np.zeros(3)).any()
+
+
+def test_each_vector_and_float_column_is_compared_on_its_key(runs):
     a, b = runs
-    found = {(d.edge, d.column): d for d in vector_edge_differences(a, b)}
+    found = {(d.edge, d.column): d for d in edge_differences(a, b)}
     assert set(found) == {
         ("results/features/c/vision.parquet", "vit"),
         ("results/align/c/aligned.parquet", "t_aligned"),
+        ("results/align/summary.parquet", "score"),
         ("results/policy/palpation.parquet", "v"),
-    }  # the summary table has no vectors
+    }  # the summary table's float column too, its string key not
+    assert found["results/align/summary.parquet", "score"].max_rel == 0.0
     assert found["results/features/c/vision.parquet", "vit"].max_rel == 0.0
     align = found["results/align/c/aligned.parquet", "t_aligned"]
     assert align.max_rel == pytest.approx(0.01 / 1.01, rel=1e-5)  # joined on the key
@@ -98,7 +111,7 @@ def test_what_cannot_be_compared_is_said(tmp_path):
     _write(a, "results/generate/c/t_gen.parquet", IDS, t_gen=rng.normal(size=(6, 4)))
     _write(b, "results/generate/c/t_gen.parquet", IDS, t_gen=rng.normal(size=(6, 5)))
     _write(b, "results/pixel/c/frames.parquet", IDS, vit=rng.normal(size=(6, 4)))
-    notes = {d.stage: d.note for d in vector_edge_differences(a, b)}
+    notes = {d.stage: d.note for d in edge_differences(a, b)}
     assert "keys differ (1, e.g. 's-005')" in notes["features"]
     assert "dimension 4 vs 5" in notes["generate"]
     assert notes["pixel"] == "only in run b"
@@ -137,6 +150,8 @@ def test_the_findings_decisions_are_compared_by_id(tmp_path):
         ("policy",),
         ("regime",),
     )
+    assert other.lines[0] == "touch_helps: a yes (0.1 [0, 0.2]); b no (0.1 [0, 0.2])"
+    assert other.lines[1].startswith("policy: a yes") and other.lines[1].endswith("b not stated")
 
 
 def test_docs_state_the_tolerances_the_module_holds():
