@@ -123,6 +123,7 @@ rule fit_generator_baselines:
         targets=lambda w: BASELINE_TARGETS[w.corpus],
         corpus=lambda w: CORPORA[w.corpus],
         probes=PROBE_SETTINGS,
+        grids=GENERATE_GRIDS,
         probe_seed=config["probes"]["seeds"][0],
     script:
         "../workflow/scripts/fit_generator_baselines.py"
@@ -161,9 +162,12 @@ rule evaluate_generator:
         targets=lambda w: GENERATE["corpora"][w.corpus],
         corpus=lambda w: CORPORA[w.corpus],
         probes=PROBE_SETTINGS,
+        grids=GENERATE_GRIDS,
         probe_seed=config["probes"]["seeds"][0],
         cells=GENERATE_CELLS,  # the order of the t_gen inputs
         reference=generate_ref_cell(),  # its CV chooses the logistic C of every cell
+        # the generated-touch rows a page compares per corpus x target (family-wise CIs)
+        family=family_size(len(GENERATE_CELLS), len(GENERATE["seeds"])),
     script:
         "../workflow/scripts/evaluate_generator.py"
 

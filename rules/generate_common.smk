@@ -5,13 +5,17 @@ from tacgen_lib.generate.cells import (
     GENERATOR,
     SAMPLE_CELL,
     SAMPLE_CONSTRAINTS,
+    family_size,
     generator_cells,
     guidance_text,
     sample_cells,
 )
+from tacgen_lib.generate.job import generate_grids
 from tacgen_lib.generate.settings import check_grid
 
 GENERATE = config["generate"]
+# the C and lambda grids of every probe that judges generated touch (generate.C, .lambdas)
+GENERATE_GRIDS = generate_grids(GENERATE)
 # config order: the first corpus feeds the PCA figure
 GENERATE_CORPORA = list(GENERATE["corpora"])
 GENERATE_REPORT = "results/report/generate"
@@ -25,6 +29,7 @@ BASELINE_CORPORA = list(BASELINE_TARGETS)
 GENERATE_ITEMS = {
     "headline": "html",
     "honesty": "html",
+    "family": "html",
     "protocol": "html",
     "fidelity": "html",
     "heatmap": "png",

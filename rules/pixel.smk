@@ -117,6 +117,7 @@ rule evaluate_pixel_generators:
         targets=lambda w: PIXEL["corpora"][w.corpus],
         corpus=lambda w: CORPORA[w.corpus],
         probes=PROBE_SETTINGS,
+        grids=GENERATE_GRIDS,
         probe_seed=config["probes"]["seeds"][0],
     script:
         "../workflow/scripts/evaluate_pixel_generators.py"
@@ -155,6 +156,7 @@ rule pixel_curve_point:
         targets=lambda w: PIXEL_CURVE["corpora"][w.corpus],
         corpus=lambda w: CORPORA[w.corpus],
         probes=PROBE_SETTINGS,
+        grids=GENERATE_GRIDS,
         probe_seed=config["probes"]["seeds"][0],
     script:
         "../workflow/scripts/pixel_curve_point.py"

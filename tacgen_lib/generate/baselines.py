@@ -38,9 +38,12 @@ def target_specs(
     probe_seed: int,
     rule: str,
     cv_repeats: int,
+    grids: Mapping[str, Sequence[float]] | None = None,
 ) -> list[TargetSpec]:
     """The `TargetSpec` of each generator target of `corpus` (target -> ridge | logistic),
-    each probe's regulariser chosen by `cv_repeats` draws of the CV folds.
+    each probe's regulariser chosen by `cv_repeats` draws of the CV folds, among the ``C`` and
+    ``lambdas`` of `grids` (config ``generate.C`` / ``generate.lambdas``: grids that reach the
+    majority class and the train mean) where given, else the probes stage's.
 
     The probes' rows (`family_rows`, the probes stage's strata) train on train + val rows, as
     in the probes stage: `assert_trainable` refuses any test row in them, naming `rule`.
@@ -56,8 +59,16 @@ def target_specs(
             strata=strata_for(corpus_config),
         )
         assert_trainable(rows.train_ids, splits, rule=rule, allowed=("train", "val"))
-        settings = ProbeSettings.from_config(probes_config, kind, probe_seed)
-        out.append(TargetSpec(target, rows, replace(settings, cv_repeats=cv_repeats)))
+        settings = replace(
+            ProbeSettings.from_config(probes_config, kind, probe_seed), cv_repeats=cv_repeats
+        )
+        if grids is not None:
+            settings = replace(
+                settings,
+                C=tuple(float(c) for c in grids["C"]),
+                lambdas=tuple(float(v) for v in grids["lambdas"]),
+            )
+        out.append(TargetSpec(target, rows, settings))
     return out
 
 

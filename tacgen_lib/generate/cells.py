@@ -9,6 +9,8 @@ from __future__ import annotations
 
 __all__ = [
     "BASELINES",
+    "RIDGE_INPUTS",
+    "family_size",
     "GENERATOR",
     "SAMPLE_CELL",
     "SAMPLE_CONSTRAINTS",
@@ -25,6 +27,9 @@ GENERATOR = "results/generate/{corpus}/seed~{seed}"
 BASELINES = "results/generate/{corpus}/baselines.parquet"
 #: Directory of one sampling cell of a generator.
 SAMPLE_CELL = GENERATOR + "/sampler~{sampler}/guidance~{guidance}/steps~{steps}"
+#: What the ridge V->T generator's two arms add to V in an evaluation row
+#: (`tacgen_lib.generate.ridge`): its conditional mean, and the mean plus a sampled residual.
+RIDGE_INPUTS = ("t_ridge", "t_ridge_residual")
 #: Wildcard constraints that keep cell text canonical.
 SAMPLE_CONSTRAINTS = {
     "seed": r"0|[1-9]\d*",
@@ -80,3 +85,11 @@ def cell_seed(generator_seed: int | str, guidance: float | str, steps: int | str
     the guidance (in thousandths), so each cell is reproducible on its own, whichever job or
     worker samples it."""
     return int(generator_seed) * 1_000_003 + int(steps) * 101 + int(round(float(guidance) * 1000))
+
+
+def family_size(n_cells: int, n_seeds: int) -> int:
+    """How many generated-touch rows of one corpus x target the Generation page compares (the
+    family of `generate.evaluate.family_interval`): V + T_gen and its shuffled control in each
+    of `n_cells` sampling cells, and the ridge V->T generator's arms (`RIDGE_INPUTS`), for
+    each of `n_seeds` generator seeds."""
+    return int(n_seeds) * (2 * int(n_cells) + len(RIDGE_INPUTS))

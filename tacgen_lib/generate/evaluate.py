@@ -57,12 +57,17 @@ import pandas as pd
 
 from tacgen_lib.generate.baselines import BASELINE_INPUTS, Baselines, TargetSpec
 from tacgen_lib.generate.blocks import feature_block
+from tacgen_lib.generate.cells import RIDGE_INPUTS
 from tacgen_lib.generate.fidelity import (
     PERMUTATION_COLUMNS,
     fidelity,
 )
-from tacgen_lib.generate.ridge import RIDGE_ALPHAS, RIDGE_INPUTS, ridge_generate
-from tacgen_lib.probes.bootstrap import fixed_test_bootstrap, resample_indices
+from tacgen_lib.generate.ridge import RIDGE_ALPHAS, ridge_generate
+from tacgen_lib.probes.bootstrap import (
+    fixed_test_bootstrap,
+    percentile_interval,
+    resample_indices,
+)
 from tacgen_lib.probes.fit import FittedProbe, fit_probe
 from tacgen_lib.probes.logistic import FixedLogistic
 from tacgen_lib.probes.rows import FamilyRows, baseline_score
@@ -109,7 +114,25 @@ def _row(
         "delta_vs_ridge": np.nan if vs_ridge is None else vs_ridge["delta"],
         "ci_low_vs_ridge": np.nan if vs_ridge is None else vs_ridge["ci_low"],
         "ci_high_vs_ridge": np.nan if vs_ridge is None else vs_ridge["ci_high"],
+        # the family-wise interval of a generated-touch row (`family_interval`); NaN elsewhere
+        "ci_low_fw": boot.get("ci_low_fw", np.nan),
+        "ci_high_fw": boot.get("ci_high_fw", np.nan),
     }
+
+
+#: The family-wise error rate of the generated-touch rows a page compares (two-sided).
+FAMILY_ALPHA = 0.05
+
+
+def family_interval(deltas: np.ndarray, size: int) -> tuple[float, float]:
+    """The Bonferroni interval of one of `size` compared bootstrap differences: the central
+    1 - `FAMILY_ALPHA` / size percentile interval (`bootstrap.percentile_interval`). All
+    `size` intervals hold together with probability at least 1 - `FAMILY_ALPHA`; at size 1 it
+    is the 95 % CI. Its lower bound above 0 is a gain read family-wise, the first step of
+    Holm's procedure (`probes.multiplicity.holm`) on the same comparisons."""
+    if size < 1:
+        raise ValueError(f"family_interval: family size must be at least 1, got {size}")
+    return percentile_interval(deltas, confidence_level=1.0 - FAMILY_ALPHA / size)
 
 
 def _cell_order(
@@ -138,6 +161,7 @@ def evaluate_generator(
     generator_train_ids: Sequence[str],
     reference: tuple[str, str, str] | None = None,
     labels: Mapping[str, object] | None = None,
+    family: int = 1,
     progress: Callable[[str], None] | None = None,
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
     """Summary rows (one per target x cell x input) and permutation draws of one generator.
@@ -150,7 +174,10 @@ def evaluate_generator(
     its two arms are evaluated beside every cell: rows ``t_ridge`` and ``t_ridge_residual``,
     each with its own fidelity, and ``delta_vs_ridge`` = score(V + T_gen) - score(V + T_ridge)
     on the ``t_gen`` rows. `reference`: the cell whose CV chooses the logistic C of every cell
-    (module docstring; default: the first cell).
+    (module docstring; default: the first cell). `family`: how many generated-touch rows the
+    page compares (`cells.family_size`); each generated row (``t_gen``, ``t_gen_shuffled``, the
+    ridge arms) also carries its family-wise interval, ``ci_low_fw`` / ``ci_high_fw``
+    (`family_interval`), from the same resamples as its CI.
     """
     say = progress or (lambda _m: None)
     ridge = ridge_generate(vision, t_real, generator_train_ids, seed=seed, alphas=RIDGE_ALPHAS)
@@ -186,8 +213,9 @@ def evaluate_generator(
             ps: ProbeSettings = ps,
             rows: FamilyRows = rows,
             resamples: np.ndarray = resamples,
+            generated: bool = False,
         ) -> dict:
-            return fixed_test_bootstrap(
+            out = fixed_test_bootstrap(
                 rows.y_test,
                 pred_a,
                 pred_b,
@@ -196,7 +224,11 @@ def evaluate_generator(
                 seed=ps.seed,
                 indices=resamples,
                 sample_ids=rows.test_ids,
+                return_distribution=generated,
             )
+            if generated:
+                out["ci_low_fw"], out["ci_high_fw"] = family_interval(out.pop("deltas"), family)
+            return out
 
         chosen: dict[str, float] = {}  # input kind -> C chosen on the reference cell
 
@@ -264,7 +296,9 @@ def evaluate_generator(
                 fid, _ = fidelity(r_te, t_te, t_tr, n_permutations=permutations, seed=seed)
                 fid_cache[key] = fid
             r_fid = fid_cache[key]
-            r_row = _row({}, inp, boot(p_v, probe.pred_test), boot(p_nl, probe.pred_test))
+            r_row = _row(
+                {}, inp, boot(p_v, probe.pred_test, generated=True), boot(p_nl, probe.pred_test)
+            )
             r_row.update(reg=float(probe.reg), reg_source=REG_CV, **r_fid)
             ridge_rows.append(r_row)
             say(
@@ -319,11 +353,16 @@ def evaluate_generator(
             gen_row = _row(
                 cell_base,
                 "t_gen",
-                boot(p_v, p_gen),
+                boot(p_v, p_gen, generated=True),
                 boot(p_nl, p_gen),
                 boot(ridge_pred["t_ridge"], p_gen),
             )
-            shuf_row = _row(cell_base, "t_gen_shuffled", boot(p_v, p_shuf), boot(p_nl, p_shuf))
+            shuf_row = _row(
+                cell_base,
+                "t_gen_shuffled",
+                boot(p_v, p_shuf, generated=True),
+                boot(p_nl, p_shuf),
+            )
             gen_row.update(reg=reg_gen, reg_source=src_gen)
             shuf_row.update(reg=reg_shuf, reg_source=src_shuf)
             rows_cell = [{**cell_base, **real_row}, gen_row, shuf_row, {**cell_base, **nl_row}]

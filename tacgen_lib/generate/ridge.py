@@ -27,9 +27,6 @@ from sklearn.linear_model import RidgeCV
 #: The ridge penalties leave-one-out chooses from (13 steps from 1e-3 to 1e3 in log space).
 RIDGE_ALPHAS: tuple[float, ...] = tuple(float(a) for a in np.logspace(-3, 3, 13))
 
-#: What the two ridge arms add to V in an evaluation row.
-RIDGE_INPUTS = ("t_ridge", "t_ridge_residual")
-
 
 @dataclass(frozen=True)
 class RidgeGeneration:

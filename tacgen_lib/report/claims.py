@@ -262,16 +262,14 @@ def gain_within_uncertainty(cheap_value: float, dear_lo: float, dear_hi: float) 
 
 
 def ceiling_decision(score: float, lo: float, hi: float, ceiling: float) -> str:
-    """Where a V-only policy's success sits against the vision-only ceiling: ``not computed``,
-    ``above the ceiling`` (its interval wholly above: a defect), ``at the ceiling`` (its point
-    above, its interval reaching below: sampling noise), ``reaches the ceiling`` (within its
-    interval) or ``below the ceiling``."""
+    """Where a V-only policy's success sits against the vision-only ceiling, read by its
+    interval: ``not computed``, ``above the ceiling`` (the interval wholly above: a defect),
+    ``reaches the ceiling`` (the ceiling inside the interval, whichever side the point lies:
+    a point a hair above or below it is the same finding) or ``below the ceiling``."""
     if fmt.is_missing(score) or fmt.is_missing(ceiling):
         return "not computed"
     if not fmt.is_missing(lo) and lo > ceiling:
         return "above the ceiling"
-    if score > ceiling:
-        return "at the ceiling"
     if fmt.is_missing(hi) or hi >= ceiling:
         return "reaches the ceiling"
     return "below the ceiling"
@@ -294,7 +292,7 @@ def ceiling_verdict(
             f"UNEXPECTED: {what} success {s} lies above the vision-only ceiling {c}: vision "
             "must see more than the ceiling assumes."
         )
-    if decided == "at the ceiling":
+    if decided == "reaches the ceiling" and score > ceiling:
         return (
             f"{what} success {s} is at the vision-only ceiling {c}: its point is above it by "
             "sampling noise only (the interval reaches below)."

@@ -390,7 +390,7 @@ def test_policy_findings_use_the_ceiling_claim():
         {"success": [0.38, 0.44], "gap_closed": [-0.09, 0.02], "vision_ceiling": [0.363, 0.363]}
     )
     rows, decided = findings.policy_findings(summary, deltas, sweep)
-    assert [d["decision"] for d in decided] == ["above 0", "at the ceiling"]
+    assert [d["decision"] for d in decided] == ["above 0", "reaches the ceiling"]
     assert rows["verdict"].iloc[0].startswith("Touch helps")
     # all 128 successes: the Wilson interval, not a bootstrap of width 0
     assert "V+T 1.000 [0.971, 1.000] (Wilson: all 128/128 alike)" in rows["result"].iloc[0]

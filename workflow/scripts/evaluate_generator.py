@@ -40,6 +40,7 @@ with threadpool_limits(snakemake.threads):
         permutations=settings.permutations,
         reference=tuple(params.reference),
         labels=corpus_labels(params.corpus),
+        family=params.family,
         progress=logger.info,
     )
 edges.write(snakemake.output.rows, summary, key="row_id", producer=snakemake.rule)
