@@ -25,7 +25,7 @@ import yaml
 
 import tacgen_lib.corpus.sim  # noqa: F401  (sets MUJOCO_GL=egl before mujoco is imported)
 from tacgen_lib.corpus.sim import corpus, physics, render, samples, tactile
-from tacgen_lib.corpus.sim.scenes import scene_xml, validate_scene
+from tacgen_lib.corpus.sim.scenes import compile_scene, scene_xml, validate_scene
 
 SCENES = yaml.safe_load(open("config/scenes.yaml"))
 PAIRED = {
@@ -40,16 +40,15 @@ PAIRED = {
 
 
 def pressed_states(n: int):
-    """n pressed objects (qpos snapshots) drawn like the paired corpus."""
+    """n pressed objects (qpos snapshots) drawn like the paired corpus, in the corpus's model
+    (`compile_scene`) with an orthographic camera under the gel for the depth method."""
     scene = validate_scene("paired_press", SCENES["paired_press"])
     xml = scene_xml(scene).replace(
         "</worldbody>",
         f'<camera name="gel_cam" pos="0 0 -{scene.gel_camera_distance}" euler="3.14159265 0 0" '
         f'projection="orthographic" fovy="{scene.gel_size[0]}"/></worldbody>',
     )
-    model = mujoco.MjModel.from_xml_string(xml)
-    model.light_castshadow[:] = 0
-    rt = physics.SceneRuntime(scene, model)
+    rt = physics.SceneRuntime(scene, compile_scene(scene, xml))
     cfg = samples.CorpusSettings.from_config(dict(PAIRED, n=n))
     states = []
     for i in range(n):
