@@ -42,7 +42,8 @@ def cold_run(dest: Path, configfile: str, cores: int, env: dict[str, str] | None
     """Copy the workflow into `dest` and run `configfile` there cold (in environment `env`,
     default this process's); returns `dest`."""
     copy_tree(dest)
-    cmd = [*SNAKEMAKE, "--cores", str(cores), "--configfile", configfile, "--quiet"]
+    # quiet about the rules only: the log must keep its progress lines, which `last_run` reads
+    cmd = [*SNAKEMAKE, "--cores", str(cores), "--configfile", configfile, "--quiet", "rules"]
     print(f"running snakemake {' '.join(cmd[3:])} in {dest}", flush=True)
     subprocess.run(cmd, cwd=dest, env=env, check=True)
     return dest
