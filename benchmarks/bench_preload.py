@@ -8,8 +8,9 @@ whether every edge is the same bit for bit.
         [TARGET ...]
 
 Not a test: two cold runs take minutes, and the ratio moves with the machine's load. The
-targets (default the workflow's `all`) let a run stop early: the tiny mode runs the simulated
-corpora of config/test.yaml to their merged samples (`TINY_TARGETS`).
+targets (default the workflow's `all`) let a run stop early: the tiny mode runs one corpus of
+config/test.yaml to its merged samples (bench_estimate.TINY_TARGETS), too few jobs for the
+server to start (`tacgen_lib.runtime.preload_server.MIN_JOBS`): both runs are fresh then.
 """
 
 from __future__ import annotations
@@ -23,7 +24,7 @@ import time
 from pathlib import Path
 
 import machine
-from bench_estimate import cold_run
+from bench_estimate import TINY_TARGETS, cold_run
 from machine import TINY_CONFIG, parse_args
 
 from tacgen_lib.runtime.benchmarks import read_benchmark
@@ -31,13 +32,6 @@ from tacgen_lib.runtime.preload import SWITCH_ENV, usage_path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from snakemake_run import edge_hashes  # noqa: E402  (the tests' edge hashes)
-
-#: the tiny mode's targets: each simulated corpus of config/test.yaml simulated and merged,
-#: the fewest jobs a run starts the server for (`tacgen_lib.runtime.preload_server.MIN_JOBS`)
-TINY_TARGETS = [
-    f"results/corpus/{c}/samples.parquet"
-    for c in ("sim_paired", "sim_null", "sim_controlled", "sim_transfer")
-]
 
 
 def timed_run(dest: Path, configfile: str, cores: int, preload: bool, targets: list[str]) -> dict:
