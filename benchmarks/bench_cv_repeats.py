@@ -12,7 +12,8 @@ chosen. What config ``generate.cv_repeats`` buys, and its price in fits.
         [--target hardness] [--cell ddim/1/25] [--repeats 1,5,10,20] [--draws 20]
         [--configfile config/config.yaml]
 
-`--configfile` names the run's config (merged over config/config.yaml, as Snakemake's does).
+`--configfile` names the run's config (merged over config/config.yaml as Snakemake merges
+its own `--configfile`).
 """
 
 from __future__ import annotations

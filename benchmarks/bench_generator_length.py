@@ -12,8 +12,8 @@ ridge V->T's conditional mean (`ridge.ridge_generate`) on the same rows.
         [--corpus sim_paired] [--seed 0] [--threads 1] [--configfile config/config.yaml]
         steps=500 steps=3000,batch_size=256
 
-`--configfile` names the run's config (merged over config/config.yaml, as Snakemake's does):
-the settings change its ``generate``.
+`--configfile` names the run's config (merged over config/config.yaml as Snakemake merges
+its own `--configfile`): the settings change its ``generate``.
 """
 
 from __future__ import annotations

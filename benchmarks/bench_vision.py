@@ -21,7 +21,8 @@ statistics (stages, `resnet.ResNet.stage_statistics`).
     .venv/bin/python benchmarks/bench_vision.py --results results --grey 0 0.1 0.5
         [--configfile config/config.yaml]
 
-`--configfile` names the run's config (merged over config/config.yaml, as Snakemake's does).
+`--configfile` names the run's config (merged over config/config.yaml as Snakemake merges
+its own `--configfile`).
 
 Every figure is measured in this run; nothing is compared with a stored number.
 """
