@@ -19,7 +19,7 @@ several rounds (and the median is printed too), and the ratio is also given with
 CPU seconds in place of wall seconds for both sides (`cpu-frac`), which is much less
 sensitive to other processes competing for the cores.
 
-    /tmp/venv/bin/python benchmarks/bench_align.py [--rounds 5] [--steps 20] [--threads N]
+    .venv/bin/python benchmarks/bench_align.py [--rounds 5] [--steps 20] [--threads N]
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ import statistics
 import machine
 import numpy as np
 import torch
-from machine import Timing, best_of, gemm_peak
+from machine import Timing, best_of, gemm_peak, parse_args, sized
 
 from tacgen_lib.align.heads import HIDDEN_DIM, OUT_DIM, AlignHeads
 from tacgen_lib.align.settings import AlignSettings
@@ -39,6 +39,8 @@ from tacgen_lib.align.train import fit_heads, make_optimizer, train_step
 
 PAPER_STEPS = 6000
 BATCH = 256
+#: training pairs the timed steps draw their batches from (the fit's validation: a quarter)
+PAIRS = sized(4096, 2 * BATCH)
 
 
 def step_flops(batch: int, in_dim_v: int, in_dim_t: int) -> float:
@@ -82,7 +84,7 @@ def time_steps(in_dim: int, steps: int, rounds: int) -> tuple[Timing, Timing, li
     """Best per-step time of `train_step`, best 1024^3 GEMM time (measured between the rounds),
     and the per-round wall seconds per step (for the median)."""
     torch.manual_seed(0)
-    n = 4096
+    n = PAIRS
     v, t = torch.randn(n, in_dim), torch.randn(n, in_dim)
     heads = AlignHeads(in_dim, in_dim).train()
     opt = make_optimizer(heads, lr=1e-4, weight_decay=0.01)
@@ -106,9 +108,9 @@ def time_steps(in_dim: int, steps: int, rounds: int) -> tuple[Timing, Timing, li
 
 
 def time_fit(in_dim: int, steps: int) -> float:
-    """Seconds per step of fit_heads end to end (eval every 50 steps on 1,024 val pairs)."""
+    """Seconds per step of fit_heads end to end (eval every 50 steps on PAIRS // 4 val pairs)."""
     rng = np.random.default_rng(0)
-    n_train, n_val = 4096, 1024
+    n_train, n_val = PAIRS, PAIRS // 4
     v = rng.standard_normal((n_train + n_val, in_dim)).astype(np.float32)
     t = rng.standard_normal((n_train + n_val, in_dim)).astype(np.float32)
     res = fit_heads(
@@ -131,7 +133,7 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=20, help="steps per timed round")
     ap.add_argument("--fit-steps", type=int, default=100, help="steps of the end-to-end fit")
     ap.add_argument("--threads", type=int, default=0, help="torch threads (0 = torch default)")
-    args = ap.parse_args()
+    args = parse_args(ap, {"rounds": 1, "steps": 2, "fit_steps": 2, "threads": 1})
     if args.threads:
         torch.set_num_threads(args.threads)
     print(f"machine: {machine.describe()}")

@@ -10,6 +10,10 @@ chosen. What config ``generate.cv_repeats`` buys, and its price in fits.
 
     .venv/bin/python benchmarks/bench_cv_repeats.py [--results results] [--corpus sim_paired]
         [--target hardness] [--cell ddim/1/25] [--repeats 1,5,10,20] [--draws 20]
+        [--configfile config/config.yaml]
+
+`--configfile` names the run's config (merged over config/config.yaml as Snakemake merges
+its own `--configfile`).
 """
 
 from __future__ import annotations
@@ -20,7 +24,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-import yaml
+from machine import TINY_CONFIG, parse_args, run_config
 from threadpoolctl import threadpool_limits
 
 from tacgen_lib.generate.baselines import target_specs
@@ -28,8 +32,6 @@ from tacgen_lib.generate.blocks import feature_block
 from tacgen_lib.io import edges
 from tacgen_lib.probes.bootstrap import fixed_test_bootstrap
 from tacgen_lib.probes.fit import fit_probe
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def main() -> None:
@@ -41,9 +43,11 @@ def main() -> None:
     ap.add_argument("--repeats", default="1,5,10,20")
     ap.add_argument("--draws", type=int, default=20)
     ap.add_argument("--bootstrap", type=int, default=1000)
-    args = ap.parse_args()
+    ap.add_argument("--configfile", default="config/config.yaml", help="the run's config")
+    tiny = {"configfile": TINY_CONFIG, "cell": "ddim/2/3", "repeats": "1,2", "draws": 2}
+    args = parse_args(ap, {**tiny, "bootstrap": 50})
     results = Path(args.results)
-    cfg = yaml.safe_load((ROOT / "config/config.yaml").read_text())
+    cfg = run_config(args.configfile)
     sampler, guidance, steps = args.cell.split("/")
     seed = cfg["generate"]["seeds"][0]
     manifest = edges.read(results / "corpus/manifest.parquet").frame

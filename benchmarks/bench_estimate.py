@@ -10,11 +10,15 @@ Prints the predicted and measured wall and their ratio (the estimate aims at 0.7
 
     .venv/bin/python benchmarks/bench_estimate.py                 # runs config/test.yaml cold
     .venv/bin/python benchmarks/bench_estimate.py --run DIR [--configfile config/config.yaml]
+        [TARGET ...]
 
 Without ``--run`` it copies the repository's workflow files into a temporary folder and runs
-`snakemake --cores N --configfile config/test.yaml` there first. Not a test: the ratio depends
-on what else the machine does while the run goes (a job takes 1.2x its idle CPU time beside
-one other job, 6-10x beside a dozen), which a unit test cannot control.
+`snakemake --cores N --configfile config/test.yaml` there first. Targets (default the
+workflow's `all`) make the run, and the DAG estimated, stop at them: the tiny mode runs cold
+one corpus of config/test.yaml to its merged samples (`TINY_TARGETS`). Not a
+test: the ratio depends on what else the machine does while the run goes (a job takes longer
+than its idle CPU time beside other jobs, and much longer beside a dozen), which a unit test
+cannot control.
 """
 
 from __future__ import annotations
@@ -23,10 +27,12 @@ import argparse
 import subprocess
 import sys
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 
 import machine
 import numpy as np
+from machine import TINY_CONFIG, parse_args
 
 from tacgen_lib.estimate.calibration import fit_costs, last_run, load_calibration
 from tacgen_lib.estimate.dag import dag_jobs
@@ -37,23 +43,35 @@ from tacgen_lib.runtime.benchmarks import read_benchmark
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from snakemake_run import SNAKEMAKE, copy_tree  # noqa: E402  (the tests' workflow copy)
 
+#: the tiny mode's targets: one corpus of config/test.yaml simulated and merged (two jobs)
+TINY_TARGETS = ["results/corpus/sim_controlled/samples.parquet"]
 
-def cold_run(dest: Path, configfile: str, cores: int, env: dict[str, str] | None = None) -> Path:
+
+def cold_run(
+    dest: Path,
+    configfile: str,
+    cores: int,
+    env: dict[str, str] | None = None,
+    targets: Sequence[str] = (),
+) -> Path:
     """Copy the workflow into `dest` and run `configfile` there cold (in environment `env`,
-    default this process's); returns `dest`."""
+    default this process's), to `targets` (default the workflow's `all`); returns `dest`."""
     copy_tree(dest)
-    cmd = [*SNAKEMAKE, "--cores", str(cores), "--configfile", configfile, "--quiet"]
+    # quiet about the rules only: the log must keep its progress lines, which `last_run` reads
+    cmd = [*SNAKEMAKE, *targets, "--cores", str(cores), "--configfile", configfile]
+    cmd += ["--quiet", "rules"]
     print(f"running snakemake {' '.join(cmd[3:])} in {dest}", flush=True)
     subprocess.run(cmd, cwd=dest, env=env, check=True)
     return dest
 
 
-def compare(run: Path, configfile: str, cores: int) -> float:
-    """Print the estimate of `run`'s DAG against its measured wall; returns their ratio."""
+def compare(run: Path, configfile: str, cores: int, targets: Sequence[str] = ()) -> float:
+    """Print the estimate of `run`'s DAG (to `targets`, default `all`) against its measured
+    wall; returns their ratio."""
     log = last_run(run)
     if log is None:
         raise SystemExit(f"{run}: no finished Snakemake run (no log saying '(100%) done')")
-    jobs, config = dag_jobs([configfile], workdir=run, cores=cores)
+    jobs, config = dag_jobs([configfile], workdir=run, cores=cores, targets=list(targets) or None)
     cal = load_calibration()
     predicted = job_seconds(jobs, config, fit_costs(cal.points)).set_index("jobid")["seconds"]
     ratios = [
@@ -82,13 +100,15 @@ def main() -> None:
     ap.add_argument("--run", type=Path, help="a finished run's directory (default: run one)")
     ap.add_argument("--configfile", default="config/test.yaml")
     ap.add_argument("--cores", type=int, default=2)
-    args = ap.parse_args()
+    ap.add_argument("targets", nargs="*", help="Snakemake targets (default: all)")
+    args = parse_args(ap, {"configfile": TINY_CONFIG, "targets": TINY_TARGETS})
     print(machine.describe(), flush=True)
+    run_args = (args.configfile, args.cores)
     if args.run is not None:
-        compare(args.run, args.configfile, args.cores)
+        compare(args.run, *run_args, args.targets)
         return
     with tempfile.TemporaryDirectory(prefix="bench_estimate_") as tmp:
-        compare(cold_run(Path(tmp), args.configfile, args.cores), args.configfile, args.cores)
+        compare(cold_run(Path(tmp), *run_args, targets=args.targets), *run_args, args.targets)
 
 
 if __name__ == "__main__":

@@ -12,8 +12,8 @@ Prints, measured in this run:
 
 Random weights are used for the throughput rows: speed does not depend on the values.
 
-    /tmp/venv/bin/python benchmarks/bench_features.py --image-size 56 --threads 2
-    /tmp/venv/bin/python benchmarks/bench_features.py --image-size 56 --probe --dino-epochs 10
+    .venv/bin/python benchmarks/bench_features.py --image-size 56 --threads 2
+    .venv/bin/python benchmarks/bench_features.py --image-size 56 --probe --dino-epochs 10
 """
 
 from __future__ import annotations
@@ -24,6 +24,7 @@ import time
 import cv2
 import numpy as np
 import torch
+from machine import parse_args
 from sklearn.linear_model import LogisticRegression
 from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import StandardScaler
@@ -148,7 +149,8 @@ def main() -> None:
     ap.add_argument("--dino-lr", type=float, default=1e-3)
     ap.add_argument("--shape-radius", type=float, nargs=2, default=(0.15, 0.3))
     ap.add_argument("--skip-throughput", action="store_true")
-    args = ap.parse_args()
+    tiny = {"image_size": 28, "n": 4, "batch_size": 2, "threads": 1, "dino_n": 8, "probe": True}
+    args = parse_args(ap, {**tiny, "probe_train": 16, "probe_test": 8, "dino_epochs": 1})
     torch.set_num_threads(args.threads)
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads")
     if not args.skip_throughput:

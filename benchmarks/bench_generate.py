@@ -35,7 +35,7 @@ import time
 import machine
 import numpy as np
 import torch
-from machine import best_of, gemm_peak
+from machine import best_of, gemm_peak, parse_args, sized
 from threadpoolctl import threadpool_limits
 from torch import nn
 
@@ -98,7 +98,7 @@ def numpy_gemm_rate(n: int = 1024) -> tuple[float, float]:
     return 2 * n**3 / wall, 2 * n**3 / cpu
 
 
-def import_seconds(modules: str, reps: int = 3) -> float:
+def import_seconds(modules: str, reps: int = sized(3, 1)) -> float:
     """Best wall seconds of a fresh interpreter importing `modules` (minus a bare start)."""
 
     def run(code: str) -> float:
@@ -122,7 +122,8 @@ def main() -> None:
     ap.add_argument("--dim", type=int, default=192, help="d_t = d_v (ViT-tiny: 192)")
     ap.add_argument("--batch", type=int, default=GenerateSettings.batch_size)
     ap.add_argument("--rows", type=int, default=1200, help="rows sampled (DDIM-50, CFG)")
-    args = ap.parse_args()
+    tiny = {"rounds": 1, "steps": 2, "threads": 1, "hidden": 16, "blocks": 1, "dim": 8}
+    args = parse_args(ap, {**tiny, "batch": 8, "rows": 16})
     torch.set_num_threads(args.threads)
     print(machine.describe())
     print(

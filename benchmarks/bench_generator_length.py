@@ -9,7 +9,11 @@ real train mean, `fidelity.cosine_pairing`). First the reference measured in the
 ridge V->T's conditional mean (`ridge.ridge_generate`) on the same rows.
 
     .venv/bin/python benchmarks/bench_generator_length.py [--results results]
-        [--corpus sim_paired] [--seed 0] [--threads 1] steps=500 steps=3000,batch_size=256
+        [--corpus sim_paired] [--seed 0] [--threads 1] [--configfile config/config.yaml]
+        steps=500 steps=3000,batch_size=256
+
+`--configfile` names the run's config (merged over config/config.yaml as Snakemake merges
+its own `--configfile`): the settings change its ``generate``.
 """
 
 from __future__ import annotations
@@ -21,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 import torch
-import yaml
+from machine import TINY_CONFIG, parse_args, run_config
 
 from tacgen_lib.corpus.splits import ids_in_split
 from tacgen_lib.generate.fidelity import cosine_pairing
@@ -30,8 +34,6 @@ from tacgen_lib.generate.sampling import generate
 from tacgen_lib.generate.settings import GenerateSettings
 from tacgen_lib.generate.train import fit_generator
 from tacgen_lib.io import edges
-
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def parse_setting(text: str, base: GenerateSettings) -> GenerateSettings:
@@ -45,15 +47,18 @@ def parse_setting(text: str, base: GenerateSettings) -> GenerateSettings:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("settings", nargs="+", help="key=value[,key=value] changes to generate")
+    ap.add_argument("settings", nargs="*", help="key=value[,key=value] changes to generate")
     ap.add_argument("--results", default="results", help="a finished run's results folder")
     ap.add_argument("--corpus", default="sim_paired")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--threads", type=int, default=1)
-    args = ap.parse_args()
+    ap.add_argument("--configfile", default="config/config.yaml", help="the run's config")
+    args = parse_args(ap, {"settings": ["steps=20"], "configfile": TINY_CONFIG})
+    if not args.settings:
+        ap.error("name at least one setting, e.g. steps=500")
     torch.set_num_threads(args.threads)
     results = Path(args.results)
-    config = yaml.safe_load((ROOT / "config/config.yaml").read_text())["generate"]
+    config = run_config(args.configfile)["generate"]
     base = GenerateSettings.from_config(config)
     splits = edges.read(results / "corpus/splits.parquet").frame
     v = edges.read(results / f"features/{args.corpus}/vision.parquet", columns=["vit"])

@@ -35,7 +35,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 import yaml
-from machine import best_of
+from machine import best_of, parse_args, sized
 from torch.utils.flop_counter import FlopCounterMode
 
 from tacgen_lib.generate.pixel.ddpm import RowDenoiser, make_unet, sample_pixel_ddpm
@@ -55,6 +55,8 @@ SIZE = tuple(
     int(x) for x in yaml.safe_load((ROOT / "config/config.yaml").read_text())["pixel"]["size"]
 )
 BATCH = 32
+#: the conv roofline's input (batch, channels = filters, side): a large float32 conv2d
+CONV = sized((32, 64, 64), (4, 8, 16))
 
 
 def lscpu_lines() -> list[str]:
@@ -81,9 +83,11 @@ def mm_rate(n: int = 1024, reps: int = 5) -> float:
 
 
 def conv_rate(reps: int = 3) -> float:
-    """FLOP/s of one large float32 conv2d (best of `reps`): 32 x 64 x 64 x 64, 64 3x3 filters."""
-    x, w = torch.randn(32, 64, 64, 64), torch.randn(64, 64, 3, 3)
-    flops = 2 * 32 * 64 * 64 * 64 * 64 * 9
+    """FLOP/s of one float32 conv2d (best of `reps`): `CONV` input, as many 3x3 filters as
+    channels."""
+    n, c, side = CONV
+    x, w = torch.randn(n, c, side, side), torch.randn(c, c, 3, 3)
+    flops = 2 * n * c * side * side * c * 9
     return flops / best_of(lambda: F.conv2d(x, w, padding=1), reps).wall
 
 
@@ -171,7 +175,8 @@ def main() -> None:
     ap.add_argument("--rows", type=int, default=256, help="frames sampled (DDIM-10, w = 1)")
     ap.add_argument("--threads", default="1,2", help="torch thread counts, comma-separated")
     ap.add_argument("--size", default=None, help="frame size H,W (default: pixel.size)")
-    args = ap.parse_args()
+    tiny = {"rounds": 1, "steps": 1, "rows": 2, "threads": "1", "size": "8,16"}
+    args = parse_args(ap, tiny)
     if args.size:
         global SIZE
         SIZE = tuple(int(x) for x in args.size.split(","))
@@ -188,7 +193,7 @@ def main() -> None:
         mm, conv = max(mm, mm_rate()), max(conv, conv_rate())
         print(
             f"\n-- {threads} thread(s): torch.mm 1024^3 {mm / 1e9:.1f} GFLOP/s, "
-            f"conv2d 32x64x64x64 3x3 {conv / 1e9:.1f} GFLOP/s"
+            f"conv2d {CONV[0]}x{CONV[1]}x{CONV[2]}x{CONV[2]} 3x3 {conv / 1e9:.1f} GFLOP/s"
         )
 
         for name, seconds, flops, extra in (

@@ -17,7 +17,7 @@ import time
 
 import mujoco  # noqa: I001
 import yaml
-from machine import describe
+from machine import describe, parse_args, sized
 
 import tacgen_lib.corpus.sim  # noqa: F401  (sets MUJOCO_GL=egl before mujoco is imported)
 from tacgen_lib.corpus.sim import tactile
@@ -30,7 +30,7 @@ DECL = yaml.safe_load(open("config/scenes.yaml"))["grasp_lift"]
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--episodes", type=int, default=40)
-    args = ap.parse_args()
+    args = parse_args(ap, {"episodes": 2})
     s = PolicySettings()
     eps = task.sample_episodes(s, 77, args.episodes, "bench")
     forces = [oracle.oracle_force(ep, s) for ep in eps]
@@ -39,7 +39,7 @@ def main() -> None:
     lift = data.compile_phase(DECL, s, "lift")
     # 1. bare stepping of the same model and state
     lift.set_episode(eps[0])
-    n = 5000
+    n = sized(5000, 100)
     t0 = time.perf_counter()
     for _ in range(n):
         mujoco.mj_step(lift.model, lift.data)

@@ -5,8 +5,12 @@ median of its jobs' benchmark seconds and how many jobs the server ran, the rati
 whether every edge is the same bit for bit.
 
     .venv/bin/python benchmarks/bench_preload.py [--configfile config/test.yaml] [--cores 2]
+        [TARGET ...]
 
-Not a test: two cold runs take minutes, and the ratio moves with the machine's load.
+Not a test: two cold runs take minutes, and the ratio moves with the machine's load. The
+targets (default the workflow's `all`) let a run stop early: the tiny mode runs one corpus of
+config/test.yaml to its merged samples (bench_estimate.TINY_TARGETS), too few jobs for the
+server to start (`tacgen_lib.runtime.preload_server.MIN_JOBS`): both runs are fresh then.
 """
 
 from __future__ import annotations
@@ -20,7 +24,8 @@ import time
 from pathlib import Path
 
 import machine
-from bench_estimate import cold_run
+from bench_estimate import TINY_TARGETS, cold_run
+from machine import TINY_CONFIG, parse_args
 
 from tacgen_lib.runtime.benchmarks import read_benchmark
 from tacgen_lib.runtime.preload import SWITCH_ENV, usage_path
@@ -29,13 +34,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from snakemake_run import edge_hashes  # noqa: E402  (the tests' edge hashes)
 
 
-def timed_run(dest: Path, configfile: str, cores: int, preload: bool) -> dict:
-    """`configfile` cold in a copy of the workflow at `dest` (bench_estimate.cold_run), with
-    or without the server; its wall, job seconds, jobs served and edge hashes."""
+def timed_run(dest: Path, configfile: str, cores: int, preload: bool, targets: list[str]) -> dict:
+    """`configfile` cold in a copy of the workflow at `dest` (bench_estimate.cold_run) to
+    `targets`, with or without the server; its wall, job seconds, jobs served and edge hashes."""
     env = {**os.environ, SWITCH_ENV: "1" if preload else "0"}
     label = "preloaded" if preload else "fresh"
     t0 = time.monotonic()
-    cold_run(dest, configfile, cores, env)
+    cold_run(dest, configfile, cores, env, targets)
     wall = time.monotonic() - t0
     benches = sorted((dest / "results" / "benchmarks").rglob("*.tsv"))
     seconds = [read_benchmark(b).wall for b in benches]
@@ -55,11 +60,12 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--configfile", default="config/test.yaml")
     ap.add_argument("--cores", type=int, default=2)
-    args = ap.parse_args()
+    ap.add_argument("targets", nargs="*", help="Snakemake targets (default: all)")
+    args = parse_args(ap, {"configfile": TINY_CONFIG, "targets": TINY_TARGETS})
     print(f"machine: {machine.describe()}")
     with tempfile.TemporaryDirectory(prefix="tacgen-bench-preload-") as tmp:
         runs = [
-            timed_run(Path(tmp) / name, args.configfile, args.cores, preload)
+            timed_run(Path(tmp) / name, args.configfile, args.cores, preload, args.targets)
             for name, preload in (("fresh", False), ("preloaded", True))
         ]
     print(f"{'run':<10} {'wall s':>8} {'jobs':>5} {'job s sum':>10} {'median':>7} {'served':>7}")

@@ -15,7 +15,7 @@ the CV scores compared. And single lbfgs fits at the workflow's sizes (32 to 1,4
 two and six classes): the probes' solver (`lbfgs.fit_lbfgs_logistic`) against scikit-learn's
 LogisticRegression on the same rows, with iterations and probabilities compared.
 
-    /tmp/venv/bin/python benchmarks/bench_probes.py [--repeats 3] [--blas-threads 1]
+    .venv/bin/python benchmarks/bench_probes.py [--repeats 3] [--blas-threads 1]
 
 Not a test: figures depend on the machine and its load.
 """
@@ -30,6 +30,7 @@ from dataclasses import dataclass
 import machine
 import numpy as np
 import scipy.stats
+from machine import parse_args, sized
 from sklearn.linear_model import LogisticRegression, Ridge
 from sklearn.model_selection import GridSearchCV
 from sklearn.preprocessing import StandardScaler
@@ -56,7 +57,16 @@ def synthetic_features(n: int, d: int, rng: np.random.Generator) -> np.ndarray:
     return rng.standard_normal((n, d)) * scales + rng.standard_normal(d)
 
 
-def hardness_like(n: int, d: int = 192) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+#: rows and per-modality width of the hardness-like probe (training rows of the controls and
+#: the CV; the controls test on a quarter as many more)
+LOGISTIC_ROWS, LOGISTIC_D = sized((960, 192), (48, 8))
+#: (rows, features, classes) of the single lbfgs fits
+LOGISTIC_FITS = sized(
+    ((32, 384, 2), (384, 384, 2), (960, 384, 2), (1408, 192, 6)), ((32, 16, 2), (48, 16, 3))
+)
+
+
+def hardness_like(n: int, d: int = LOGISTIC_D) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(V, T, labels) of a binary probe where both V and T carry the label (seeded)."""
     rng = np.random.default_rng(11)
     v, t = synthetic_features(n, d, rng), synthetic_features(n, d, rng)
@@ -88,7 +98,7 @@ class LoopLogistic(FixedLogistic):
 
 def logistic_controls(args) -> list[tuple]:
     """Rows (name, ours, reference name, reference) for the logistic controls, per refit."""
-    n_tr, n_te = 960, 240
+    n_tr, n_te = LOGISTIC_ROWS, LOGISTIC_ROWS // 4
     v, t, y = hardness_like(n_tr + n_te)
     tr, te = slice(0, n_tr), slice(n_tr, None)
     probe, loop = FixedLogistic(1.0, tol=1e-4), LoopLogistic(1.0, tol=1e-4)
@@ -129,7 +139,8 @@ def logistic_cv() -> tuple:
 
     This synthetic design is well conditioned (scikit-learn converges in ~50 iterations), where
     the batched solve gains nothing; the real ViT probes take ~1,000 (README, Probes)."""
-    v, t, y = hardness_like(960)
+    n = LOGISTIC_ROWS
+    v, t, y = hardness_like(n)
     x, grid = np.hstack([v, t]), [0.1, 1.0, 10.0]
     ours, batched = best_of(lambda: fit_logistic(x, y, grid, seed=42), 1, "logistic cv")
     batches = logistic.cv_batches
@@ -138,12 +149,13 @@ def logistic_cv() -> tuple:
         ref, loop = best_of(lambda: fit_logistic(x, y, grid, seed=42), 1, "ref cv")
     finally:
         logistic.cv_batches = batches
-    rows = np.abs(batched.cv_scores - loop.cv_scores) * 960  # held-out rows, over the 5 folds
+    rows = np.abs(batched.cv_scores - loop.cv_scores) * n  # held-out rows, over the 5 folds
     same = (
         f"C {batched.C:g} vs {loop.C:g}; CV scores differ by {rows.max():.0f} held-out row(s)"
         f", iterations {batched.cv_max_n_iter} vs {loop.cv_max_n_iter}"
     )
-    return "logistic CV 5 folds x 3 C, 960 x 384", ours, "one-fit lbfgs loop", ref, same
+    name = f"logistic CV 5 folds x 3 C, {n} x {x.shape[1]}"
+    return name, ours, "one-fit lbfgs loop", ref, same
 
 
 def logistic_fits(repeats: int) -> list[tuple]:
@@ -151,7 +163,7 @@ def logistic_fits(repeats: int) -> list[tuple]:
     workflow's probe sizes: `lbfgs.fit_lbfgs_logistic` (the probes' solver) against
     scikit-learn's ``LogisticRegression(solver="lbfgs")`` on the same standardised rows."""
     out = []
-    for n, d, k in ((32, 384, 2), (384, 384, 2), (960, 384, 2), (1408, 192, 6)):
+    for n, d, k in LOGISTIC_FITS:
         v, t, _ = hardness_like(n, d // 2)
         x = StandardScaler().fit_transform(np.hstack([v, t]))
         score = x[:, :6] @ np.linspace(1.0, -1.0, 6) + np.random.default_rng(n).normal(size=n)
@@ -191,7 +203,8 @@ def main() -> None:
     ap.add_argument("--blas-threads", type=int, default=None, help="cap BLAS threads")
     ap.add_argument("--logistic-perms", type=int, default=50, help="batched logistic refits")
     ap.add_argument("--logistic-ref", type=int, default=5, help="reference loop refits")
-    args = ap.parse_args()
+    tiny = {"n_train": 40, "n_test": 20, "d_v": 8, "d_t": 8, "resamples": 20, "permutations": 3}
+    args = parse_args(ap, {**tiny, "repeats": 1, "logistic_perms": 2, "logistic_ref": 1})
     if args.blas_threads is not None:
         threadpool_limits(args.blas_threads)
     blas = max((p["num_threads"] for p in threadpool_info()), default=0)

@@ -1,7 +1,7 @@
 """Benchmark of the simulated corpus (tacgen_lib.corpus.sim): tactile frame rate, per-sample time,
 and the cost of each declared effect. Prints figures; not a test.
 
-    /tmp/venv/bin/python benchmarks/bench_sim.py [--samples 60] [--frames 300]
+    .venv/bin/python benchmarks/bench_sim.py [--samples 60] [--frames 300] [--states 40]
 
 1. Tactile frames/s at 120x160 (height field + shading, PNG excluded) for the two ways of
    getting the height field from MuJoCo: mj_multiRay (one ray per pixel, object box only) and
@@ -22,10 +22,11 @@ import time
 import mujoco  # noqa: I001
 import numpy as np
 import yaml
+from machine import parse_args
 
 import tacgen_lib.corpus.sim  # noqa: F401  (sets MUJOCO_GL=egl before mujoco is imported)
 from tacgen_lib.corpus.sim import corpus, physics, render, samples, tactile
-from tacgen_lib.corpus.sim.scenes import scene_xml, validate_scene
+from tacgen_lib.corpus.sim.scenes import compile_scene, scene_xml, validate_scene
 
 SCENES = yaml.safe_load(open("config/scenes.yaml"))
 PAIRED = {
@@ -40,16 +41,15 @@ PAIRED = {
 
 
 def pressed_states(n: int):
-    """n pressed objects (qpos snapshots) drawn like the paired corpus."""
+    """n pressed objects (qpos snapshots) drawn like the paired corpus, in the corpus's model
+    (`compile_scene`) with an orthographic camera under the gel for the depth method."""
     scene = validate_scene("paired_press", SCENES["paired_press"])
     xml = scene_xml(scene).replace(
         "</worldbody>",
         f'<camera name="gel_cam" pos="0 0 -{scene.gel_camera_distance}" euler="3.14159265 0 0" '
         f'projection="orthographic" fovy="{scene.gel_size[0]}"/></worldbody>',
     )
-    model = mujoco.MjModel.from_xml_string(xml)
-    model.light_castshadow[:] = 0
-    rt = physics.SceneRuntime(scene, model)
+    rt = physics.SceneRuntime(scene, compile_scene(scene, xml))
     cfg = samples.CorpusSettings.from_config(dict(PAIRED, n=n))
     states = []
     for i in range(n):
@@ -67,7 +67,7 @@ def pressed_states(n: int):
     return rt, states, optics
 
 
-def frames(method: str, n_frames: int, n_states: int = 40) -> float:
+def frames(method: str, n_frames: int, n_states: int) -> float:
     """Tactile frames per second of one process (height field + shading + noise)."""
     rt, states, optics = pressed_states(n_states)
     dirs = tactile.ray_directions(optics)
@@ -122,15 +122,16 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--samples", type=int, default=60)
     ap.add_argument("--frames", type=int, default=300)
-    a = ap.parse_args()
+    ap.add_argument("--states", type=int, default=40, help="pressed objects the frames cycle")
+    a = parse_args(ap, {"samples": 2, "frames": 4, "states": 2})
 
     print("== tactile frames/s at 120x160 (height field + shading + noise, no PNG) ==")
-    fps = {m: frames(m, a.frames) for m in ("rays", "depth")}
+    fps = {m: frames(m, a.frames, a.states) for m in ("rays", "depth")}
     for m, v in fps.items():
         print(f"  1 process, {m:5s}: {v:7.0f} frames/s ({1e3 / v:.2f} ms/frame)")
     # agreement of the two height fields on one pressed sphere (precision of depth buffer)
     with mp.get_context("spawn").Pool(2) as pool:
-        two = sum(pool.map(_worker, [("rays", a.frames)] * 2))
+        two = sum(pool.map(_worker, [("rays", a.frames, a.states)] * 2))
     print(f"  2 processes, rays: {two:7.0f} frames/s  (target >= 400)")
     print(
         f"  method used by the corpus: rays (ratio rays/depth in one process: "

@@ -41,6 +41,7 @@ from collections import Counter
 from pathlib import Path
 
 import machine
+from machine import parse_args
 
 HERE = Path(__file__).resolve().parents[1]
 
@@ -208,7 +209,7 @@ def main() -> None:
     ap.add_argument("--root", type=Path, default=HERE, help="the checkout to measure")
     ap.add_argument("--scripts", default="", help="comma-separated script names (default all)")
     ap.add_argument("--no-dry-run", action="store_true", help="skip the job-count weighting")
-    args = ap.parse_args()
+    args = parse_args(ap, {"repeats": 1, "scripts": "merge_corpus"})
     root = args.root.resolve()
     scripts = sorted((root / "workflow" / "scripts").glob("*.py"))
     if args.scripts:

@@ -1,7 +1,7 @@
 """What every benchmark shares: one line naming the machine it ran on (its figures depend on
-the CPU's vector units: the same code measured 0.41 and 0.65 of the GEMM roofline on two 2-core
-machines), best-of timing by wall and CPU clock, and the GEMM rate a roofline is measured
-against.
+the CPU's vector units: the same code reaches another fraction of the GEMM roofline on another
+CPU class), best-of timing by wall and CPU clock, the GEMM rate a roofline is measured against,
+the tiny mode and the config of the finished run a benchmark reads.
 
 Run as a script, it prints the machine's speed at that moment, to quote beside any whole-run
 timing (a cold run, `make test`): the CPU (model, family, cores, widest vector extension), the
@@ -11,6 +11,13 @@ import the libraries every job imports (the preloaded interpreter's list,
 machine is loaded now. Best of `--repeats`.
 
     .venv/bin/python benchmarks/machine.py [--repeats 3]
+
+The tiny mode (`TINY_ENV`, ``TACGEN_BENCH_TINY=1``): every script runs its whole path at the
+smallest sizes, in seconds, and prints its figures, which then measure nothing but that the
+path still runs (`make test` runs every script so, tests/test_benchmarks.py). A script states
+its tiny sizes once, as the defaults `parse_args` gives its arguments in that mode (an
+argument given on the command line still wins), and `sized` for a size it takes no argument
+for. A script that reads a finished run reads one of config/test.yaml in the tiny mode.
 """
 
 from __future__ import annotations
@@ -20,10 +27,58 @@ import os
 import subprocess
 import sys
 import time
-from collections.abc import Callable
-from typing import NamedTuple
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any, NamedTuple, TypeVar
 
 from tacgen_lib.runtime.benchmarks import cpu_label, cpuinfo
+
+ROOT = Path(__file__).resolve().parents[1]
+#: the environment variable that runs a benchmark in its tiny mode (anything but "" or "0")
+TINY_ENV = "TACGEN_BENCH_TINY"
+#: the config a tiny mode's finished run was made with (merged over config/config.yaml)
+TINY_CONFIG = "config/test.yaml"
+T = TypeVar("T")
+
+
+def tiny() -> bool:
+    """Whether this process runs in the tiny mode (`TINY_ENV`)."""
+    return os.environ.get(TINY_ENV, "0") not in ("", "0")
+
+
+def sized(real: T, small: T) -> T:
+    """`real`, or `small` in the tiny mode: a size the script takes no argument for."""
+    return small if tiny() else real
+
+
+def parse_args(
+    parser: argparse.ArgumentParser,
+    tiny_defaults: Mapping[str, Any],
+    argv: list[str] | None = None,
+) -> argparse.Namespace:
+    """`parser`'s arguments; in the tiny mode with `tiny_defaults` (argument dest -> value) for
+    its defaults, and a line saying so. A dest the parser lacks is an error in either mode, so
+    a renamed argument cannot leave a tiny size behind."""
+    dests = {action.dest for action in parser._actions}
+    unknown = sorted(set(tiny_defaults) - dests)
+    if unknown:
+        raise ValueError(f"tiny defaults {unknown} name no argument of {parser.prog}")
+    if tiny():
+        parser.set_defaults(**tiny_defaults)
+        print(f"tiny mode ({TINY_ENV}): the smallest sizes; the figures only show the path runs")
+    return parser.parse_args(argv)
+
+
+def run_config(configfile: str | os.PathLike[str]) -> dict:
+    """The validated config of a finished run made with `--configfile configfile`: the file
+    merged over config/config.yaml as Snakemake merges it (config/config.yaml itself: the
+    default), the schema's defaults filled in."""
+    from tacgen_lib.estimate.command import merged_config
+    from tacgen_lib.workflow_config import validate_config
+
+    config = merged_config([Path(configfile).absolute()], ROOT)
+    config["scenes_file"] = str(ROOT / config["scenes_file"])
+    return validate_config(config, ROOT / "config/config.schema.yaml")
 
 
 class Timing(NamedTuple):
@@ -93,7 +148,7 @@ def import_seconds(repeats: int) -> Timing:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[1])
     parser.add_argument("--repeats", type=int, default=3)
-    args = parser.parse_args(argv)
+    args = parse_args(parser, {"repeats": 1}, argv)
     import torch
 
     torch.set_num_threads(1)

@@ -74,6 +74,7 @@ NOT_NUMERIC = (
     "tests/test_faults.py",
     "tests/estimate/test_estimate.py",  # run-time estimates: sums of benchmark seconds
     "tests/test_kernel_variants.py",  # which variant a CPU class gets
+    "tests/test_benchmarks.py",  # runs the benchmark scripts, whose figures are timings
 )
 #: single tests of numeric modules that compare no float: what a process imports, and which
 #: checkpoint keys and shapes an architecture accepts

@@ -429,9 +429,16 @@ def disable_undeclared(model: mujoco.MjModel, scene: Scene, *, sensors: bool) ->
     model.opt.disableflags = int(model.opt.disableflags) | int(flags)
 
 
-def compile_scene(scene: Scene) -> mujoco.MjModel:
-    """Compile a validated scene to an MjModel with undeclared physics disabled."""
-    model = mujoco.MjModel.from_xml_string(scene_xml(scene), texture_assets())
+def compile_scene(scene: Scene, xml: str | None = None) -> mujoco.MjModel:
+    """Compile a validated scene to an MjModel with undeclared physics disabled.
+
+    `xml` is the scene's MJCF text (default `scene_xml(scene)`); a caller that edits it (as
+    benchmarks/bench_sim.py adds a camera) still gets the texture assets it names, the
+    disabled physics and the shadows of the corpus's own model.
+    """
+    model = mujoco.MjModel.from_xml_string(
+        scene_xml(scene) if xml is None else xml, texture_assets()
+    )
     disable_undeclared(model, scene, sensors=scene.has("tactile"))
     if not scene.has("shadows"):
         model.light_castshadow[:] = 0
