@@ -54,7 +54,9 @@ rule family_backbone:
             if family_spec(w.family, w.modality).objective == "simclr"
             else {}
         ),
-        image_size=FEAT["image_size"],
+        image_size=lambda w: backbone_image_size(
+            FEAT, FAMILIES.families[w.family][w.modality].__dict__
+        ),
         batch_size=FEAT["batch_size"],
         pool=lambda w: family_spec(w.family, w.modality).pool or FEAT["pool"],
     script:

@@ -7,6 +7,7 @@ from tacgen_lib.features.families import (
     check_checkpoint_file,
 )
 from tacgen_lib.features.families import BackboneSpec as _Spec
+from tacgen_lib.features.settings import backbone_image_size
 
 for _m in MODALITIES:
     check_backbone(

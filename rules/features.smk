@@ -1,7 +1,7 @@
 """Features stage: a DINOv2-architecture backbone per modality, frozen features per corpus."""
 
 from tacgen_lib.features.families import BackboneSpec as _Backbone
-from tacgen_lib.features.settings import pretraining_corpora
+from tacgen_lib.features.settings import backbone_image_size, pretraining_corpora
 
 FEAT = config["features"]
 PRETRAIN = FEAT["pretrain"]
@@ -75,7 +75,7 @@ rule pretrain_backbone:
             if FEAT["backbones"][w.modality]["objective"] == "simclr"
             else {}
         ),
-        image_size=FEAT["image_size"],
+        image_size=lambda w: backbone_image_size(FEAT, FEAT["backbones"][w.modality]),
     script:
         "../workflow/scripts/pretrain_backbone.py"
 

@@ -35,6 +35,7 @@ RUN_ARGS = {
     "bench_cv_repeats.py": ["--results", "{run}/results"],
     "bench_generator_length.py": ["--results", "{run}/results"],
     "bench_vision.py": ["--results", "{run}/results"],
+    "bench_visibility_gate.py": ["--results", "{run}/results"],
 }
 ALONE = [s for s in SCRIPTS if s not in RUN_ARGS]
 #: the scripts that take longest, longest first: started first, so that neither worker is left
@@ -42,6 +43,7 @@ ALONE = [s for s in SCRIPTS if s not in RUN_ARGS]
 LONG_FIRST = (
     "bench_preload.py",
     "bench_vision.py",
+    "bench_visibility_gate.py",
     "bench_estimate.py",
     "bench_pixel.py",
     "machine.py",

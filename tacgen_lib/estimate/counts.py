@@ -14,8 +14,8 @@ from tacgen_lib.estimate.flops import (
     DINO_FORWARDS,
     MAE_FORWARDS,
     SIMCLR_FORWARDS,
-    arch_flops,
     generator_mlp_flops,
+    spec_flops,
 )
 from tacgen_lib.features.settings import MaeSettings, SimclrSettings, pretraining_corpora
 from tacgen_lib.generate.cells import guidance_passes
@@ -103,7 +103,7 @@ def pretraining_flops(c: Config, spec: Mapping[str, Any]) -> float:
     MAE's or SimCLR's count per frame and epoch)."""
     objective, units = pretraining_units(c, spec)
     forwards = {"mae": MAE_FORWARDS, "simclr": SIMCLR_FORWARDS}.get(objective, DINO_FORWARDS)
-    return units * forwards * arch_flops(spec["arch"], c["features"]["image_size"])
+    return units * forwards * spec_flops(c, spec)
 
 
 def family_spec(c: Config, w: Wildcards) -> Mapping[str, Any]:
@@ -139,7 +139,7 @@ def family_backbone(c: Config, w: Wildcards) -> tuple[str, float]:
 
 def family_backbone_flops(c: Config, w: Wildcards) -> float:
     spec = family_spec(c, w)
-    extraction = family_frames(c) * arch_flops(spec["arch"], c["features"]["image_size"])
+    extraction = family_frames(c) * spec_flops(c, spec)
     return pretraining_flops(c, spec) + extraction
 
 

@@ -12,6 +12,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from tacgen_lib.features.archs import ARCHS, RESNET_ARCHS, arch_family
+from tacgen_lib.features.settings import backbone_image_size
 
 __all__ = [
     "GFLOPS_PER_THREAD",
@@ -23,6 +24,7 @@ __all__ = [
     "resnet_flops",
     "arch_flops",
     "backbone_flops",
+    "spec_flops",
     "generator_mlp_flops",
     "pixel_frame",
     "pixel_forward_flops",
@@ -73,9 +75,15 @@ def arch_flops(arch: str, image_size: int) -> float:
     return vit_flops(arch, image_size)
 
 
+def spec_flops(c: Config, spec: Mapping[str, Any]) -> float:
+    """`arch_flops` of a backbone declaration at the input size it reads
+    (`features.settings.backbone_image_size`: its own, else features.image_size)."""
+    return arch_flops(spec["arch"], backbone_image_size(c["features"], spec))
+
+
 def backbone_flops(c: Config, modality: str) -> float:
-    """`arch_flops` of a modality's backbone at the config's input size."""
-    return arch_flops(c["features"]["backbones"][modality]["arch"], c["features"]["image_size"])
+    """`spec_flops` of a modality's backbone (features.backbones)."""
+    return spec_flops(c, c["features"]["backbones"][modality])
 
 
 #: MAE pretraining per frame and epoch, in encoder forwards: the encoder sees a quarter of the

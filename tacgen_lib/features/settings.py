@@ -18,6 +18,7 @@ from tacgen_lib.io.schema import SchemaSettings, schema_fields
 
 __all__ = [
     "DinoSettings",
+    "backbone_image_size",
     "FeatureSettings",
     "MaeSettings",
     "PretrainedVsRandomSettings",
@@ -43,11 +44,27 @@ class FeatureSettings(SchemaSettings):
 
     @classmethod
     def for_backbone(cls, features: Mapping[str, Any], modality: str) -> FeatureSettings:
-        """The settings of config ``features`` with the pool of the `modality` backbone
-        (``features.backbones.<modality>.pool`` where it names one, else features.pool)."""
-        settings = cls.from_config(features)
-        own = features["backbones"][modality].get("pool")
-        return replace(settings, pool=own) if own else settings
+        """The settings of config ``features`` with the pool and the image size of the
+        `modality` backbone (``features.backbones.<modality>.pool`` and ``.image_size`` where
+        it names them, else features.pool and features.image_size)."""
+        return cls.from_config(features).own(features["backbones"][modality])
+
+    def own(self, backbone: Mapping[str, Any]) -> FeatureSettings:
+        """These settings with the pool and image size a backbone declaration (`backbone`:
+        features.backbones.<modality>, or a family's) names, where it names them."""
+        out = self
+        if backbone.get("pool"):
+            out = replace(out, pool=backbone["pool"])
+        if backbone.get("image_size"):
+            out = replace(out, image_size=int(backbone["image_size"]))
+        return out
+
+
+def backbone_image_size(features: Mapping[str, Any], backbone: Mapping[str, Any]) -> int:
+    """The side in pixels a backbone declaration's frames are resized to (its own
+    ``image_size``, else config ``features.image_size``; `FeatureSettings.own`): what its
+    pretraining and its features read."""
+    return FeatureSettings.from_config(features).own(backbone).image_size
 
 
 @dataclass(frozen=True)

@@ -26,7 +26,8 @@ import numpy as np
 from torch import nn
 
 from tacgen_lib.align.heads import AlignHeads, project
-from tacgen_lib.features.extract import extract_features
+from tacgen_lib.features.extract import extract_with
+from tacgen_lib.features.settings import FeatureSettings
 from tacgen_lib.preprocess.background import background_subtract
 
 __all__ = ["tactile_moments", "palpation_features"]
@@ -51,26 +52,18 @@ def palpation_features(
     heads: Mapping[str, AlignHeads],
     *,
     variant: str,
-    image_size: int,
-    batch_size: int,
-    pools: Mapping[str, str],
+    reads: Mapping[str, FeatureSettings],
     device: Any = "cpu",
 ) -> dict[str, np.ndarray]:
     """V (N, d_v), T raw (N, moments x d_t) and T aligned per heads key (N, moments x 128).
 
     rgb: (N, H, W, 3); frames: column 'tactile_<moment>_<pad>' -> (N, h, w, 3);
-    backgrounds: pad name -> (h, w, 3). pools: modality ("vision", "tactile") -> its
-    backbone's pool (`extract.extract_features`). `device` (a torch device or its name): where the
-    backbones and heads run (`extract_features`, `project`).
+    backgrounds: pad name -> (h, w, 3). reads: modality ("vision", "tactile") -> how its
+    backbone's features are read (`FeatureSettings.for_backbone`: image size, batch, pool;
+    `extract.extract_with`), as the extraction rules read them. `device` (a torch device or its
+    name): where the backbones and heads run (`extract_with`, `project`).
     """
-    v = extract_features(
-        vision,
-        rgb,
-        image_size=image_size,
-        batch_size=batch_size,
-        pool=pools["vision"],
-        device=device,
-    )
+    v = extract_with(vision, rgb, reads["vision"], device=device)
     moments = tactile_moments(list(frames))
     raw, aligned = [], {k: [] for k in heads}
     for moment in moments:
@@ -80,16 +73,7 @@ def palpation_features(
                 continue
             pad = name[len(f"tactile_{moment}_") :]
             proc = np.stack([background_subtract(f, backgrounds[pad], variant) for f in imgs])
-            per_pad.append(
-                extract_features(
-                    tactile,
-                    proc,
-                    image_size=image_size,
-                    batch_size=batch_size,
-                    pool=pools["tactile"],
-                    device=device,
-                )
-            )
+            per_pad.append(extract_with(tactile, proc, reads["tactile"], device=device))
         t = np.mean(per_pad, axis=0).astype(np.float32)
         raw.append(t)
         for key, h in heads.items():

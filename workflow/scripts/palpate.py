@@ -20,10 +20,9 @@ from tacgen_lib.runtime.device import torch_device
 logger = log.for_rule(snakemake)
 torch.set_num_threads(snakemake.threads)
 settings = PolicySettings.from_config(snakemake.params.settings)
-feat = FeatureSettings.from_config(snakemake.params.features)
-pools = {
-    m: FeatureSettings.for_backbone(snakemake.params.features, m).pool
-    for m in ("vision", "tactile")
+# each backbone read as the extraction rules read it: its own image size and pool
+reads = {
+    m: FeatureSettings.for_backbone(snakemake.params.features, m) for m in ("vision", "tactile")
 }
 names = frame_names(len(settings.palpation_forces))
 parts = [edges.read(p).frame for p in snakemake.input.episodes]
@@ -50,9 +49,7 @@ out = palpation_features(
     read_backbone(snakemake.input.tactile),
     heads,
     variant=settings.heads_variant,
-    image_size=feat.image_size,
-    batch_size=feat.batch_size,
-    pools=pools,
+    reads=reads,
     device=torch_device(snakemake.params.device),
 )
 labels = episodes[

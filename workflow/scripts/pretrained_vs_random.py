@@ -38,10 +38,11 @@ for modality, column in (("vision", "rgb"), ("tactile", "tactile_proc")):
     train, test = (split == "train").nonzero()[0], (split == "test").nonzero()[0]
     images = decode_frames(frames.frame, column, where=snakemake.input[modality])
     arch = params.archs[modality]
+    read = FeatureSettings.for_backbone(params.features, modality)  # its image size and pool
     rand = extract_with(
-        random_init(arch, features.image_size, seed=pretrain.seed),
+        random_init(arch, read.image_size, seed=pretrain.seed),
         images,
-        FeatureSettings.for_backbone(params.features, modality),
+        read,
         device=torch_device(params.device),
     )
     with threadpool_limits(snakemake.threads):
