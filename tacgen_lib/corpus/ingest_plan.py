@@ -60,20 +60,25 @@ class IngestPlan:
         ids = [s.sample_id for s in self.samples]
         return dict(zip(ids, top_pattern_strata([s.adjectives for s in self.samples]), strict=True))
 
-    def report(self) -> list[str]:
-        """Sentences for the rule's log: counts of what is ingested, skipped and without a
-        background, each with its first items."""
+    def summary(self) -> str:
+        """One sentence: what the ingest writes, from where."""
+        return (
+            f"{self.corpus}: {len(self.samples)} samples, {len(self.backgrounds)} sensor "
+            f"backgrounds from {self.root}"
+        )
+
+    def warnings(self) -> list[str]:
+        """Sentences for the rule's log, as warnings: the counts of what is skipped and of the
+        samples without a background, each with its first items, and how CSVs were read."""
 
         def first(items: list[str]) -> str:
             shown = ", ".join(items[:5])
             return shown + (f", ... ({len(items) - 5} more)" if len(items) > 5 else "")
 
         lines = [
-            f"{self.corpus}: {len(self.samples)} samples, {len(self.backgrounds)} sensor "
-            f"backgrounds from {self.root}"
+            f"{self.corpus}: skipped {len(items)} {reason}: {first(items)}"
+            for reason, items in self.skipped.items()
         ]
-        for reason, items in self.skipped.items():
-            lines.append(f"{self.corpus}: skipped {len(items)} {reason}: {first(items)}")
         if self.without_background:
             lines.append(
                 f"{self.corpus}: {len(self.without_background)} samples have no tactile "
@@ -81,6 +86,10 @@ class IngestPlan:
                 f"{first(self.without_background)}"
             )
         return lines + [f"{self.corpus}: {note}" for note in self.notes]
+
+    def report(self) -> list[str]:
+        """`summary` then `warnings`."""
+        return [self.summary(), *self.warnings()]
 
 
 def tvl_part(root: Path, part: str) -> Path:

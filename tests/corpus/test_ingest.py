@@ -12,6 +12,7 @@ from collections import Counter
 from pathlib import Path
 
 import cv2
+import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 import pyarrow as pa
@@ -47,6 +48,7 @@ from tacgen_lib.corpus.ingest_files import SAMPLE_COLUMNS, SENSOR_COLUMNS, pad_a
 from tacgen_lib.io import edges
 from tacgen_lib.io.images import decode_png
 from tacgen_lib.preprocess.frames import sensor_background_map, subtract_backgrounds
+from tacgen_lib.report.figures import corpus_example_grid
 
 
 def imread_rgb(path: Path) -> np.ndarray:
@@ -477,6 +479,11 @@ def test_hct_row_without_background_is_ingested_and_refused_by_subtraction(hct_r
     with pytest.raises(ValueError) as err:
         subtract_backgrounds(samples, sensor_background_map(sensors), "clip128", where=where)
     assert_names(err, where, "8 of 12 samples", *lacking, "hct-bg:data1/0-1702507215.615537")
+    # the report's example grid still draws them, with blank background panels
+    splits = pd.DataFrame({"sample_id": samples["sample_id"], "split": "train"})
+    figure = corpus_example_grid(samples, sensors, splits, n=12, title="hct")
+    assert len([ax for ax in figure.axes if ax.images]) == 12 * 4
+    plt.close(figure)
 
 
 def test_hct_empty_caption(hct_root: Path) -> None:

@@ -16,8 +16,9 @@ try:
     plan = plan_declared(Path(snakemake.input.root), corpus)
 except (OSError, ValueError) as exc:
     raise type(exc)(f"{where}: {exc}") from exc
-for line in plan.report():
-    logger.info(line)
+logger.info(plan.summary())
+for line in plan.warnings():
+    logger.warning(line)
 progress = log.Progress(logger, len(plan.samples), "samples")
 try:
     n_samples, n_sensors = write_ingested(
