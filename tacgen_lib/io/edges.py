@@ -189,9 +189,23 @@ def write_batches(
     os.close(fd)
     seen: set[str] = set()
     rows = 0
+
+    def disk(call, *args, **kwargs):  # noqa: ANN001, ANN202 - a write, its OSError explained
+        try:
+            return call(*args, **kwargs)
+        except OSError as exc:
+            if exc.errno is None:
+                raise
+            raise OSError(
+                exc.errno,
+                f"{path}: cannot write the edge ({exc.strerror}); nothing was written there (the "
+                "previous file, if any, is untouched); free space and rerun",
+            ) from exc
+
     try:
-        with pq.ParquetWriter(tmp, schema, compression="zstd", write_statistics=False) as writer:
-            for batch in batches:
+        writer = disk(pq.ParquetWriter, tmp, schema, compression="zstd", write_statistics=False)
+        try:
+            for batch in batches:  # the producer's own errors pass through as they are
                 if not batch.schema.remove_metadata().equals(schema):
                     raise EdgeError(
                         f"{where}: a row group's columns {batch.schema.names} / types differ "
@@ -206,9 +220,12 @@ def write_batches(
                     if value in seen:
                         raise EdgeError(f"{where}: {key} {value!r} appears more than once")
                     seen.add(value)
-                writer.write_table(batch.replace_schema_metadata(None))
+                disk(writer.write_table, batch.replace_schema_metadata(None))
                 rows += batch.num_rows
-        commit_file(
+        finally:
+            disk(writer.close)
+        disk(
+            commit_file,
             tmp,
             path,
             rows=rows,
@@ -217,15 +234,9 @@ def write_batches(
             vectors={},
             producer=producer,
         )
-    except BaseException as exc:
+    except BaseException:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
-        if isinstance(exc, OSError) and exc.errno is not None:
-            raise OSError(
-                exc.errno,
-                f"{path}: cannot write the edge ({exc.strerror}); nothing was written there (the "
-                "previous file, if any, is untouched); free space and rerun",
-            ) from exc
         raise
     return rows
 
