@@ -9,9 +9,9 @@ own `ru_maxrss`), streamed as the rule streams it (`tacgen_lib.corpus.ingest.wri
 with --in-memory as whole tables (`load_ingested` then `edges.write`, how the ingest worked
 before it streamed), for comparison. The tree: data1..data3, trajectories of --per-traj frames,
 each with its background; DIGIT frames at the published SSVTP background's size (320 x 240,
-rows x columns), camera frames at --rgb-size. Frames are drawn from a pool of distinct seeded
-images and hard-linked into place (copied where links fail), so a 40 000-frame tree is quick to
-build; every frame is still decoded and re-encoded by the ingest.
+rows x columns), camera frames at --rgb-size: seeded images from a small pool, each frame
+made its own by a block drawn from its index (so the edge holds every frame's PNG, as a real
+one does); every frame is decoded and re-encoded by the ingest.
 """
 
 from __future__ import annotations
@@ -34,40 +34,38 @@ TACTILE = (320, 240)
 WORDS = ("smooth", "rough", "hard", "soft", "glossy", "bumpy", "textured", "cool")
 
 
-def _pool(n: int, shape: tuple[int, int], seed: int, folder: Path, tactile: bool) -> list[Path]:
-    """`n` distinct seeded JPEGs of `shape`: DIGIT-like (a gradient, a contact blob, sensor
-    noise) or camera-like (a colour field with an object)."""
+def _pool(n: int, shape: tuple[int, int], seed: int, tactile: bool) -> list[np.ndarray]:
+    """`n` distinct seeded BGR images of `shape`: DIGIT-like (a gradient, a contact blob,
+    sensor noise) or camera-like (a colour field with an object)."""
     rng = np.random.default_rng(seed)
     h, w = shape
     yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
-    paths = []
-    for i in range(n):
+    images = []
+    for _ in range(n):
         img = rng.uniform(60, 160, 3) + 40 * np.stack([xx / w, yy / h, 1 - xx / w], -1)
         cy, cx = rng.uniform(0.3, 0.7) * h, rng.uniform(0.3, 0.7) * w
         blob = np.exp(-((yy - cy) ** 2 + (xx - cx) ** 2) / (2 * (0.15 * min(h, w)) ** 2))
-        img += blob[..., None] * rng.uniform(-60, 60, 3) + rng.normal(
-            0, 3 if tactile else 6, img.shape
-        )
-        path = folder / f"{'tac' if tactile else 'rgb'}_{i}.jpg"
-        cv2.imwrite(str(path), np.clip(img, 0, 255).astype(np.uint8))
-        paths.append(path)
-    return paths
+        img += blob[..., None] * rng.uniform(-60, 60, 3)
+        img += rng.normal(0, 3 if tactile else 6, img.shape)
+        images.append(np.clip(img, 0, 255).astype(np.uint8))
+    return images
 
 
-def _place(src: Path, dest: Path) -> None:
+def _write_unique(image: np.ndarray, index: int, dest: Path) -> None:
+    """`image` with a corner block drawn from `index` (so no two frames share their bytes,
+    nor their PNG: a Parquet dictionary cannot fold them), as a JPEG at `dest`."""
+    frame = image.copy()
+    block = np.frombuffer(np.int64(index).tobytes() * 24, dtype=np.uint8)[: 8 * 8 * 3]
+    frame[:8, :8] = block.reshape(8, 8, 3)
     dest.parent.mkdir(parents=True, exist_ok=True)
-    try:
-        os.link(src, dest)
-    except OSError:
-        shutil.copyfile(src, dest)
+    if not cv2.imwrite(str(dest), frame):
+        raise OSError(f"cannot write {dest}")
 
 
 def build_tree(root: Path, frames: int, per_traj: int, rgb_size: tuple[int, int]) -> None:
-    """A synthetic hct/ of `frames` rows in the published layout."""
-    pool_dir = root / "pool"
-    pool_dir.mkdir(parents=True)
-    tactile = _pool(32, TACTILE, 0, pool_dir, tactile=True)
-    rgb = _pool(32, rgb_size, 1, pool_dir, tactile=False)
+    """A synthetic hct/ of `frames` rows in the published layout, every frame its own file."""
+    tactile = _pool(32, TACTILE, 0, tactile=True)
+    rgb = _pool(32, rgb_size, 1, tactile=False)
     rng = np.random.default_rng(2)
     hct = root / "hct"
     rows: dict[str, dict[str, list[list[str]]]] = {
@@ -78,11 +76,13 @@ def build_tree(root: Path, frames: int, per_traj: int, rgb_size: tuple[int, int]
     for t in range(n_traj):
         data = f"data{1 + t % 3}"
         traj = f"{t}-{1702507215.615537 + 61.25 * t:.6f}"
-        _place(tactile[t % len(tactile)], hct / data / traj / "background.png")
+        _write_unique(tactile[t % len(tactile)], -1 - t, hct / data / traj / "background.png")
         for k in range(min(per_traj, frames - done)):
             frame = f"{100 + k}-{0.025303125 * (k + 1):.6f}.jpg"
-            _place(rgb[(t + k) % len(rgb)], hct / data / traj / "vision" / frame)
-            _place(tactile[(t * 7 + k) % len(tactile)], hct / data / traj / "tactile" / frame)
+            _write_unique(rgb[(t + k) % len(rgb)], done, hct / data / traj / "vision" / frame)
+            _write_unique(
+                tactile[(t * 7 + k) % len(tactile)], done, hct / data / traj / "tactile" / frame
+            )
             words = rng.choice(len(WORDS), size=int(rng.integers(1, 4)), replace=False)
             rows[data]["test" if k % 10 == 9 else "train"].append(
                 [
@@ -99,7 +99,6 @@ def build_tree(root: Path, frames: int, per_traj: int, rgb_size: tuple[int, int]
                 writer = csv.writer(handle)
                 writer.writerow(["url", "tactile", "tactile_background", "caption"])
                 writer.writerows(split_rows)
-    shutil.rmtree(pool_dir)
 
 
 _CHILD = """
