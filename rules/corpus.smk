@@ -111,7 +111,7 @@ rule merge_corpus:
 
 
 rule ingest_tvl:
-    """A real TVL corpus from a local folder (SSVTP or HCT layout) into the corpus edge schema."""
+    """A real TVL corpus from its published folder (SSVTP or HCT, read as the authors' loaders read it) into the corpus edge schema, streamed one row group of images at a time."""
     input:
         root=lambda w: CORPORA[w.corpus]["root"],
         code=imports_of("ingest_tvl"),
@@ -127,8 +127,11 @@ rule ingest_tvl:
     conda:
         "../envs/corpus.yaml"
     threads: 1
+    # memory: one row group of images (tacgen_lib.corpus.ingest.ROW_GROUP_BYTES of PNG) and the
+    # plan's text, whatever the corpus's size (benchmarks/bench_ingest.py measures it); the
+    # runtime is the estimate's (its units: the rows the dataset's split CSVs list)
     resources:
-        mem_mb=4000,
+        mem_mb=2000,
         runtime=30,
     params:
         corpus=lambda w: {"name": w.corpus, **CORPORA[w.corpus]},

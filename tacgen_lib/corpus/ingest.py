@@ -1,368 +1,248 @@
 """Real-corpus ingest: the TVL dataset's SSVTP and HCT folders as corpus edges (docs/real_data.md; the edge contract: docs/layout.md, Edges).
 
 This module owns reading the public Touch-Vision-Language (TVL) dataset (Fu et al., 2024) from
-disk and turning it into the two tables every corpus provides: one row per visuo-tactile sample
-(images as PNG bytes, caption, adjectives, hardness label, stratum, source split) and one row
-per tactile sensor background. The caption vocabulary the paper uses for real data (adjective
-parsing, the hard/soft label, the top-5 adjective-pattern strata SSVTP splits are stratified
-by) is `tacgen_lib.corpus.captions`.
+disk as its authors' loaders read it, and turning it into the two tables every corpus
+provides: one row per visuo-tactile sample (images as PNG bytes, caption, adjectives, hardness
+label, stratum, source split) and one row per tactile sensor background. The caption vocabulary
+the paper uses for real data (adjective parsing, the hard/soft label, the top-5
+adjective-pattern strata SSVTP splits are stratified by) is `tacgen_lib.corpus.captions`.
 
-Layouts (``root`` is the unzipped ``tvl_dataset`` folder holding ``ssvtp/`` and ``hct/``)::
+An ingest is planned first (`plan_ssvtp`, `plan_hct`: the CSVs and captions read, every file
+found or reported, the strata fixed) and its images are read afterwards, in row groups
+(`write_ingested` streams them into the edge; `ingest_ssvtp` / `ingest_hct` return the whole
+tables, for small corpora and tests), so memory holds one row group of images at a time.
 
+Layouts (``root`` is the unzipped ``tvl_dataset`` folder holding ``ssvtp/`` and ``hct/``), as
+read by the loaders of the TVL code release (github.com/Max-Fu/tvl): ``TacVisDataset`` (SSVTP)
+and ``TacVisDatasetV2`` (HCT) in ``tvl_enc/tacvis.py``, ``PretrainDataset`` in
+``tvl_llama/data/dataset.py``::
+
+    root/ssvtp/train.csv, test.csv              header url,tactile,caption; column 0 names the
+                                                RGB file, relative to ssvtp/
     root/ssvtp/images_rgb/image_{i}_rgb.jpg     camera frame of pair i
     root/ssvtp/images_tac/image_{i}_tac.jpg     DIGIT frame of pair i
-    root/ssvtp/text/labels_{i}.txt              caption, e.g. "smooth, hard, glossy"
-    root/ssvtp/train.csv, test.csv              optional; first column = the RGB path
-    root/ssvtp/tac_background.png               global sensor background (see below)
+    root/ssvtp/text/labels_{i}.txt              caption, e.g. "smooth, hard, glossy."
+    <TVL code>/tvl_enc/data/tac_background.png  the SSVTP sensor's background (with the code)
 
-    root/hct/<data folder>/train.csv, test.csv  columns vision,tactile,background,caption;
+    root/hct/data{1,2,3}/train.csv, test.csv    header url,tactile,tactile_background,caption;
                                                 paths relative to the CSV's folder
-    root/hct/<data folder>/<trajectory>/vision/*.jpg, tactile/*.jpg, background per trajectory
+    root/hct/data*/<trajectory>/vision/*.jpg, tactile/*.jpg, and the trajectory's background
+    root/hct/data*/contact.json, not_contact.json   path lists (no captions; not read here)
 
-Assumptions, checked against the TVL code release (github.com/Max-Fu/tvl, ``tvl_enc/tacvis.py``):
+SSVTP, as ``TacVisDataset`` selects pairs: the pairs are the rows of ``train.csv`` and
+``test.csv`` whose first cell names an existing RGB file (a header row names none); the tactile
+file is that path with ``rgb`` read as ``tac``, the caption ``text/labels_{i}.txt``. A listed
+pair with a missing RGB, tactile or caption file is skipped, and pairs in ``images_rgb/`` that
+neither CSV lists are left out; both are counted in the plan's report, never fatal. With
+neither CSV present every ``images_rgb/image_{i}_rgb.*`` is a pair, with no source split (the
+loader lists the folder then). The background is found where the code publishes it: the
+corpus's ``background`` (the file, or a clone of the TVL code), else a copy at
+``root/ssvtp/tac_background.png``; its absence is an error naming where to get it.
 
-- SSVTP CSVs: TVL reads only the first column of each row, an RGB path relative to ``ssvtp/``
-  (``images_rgb/image_{i}_rgb.jpg``), and derives the tactile and text paths from the index.
-  Their header names are not documented, so a first row whose first cell is not such a path is
-  taken as a header. Pairs listed in neither CSV are still ingested, with ``source_split`` None.
-- SSVTP background: TVL ships it with the code, not the data (``tvl_enc/data/tac_background.png``).
-  Copy it to ``root/ssvtp/tac_background.png`` or pass ``background=``.
-- HCT CSVs have a header row; TVL unpacks the four columns by position as
-  ``vision, tactile, background, caption``. Here they are looked up by those names (case and
-  surrounding spaces ignored), so a CSV with different names fails and names the column.
-- HCT background: when a row's background file does not exist, TVL falls back to a
-  ``digit_background.png`` higher up the tree; here the nearest ``digit_background.png`` from the
-  background's folder up to ``root/hct`` is used, and its absence is an error.
-- Captions: like TVL, adjectives are comma-separated and periods around them are dropped.
+HCT, as ``TacVisDatasetV2`` and ``PretrainDataset`` read it: the first row of each CSV is a
+header; its columns are found by the authors' names (``url``, ``tactile``,
+``tactile_background``, ``caption``; ``vision`` and ``background`` are read as the first and
+third), and a header naming none of them is read by position, as ``TacVisDatasetV2`` does. A
+row's background that does not exist falls back, as there, to ``digit_background.png`` three
+path levels up from the listed file; a row with neither is ingested with no background (its
+sensor is absent from the sensors table; the plan's report lists it, and background subtraction
+refuses it by name).
+
+Tactile frames and their backgrounds are checked to have one size (as stored; a mismatch names
+both sizes and the likely swap) and then padded to a square and turned a quarter
+counter-clockwise, as TVL's code does to both before subtracting (`ingest_files.pad_and_rotate`).
+Camera frames are kept as stored. Every image is re-encoded as PNG
+(:func:`tacgen_lib.io.images.encode_png`) so all corpora carry the same lossless encoding.
 
 Identifiers: SSVTP ``sample_id`` is ``f"{corpus}-{i:06d}"``; HCT's is
 ``f"{corpus}-{data_folder}-{row:05d}"`` with ``row`` counting the data rows of ``train.csv`` then
 ``test.csv`` of that folder. SSVTP has one sensor, ``f"{corpus}-bg"``; HCT has one per background
-file, ``f"{corpus}-bg:{path relative to root/hct}"``.
-
-Every image is decoded (JPEG or PNG) and re-encoded as PNG with :func:`tacgen_lib.io.images.encode_png`
-so all corpora carry the same lossless encoding. Errors name the file and the ``sample_id``; an
-ingest either returns the whole corpus or raises.
+file, ``f"{corpus}-bg:{path relative to root/hct}"``. Captions: like TVL, adjectives are
+comma-separated and periods around them are dropped. Errors name the file and the
+``sample_id``; an ingest either returns (or writes) the whole corpus or raises.
 """
 
 from __future__ import annotations
 
-import csv
 import os
-import re
-from collections.abc import Mapping
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
 import pandas as pd
+import pyarrow as pa
 
 from tacgen_lib.corpus.ingest_files import (
-    SPLIT_CSVS,
-    Image,
+    SAMPLE_SCHEMA,
+    SENSOR_SCHEMA,
     Record,
     check_same_shape,
-    corpus_frames,
-    inside_root,
-    load_image,
-    parsed_caption,
-    relative_path,
+    pad_and_rotate,
+    read_image,
+    samples_frame,
+    sensors_frame,
 )
+from tacgen_lib.corpus.ingest_hct import HCT_COLUMNS, plan_hct
+from tacgen_lib.corpus.ingest_plan import IngestPlan, PlannedSample, listed_rows
+from tacgen_lib.corpus.ingest_ssvtp import plan_ssvtp
+from tacgen_lib.io import edges
+from tacgen_lib.io.images import encode_png
 
-HCT_COLUMNS: tuple[str, ...] = ("vision", "tactile", "background", "caption")
-
-
-SSVTP_BACKGROUND_NAME = "tac_background.png"
-
-
-HCT_FALLBACK_BACKGROUND = "digit_background.png"
-
-
-_IMAGE_EXT = r"\.(?:jpg|jpeg|png)"
-
-
-_SSVTP_RGB = re.compile(rf"image_(\d+)_rgb{_IMAGE_EXT}", re.IGNORECASE)
-
-
-_SSVTP_TAC = re.compile(rf"image_(\d+)_tac{_IMAGE_EXT}", re.IGNORECASE)
-
-
-_SSVTP_TEXT = re.compile(r"labels_(\d+)\.txt", re.IGNORECASE)
-
-
-def _index_files(folder: Path, pattern: re.Pattern[str]) -> dict[int, Path]:
-    """Map index -> file for the files in ``folder`` whose whole name matches ``pattern``."""
-    found: dict[int, Path] = {}
-    if not folder.is_dir():
-        return found
-    for path in sorted(folder.iterdir()):
-        match = pattern.fullmatch(path.name)
-        if match is None:
-            continue
-        index = int(match.group(1))
-        if index in found:
-            raise ValueError(
-                f"{folder}: two files for index {index}: {found[index].name} and {path.name}; "
-                "keep one"
-            )
-        found[index] = path
-    return found
+__all__ = [
+    "HCT_COLUMNS",
+    "IngestPlan",
+    "PlannedSample",
+    "ROW_GROUP_BYTES",
+    "ingest_declared",
+    "ingest_hct",
+    "ingest_ssvtp",
+    "listed_rows",
+    "load_ingested",
+    "plan_declared",
+    "plan_hct",
+    "plan_ssvtp",
+    "write_ingested",
+]
 
 
-def _read_ssvtp_split(csv_path: Path) -> dict[int, int]:
-    """Indices listed in an SSVTP split CSV -> the CSV line listing them.
-
-    The first column holds the RGB path (``images_rgb/image_{i}_rgb.jpg``); a first row whose
-    first cell is not such a path is a header.
-    """
-    listed: dict[int, int] = {}
-    with csv_path.open(newline="", encoding="utf-8") as handle:
-        for line, row in enumerate(csv.reader(handle), start=1):
-            if not row or not any(cell.strip() for cell in row):
-                continue
-            cell = row[0].strip()
-            match = _SSVTP_RGB.fullmatch(Path(cell).name)
-            if match is None:
-                if line == 1:
-                    continue  # header row
-                raise ValueError(
-                    f"{csv_path}: line {line}: first column {cell!r} is not an SSVTP RGB path "
-                    "like images_rgb/image_<i>_rgb.jpg; fix the row"
-                )
-            listed.setdefault(int(match.group(1)), line)
-    return listed
+#: PNG bytes of images a row group of the samples edge holds before it is written: what bounds
+#: the ingest's memory (with the plan's text and the backgrounds' sizes)
+ROW_GROUP_BYTES = 64 << 20
 
 
-def _tvl_part(root: Path, part: str) -> Path:
-    """The folder of one part of the TVL dataset (``root/ssvtp``, ``root/hct``); a missing one
-    raises FileNotFoundError naming it."""
-    folder = root / part
-    if not folder.is_dir():
-        raise FileNotFoundError(
-            f"{part.upper()} folder {folder} not found; pass the unzipped TVL dataset folder "
-            "that holds ssvtp/ and hct/"
+def plan_declared(root: Path, corpus: Mapping[str, Any]) -> IngestPlan:
+    """The plan of the real corpus `corpus` declares (``corpora.<name>`` with its ``name``:
+    kind ssvtp, with an optional tactile ``background`` file or TVL code clone, or hct)."""
+    if corpus["kind"] == "ssvtp":
+        background = Path(corpus["background"]) if corpus.get("background") else None
+        return plan_ssvtp(root, corpus=corpus["name"], background=background)
+    return plan_hct(root, corpus=corpus["name"])
+
+
+# --------------------------------------------------------------------------- the images
+
+
+def _load_backgrounds(plan: IngestPlan) -> Iterator[tuple[str, tuple[int, ...], bytes]]:
+    """(sensor_id, background size as stored, PNG of the padded and turned background)."""
+    for sensor_id in sorted(plan.backgrounds):
+        array = read_image(plan.backgrounds[sensor_id], sample_id=sensor_id, role="background")
+        yield sensor_id, tuple(array.shape), encode_png(pad_and_rotate(array))
+
+
+def _record(
+    sample: PlannedSample, bg_shape: tuple[int, ...] | None, bg_path: Path | None
+) -> Record:
+    """A sample's images read, its tactile frame checked against its background (when it has
+    one) and padded and turned as TVL's code does, both re-encoded as PNG."""
+    rgb = read_image(sample.rgb, sample_id=sample.sample_id, role="RGB")
+    tactile = read_image(sample.tactile, sample_id=sample.sample_id, role="tactile")
+    if bg_shape is not None and bg_path is not None:
+        check_same_shape(
+            tactile.shape,
+            bg_shape,
+            sample_id=sample.sample_id,
+            tactile_path=sample.tactile,
+            bg_path=bg_path,
+            rgb=rgb.shape,
         )
-    return folder
+    return Record(
+        sample_id=sample.sample_id,
+        rgb=encode_png(rgb),
+        tactile=encode_png(pad_and_rotate(tactile)),
+        sensor_id=sample.sensor_id,
+        caption=sample.caption,
+        adjectives=sample.adjectives,
+        source_split=sample.source_split,
+        source_path=sample.source_path,
+    )
+
+
+def _sample_groups(
+    plan: IngestPlan,
+    shapes: dict[str, tuple[int, ...]],
+    group_bytes: int,
+    progress: Callable[[int], None] | None,
+) -> Iterator[pd.DataFrame]:
+    """The samples table in row groups of about `group_bytes` of PNG each, in sample_id order."""
+    strata = plan.strata()
+    group: list[Record] = []
+    size = 0
+    for done, sample in enumerate(plan.samples, start=1):
+        record = _record(
+            sample, shapes.get(sample.sensor_id), plan.backgrounds.get(sample.sensor_id)
+        )
+        group.append(record)
+        size += len(record.rgb) + len(record.tactile)
+        if size >= group_bytes:
+            yield samples_frame(group, strata, plan.corpus)
+            group, size = [], 0
+        if progress is not None:
+            progress(done)
+    if group:
+        yield samples_frame(group, strata, plan.corpus)
+
+
+def load_ingested(plan: IngestPlan) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """The whole (samples, sensors) tables of a plan, in memory (small corpora and tests;
+    the rule streams them with `write_ingested`)."""
+    shapes: dict[str, tuple[int, ...]] = {}
+    sensors: dict[str, bytes] = {}
+    for sensor_id, shape, png in _load_backgrounds(plan):
+        shapes[sensor_id] = shape
+        sensors[sensor_id] = png
+    groups = list(_sample_groups(plan, shapes, group_bytes=1 << 62, progress=None))
+    return groups[0].reset_index(drop=True), sensors_frame(sensors, plan.corpus)
+
+
+def write_ingested(
+    plan: IngestPlan,
+    samples_path: str | os.PathLike,
+    sensors_path: str | os.PathLike,
+    *,
+    producer: str = "",
+    group_bytes: int = ROW_GROUP_BYTES,
+    progress: Callable[[int], None] | None = None,
+) -> tuple[int, int]:
+    """Write a plan's samples and sensors edges, reading its images one row group at a time
+    (about `group_bytes` of PNG), so memory holds one group, never the corpus. Returns the
+    (samples, sensors) row counts. `progress(samples done)` is called after each sample."""
+    shapes: dict[str, tuple[int, ...]] = {}
+
+    def sensor_groups() -> Iterator[pa.Table]:
+        for sensor_id, shape, png in _load_backgrounds(plan):
+            shapes[sensor_id] = shape
+            yield pa.Table.from_pandas(
+                sensors_frame({sensor_id: png}, plan.corpus),
+                schema=SENSOR_SCHEMA,
+                preserve_index=False,
+            )
+
+    n_sensors = edges.write_batches(
+        sensors_path, SENSOR_SCHEMA, sensor_groups(), key="sensor_id", producer=producer
+    )
+    groups = (
+        pa.Table.from_pandas(frame, schema=SAMPLE_SCHEMA, preserve_index=False)
+        for frame in _sample_groups(plan, shapes, group_bytes, progress)
+    )
+    n_samples = edges.write_batches(samples_path, SAMPLE_SCHEMA, groups, producer=producer)
+    return n_samples, n_sensors
 
 
 def ingest_ssvtp(
     root: Path, *, corpus: str = "ssvtp", background: Path | None = None
 ) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """Ingest TVL's SSVTP part (``root/ssvtp``) as (samples, sensors) tables.
-
-    Samples are the union of the indices found in ``images_rgb/``, ``images_tac/``, ``text/`` and
-    the split CSVs; each must have all three files. ``background`` is the global tactile
-    background of the SSVTP sensor (default ``root/ssvtp/tac_background.png``). Columns:
-    :data:`SAMPLE_COLUMNS` and :data:`SENSOR_COLUMNS`; rows sorted by ``sample_id``.
-    """
-    root = Path(root)
-    folder = _tvl_part(root, "ssvtp")
-    sensor_id = f"{corpus}-bg"
-    bg_path = Path(background) if background is not None else folder / SSVTP_BACKGROUND_NAME
-    if not bg_path.is_file():
-        raise FileNotFoundError(
-            f"SSVTP tactile background {bg_path} not found (sensor '{sensor_id}'); copy "
-            f"tvl_enc/data/{SSVTP_BACKGROUND_NAME} from the TVL code release there or pass "
-            "background=<path>"
-        )
-    bg = load_image(bg_path, sample_id=sensor_id, role="background")
-
-    rgb_files = _index_files(folder / "images_rgb", _SSVTP_RGB)
-    tac_files = _index_files(folder / "images_tac", _SSVTP_TAC)
-    text_files = _index_files(folder / "text", _SSVTP_TEXT)
-    split_of: dict[int, str] = {}
-    listed_in: dict[int, str] = {}
-    for split, name in SPLIT_CSVS:
-        csv_path = folder / name
-        if not csv_path.is_file():
-            continue
-        for index, line in _read_ssvtp_split(csv_path).items():
-            if index in split_of and split_of[index] != split:
-                raise ValueError(
-                    f"sample_id '{corpus}-{index:06d}' is listed in both {listed_in[index]} and "
-                    f"{csv_path}:{line}; a pair must be in one split only"
-                )
-            split_of[index] = split
-            listed_in[index] = f"{csv_path}:{line}"
-
-    indices = sorted(set(rgb_files) | set(tac_files) | set(text_files) | set(split_of))
-    if not indices:
-        raise ValueError(
-            f"no SSVTP samples under {folder}: expected images_rgb/image_<i>_rgb.jpg, "
-            "images_tac/image_<i>_tac.jpg and text/labels_<i>.txt"
-        )
-
-    records: list[Record] = []
-    for index in indices:
-        sample_id = f"{corpus}-{index:06d}"
-        rgb_path = rgb_files.get(index, folder / "images_rgb" / f"image_{index}_rgb.jpg")
-        tac_path = tac_files.get(index, folder / "images_tac" / f"image_{index}_tac.jpg")
-        text_path = text_files.get(index, folder / "text" / f"labels_{index}.txt")
-        for role, path in (("RGB", rgb_path), ("tactile", tac_path), ("caption", text_path)):
-            inside_root(path, root, where=str(folder), sample_id=sample_id, role=role)
-        rgb = load_image(rgb_path, sample_id=sample_id, role="RGB")
-        tactile = load_image(tac_path, sample_id=sample_id, role="tactile")
-        check_same_shape(tactile, bg, sample_id=sample_id, tactile_path=tac_path, bg_path=bg_path)
-        if not text_path.is_file():
-            raise FileNotFoundError(
-                f"sample_id '{sample_id}': caption file not found, expected {text_path}; "
-                "restore it or remove the pair"
-            )
-        try:
-            caption = text_path.read_text(encoding="utf-8").strip()
-        except (OSError, UnicodeDecodeError) as err:
-            raise ValueError(
-                f"sample_id '{sample_id}': cannot read caption {text_path}: {err}"
-            ) from err
-        adjectives = parsed_caption(caption, where=str(text_path), sample_id=sample_id)
-        records.append(
-            Record(
-                sample_id=sample_id,
-                rgb=rgb.png,
-                tactile=tactile.png,
-                sensor_id=sensor_id,
-                caption=caption,
-                adjectives=adjectives,
-                source_split=split_of.get(index),
-                source_path=relative_path(tac_path, root),
-            )
-        )
-    return corpus_frames(records, {sensor_id: bg.png}, corpus)
-
-
-def _hct_background(path: Path, hct: Path) -> Path | None:
-    """The row's background file, else the nearest digit_background.png up to ``hct``."""
-    if path.is_file():
-        return path
-    folder = path.parent
-    while True:
-        candidate = folder / HCT_FALLBACK_BACKGROUND
-        if candidate.is_file():
-            return candidate
-        if folder == hct or folder == folder.parent or hct not in folder.parents:
-            return None
-        folder = folder.parent
-
-
-def _read_hct_csv(csv_path: Path) -> list[tuple[int, dict[str, str]]]:
-    """(line, row) pairs of an HCT split CSV, keyed by the lower-cased header names."""
-    with csv_path.open(newline="", encoding="utf-8") as handle:
-        reader = csv.reader(handle)
-        header = next(reader, None)
-        if header is None:
-            raise ValueError(
-                f"{csv_path}: empty file; expected a header {','.join(HCT_COLUMNS)} and rows"
-            )
-        names = [cell.strip().lower() for cell in header]
-        for column in HCT_COLUMNS:
-            if column not in names:
-                raise ValueError(
-                    f"{csv_path}: missing column '{column}' (header is {header}); HCT CSVs need "
-                    f"the columns {', '.join(HCT_COLUMNS)}"
-                )
-        position = {column: names.index(column) for column in HCT_COLUMNS}
-        rows: list[tuple[int, dict[str, str]]] = []
-        for line, row in enumerate(reader, start=2):
-            if not row or not any(cell.strip() for cell in row):
-                continue
-            if len(row) < len(names):
-                raise ValueError(
-                    f"{csv_path}: line {line} has {len(row)} fields, the header has {len(names)}"
-                )
-            rows.append((line, {c: row[i].strip() for c, i in position.items()}))
-    return rows
-
-
-def _hct_data_folders(hct: Path) -> list[Path]:
-    folders: list[Path] = []
-    for folder in sorted(p for p in hct.iterdir() if p.is_dir()):
-        has_csv = any((folder / name).is_file() for _, name in SPLIT_CSVS)
-        if has_csv:
-            folders.append(folder)
-        elif (folder / "contact.json").is_file():
-            raise FileNotFoundError(
-                f"HCT data folder {folder} has contact.json but neither train.csv nor test.csv; "
-                "the captions come from those CSVs, so restore them"
-            )
-    if not folders:
-        raise FileNotFoundError(
-            f"no HCT data folders under {hct}: expected <folder>/train.csv or <folder>/test.csv"
-        )
-    return folders
-
-
-def ingest_declared(root: Path, corpus: Mapping[str, Any]) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """(samples, sensors) of the real corpus `corpus` declares (``corpora.<name>`` with its
-    ``name``: kind ssvtp, with an optional tactile ``background`` image, or hct) from `root`."""
-    if corpus["kind"] == "ssvtp":
-        background = Path(corpus["background"]) if corpus.get("background") else None
-        return ingest_ssvtp(root, corpus=corpus["name"], background=background)
-    return ingest_hct(root, corpus=corpus["name"])
+    """TVL's SSVTP part (``root/ssvtp``) as (samples, sensors) tables in memory: `plan_ssvtp`
+    then `load_ingested`. Columns: :data:`SAMPLE_COLUMNS` and :data:`SENSOR_COLUMNS`; rows
+    sorted by ``sample_id``."""
+    return load_ingested(plan_ssvtp(root, corpus=corpus, background=background))
 
 
 def ingest_hct(root: Path, *, corpus: str = "hct") -> tuple[pd.DataFrame, pd.DataFrame]:
-    """Ingest TVL's HCT part (``root/hct``) as (samples, sensors) tables.
+    """TVL's HCT part (``root/hct``) as (samples, sensors) tables in memory: `plan_hct` then
+    `load_ingested`. Each distinct background file is a sensor; rows sorted by ``sample_id``."""
+    return load_ingested(plan_hct(root, corpus=corpus))
 
-    Every sub-folder of ``root/hct`` with a ``train.csv`` and/or ``test.csv`` is a data folder;
-    each CSV row (vision, tactile, background, caption; paths relative to the CSV's folder) is a
-    sample whose ``source_split`` is the CSV's name. Each distinct background file is a sensor.
-    Columns: :data:`SAMPLE_COLUMNS` and :data:`SENSOR_COLUMNS`; rows sorted by ``sample_id``.
-    """
-    root = Path(root)
-    hct = _tvl_part(root, "hct")
-    backgrounds: dict[Path, tuple[str, Image]] = {}
-    records: list[Record] = []
-    for folder in _hct_data_folders(hct):
-        row_number = 0
-        for split, name in SPLIT_CSVS:
-            csv_path = folder / name
-            if not csv_path.is_file():
-                continue
-            for line, row in _read_hct_csv(csv_path):
-                sample_id = f"{corpus}-{folder.name}-{row_number:05d}"
-                row_number += 1
-                where = f"{csv_path}:{line}"
-                adjectives = parsed_caption(row["caption"], where=where, sample_id=sample_id)
-                rgb_path = Path(os.path.normpath(folder / row["vision"]))
-                tac_path = Path(os.path.normpath(folder / row["tactile"]))
-                listed_bg = Path(os.path.normpath(folder / row["background"]))
-                bg_path = _hct_background(listed_bg, hct)
-                if bg_path is None:
-                    raise FileNotFoundError(
-                        f"sample_id '{sample_id}' ({where}): background {listed_bg} not found, "
-                        f"nor a {HCT_FALLBACK_BACKGROUND} between its folder and {hct}; restore "
-                        "the trajectory's background"
-                    )
-                for role, path in (
-                    ("vision", rgb_path),
-                    ("tactile", tac_path),
-                    ("background", bg_path),
-                ):
-                    inside_root(path, root, where=where, sample_id=sample_id, role=role)
-                if bg_path not in backgrounds:
-                    sensor_id = f"{corpus}-bg:{relative_path(bg_path, hct)}"
-                    backgrounds[bg_path] = (
-                        sensor_id,
-                        load_image(bg_path, sample_id=sample_id, role="background"),
-                    )
-                sensor_id, bg = backgrounds[bg_path]
-                rgb = load_image(rgb_path, sample_id=sample_id, role="RGB")
-                tactile = load_image(tac_path, sample_id=sample_id, role="tactile")
-                check_same_shape(
-                    tactile, bg, sample_id=sample_id, tactile_path=tac_path, bg_path=bg_path
-                )
-                records.append(
-                    Record(
-                        sample_id=sample_id,
-                        rgb=rgb.png,
-                        tactile=tactile.png,
-                        sensor_id=sensor_id,
-                        caption=row["caption"],
-                        adjectives=adjectives,
-                        source_split=split,
-                        source_path=relative_path(tac_path, root),
-                    )
-                )
-    if not records:
-        raise ValueError(f"no HCT samples under {hct}: the split CSVs have no data rows")
-    sensors = {sensor_id: image.png for sensor_id, image in backgrounds.values()}
-    return corpus_frames(records, sensors, corpus)
+
+def ingest_declared(root: Path, corpus: Mapping[str, Any]) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(samples, sensors) of the real corpus `corpus` declares, in memory (`plan_declared`)."""
+    return load_ingested(plan_declared(root, corpus))

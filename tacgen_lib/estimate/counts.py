@@ -10,6 +10,7 @@ import functools
 from collections.abc import Mapping
 from typing import Any
 
+from tacgen_lib.corpus.ingest_plan import listed_rows
 from tacgen_lib.estimate.flops import (
     DINO_FORWARDS,
     MAE_FORWARDS,
@@ -61,8 +62,13 @@ def natural_grid_units(c: Config) -> float:
 
 
 def samples(c: Config, name: str) -> float:
-    """Samples of a corpus: `n` of a simulated one; a real one's size is not in config (1)."""
-    return float(corpus_of(c, name).get("n", 1))
+    """Samples of a corpus: `n` of a simulated one; for a real one, the rows its dataset's
+    split CSVs list (`tacgen_lib.corpus.ingest.listed_rows`, counted on disk without opening
+    an image), 1 where its folder is not there."""
+    corpus = corpus_of(c, name)
+    if corpus.get("kind") in ("ssvtp", "hct"):
+        return float(listed_rows(str(corpus["kind"]), str(corpus["root"])) or 1)
+    return float(corpus.get("n", 1))
 
 
 def tactile_pixels(c: Config, name: str) -> float:

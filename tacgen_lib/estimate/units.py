@@ -111,7 +111,10 @@ UNITS: dict[str, UnitRule] = {
         lambda c, w: ("", natural_grid_units(c)),
     ),
     "merge_corpus": UnitRule("sample", lambda c, w: ("", samples(c, w["corpus"]))),
-    "ingest_tvl": _const("job (real corpus; size not in config)"),
+    "ingest_tvl": UnitRule(
+        "sample (the rows its dataset's split CSVs list)",
+        lambda c, w: ("", samples(c, w["corpus"])),
+    ),
     "fuse_manifest": UnitRule(
         "sample (all corpora)", lambda c, w: ("", sum(map(lambda k: samples(c, k), c["corpora"])))
     ),

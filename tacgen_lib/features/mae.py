@@ -263,7 +263,8 @@ def load_mae_checkpoint(model: DinoVisionTransformer, path: str | Path) -> DinoV
     path = Path(path)
     sd = unwrap_state_dict(load_tensors(path), where=str(path))
     sd = {k: v for k, v in sd.items() if not k.startswith(_MAE_DECODER)}
-    fit_pos_embed(sd, model)
+    # MAE's own resize (its util/pos_embed.py interpolate_pos_embed): bicubic to an exact size
+    fit_pos_embed(sd, model, offset=0.0, antialias=False)
     own = model.state_dict()
     for k, v in own.items():
         if k not in sd and (k.endswith((".ls1.gamma", ".ls2.gamma"))):

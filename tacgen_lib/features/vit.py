@@ -130,15 +130,19 @@ def interpolate_pos_embed(
     patch_pos_embed: Tensor,
     grid: tuple[int, int],
     *,
-    offset: float = 0.0,
-    antialias: bool = False,
+    offset: float,
+    antialias: bool,
 ) -> Tensor:
-    """Bicubic resize of a square grid of position embeddings to `grid` = (rows, cols).
+    """Bicubic resize of a square grid of position embeddings to `grid` = (rows, cols), as
+    DINOv2's `interpolate_pos_encoding` does it.
 
     patch_pos_embed: (1, M*M, D) embeddings of the patch tokens (no CLS). Returns (1, rows*cols, D)
     float32. With `offset` > 0 the resize is driven by the scale factor (rows + offset) / M, the
     DINOv2 "interpolate_offset" kludge kept for output parity with the official non-register
-    models (offset 0.1); with offset 0 the output size is given directly (register models).
+    models (offset 0.1); with offset 0 the output size is given directly (register models, with
+    `antialias` on). Both settings are the caller's: a checkpoint's features equal its own
+    code's only with that code's pair (`DinoVisionTransformer.interpolate_offset` /
+    `interpolate_antialias`; MAE: 0 and off).
     """
     _, n, dim = patch_pos_embed.shape
     m = math.isqrt(n)

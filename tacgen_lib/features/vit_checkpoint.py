@@ -9,6 +9,7 @@ backbone rebuilt from a checkpoint alone (`load_backbone`) and written atomicall
 
 from __future__ import annotations
 
+import argparse
 import math
 import pickle
 from collections.abc import Mapping
@@ -63,13 +64,16 @@ def unwrap_state_dict(obj: object, *, where: str = "checkpoint") -> dict[str, Te
 
 
 def load_tensors(path: str | Path) -> Any:
-    """`torch.load` with ``weights_only=True``: tensors and plain containers only.
+    """`torch.load` with ``weights_only=True``: tensors and plain containers only, plus
+    `argparse.Namespace`, the ``args`` entry MAE's training code saves beside its ``model``
+    (its `misc.save_model`: model, optimizer, epoch, scaler, args), which holds plain values.
 
-    A checkpoint that needs arbitrary objects (a crafted pickle could run code when unpickled)
+    A checkpoint that needs other objects (a crafted pickle could run code when unpickled)
     is refused with a ValueError naming the file; nothing in it is executed.
     """
     try:
-        return torch.load(path, map_location="cpu", weights_only=True)
+        with torch.serialization.safe_globals([argparse.Namespace]):
+            return torch.load(path, map_location="cpu", weights_only=True)
     except pickle.UnpicklingError as exc:
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         raise ValueError(
@@ -100,23 +104,35 @@ def state_dict_mismatch(own: Mapping[str, Tensor], sd: Mapping[str, Tensor]) -> 
     )
 
 
-def fit_pos_embed(sd: dict[str, Tensor], model: DinoVisionTransformer) -> None:
+def fit_pos_embed(
+    sd: dict[str, Tensor], model: DinoVisionTransformer, *, offset: float, antialias: bool
+) -> None:
     """Resize a checkpoint's square `pos_embed` grid (in `sd`, in place) bicubically to the
-    model's grid when the widths agree and the grids differ (exact output size)."""
+    model's grid when the widths agree and the grids differ, as the checkpoint's own code
+    resamples it (`interpolate_pos_embed` with that code's `offset` and `antialias`).
+
+    A DINOv2 checkpoint keeps its 37 x 37 grid and resamples it at every forward to the input's
+    grid with its model's `interpolate_offset` and `interpolate_antialias` (0.1 and off for the
+    plain models, 0 and on for the register ones: `vit.build_vit`); resampling once here with
+    the same two settings gives the same position embeddings, so the features at the model's
+    input size are DINOv2's own. MAE resizes to an exact size, without antialiasing
+    (`mae.load_mae_checkpoint`).
+    """
     own = model.state_dict()["pos_embed"]
     pe = sd.get("pos_embed")
     if pe is not None and pe.ndim == 3 and pe.shape != own.shape:
         if pe.shape[-1] == own.shape[-1] and math.isqrt(pe.shape[1] - 1) ** 2 == (pe.shape[1] - 1):
             g = model.grid_size
-            patch = interpolate_pos_embed(pe[:, 1:], (g, g), offset=0.0)
+            patch = interpolate_pos_embed(pe[:, 1:], (g, g), offset=offset, antialias=antialias)
             sd["pos_embed"] = torch.cat((pe[:, :1].float(), patch), dim=1).to(pe.dtype)
 
 
 def load_pretrained(model: DinoVisionTransformer, path: str | Path) -> DinoVisionTransformer:
     """Load an official-format DINOv2 checkpoint into `model` (in place; also returned).
 
-    See `unwrap_state_dict` for the accepted wrappers/prefixes. `pos_embed` is bicubically
-    resized (exact output size) to the model's grid when the grids differ. Any missing,
+    See `unwrap_state_dict` for the accepted wrappers/prefixes. `pos_embed` is resized to the
+    model's grid when the grids differ, as DINOv2 resamples it at the model's input size (the
+    model's own `interpolate_offset` and `interpolate_antialias`: `fit_pos_embed`). Any missing,
     unexpected or shape-mismatched key is refused with a ValueError listing them all.
     """
     path = Path(path)
@@ -124,7 +140,7 @@ def load_pretrained(model: DinoVisionTransformer, path: str | Path) -> DinoVisio
     sd = unwrap_state_dict(raw, where=str(path))
     own = model.state_dict()
 
-    fit_pos_embed(sd, model)
+    fit_pos_embed(sd, model, offset=model.interpolate_offset, antialias=model.interpolate_antialias)
     problems = state_dict_mismatch(own, sd)
     if problems:
         raise ValueError(

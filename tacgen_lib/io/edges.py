@@ -14,8 +14,10 @@ Joins are always on the key (`join`), never on row order.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
+import tempfile
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,7 +29,7 @@ import pyarrow.parquet as pq
 
 if TYPE_CHECKING:  # pandas is imported where a frame is built: a vectors-only job never loads it
     import pandas as pd
-from tacgen_lib.io.hashed import EdgeError, verify, write_bytes
+from tacgen_lib.io.hashed import EdgeError, commit_file, verify, write_bytes
 
 
 @dataclass
@@ -159,6 +161,84 @@ def write_vectors(
     _check_key(ids, str(path), key)
     table = pa.table({key: pa.array(list(ids), type=pa.large_string())})
     return _write_table(path, table, ids, vectors, key=key, producer=producer)
+
+
+def write_batches(
+    path: str | os.PathLike,
+    schema: pa.Schema,
+    batches: Iterable[pa.Table],
+    *,
+    key: str = "sample_id",
+    producer: str = "",
+) -> int:
+    """`write` of an edge too large to hold in memory: each table of `batches` (scalar
+    columns of `schema`) becomes a row group as it comes, in a temporary file beside `path`
+    that replaces it, its sidecar written first, once the last group is in. The key is checked
+    across all groups (unique, non-empty strings). Returns the row count.
+
+    The bytes differ from `write`'s of the same rows (one row group there); the same batches
+    always give the same bytes.
+    """
+    path = Path(path)
+    where = str(path)
+    if key not in schema.names:
+        raise EdgeError(f"{where}: missing key column {key!r}")
+    schema = schema.remove_metadata()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    seen: set[str] = set()
+    rows = 0
+
+    def disk(call, *args, **kwargs):  # noqa: ANN001, ANN202 - a write, its OSError explained
+        try:
+            return call(*args, **kwargs)
+        except OSError as exc:
+            if exc.errno is None:
+                raise
+            raise OSError(
+                exc.errno,
+                f"{path}: cannot write the edge ({exc.strerror}); nothing was written there (the "
+                "previous file, if any, is untouched); free space and rerun",
+            ) from exc
+
+    try:
+        writer = disk(pq.ParquetWriter, tmp, schema, compression="zstd", write_statistics=False)
+        try:
+            for batch in batches:  # the producer's own errors pass through as they are
+                if not batch.schema.remove_metadata().equals(schema):
+                    raise EdgeError(
+                        f"{where}: a row group's columns {batch.schema.names} / types differ "
+                        f"from the edge's schema {schema}"
+                    )
+                ids = batch.column(key).to_pylist()
+                for row, value in enumerate(ids, start=rows):
+                    if not isinstance(value, str) or not value:
+                        raise EdgeError(
+                            f"{where}: column {key!r} has a null or empty {key} at row {row}"
+                        )
+                    if value in seen:
+                        raise EdgeError(f"{where}: {key} {value!r} appears more than once")
+                    seen.add(value)
+                disk(writer.write_table, batch.replace_schema_metadata(None))
+                rows += batch.num_rows
+        finally:
+            disk(writer.close)
+        disk(
+            commit_file,
+            tmp,
+            path,
+            rows=rows,
+            key=key,
+            columns={f.name: str(f.type) for f in pq.read_schema(tmp)},
+            vectors={},
+            producer=producer,
+        )
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            os.unlink(tmp)
+        raise
+    return rows
 
 
 def _write_table(

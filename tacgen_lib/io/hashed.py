@@ -91,6 +91,19 @@ def write_bytes(path: str | os.PathLike, data: bytes, **fields) -> str:
     return digest
 
 
+def commit_file(tmp: str | os.PathLike, path: str | os.PathLike, **fields) -> str:
+    """Install `tmp`, a finished file written beside `path` (same folder), as `path`: its
+    SHA-256 into the sidecar first, then the rename. For a file too large to hold in memory
+    (`write_bytes` takes the bytes); `fields` as there. Returns the SHA-256."""
+    tmp, path = Path(tmp), Path(path)
+    with open(tmp, "rb") as fh:
+        os.fsync(fh.fileno())
+    digest = sha256_file(tmp)
+    _write_sidecar(path, digest, fields)
+    os.replace(tmp, path)
+    return digest
+
+
 def record_file(path: str | os.PathLike, *, producer: str = "", kind: str = "weights") -> str:
     """Hash a non-Parquet output (model weights, a table file) into its sidecar manifest, so it
     is verified by `verify` and listed in the report like an edge. Returns the SHA-256."""

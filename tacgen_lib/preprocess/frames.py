@@ -62,16 +62,27 @@ def subtract_backgrounds(
     """Apply one background-subtraction variant to every tactile frame, each with its own
     sensor's background. Returns sample_id, sensor_id and `tactile_proc` (PNG bytes).
 
-    A sample whose sensor has no background is an error naming the sensor and the sample_id.
+    Samples whose sensor has no background (a real corpus's rows whose background file its
+    ingest did not find) are refused before any frame is processed, in one error naming
+    `where`, how many there are and their sample_ids and sensors.
     """
+    lacking = [
+        (sid, sensor)
+        for sid, sensor in zip(samples["sample_id"], samples["sensor_id"], strict=True)
+        if sensor not in backgrounds
+    ]
+    if lacking:
+        shown = ", ".join(f"{sid!r} (sensor {sensor!r})" for sid, sensor in lacking[:10])
+        more = f" and {len(lacking) - 10} more" if len(lacking) > 10 else ""
+        raise ValueError(
+            f"{where}: {len(lacking)} of {len(samples)} samples have no tactile background to "
+            f"subtract: {shown}{more}; their sensors have no background image (a real "
+            "corpus's ingest log lists the rows whose background file it did not find): "
+            f"restore those files or drop the samples (sensors with one: {sorted(backgrounds)[:10]})"
+        )
     out = []
     for i, row in enumerate(samples[["sample_id", "sensor_id", "tactile"]].itertuples(index=False)):
         sid, sensor, data = row
-        if sensor not in backgrounds:
-            raise ValueError(
-                f"{where}: sample_id {sid!r} was recorded by sensor {sensor!r}, which has no "
-                f"background image (sensors with one: {sorted(backgrounds)})"
-            )
         tac = decode_png(data, where=f"{where}: sample_id {sid!r} column 'tactile'")
         try:
             proc = background_subtract(tac, backgrounds[sensor], variant)

@@ -38,7 +38,9 @@ def corpus_example_grid(
     samples: pd.DataFrame, sensors: pd.DataFrame, splits: pd.DataFrame, *, n: int, title: str
 ) -> plt.Figure:
     """Examples as RGB | raw tactile | background | tactile_proc (tactile − background + 128),
-    each captioned with its id, split, sensor and caption; two examples per row."""
+    each captioned with its id, split, sensor and caption; two examples per row. A sample
+    whose sensor has no background (a real corpus's row without one) shows blank panels
+    for the two."""
     from tacgen_lib.preprocess.background import tactile_proc
 
     picks = _pick_examples(samples, splits, n)
@@ -63,8 +65,14 @@ def corpus_example_grid(
         r, c = divmod(k, per_row)
         row = axes[r, 5 * c : 5 * c + 5]
         tac = decode_png(s["tactile"], where=s["sample_id"])
-        bg = backgrounds[s["sensor_id"]]
-        panels = [decode_png(s["rgb"], where=s["sample_id"]), tac, bg, tactile_proc(tac, bg)]
+        bg = backgrounds.get(s["sensor_id"])  # None: a real sample whose background is missing
+        blank = np.full_like(tac, 255)
+        panels = [
+            decode_png(s["rgb"], where=s["sample_id"]),
+            tac,
+            blank if bg is None else bg,
+            blank if bg is None else tactile_proc(tac, bg),
+        ]
         caption = textwrap.wrap(str(s["caption"]), 19)
         sensor = str(s["sensor_id"]).rsplit("/", 1)[-1]
         label = (

@@ -1,21 +1,32 @@
-"""Real-corpus ingest (tacgen_lib.corpus.ingest) on tiny copies of the TVL SSVTP and HCT layouts."""
+"""Real-corpus ingest (tacgen_lib.corpus.ingest) on tiny copies of the TVL dataset in its
+authors' layout (tests/fixtures_real.py): pairs selected as TVL's loaders select them, the
+skipped ones counted, backgrounds found where TVL publishes them, tactile frames padded and
+turned as TVL's code does, the edge streamed in row groups."""
 
 from __future__ import annotations
 
 import io
 import shutil
+import tracemalloc
 from collections import Counter
 from pathlib import Path
 
 import cv2
+import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
-from fixtures_real import IMAGE_SHAPE, write_hct_fixture, write_ssvtp_fixture
+from fixtures_real import (
+    RGB_SHAPE,
+    TACTILE_SHAPE,
+    write_hct_fixture,
+    write_ssvtp_fixture,
+)
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from PIL import Image, ImageOps
 
 from tacgen_lib.corpus.captions import (
     OTHER_STRATUM,
@@ -23,9 +34,21 @@ from tacgen_lib.corpus.captions import (
     parse_caption,
     top_pattern_strata,
 )
-from tacgen_lib.corpus.ingest import ingest_hct, ingest_ssvtp
-from tacgen_lib.corpus.ingest_files import SAMPLE_COLUMNS, SENSOR_COLUMNS
+from tacgen_lib.corpus.ingest import (
+    ingest_hct,
+    ingest_ssvtp,
+    listed_rows,
+    load_ingested,
+    plan_declared,
+    plan_hct,
+    plan_ssvtp,
+    write_ingested,
+)
+from tacgen_lib.corpus.ingest_files import SAMPLE_COLUMNS, SENSOR_COLUMNS, pad_and_rotate
+from tacgen_lib.io import edges
 from tacgen_lib.io.images import decode_png
+from tacgen_lib.preprocess.frames import sensor_background_map, subtract_backgrounds
+from tacgen_lib.report.figures import corpus_example_grid
 
 
 def imread_rgb(path: Path) -> np.ndarray:
@@ -35,22 +58,39 @@ def imread_rgb(path: Path) -> np.ndarray:
     return bgr[:, :, ::-1]
 
 
+def tvl_view(image: np.ndarray) -> np.ndarray:
+    """Reference of TVL's tac_padding on a PIL image, as its loaders apply it: torchvision's
+    pad on PIL (ImageOps.expand by (max side - side) // 2 on each side, black) and rotate(90)
+    (PIL, counter-clockwise)."""
+    h, w = image.shape[:2]
+    side = max(h, w)
+    hpad, wpad = (side - h) // 2, (side - w) // 2
+    padded = ImageOps.expand(Image.fromarray(image), border=(wpad, hpad, wpad, hpad), fill=0)
+    return np.asarray(padded.rotate(90))
+
+
 def assert_names(err: pytest.ExceptionInfo, *parts: object) -> None:
     message = str(err.value)
     for part in parts:
         assert str(part) in message, f"{part!r} not in error message: {message}"
 
 
-def assert_refused(root: Path, error: type[Exception], *parts: object, match=None) -> None:
-    """`ingest_ssvtp(root)` raises `error` (matching `match`), its message naming `parts`."""
-    with pytest.raises(error, match=match) as err:
-        ingest_ssvtp(root)
-    assert_names(err, *parts)
+@pytest.fixture
+def code(tmp_path: Path) -> Path:
+    """A stand-in for a clone of the TVL code (it holds tvl_enc/data/tac_background.png)."""
+    return tmp_path / "tvl-code"
 
 
 @pytest.fixture
-def ssvtp_root(tmp_path: Path) -> Path:
-    return write_ssvtp_fixture(tmp_path / "tvl", n=12, seed=0)
+def ssvtp_root(tmp_path: Path, code: Path) -> Path:
+    return write_ssvtp_fixture(tmp_path / "tvl", n=12, seed=0, code=code)
+
+
+def assert_refused(root: Path, code: Path, error: type[Exception], *parts, match=None) -> None:
+    """`ingest_ssvtp(root, background=code)` raises `error` (matching `match`), naming `parts`."""
+    with pytest.raises(error, match=match) as err:
+        ingest_ssvtp(root, background=code)
+    assert_names(err, *parts)
 
 
 @pytest.fixture
@@ -158,16 +198,28 @@ def test_top_pattern_strata_matches_reference_and_ignores_order(
     assert shuffled == [expected[i] for i in order]
 
 
-# --------------------------------------------------------------------------- SSVTP round trip
+# --------------------------------------------------------------------------- TVL's tactile view
 
 
-def test_ssvtp_round_trip(ssvtp_root: Path) -> None:
-    samples, sensors = ingest_ssvtp(ssvtp_root)
+@pytest.mark.parametrize("shape", [TACTILE_SHAPE, TACTILE_SHAPE[::-1], (30, 30), (8, 12)])
+def test_pad_and_rotate_is_tvl_tac_padding(shape):
+    image = np.random.default_rng(0).integers(0, 256, size=(*shape, 3), dtype=np.uint8)
+    got = pad_and_rotate(image)
+    side = max(shape)
+    assert got.shape == (side, side, 3)
+    np.testing.assert_array_equal(got, tvl_view(image))
+
+
+# --------------------------------------------------------------------------- SSVTP
+
+
+def test_ssvtp_round_trip(ssvtp_root: Path, code: Path) -> None:
+    samples, sensors = ingest_ssvtp(ssvtp_root, background=code)
     folder = ssvtp_root / "ssvtp"
     assert list(samples.columns) == list(SAMPLE_COLUMNS)
     assert list(sensors.columns) == list(SENSOR_COLUMNS)
+    # the 12 listed pairs with their files; pairs 12 (unlisted), 13 and 14 (files missing) not
     assert samples["sample_id"].tolist() == [f"ssvtp-{i:06d}" for i in range(12)]
-    assert samples["sample_id"].is_unique
     assert set(samples["corpus"]) == {"ssvtp"}
     assert set(samples["sensor_id"]) == {"ssvtp-bg"}
     for i, row in samples.iterrows():
@@ -175,7 +227,8 @@ def test_ssvtp_round_trip(ssvtp_root: Path) -> None:
         tac_path = folder / "images_tac" / f"image_{i}_tac.jpg"
         assert row["rgb"][:8] == b"\x89PNG\r\n\x1a\n"
         np.testing.assert_array_equal(decode_png(row["rgb"]), imread_rgb(rgb_path))
-        np.testing.assert_array_equal(decode_png(row["tactile"]), imread_rgb(tac_path))
+        assert decode_png(row["rgb"]).shape == (*RGB_SHAPE, 3)  # camera frames as stored
+        np.testing.assert_array_equal(decode_png(row["tactile"]), tvl_view(imread_rgb(tac_path)))
         caption = (folder / "text" / f"labels_{i}.txt").read_text().strip()
         assert row["caption"] == caption
         assert row["adjectives"] == parse_caption(caption)
@@ -184,15 +237,29 @@ def test_ssvtp_round_trip(ssvtp_root: Path) -> None:
         assert row["source_path"] == f"ssvtp/images_tac/image_{i}_tac.jpg"
     assert samples["stratum"].tolist() == top_pattern_strata(samples["adjectives"].tolist())
     assert sensors["sensor_id"].tolist() == ["ssvtp-bg"]
-    np.testing.assert_array_equal(
-        decode_png(sensors["background"].iloc[0]), imread_rgb(folder / "tac_background.png")
-    )
-    assert decode_png(sensors["background"].iloc[0]).shape == (*IMAGE_SHAPE, 3)
+    background = imread_rgb(code / "tvl_enc" / "data" / "tac_background.png")
+    assert background.shape[:2] == TACTILE_SHAPE
+    np.testing.assert_array_equal(decode_png(sensors["background"].iloc[0]), tvl_view(background))
 
 
-def test_ssvtp_parquet_round_trip(ssvtp_root: Path) -> None:
+def test_ssvtp_plan_counts_the_pairs_it_leaves_out(ssvtp_root: Path, code: Path) -> None:
+    plan = plan_ssvtp(ssvtp_root, background=code)
+    unlisted, missing = plan.skipped.values()
+    assert unlisted == ["ssvtp-000012"]
+    assert missing == [
+        "ssvtp-000013 (images_rgb/image_13_rgb.jpg, images_tac/image_13_tac.jpg, "
+        "text/labels_13.txt)",
+        "ssvtp-000014 (images_tac/image_14_tac.jpg)",
+    ]
+    report = "\n".join(plan.report())
+    assert "skipped 1 pairs listed in neither train.csv nor test.csv: ssvtp-000012" in report
+    assert "skipped 2 listed pairs with missing files: ssvtp-000013" in report
+    assert listed_rows("ssvtp", str(ssvtp_root)) == 14  # what the CSVs list: 12 + 2 missing
+
+
+def test_ssvtp_parquet_round_trip(ssvtp_root: Path, code: Path) -> None:
     """The tables survive Parquet (the edge format): bytes, lists and nulls come back as is."""
-    samples, sensors = ingest_ssvtp(ssvtp_root)
+    samples, sensors = ingest_ssvtp(ssvtp_root, background=code)
     for table in (samples, sensors):
         back = pq.read_table(io.BytesIO(parquet_bytes(table))).to_pylist()
         assert back == table.to_dict(orient="records")
@@ -202,35 +269,133 @@ def test_ssvtp_parquet_round_trip(ssvtp_root: Path) -> None:
     assert str(schema.field("hardness").type) == "string"
 
 
-def test_ssvtp_corpus_name_and_background_option(ssvtp_root: Path, tmp_path: Path) -> None:
-    custom = tmp_path / "elsewhere" / "bg.png"
-    custom.parent.mkdir()
-    shutil.move(ssvtp_root / "ssvtp" / "tac_background.png", custom)
-    samples, sensors = ingest_ssvtp(ssvtp_root, corpus="tvl-ssvtp", background=custom)
-    assert samples["sample_id"].iloc[0] == "tvl-ssvtp-000000"
-    assert set(samples["corpus"]) == {"tvl-ssvtp"}
-    assert sensors["sensor_id"].tolist() == ["tvl-ssvtp-bg"]
+def test_ssvtp_background_where_tvl_publishes_it_or_a_copy(ssvtp_root, code, tmp_path):
+    file = code / "tvl_enc" / "data" / "tac_background.png"
+    by_code = ingest_ssvtp(ssvtp_root, corpus="tvl-ssvtp", background=code)
+    by_file = ingest_ssvtp(ssvtp_root, corpus="tvl-ssvtp", background=file)
+    assert by_code[0]["sample_id"].iloc[0] == "tvl-ssvtp-000000"
+    assert by_code[1]["sensor_id"].tolist() == ["tvl-ssvtp-bg"]
+    assert by_code[1].equals(by_file[1])
+    # the config key reaches it (corpora.<name>.background)
+    plan = plan_declared(ssvtp_root, {"name": "s", "kind": "ssvtp", "background": str(code)})
+    assert plan.backgrounds == {"s-bg": file}
+    # unset: a copy next to the data
+    shutil.copy(file, ssvtp_root / "ssvtp" / "tac_background.png")
+    copied = ingest_ssvtp(ssvtp_root)[1]
+    assert copied["background"].tolist() == by_file[1]["background"].tolist()
 
 
-def test_ssvtp_without_split_csvs_has_no_source_split(ssvtp_root: Path) -> None:
+def test_ssvtp_background_missing_says_where_to_get_it(ssvtp_root: Path, tmp_path: Path) -> None:
+    with pytest.raises(FileNotFoundError) as err:
+        ingest_ssvtp(ssvtp_root)
+    assert_names(
+        err,
+        ssvtp_root / "ssvtp" / "tac_background.png",
+        "github.com/Max-Fu/tvl",
+        "tvl_enc/data/tac_background.png",
+        "corpora.<name>.background",
+        "ssvtp-bg",
+    )
+    with pytest.raises(FileNotFoundError) as err:
+        ingest_ssvtp(ssvtp_root, background=tmp_path / "elsewhere")  # a folder: a code clone?
+    assert_names(err, tmp_path / "elsewhere" / "tvl_enc" / "data" / "tac_background.png")
+
+
+def test_ssvtp_without_split_csvs_takes_every_rgb_file(ssvtp_root: Path, code: Path) -> None:
     (ssvtp_root / "ssvtp" / "train.csv").unlink()
     (ssvtp_root / "ssvtp" / "test.csv").unlink()
-    samples, _ = ingest_ssvtp(ssvtp_root)
-    assert len(samples) == 12
-    assert samples["source_split"].tolist() == [None] * 12
+    plan = plan_ssvtp(ssvtp_root, background=code)
+    # as TVL's loader lists images_rgb/: pairs 0-12; pair 14 lacks its tactile frame
+    assert [s.sample_id for s in plan.samples] == [f"ssvtp-{i:06d}" for i in range(13)]
+    assert [s.source_split for s in plan.samples] == [None] * 13
+    assert plan.skipped == {
+        "listed pairs with missing files": ["ssvtp-000014 (images_tac/image_14_tac.jpg)"]
+    }
 
 
-def test_ssvtp_csv_without_header_and_unlisted_pairs(ssvtp_root: Path) -> None:
+def test_ssvtp_csv_without_header_and_unlisted_pairs(ssvtp_root: Path, code: Path) -> None:
     folder = ssvtp_root / "ssvtp"
     (folder / "train.csv").write_text("images_rgb/image_0_rgb.jpg\nimages_rgb/image_1_rgb.jpg\n")
-    samples, _ = ingest_ssvtp(ssvtp_root)
-    split = dict(zip(samples["sample_id"], samples["source_split"], strict=True))
-    assert split["ssvtp-000000"] == "train"
-    assert split["ssvtp-000003"] == "test"
-    assert split["ssvtp-000002"] is None  # listed in neither CSV: kept, without a source split
+    plan = plan_ssvtp(ssvtp_root, background=code)
+    split = {s.sample_id: s.source_split for s in plan.samples}
+    assert split == {"ssvtp-000000": "train", "ssvtp-000001": "train"} | {
+        f"ssvtp-{i:06d}": "test" for i in (3, 7, 11)
+    }
+    # on disk: the RGB files of pairs 0-12 and 14; listed: 5 of them
+    assert len(plan.skipped["pairs listed in neither train.csv nor test.csv"]) == 14 - 5
 
 
-# --------------------------------------------------------------------------- HCT round trip
+@pytest.mark.parametrize(
+    ("missing", "named"),
+    [
+        ("images_rgb/image_3_rgb.jpg", "ssvtp-000003 (images_rgb/image_3_rgb.jpg)"),
+        ("images_tac/image_5_tac.jpg", "ssvtp-000005 (images_tac/image_5_tac.jpg)"),
+        ("text/labels_7.txt", "ssvtp-000007 (text/labels_7.txt)"),
+    ],
+)
+def test_ssvtp_listed_pair_with_a_missing_file_is_skipped_and_reported(
+    ssvtp_root: Path, code: Path, missing: str, named: str
+) -> None:
+    (ssvtp_root / "ssvtp" / missing).unlink()
+    plan = plan_ssvtp(ssvtp_root, background=code)
+    assert len(plan.samples) == 11
+    assert named in plan.skipped["listed pairs with missing files"]
+
+
+@pytest.mark.parametrize("content", [b"not a jpeg at all", b""])
+def test_ssvtp_unreadable_image(ssvtp_root: Path, code: Path, content: bytes) -> None:
+    path = ssvtp_root / "ssvtp" / "images_rgb" / "image_2_rgb.jpg"
+    path.write_bytes(content)
+    assert_refused(ssvtp_root, code, ValueError, path, "ssvtp-000002", match="not a readable image")
+
+
+@pytest.mark.parametrize("caption", ["", "  \n", " , ,. ,"])
+def test_ssvtp_empty_caption(ssvtp_root: Path, code: Path, caption: str) -> None:
+    path = ssvtp_root / "ssvtp" / "text" / "labels_4.txt"
+    path.write_text(caption)
+    assert_refused(ssvtp_root, code, ValueError, path, "ssvtp-000004", match="empty caption")
+
+
+def test_ssvtp_frame_and_background_sizes_differ(ssvtp_root: Path, code: Path) -> None:
+    bg = code / "tvl_enc" / "data" / "tac_background.png"
+    h, w = TACTILE_SHAPE
+    tac = ssvtp_root / "ssvtp" / "images_tac" / "image_0_tac.jpg"
+    # any other size: both sizes named
+    cv2.imwrite(str(bg), np.zeros((10, 10, 3), np.uint8))
+    assert_refused(ssvtp_root, code, ValueError, bg, tac, f"{h} x {w}", "10 x 10", "ssvtp-000000")
+    # the background turned a quarter: the orientation named
+    cv2.imwrite(str(bg), np.zeros((w, h, 3), np.uint8))
+    assert_refused(ssvtp_root, code, ValueError, f"{w} x {h}", match="turned a quarter")
+    # tactile and vision files swapped, as in TVL's first release: the revised release named
+    cv2.imwrite(str(bg), np.zeros((*RGB_SHAPE, 3), np.uint8))
+    assert_refused(ssvtp_root, code, ValueError, "TVL-revise", match="look swapped")
+
+
+def test_ssvtp_csv_row_naming_another_file_names_csv_and_line(ssvtp_root, code) -> None:
+    path = ssvtp_root / "ssvtp" / "train.csv"
+    (ssvtp_root / "ssvtp" / "images_rgb" / "picture.jpg").write_bytes(b"x")
+    with path.open("a") as handle:
+        handle.write("images_rgb/picture.jpg,,\n")
+    n_lines = len(path.read_text().splitlines())
+    assert_refused(
+        ssvtp_root, code, ValueError, path, f"line {n_lines}", match="not an SSVTP RGB path"
+    )
+
+
+def test_ssvtp_pair_in_both_splits(ssvtp_root: Path, code: Path) -> None:
+    path = ssvtp_root / "ssvtp" / "test.csv"
+    with path.open("a") as handle:
+        handle.write("images_rgb/image_0_rgb.jpg,images_tac/image_0_tac.jpg,hard\n")
+    assert_refused(ssvtp_root, code, ValueError, "ssvtp-000000", "train.csv", path, match="both")
+
+
+def test_ssvtp_wrong_root(tmp_path: Path) -> None:
+    with pytest.raises(FileNotFoundError) as err:
+        ingest_ssvtp(tmp_path)
+    assert_names(err, tmp_path / "ssvtp")
+
+
+# --------------------------------------------------------------------------- HCT
 
 
 def test_hct_round_trip(hct_root: Path) -> None:
@@ -238,43 +403,136 @@ def test_hct_round_trip(hct_root: Path) -> None:
     hct = hct_root / "hct"
     assert list(samples.columns) == list(SAMPLE_COLUMNS)
     assert list(sensors.columns) == list(SENSOR_COLUMNS)
-    assert len(samples) == 12 and samples["sample_id"].is_unique
-    assert samples["sample_id"].tolist() == sorted(samples["sample_id"])
-    # data1 holds trajectories 0 and 2 (6 train rows, then 2 test rows); data2 holds trajectory 1
-    assert samples["sample_id"].tolist() == [f"hct-data1-{r:05d}" for r in range(8)] + [
-        f"hct-data2-{r:05d}" for r in range(4)
+    # data{1,2,3} each hold one trajectory: 3 train rows, then 1 test row
+    assert samples["sample_id"].tolist() == [
+        f"hct-data{d}-{r:05d}" for d in (1, 2, 3) for r in range(4)
     ]
-    assert samples["source_split"].tolist() == ["train"] * 6 + ["test"] * 2 + ["train"] * 3 + [
-        "test"
+    assert samples["source_split"].tolist() == (["train"] * 3 + ["test"]) * 3
+    # trajectory 1 (data2) has no background of its own: TVL's fallback, three levels up
+    assert sensors["sensor_id"].tolist() == [
+        "hct-bg:data1/0-1702507215.615537/background.png",
+        "hct-bg:data3/2-1702507338.115537/background.png",
+        "hct-bg:digit_background.png",
     ]
-    assert len(sensors) == 3 and sensors["sensor_id"].is_unique
+    assert set(samples.loc[4:7, "sensor_id"]) == {"hct-bg:digit_background.png"}
     background_of = dict(zip(sensors["sensor_id"], sensors["background"], strict=True))
     for _, row in samples.iterrows():
         tac_path = hct_root / row["source_path"]
         trajectory = tac_path.parent.parent
-        assert row["sensor_id"] == f"hct-bg:{trajectory.relative_to(hct).as_posix()}/background.png"
-        np.testing.assert_array_equal(decode_png(row["tactile"]), imread_rgb(tac_path))
+        bg = hct / row["sensor_id"].removeprefix("hct-bg:")
+        assert bg.is_file() and tac_path.parent.name == "tactile"
+        np.testing.assert_array_equal(decode_png(row["tactile"]), tvl_view(imread_rgb(tac_path)))
         rgb_path = trajectory / "vision" / tac_path.name
         np.testing.assert_array_equal(decode_png(row["rgb"]), imread_rgb(rgb_path))
         np.testing.assert_array_equal(
-            decode_png(background_of[row["sensor_id"]]), imread_rgb(trajectory / "background.png")
+            decode_png(background_of[row["sensor_id"]]), tvl_view(imread_rgb(bg))
         )
         assert row["adjectives"] == parse_caption(row["caption"])
-        assert row["hardness"] == hardness_from_adjectives(row["adjectives"])
     assert samples["stratum"].tolist() == top_pattern_strata(samples["adjectives"].tolist())
+    assert listed_rows("hct", str(hct_root)) == 12  # not_contact.json's frames are not rows
 
 
-def test_hct_falls_back_to_digit_background(hct_root: Path) -> None:
-    data1 = hct_root / "hct" / "data1"
-    trajectory = next(p for p in sorted(data1.iterdir()) if p.is_dir())
-    shutil.move(trajectory / "background.png", data1 / "digit_background.png")
-    samples, sensors = ingest_hct(hct_root)
-    in_trajectory = samples["source_path"].str.contains(trajectory.name, regex=False)
-    assert set(samples.loc[in_trajectory, "sensor_id"]) == {"hct-bg:data1/digit_background.png"}
-    assert "hct-bg:data1/digit_background.png" in set(sensors["sensor_id"])
+def rewrite_header(csv_path: Path, header: list[str], order: list[int] | None = None) -> None:
+    frame = pd.read_csv(csv_path, keep_default_na=False)
+    if order is not None:
+        frame = frame.iloc[:, order]
+    frame.columns = header
+    frame.to_csv(csv_path, index=False)
 
 
-# --------------------------------------------------------------------------- determinism
+def test_hct_columns_by_the_authors_names_in_any_order_or_by_position(hct_root: Path) -> None:
+    reference, _ = ingest_hct(hct_root)
+    train = hct_root / "hct" / "data1" / "train.csv"
+    rewrite_header(train, ["caption", "tactile_background", "url", "tactile"], [3, 2, 0, 1])
+    assert ingest_hct(hct_root)[0].equals(reference)  # PretrainDataset reads them by name
+    rewrite_header(train, ["Vision", " tactile", "background", "caption"], [2, 3, 1, 0])
+    assert ingest_hct(hct_root)[0].equals(reference)  # the names TacVisDatasetV2 gives them
+    rewrite_header(train, ["a", "b", "c", "d"])
+    plan = plan_hct(hct_root)
+    assert "read by position" in plan.notes[0] and str(train) in plan.notes[0]
+    assert load_ingested(plan)[0].equals(reference)  # TacVisDatasetV2 reads them by position
+
+
+def test_hct_csv_missing_column(hct_root: Path) -> None:
+    path = hct_root / "hct" / "data2" / "train.csv"
+    frame = pd.read_csv(path).drop(columns=["tactile_background"])
+    frame.to_csv(path, index=False)
+    with pytest.raises(ValueError, match="missing column 'tactile_background'") as err:
+        ingest_hct(hct_root)
+    assert_names(err, path)
+
+
+def test_hct_row_without_background_is_ingested_and_refused_by_subtraction(hct_root: Path):
+    hct = hct_root / "hct"
+    (hct / "data1" / "0-1702507215.615537" / "background.png").unlink()
+    plan = plan_hct(hct_root)
+    # TVL's fallback three levels up is hct/digit_background.png: trajectory 0 takes it now
+    assert {s.sensor_id for s in plan.samples[:4]} == {"hct-bg:digit_background.png"}
+    (hct / "digit_background.png").unlink()
+    plan = plan_hct(hct_root)
+    lacking = [f"hct-data{d}-{r:05d}" for d in (1, 2) for r in range(4)]
+    assert plan.without_background == lacking
+    assert "8 samples have no tactile background" in "\n".join(plan.report())
+    samples, sensors = load_ingested(plan)
+    assert len(samples) == 12 and len(sensors) == 1
+    where = "rule background_subtract, results/corpus/hct/samples.parquet"
+    with pytest.raises(ValueError) as err:
+        subtract_backgrounds(samples, sensor_background_map(sensors), "clip128", where=where)
+    assert_names(err, where, "8 of 12 samples", *lacking, "hct-bg:data1/0-1702507215.615537")
+    # the report's example grid still draws them, with blank background panels
+    splits = pd.DataFrame({"sample_id": samples["sample_id"], "split": "train"})
+    figure = corpus_example_grid(samples, sensors, splits, n=12, title="hct")
+    assert len([ax for ax in figure.axes if ax.images]) == 12 * 4
+    plt.close(figure)
+
+
+def test_hct_empty_caption(hct_root: Path) -> None:
+    path = hct_root / "hct" / "data1" / "test.csv"
+    frame = pd.read_csv(path, keep_default_na=False)
+    frame.loc[0, "caption"] = " ,  "
+    frame.to_csv(path, index=False)
+    with pytest.raises(ValueError, match="empty caption") as err:
+        ingest_hct(hct_root)
+    # data1 has 3 train rows, so its first test row is row 3; CSV line 2 (after the header)
+    assert_names(err, f"{path}:2", "hct-data1-00003")
+
+
+def test_hct_missing_tactile(hct_root: Path) -> None:
+    path = hct_root / "hct" / "data2" / "train.csv"
+    image = hct_root / "hct" / "data2" / pd.read_csv(path)["tactile"].iloc[2]
+    image.unlink()
+    with pytest.raises(FileNotFoundError) as err:
+        ingest_hct(hct_root)
+    assert_names(err, image, f"{path}:4", "hct-data2-00002", "tactile")
+
+
+def test_hct_unreadable_rgb(hct_root: Path) -> None:
+    path = hct_root / "hct" / "data2" / "train.csv"
+    image = hct_root / "hct" / "data2" / pd.read_csv(path)["url"].iloc[0]
+    image.write_bytes(b"\xff\xd8\xff garbage")
+    with pytest.raises(ValueError, match="not a readable image") as err:
+        ingest_hct(hct_root)
+    assert_names(err, image, "hct-data2-00000", "RGB")
+
+
+def test_hct_data_folder_without_csvs(hct_root: Path) -> None:
+    (hct_root / "hct" / "data2" / "train.csv").unlink()
+    (hct_root / "hct" / "data2" / "test.csv").unlink()
+    with pytest.raises(FileNotFoundError, match="contact.json") as err:
+        ingest_hct(hct_root)
+    assert_names(err, hct_root / "hct" / "data2")
+
+
+def test_hct_wrong_root(tmp_path: Path) -> None:
+    with pytest.raises(FileNotFoundError) as err:
+        ingest_hct(tmp_path)
+    assert_names(err, tmp_path / "hct")
+    (tmp_path / "hct").mkdir()
+    with pytest.raises(FileNotFoundError, match="no HCT data folders"):
+        ingest_hct(tmp_path)
+
+
+# --------------------------------------------------------------------------- streamed edges
 
 
 def parquet_bytes(table: pd.DataFrame) -> bytes:
@@ -294,164 +552,57 @@ def test_ingest_is_deterministic(tmp_path: Path) -> None:
         first, second = ingest(roots[0]), ingest(roots[1])
         for a, b in zip(first, second, strict=True):
             assert parquet_bytes(a) == parquet_bytes(b)
-        again = ingest(roots[0])
-        for a, b in zip(first, again, strict=True):
-            assert parquet_bytes(a) == parquet_bytes(b)
 
 
-# --------------------------------------------------------------------------- SSVTP errors
+def test_streamed_edges_hold_the_tables_in_row_groups(hct_root: Path, tmp_path: Path) -> None:
+    samples, sensors = ingest_hct(hct_root)
+    plan = plan_hct(hct_root)
+    out = [tmp_path / "one", tmp_path / "two"]
+    for d in out:
+        counts = write_ingested(plan, d / "s.parquet", d / "b.parquet", group_bytes=500_000)
+        assert counts == (12, 3)
+    # the same batches give the same bytes; several row groups
+    for name in ("s.parquet", "b.parquet"):
+        assert (out[0] / name).read_bytes() == (out[1] / name).read_bytes()
+    assert pq.ParquetFile(out[0] / "s.parquet").num_row_groups > 1
+    got = edges.read(out[0] / "s.parquet").frame
+    for column in SAMPLE_COLUMNS:
+        have = got[column].tolist()
+        if column == "adjectives":
+            have = [list(v) for v in have]
+        elif column in ("hardness", "source_split"):  # nulls read back as NaN
+            have = [v if isinstance(v, str) else None for v in have]
+        assert have == samples[column].tolist(), column
+    got = edges.read(out[0] / "b.parquet").frame
+    assert got["background"].tolist() == sensors["background"].tolist()
 
 
-@pytest.mark.parametrize(
-    ("missing", "names"),
-    [
-        ("images_rgb/image_3_rgb.jpg", ("ssvtp-000003", "RGB")),
-        ("images_tac/image_5_tac.jpg", ("ssvtp-000005", "tactile")),
-        ("text/labels_7.txt", ("ssvtp-000007",)),
-    ],
-)
-def test_ssvtp_missing_file_names_path_and_sample(
-    ssvtp_root: Path, missing: str, names: tuple[str, ...]
+def test_streamed_ingest_holds_one_row_group_however_many_samples_it_writes(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    path = ssvtp_root / "ssvtp" / missing
-    path.unlink()
-    assert_refused(ssvtp_root, FileNotFoundError, path, *names)
+    """The Python memory held (tracemalloc: images, PNG bytes, frames) as each row group of
+    about one sample reaches the edge writer stays flat over the stream: held in memory, the
+    samples would add a frame's PNG each."""
+    root = write_hct_fixture(tmp_path / "tvl", n_traj=5, per_traj=4)
+    plan = plan_hct(root)
+    held: list[int] = []
+    write_batches = edges.write_batches
 
+    def watched(path, schema, batches, **kw):
+        def groups():
+            for group in batches:
+                held.append(tracemalloc.get_traced_memory()[0])
+                yield group
 
-@pytest.mark.parametrize("content", [b"not a jpeg at all", b""])
-def test_ssvtp_unreadable_image(ssvtp_root: Path, content: bytes) -> None:
-    path = ssvtp_root / "ssvtp" / "images_rgb" / "image_2_rgb.jpg"
-    path.write_bytes(content)
-    assert_refused(ssvtp_root, ValueError, path, "ssvtp-000002", match="not a readable image")
+        return write_batches(path, schema, groups(), **kw)
 
-
-@pytest.mark.parametrize("caption", ["", "  \n", " , ,. ,"])
-def test_ssvtp_empty_caption(ssvtp_root: Path, caption: str) -> None:
-    path = ssvtp_root / "ssvtp" / "text" / "labels_4.txt"
-    path.write_text(caption)
-    assert_refused(ssvtp_root, ValueError, path, "ssvtp-000004", match="empty caption")
-
-
-def test_ssvtp_background_missing(ssvtp_root: Path, tmp_path: Path) -> None:
-    path = ssvtp_root / "ssvtp" / "tac_background.png"
-    path.unlink()
-    assert_refused(ssvtp_root, FileNotFoundError, path, "ssvtp-bg", "background=")
-    other = tmp_path / "nope.png"
-    with pytest.raises(FileNotFoundError) as err:
-        ingest_ssvtp(ssvtp_root, background=other)
-    assert_names(err, other)
-
-
-def test_ssvtp_background_size_mismatch(ssvtp_root: Path) -> None:
-    path = ssvtp_root / "ssvtp" / "tac_background.png"
-    cv2.imwrite(str(path), np.zeros((10, 10, 3), np.uint8))
-    assert_refused(
-        ssvtp_root, ValueError, path, "ssvtp-000000", "image_0_tac.jpg", match="equal sizes"
-    )
-
-
-def test_ssvtp_bad_csv_row_names_csv_and_line(ssvtp_root: Path) -> None:
-    path = ssvtp_root / "ssvtp" / "train.csv"
-    with path.open("a") as handle:
-        handle.write("images_rgb/picture.jpg\n")
-    n_lines = len(path.read_text().splitlines())
-    assert_refused(
-        ssvtp_root,
-        ValueError,
-        path,
-        f"line {n_lines}",
-        "picture.jpg",
-        match="not an SSVTP RGB path",
-    )
-
-
-def test_ssvtp_pair_in_both_splits(ssvtp_root: Path) -> None:
-    path = ssvtp_root / "ssvtp" / "test.csv"
-    with path.open("a") as handle:
-        handle.write("images_rgb/image_0_rgb.jpg\n")
-    assert_refused(ssvtp_root, ValueError, "ssvtp-000000", "train.csv", path, match="both")
-
-
-def test_ssvtp_listed_but_absent_pair(ssvtp_root: Path) -> None:
-    with (ssvtp_root / "ssvtp" / "train.csv").open("a") as handle:
-        handle.write("images_rgb/image_40_rgb.jpg\n")
-    assert_refused(
-        ssvtp_root,
-        FileNotFoundError,
-        ssvtp_root / "ssvtp" / "images_rgb" / "image_40_rgb.jpg",
-        "ssvtp-000040",
-    )
-
-
-def test_ssvtp_wrong_root(tmp_path: Path) -> None:
-    with pytest.raises(FileNotFoundError) as err:
-        ingest_ssvtp(tmp_path)
-    assert_names(err, tmp_path / "ssvtp")
-
-
-# --------------------------------------------------------------------------- HCT errors
-
-
-def test_hct_csv_missing_column(hct_root: Path) -> None:
-    path = hct_root / "hct" / "data2" / "train.csv"
-    frame = pd.read_csv(path).drop(columns=["background"])
-    frame.to_csv(path, index=False)
-    with pytest.raises(ValueError, match="missing column 'background'") as err:
-        ingest_hct(hct_root)
-    assert_names(err, path)
-
-
-def test_hct_empty_caption(hct_root: Path) -> None:
-    path = hct_root / "hct" / "data1" / "test.csv"
-    frame = pd.read_csv(path, keep_default_na=False)
-    frame.loc[1, "caption"] = " ,  "
-    frame.to_csv(path, index=False)
-    with pytest.raises(ValueError, match="empty caption") as err:
-        ingest_hct(hct_root)
-    # data1 has 6 train rows, so the second test row is row 7; CSV line 3 (after the header)
-    assert_names(err, f"{path}:3", "hct-data1-00007")
-
-
-def test_hct_missing_tactile(hct_root: Path) -> None:
-    path = hct_root / "hct" / "data2" / "train.csv"
-    relative = pd.read_csv(path)["tactile"].iloc[2]
-    image = hct_root / "hct" / "data2" / relative
-    image.unlink()
-    with pytest.raises(FileNotFoundError) as err:
-        ingest_hct(hct_root)
-    assert_names(err, image, "hct-data2-00002", "tactile")
-
-
-def test_hct_unreadable_rgb(hct_root: Path) -> None:
-    path = hct_root / "hct" / "data2" / "train.csv"
-    image = hct_root / "hct" / "data2" / pd.read_csv(path)["vision"].iloc[0]
-    image.write_bytes(b"\xff\xd8\xff garbage")
-    with pytest.raises(ValueError, match="not a readable image") as err:
-        ingest_hct(hct_root)
-    assert_names(err, image, "hct-data2-00000", "RGB")
-
-
-def test_hct_background_missing(hct_root: Path) -> None:
-    path = hct_root / "hct" / "data2" / "train.csv"
-    background = hct_root / "hct" / "data2" / pd.read_csv(path)["background"].iloc[0]
-    background.unlink()
-    with pytest.raises(FileNotFoundError) as err:
-        ingest_hct(hct_root)
-    assert_names(err, background, "hct-data2-00000", "digit_background.png")
-
-
-def test_hct_data_folder_without_csvs(hct_root: Path) -> None:
-    (hct_root / "hct" / "data2" / "train.csv").unlink()
-    (hct_root / "hct" / "data2" / "test.csv").unlink()
-    with pytest.raises(FileNotFoundError, match="contact.json") as err:
-        ingest_hct(hct_root)
-    assert_names(err, hct_root / "hct" / "data2")
-
-
-def test_hct_wrong_root(tmp_path: Path) -> None:
-    with pytest.raises(FileNotFoundError) as err:
-        ingest_hct(tmp_path)
-    assert_names(err, tmp_path / "hct")
-    (tmp_path / "hct").mkdir()
-    with pytest.raises(FileNotFoundError, match="no HCT data folders"):
-        ingest_hct(tmp_path)
+    monkeypatch.setattr(edges, "write_batches", watched)
+    tracemalloc.start()
+    try:
+        write_ingested(plan, tmp_path / "s.parquet", tmp_path / "b.parquet", group_bytes=1)
+    finally:
+        tracemalloc.stop()
+    samples = held[len(plan.backgrounds) :]  # the sensors edge's groups come first
+    assert len(samples) == 20
+    frame_png = len(ingest_hct(root)[0]["tactile"].iloc[0])
+    assert max(samples[4:]) - samples[3] < frame_png  # 16 more samples streamed: no growth

@@ -159,18 +159,28 @@ def test_native_grid_pos_encoding_is_the_parameter():
     assert torch.equal(model.interpolate_pos_encoding(4, 4), model.pos_embed.detach())
 
 
-def test_interpolate_pos_embed_offset_mode_matches_size_mode_on_smooth_field():
-    # DINOv2's offset-0.1 scale-factor path and the exact-size path agree to within the tiny
-    # coordinate shift the offset introduces, on a smooth field
-    m, d = 37, 3
-    yy, xx = torch.meshgrid(torch.linspace(0, 1, m), torch.linspace(0, 1, m), indexing="ij")
-    field = torch.stack([torch.sin(3 * xx), torch.cos(2 * yy), xx * yy], -1).reshape(1, m * m, d)
-    a = interpolate_pos_embed(field, (8, 6), offset=0.1)
-    b = interpolate_pos_embed(field, (8, 6), offset=0.0)
-    assert a.shape == b.shape == (1, 48, d)
-    assert (a - b).abs().max() < 0.05
+@pytest.mark.parametrize("regs", [0, 4])
+def test_pos_embed_fitted_on_load_is_the_one_the_checkpoint_grid_gives_at_forward(tmp_path, regs):
+    # DINOv2 keeps the 37 x 37 grid and resamples it at each forward (offset 0.1, or antialias
+    # for register models); resampling once on load with the model's own settings must give
+    # the very same embeddings (the same computation on the same array: bit-identical)
+    cfg = ARCHS["vit_tiny"]
+    torch.save(
+        random_checkpoint(official_shapes(cfg.embed_dim, cfg.depth, 37, regs)), tmp_path / "p.pth"
+    )
+    native = load_pretrained(
+        build_vit("vit_tiny", img_size=518, num_register_tokens=regs), tmp_path / "p.pth"
+    )
+    fitted = load_pretrained(
+        build_vit("vit_tiny", img_size=112, num_register_tokens=regs), tmp_path / "p.pth"
+    )
+    assert (fitted.interpolate_offset, fitted.interpolate_antialias) == (
+        (0.0, True) if regs else (0.1, False)
+    )
+    with torch.no_grad():
+        assert torch.equal(fitted.pos_embed, native.interpolate_pos_encoding(8, 8))
     with pytest.raises(ValueError, match="square grid"):
-        interpolate_pos_embed(torch.zeros(1, 10, d), (2, 2))
+        interpolate_pos_embed(torch.zeros(1, 10, 3), (2, 2), offset=0.1, antialias=False)
 
 
 def test_attention_matches_float64_sdpa_reference():
