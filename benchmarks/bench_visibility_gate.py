@@ -62,6 +62,7 @@ def cell(config: dict, results: Path, seed: int, threads: int) -> dict:
         VisibilitySettings,
         visibility_check,
         visibility_gate,
+        visibility_mlp,
         visibility_probe,
     )
     from tacgen_lib.io import edges
@@ -114,16 +115,18 @@ def cell(config: dict, results: Path, seed: int, threads: int) -> dict:
     )
     settings = VisibilitySettings.from_config(feat.get("visibility"))
     probe = visibility_probe(config["probes"], config["probes"]["seeds"][0], settings)
+    mlp = visibility_mlp(config["probes"])  # as rule visibility_check
     with threadpool_limits(1):
-        rows = visibility_check([check], probe, settings, workers=threads)
+        rows = visibility_check([check], probe, settings, mlp=mlp, workers=threads)
     gate = visibility_gate(rows, gate_corpus, settings.gate)
     out = {"seed": seed, "corpus": gate_corpus, "backbone": how, "make s": made}
     out["extract s"] = extracted
-    nonlinear = rows[rows["probe"] == "nonlinear"].set_index("factor")
-    for factor in FACTORS:
-        if factor in nonlinear.index:
-            r = nonlinear.loc[factor]
+    for factor in FACTORS:  # the better probe's, as the gate reads it
+        g = rows[rows["factor"] == factor]
+        if len(g):
+            r = g.loc[g["score"].idxmax()]
             out[factor] = [float(r["score"]), float(r["ci_low"]), float(r["ci_high"])]
+            out[f"{factor} probe"] = str(r["probe"])
     out["gate"] = "passes" if gate.passed else "fails"
     return out
 
@@ -184,7 +187,7 @@ def main() -> None:
         cells = [r["kernels"], str(r["seed"])]
         for factor in FACTORS:
             s, lo, hi = r.get(factor, [float("nan")] * 3)
-            cells.append(f"{s:.3f} [{lo:.3f}, {hi:.3f}]")
+            cells.append(f"{s:.3f} [{lo:.3f}, {hi:.3f}] ({r.get(f'{factor} probe', '-')})")
         cells += [r["gate"], f"{r['make s']:.1f}", f"{r['extract s']:.1f}"]
         print("  ".join(cells))
     decisions = {r["gate"] for r in rows}

@@ -13,7 +13,8 @@ row; pretraining reads train rows only), beside the gate of config ``features.vi
                 must beat)
   SimCLR        resnet_tiny pretrained by `features.simclr.pretrain_simclr` on this corpus's
                 train frames (the run's V learns from every corpus of features.pretrain.corpus),
-                once per --grey value (greyscale views trade colour for texture)
+                once per --grey value (greyscale views trade colour for texture) and per pool
+                (its projection reads that pool's feature)
 
 Each ResNet is read with every pool of --pools: its last stage's average (cls) and its stage
 statistics (stages, `resnet.ResNet.stage_statistics`).
@@ -49,6 +50,7 @@ from tacgen_lib.generate.visibility import (
     VisibilityCorpus,
     VisibilitySettings,
     visibility_check,
+    visibility_mlp,
     visibility_probe,
 )
 from tacgen_lib.io import edges
@@ -71,7 +73,9 @@ def main() -> None:
     ap.add_argument(
         "--pools", nargs="*", default=["cls", "stages"], help="ResNet pools (extract.POOLS)"
     )
-    ap.add_argument("--image-size", type=int, default=None, help="default: features.image_size")
+    ap.add_argument(
+        "--image-size", type=int, default=None, help="default: the run's vision backbone's"
+    )
     ap.add_argument("--threads", type=int, default=2)
     tiny = {"configfile": TINY_CONFIG, "epochs": 1, "grey": [0.0], "pools": ["stages"]}
     tiny["threads"] = 1
@@ -79,7 +83,7 @@ def main() -> None:
     torch.set_num_threads(args.threads)
     config = run_config(args.configfile)
     feat = config["features"]
-    size = args.image_size or FeatureSettings.from_config(feat).image_size
+    size = args.image_size or FeatureSettings.for_backbone(feat, "vision").image_size
     res = Path(args.results)
 
     splits = edges.read(res / "corpus/splits.parquet").frame
@@ -93,6 +97,7 @@ def main() -> None:
     factors = visible_factors(samples, appearance_class=True)
     visibility = VisibilitySettings.from_config(feat.get("visibility"))
     probe = visibility_probe(config["probes"], config["probes"]["seeds"][0], visibility)
+    mlp = visibility_mlp(config["probes"])  # as rule visibility_check
     print(
         f"corpus {args.corpus}: {len(train)} non-test rows ({len(fit_rows)} train), "
         f"{len(test)} test; input {size} px; torch threads {args.threads}"
@@ -103,7 +108,7 @@ def main() -> None:
             args.corpus, dict(zip(ids, vectors, strict=True)), factors, train, test
         )
         with threadpool_limits(1):
-            rows = visibility_check([corpus], probe, visibility, workers=args.threads)
+            rows = visibility_check([corpus], probe, visibility, mlp=mlp, workers=args.threads)
         out = {"V": name, "dim": vectors.shape[1], "make s": make_s, "extract s": extract_s}
         for _, r in rows.loc[rows["factor"].isin(FACTORS)].iterrows():
             out[f"{r['factor']} {r['probe'][:3]}"] = round(float(r["score"]), 3)
@@ -132,10 +137,12 @@ def main() -> None:
         base = replace(base, epochs=args.epochs)
     for grey in [base.grey] if args.grey is None else args.grey:
         settings = replace(base, grey=grey)
-        t0 = time.perf_counter()
-        result = pretrain_simclr(train_frames, settings, arch="resnet_tiny", image_size=size)
-        made = time.perf_counter() - t0
-        for pool in args.pools:
+        for pool in args.pools:  # the projection reads what the features read (simclr)
+            t0 = time.perf_counter()
+            result = pretrain_simclr(
+                train_frames, settings, arch="resnet_tiny", image_size=size, pool=pool
+            )
+            made = time.perf_counter() - t0
             vec, ext = extracted(result.backbone(), pool)
             name = f"SimCLR {settings.epochs} ep, grey {grey:g}, {pool}"
             table.append(scored(name, vec, made, ext))

@@ -10,8 +10,7 @@ from tacgen_lib.generate.cells import (
     guidance_text,
     sample_cells,
 )
-from tacgen_lib.generate.job import generate_grids
-from tacgen_lib.generate.settings import check_grid
+from tacgen_lib.generate.settings import check_grid, generate_grids
 
 GENERATE = config["generate"]
 # the C and lambda grids of every probe that judges generated touch (generate.C, .lambdas)

@@ -87,6 +87,7 @@ def make_backbone(
             simclr or SimclrSettings(),
             arch=spec.arch,
             image_size=image_size,
+            pool=spec.pool or "cls",  # the projection reads what the features will read
             progress=say,
             device=device,
         )

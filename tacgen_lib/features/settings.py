@@ -52,19 +52,15 @@ class FeatureSettings(SchemaSettings):
     def own(self, backbone: Mapping[str, Any]) -> FeatureSettings:
         """These settings with the pool and image size a backbone declaration (`backbone`:
         features.backbones.<modality>, or a family's) names, where it names them."""
-        out = self
-        if backbone.get("pool"):
-            out = replace(out, pool=backbone["pool"])
-        if backbone.get("image_size"):
-            out = replace(out, image_size=int(backbone["image_size"]))
-        return out
+        out = replace(self, image_size=backbone_image_size(self.__dict__, backbone))
+        return replace(out, pool=backbone["pool"]) if backbone.get("pool") else out
 
 
 def backbone_image_size(features: Mapping[str, Any], backbone: Mapping[str, Any]) -> int:
     """The side in pixels a backbone declaration's frames are resized to (its own
     ``image_size``, else config ``features.image_size``; `FeatureSettings.own`): what its
     pretraining and its features read."""
-    return FeatureSettings.from_config(features).own(backbone).image_size
+    return int(backbone.get("image_size") or features["image_size"])
 
 
 @dataclass(frozen=True)

@@ -10,6 +10,13 @@ frame's negatives are the other frames' second views, as in MoCo v3's symmetric 
 projection is dropped after training: the frozen feature is read from the backbone by
 `extract.extract_features` (its pool: the last stage's average, or the stage statistics).
 
+The projection reads the feature the workflow reads (`pool`): the last stage's average, or,
+for the ``stages`` pool, the stage statistics (`resnet.ResNet.stage_statistics`: the early
+stages' std over space beside the last stage's mean). Trained through the last stage's average
+alone, the early stages' statistics are a by-product the loss never asks to separate frames;
+trained through the statistics, every number a probe reads is one the contrastive loss shaped
+(report page What vision sees; docs/features.md, The default vision side).
+
 Why it exists beside DINO and MAE: a ViT with 14-pixel patches at the backbone's small input
 reads colour but not the fine texture of an object (report page What vision sees), while a
 convolutional network's small receptive fields see local texture by construction. The
@@ -76,6 +83,7 @@ def pretrain_simclr(
     *,
     arch: str,
     image_size: int,
+    pool: str = "cls",
     progress: Callable[[str], None] | None = None,
     device: torch.device | str = "cpu",
 ) -> SimclrResult:
@@ -86,7 +94,10 @@ def pretrain_simclr(
     `weight_decay`, linear warm-up over the first epoch, then cosine to lr/100), `tau` (the
     InfoNCE temperature), `crop_min` (the smallest crop, as a fraction of the frame's area),
     `grey` (the probability of a greyscale view), `hidden_dim` and `proj_dim` (the projection),
-    `seed` (initialisation, order and augmentation). Frames are resized once to image_size
+    `seed` (initialisation, order and augmentation). `pool`: the feature the projection reads,
+    the one the backbone's features will be read by (``stages``: the stage statistics; any
+    other pool of `extract.POOLS`: the last stage's average). Frames are resized once to
+    image_size
     (`extract.to_unit_tensor`) and every view normalised as extraction normalises
     (`extract.imagenet_normalise`). Bit-identical reruns on one machine need the same torch
     thread count. Raises ValueError for an arch that is not a ResNet or frames that are not
@@ -108,7 +119,10 @@ def pretrain_simclr(
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(s.seed)
             backbone = build_resnet(arch)
-            head = projection_head(backbone.num_features, s.hidden_dim, s.proj_dim)
+            stages = pool == "stages"
+            read = backbone.stage_statistics if stages else backbone
+            width = backbone.stage_statistics_dim if stages else backbone.num_features
+            head = projection_head(width, s.hidden_dim, s.proj_dim)
         backbone.to(dev).train()
         head.to(dev).train()
         data = torch.cat(
@@ -129,7 +143,7 @@ def pretrain_simclr(
             return imagenet_normalise(grey_views(crops, s.grey, gen)).to(dev)
 
         def project(x: Tensor) -> Tensor:
-            return F.normalize(head(backbone(x)), dim=1)
+            return F.normalize(head(read(x)), dim=1)
 
         curve: list[dict[str, float]] = []
         step = 0

@@ -14,23 +14,13 @@ from tacgen_lib.corpus.splits import assert_trainable, ids_in_split
 from tacgen_lib.generate.baselines import Baselines, TargetSpec, baselines_from_frame, target_specs
 from tacgen_lib.io import edges
 
-__all__ = ["GeneratorJob", "generate_grids", "job_target_specs"]
-
-
-def generate_grids(generate: Any) -> dict[str, list[float]]:
-    """The C and lambda grids of the probes that judge generated touch, from config
-    ``generate`` (a mapping with the schema's defaults filled): rules pass them as param
-    ``grids``, and `job_target_specs` gives them to every target's probe."""
-    return {
-        "C": [float(c) for c in generate["C"]],
-        "lambdas": [float(v) for v in generate["lambdas"]],
-    }
+__all__ = ["GeneratorJob", "job_target_specs"]
 
 
 def job_target_specs(job: Any, splits: pd.DataFrame, *, cv_repeats: int) -> list[TargetSpec]:
     """`target_specs` of Snakemake job `job`: the corpus of its wildcards, its input
     ``manifest``, its params ``targets``, ``corpus`` (the declaration), ``probes``,
-    ``probe_seed`` and ``grids`` (the probes' C and lambda grids, `generate_grids`), and its
+    ``probe_seed`` and ``grids`` (the probes' C and lambda grids, `settings.generate_grids`), and its
     rule (named in a leak's error)."""
     return target_specs(
         edges.read(job.input.manifest).frame,

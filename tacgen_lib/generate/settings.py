@@ -15,7 +15,7 @@ from typing import Any
 
 from tacgen_lib.io.schema import SchemaSettings, schema_fields
 
-__all__ = ["GenerateSettings", "SAMPLERS", "check_grid"]
+__all__ = ["GenerateSettings", "SAMPLERS", "check_grid", "generate_grids"]
 
 #: The samplers of the grid: DDPM ancestral (over all T steps) and DDIM (any number of steps).
 SAMPLERS = ("ddim", "ddpm")
@@ -77,3 +77,13 @@ def check_grid(samplers: Mapping[str, Any], train_steps: int) -> None:
                 raise ValueError(
                     f"generate.samplers.{name}: steps {s} outside 1..T = {train_steps}"
                 )
+
+
+def generate_grids(generate: Any) -> dict[str, list[float]]:
+    """The C and lambda grids of the probes that judge generated touch, from config
+    ``generate`` (a mapping with the schema's defaults filled): rules pass them as param
+    ``grids``, and `job_target_specs` gives them to every target's probe."""
+    return {
+        "C": [float(c) for c in generate["C"]],
+        "lambdas": [float(v) for v in generate["lambdas"]],
+    }

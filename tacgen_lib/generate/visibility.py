@@ -3,9 +3,15 @@
 For every simulated corpus, each visible factor (`corpus.looks.visible_factors`: colour,
 texture, shape, size third and, on the natural design, the appearance class) is decoded from V
 by a linear probe (the probes stage's logistic probe, C by CV) and a nonlinear probe (an
-RBF-kernel SVM on standardised V, C and gamma by CV, `small_probes.fit_kernel_probe`), each
-fitted on every non-test row of the corpus and scored on its test split with a fixed-test
-bootstrap CI beside the majority class's share of the test rows.
+RBF-kernel SVM on standardised V, C and gamma by CV, `small_probes.fit_kernel_probe`), and each
+factor the gate reads also by the probes stage's 2-layer probe (``mlp2``, `probes.mlp`: width
+and weight decay by CV, config ``probes.robustness.mlp``), each fitted on every non-test row of
+the corpus and scored on its test split with a fixed-test bootstrap CI beside the majority
+class's share of the test rows. Why a third probe: the appearance class is a function of two
+factors, (colour index + texture index) mod 6, so each class is a union of colour x texture
+combinations scattered through V; a kernel of one bandwidth over every dimension of V,
+shape, size and pose included, reads such a class worse than a network that learns which
+directions of V matter, even where V holds colour and texture both.
 
 It is the gate for reading any result that depends on what V sees: the regime's generator can
 pass on only what V holds, so where V does not decode the appearance class the regime cannot
@@ -29,7 +35,8 @@ from tacgen_lib.generate.small_probes import fit_kernel_probe, fit_small_probe
 from tacgen_lib.io.schema import SchemaSettings, schema_fields
 from tacgen_lib.probes.bootstrap import resample_indices, score_interval
 from tacgen_lib.probes.metrics import score
-from tacgen_lib.probes.settings import ProbeSettings
+from tacgen_lib.probes.mlp import fit_mlp_probe
+from tacgen_lib.probes.settings import MLPGrid, ProbeSettings
 from tacgen_lib.runtime.workers import fork_map
 
 __all__ = [
@@ -39,6 +46,7 @@ __all__ = [
     "VisibilitySettings",
     "visibility_check",
     "visibility_gate",
+    "visibility_mlp",
     "visibility_probe",
 ]
 
@@ -57,7 +65,9 @@ VISIBILITY_COLUMNS = (
     "n_test",
 )
 
-PROBES = ("linear", "nonlinear")
+#: The probes of the check; the gate reads the best of them. ``mlp2`` runs on the gate's
+#: factors only (`visibility_check`).
+PROBES = ("linear", "nonlinear", "mlp2")
 
 
 @dataclass(frozen=True)
@@ -68,6 +78,12 @@ class VisibilitySettings(SchemaSettings):
     `fit_kernel_probe`; the regime's V ceiling is the same probe), the fixed-test bootstrap
     resamples, the CV folds of both probes (one draw), and the gate: factor -> the accuracy V
     must reach on a regime corpus for the regime to be read (`visibility_gate`)."""
+
+
+def visibility_mlp(probes: Mapping[str, Any]) -> MLPGrid:
+    """The check's 2-layer probe: the probes stage's (config ``probes.robustness.mlp``: its
+    widths, weight decays, folds and solver budget)."""
+    return MLPGrid.from_config(probes["robustness"]["mlp"])
 
 
 def visibility_probe(
@@ -100,16 +116,19 @@ def visibility_check(
     settings: ProbeSettings,
     visibility: VisibilitySettings,
     *,
+    mlp: MLPGrid | None = None,
     progress: Callable[[str], Any] | None = None,
     workers: int = 1,
 ) -> pd.DataFrame:
     """Accuracy of the linear and the nonlinear V probe on each factor of each corpus with
-    more than one level among its train rows, fitted on its train rows and scored on its test
-    rows (fixed-test bootstrap CI, `visibility.bootstrap` resamples).
+    more than one level among its train rows, and of the 2-layer probe (grid `mlp`, where
+    given) on each factor the gate reads (`visibility.gate`), fitted on its train rows and
+    scored on its test rows (fixed-test bootstrap CI, `visibility.bootstrap` resamples).
 
-    settings: a logistic `ProbeSettings` (its C grid, folds and CV repeats). The (corpus,
-    factor, probe) fits are independent: `workers` forked processes compute them
-    (`fork_map`, the same rows for any number of workers), the nonlinear ones first. A corpus
+    settings: a logistic `ProbeSettings` (its C grid, folds and CV repeats, and its seed, the
+    2-layer probe's too). The (corpus, factor, probe) fits are independent: `workers` forked
+    processes compute them (`fork_map`, the same rows for any number of workers), the
+    costliest first. A corpus
     whose vectors, factors and split repeat an earlier one's row for row (a null corpus and
     its paired twin show the same frames) is fitted once and given that corpus's rows.
     Returns `VISIBILITY_COLUMNS` rows, ordered by corpus (as given), factor (`FACTORS`) and
@@ -145,7 +164,12 @@ def visibility_check(
         # the fixed-test resamples of the corpus, shared by its every factor and probe
         idx = resample_indices(len(test), int(visibility.bootstrap), settings.seed)
         blocks[c.name] = (c, train, test, v_tr, v_te, idx)
-        jobs += [(c.name, f, p) for f in shown for p in PROBES]
+        jobs += [
+            (c.name, f, p)
+            for f in shown
+            for p in PROBES
+            if p != "mlp2" or (mlp is not None and f in visibility.gate)
+        ]
 
     def fit(job: tuple[str, str, str]) -> dict:
         name, factor, probe = job
@@ -153,13 +177,16 @@ def visibility_check(
         y_tr = c.factors.loc[train, factor].astype(str).to_numpy(dtype=object)
         y_te = c.factors.loc[test, factor].astype(str).to_numpy(dtype=object)
         if probe == "linear":
-            fitted = fit_small_probe(v_tr, y_tr, v_te, settings)
-        else:
-            fitted = fit_kernel_probe(
+            pred = fit_small_probe(v_tr, y_tr, v_te, settings).pred
+        elif probe == "nonlinear":
+            pred = fit_kernel_probe(
                 v_tr, y_tr, v_te, settings, gammas=visibility.gammas, C=visibility.C
-            )
-        acc = score("accuracy", y_te, fitted.pred)
-        lo, hi = score_interval("accuracy", y_te, fitted.pred, idx)
+            ).pred
+        else:
+            pred = fit_mlp_probe(v_tr, y_tr, "logistic", mlp, settings.seed).predict(v_te)
+        pred = np.asarray(pred, dtype=object)
+        acc = score("accuracy", y_te, pred)
+        lo, hi = score_interval("accuracy", y_te, pred, idx)
         say(f"{name} {factor}, {probe} probe on V: accuracy {acc:.3f} [{lo:.3f}, {hi:.3f}]")
         return {
             "row_id": f"{name}|{factor}|{probe}",
@@ -175,8 +202,8 @@ def visibility_check(
             "n_test": len(test),
         }
 
-    def cost(job: tuple[str, str, str]) -> float:  # the nonlinear CV dominates, with the rows
-        return (2.0 if job[2] == "nonlinear" else 1.0) * len(blocks[job[0]][1])
+    def cost(job: tuple[str, str, str]) -> float:  # the CVs of the nonlinear probes dominate
+        return {"linear": 1.0, "nonlinear": 2.0, "mlp2": 3.0}[job[2]] * len(blocks[job[0]][1])
 
     rows = fork_map(fit, jobs, workers, cost=cost)
     by_corpus = {c.name: [r for r in rows if r["corpus"] == c.name] for c in corpora}

@@ -1,6 +1,7 @@
 """The report page *What vision sees* (`tacgen_lib.generate.visibility`): the accuracy with
-which V decodes each visible factor of each simulated corpus, linear and nonlinear probe, beside
-the majority class's share; and the sentence the findings page states from it.
+which V decodes each visible factor of each simulated corpus, by each probe of the check (linear,
+kernel, and the 2-layer probe on the gate's factors), beside the majority class's share; and
+the sentence the findings page states from it.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from tacgen_lib.report import format as fmt
 if TYPE_CHECKING:
     import matplotlib.pyplot as plt
 
-__all__ = ["visibility_figure", "visibility_sentence", "visibility_table"]
+__all__ = ["PROBE_NAMES", "visibility_figure", "visibility_sentence", "visibility_table"]
 
 _FACTOR_WORDS = {"appearance": "appearance class"}
 
@@ -26,37 +27,41 @@ def _ordered(rows: pd.DataFrame) -> pd.DataFrame:
     return rows.assign(_f=rows["factor"].map(order)).sort_values(["corpus", "_f", "probe"])
 
 
+#: Each probe of the check (`generate.visibility.PROBES`) as the report names it.
+PROBE_NAMES = {"linear": "linear", "nonlinear": "kernel (RBF)", "mlp2": "2-layer"}
+
+
 def visibility_table(rows: pd.DataFrame) -> pd.DataFrame:
-    """One row per corpus x factor: the linear and the nonlinear probe's accuracy [95% CI],
-    the majority class's share of the test rows, classes and rows."""
+    """One row per corpus x factor: each probe's accuracy [95% CI] (a dash where the probe
+    did not run on that factor), the majority class's share of the test rows, classes and
+    rows."""
     out = []
+    probes = [p for p in PROBE_NAMES if p in set(rows["probe"])]
     for (corpus, factor), g in _ordered(rows).groupby(["corpus", "factor"], sort=False):
         by = g.set_index("probe")
         r = g.iloc[0]
-        out.append(
+        row = {"corpus": corpus, "factor": _FACTOR_WORDS.get(factor, factor)}
+        for probe in probes:
+            row[f"{PROBE_NAMES[probe]} probe [95% CI]"] = (
+                fmt.with_ci(
+                    by.loc[probe, "score"], by.loc[probe, "ci_low"], by.loc[probe, "ci_high"]
+                )
+                if probe in by.index
+                else fmt.MISSING
+            )
+        row.update(
             {
-                "corpus": corpus,
-                "factor": _FACTOR_WORDS.get(factor, factor),
-                "linear probe [95% CI]": fmt.with_ci(
-                    by.loc["linear", "score"],
-                    by.loc["linear", "ci_low"],
-                    by.loc["linear", "ci_high"],
-                ),
-                "nonlinear probe [95% CI]": fmt.with_ci(
-                    by.loc["nonlinear", "score"],
-                    by.loc["nonlinear", "ci_low"],
-                    by.loc["nonlinear", "ci_high"],
-                ),
                 "majority class": r["majority"],
                 "classes": int(r["n_classes"]),
                 "n train/test": f"{int(r['n'])}/{int(r['n_test'])}",
             }
         )
+        out.append(row)
     return pd.DataFrame(out)
 
 
 def visibility_figure(rows: pd.DataFrame) -> plt.Figure:
-    """Accuracy per factor (bars: linear and nonlinear probe, whiskers: 95% CI; tick: the
+    """Accuracy per factor (bars: each probe of the check, whiskers: 95% CI; tick: the
     majority class's share), one panel per corpus."""
     import matplotlib.pyplot as plt
 
@@ -65,19 +70,21 @@ def visibility_figure(rows: pd.DataFrame) -> plt.Figure:
     corpora = sorted(rows["corpus"].unique())
     nrows, ncols, size = panel_grid(len(corpora), (3.4, 2.6), max_cols=3)
     fig, axes = plt.subplots(nrows, ncols, figsize=size, squeeze=False, constrained_layout=True)
-    colours = {"linear": "#9ecae1", "nonlinear": "#3182bd"}
+    colours = {"linear": "#9ecae1", "nonlinear": "#3182bd", "mlp2": "#08519c"}
+    probes = [p for p in PROBE_NAMES if p in set(rows["probe"])]
+    width = 0.8 / len(probes)
     for ax, corpus in zip(axes.ravel(), corpora, strict=False):
         sub = _ordered(rows[rows["corpus"] == corpus])
         factors = list(dict.fromkeys(sub["factor"]))
         x = np.arange(len(factors))
-        for k, probe in enumerate(("linear", "nonlinear")):
-            s = sub[sub["probe"] == probe].set_index("factor").loc[factors]
+        for k, probe in enumerate(probes):
+            s = sub[sub["probe"] == probe].set_index("factor").reindex(factors)
             ax.bar(
-                x + (k - 0.5) * 0.38,
+                x + (k - (len(probes) - 1) / 2) * width,
                 s["score"],
-                0.38,
+                width,
                 color=colours[probe],
-                label=f"{probe} probe",
+                label=f"{PROBE_NAMES[probe]} probe",
                 yerr=[s["score"] - s["ci_low"], s["ci_high"] - s["score"]],
                 capsize=2,
             )
@@ -110,6 +117,7 @@ def visibility_sentence(rows: pd.DataFrame, corpus: str) -> str:
         best = g.loc[g["score"].idxmax()]
         parts.append(
             f"{_FACTOR_WORDS.get(factor, factor)} {fmt.with_ci(best['score'], best['ci_low'], best['ci_high'])}"
-            f" ({best['probe']}; majority {fmt.number(best['majority'])})"
+            f" ({PROBE_NAMES.get(best['probe'], best['probe'])}; majority "
+            f"{fmt.number(best['majority'])})"
         )
     return f"V sees, on {corpus}: " + "; ".join(parts) + "."

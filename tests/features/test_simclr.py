@@ -84,3 +84,29 @@ def test_settings_are_the_schema_s_and_the_estimate_prices_their_epochs():
         SimclrSettings(grey=1.5)
     config = {"features": {"simclr": {"epochs": 7}, "pretrain": {"epochs": 0}}}
     assert pretraining(config, {"arch": "resnet_tiny", "objective": "simclr"}) == ("simclr", 7)
+
+
+def test_the_projection_reads_the_stage_statistics_for_the_stages_pool(monkeypatch):
+    """With pool "stages" the contrastive loss is computed on what the features will read
+    (ResNet.stage_statistics), with any other pool on the last stage's average; the two
+    pretrainings of one seed make different backbones."""
+    from tacgen_lib.features.resnet import ResNet
+
+    calls = []
+    real = ResNet.stage_statistics
+
+    def counted(self, x):
+        calls.append(x.shape[0])
+        return real(self, x)
+
+    monkeypatch.setattr(ResNet, "stage_statistics", counted)
+    frames = np.random.default_rng(0).integers(0, 256, size=(16, 40, 40, 3), dtype=np.uint8)
+    settings = SimclrSettings.tiny()
+    cls = pretrain_simclr(frames, settings, arch="resnet_tiny", image_size=32)
+    assert calls == []
+    stages = pretrain_simclr(frames, settings, arch="resnet_tiny", image_size=32, pool="stages")
+    steps = 16 // settings.batch_size
+    assert calls == [settings.batch_size] * (2 * steps * settings.epochs)  # both views, each step
+    assert any(
+        not torch.equal(cls.backbone_state[k], stages.backbone_state[k]) for k in cls.backbone_state
+    )

@@ -152,3 +152,33 @@ def test_a_factor_level_held_out_of_the_train_rows_is_not_checked():
     held = VisibilityCorpus(c.name, c.vision, factors, c.train, c.test)
     rows = visibility_check([held], _probe(), VisibilitySettings(bootstrap=200))
     assert "size" not in set(rows["factor"]) and {"colour", "texture"} <= set(rows["factor"])
+
+
+def test_the_2_layer_probe_reads_the_gates_factors_only_and_a_compositional_class():
+    """A class that is a union of (colour, texture) pairs, (colour + texture) mod 2 with the
+    texture coded in one column's magnitude: the 2-layer probe (the probes stage's) reads it;
+    it runs on the gate's factors only, and the gate reads the best probe."""
+    from tacgen_lib.probes.settings import MLPGrid
+
+    c = _corpus(n=400, seed=3)
+    f = c.factors.copy()
+    f["appearance"] = ((f["colour"].astype(int) + f["texture"].astype(int)) % 2).astype(str)
+    c = VisibilityCorpus(c.name, c.vision, f, c.train, c.test)
+    settings = VisibilitySettings(
+        gammas=(1.0,), bootstrap=200, gate={"appearance": 0.9, "colour": 0.9}
+    )
+    grid = MLPGrid(widths=(32,), weight_decays=(0.01, 1.0), folds=3, max_iter=300)
+    with threadpool_limits(1):
+        rows = visibility_check([c], _probe(), settings, mlp=grid)
+    probes = rows.groupby("factor")["probe"].apply(set).to_dict()
+    assert probes["appearance"] == probes["colour"] == {"linear", "nonlinear", "mlp2"}
+    assert probes["texture"] == probes["size"] == {"linear", "nonlinear"}  # not gated
+    by = rows.set_index(["factor", "probe"])["score"]
+    assert by["appearance", "mlp2"] > 0.9 > by["appearance", "linear"]
+    gate = visibility_gate(rows, "toy", settings.gate)
+    assert gate.scores["appearance"] == rows.loc[rows["factor"] == "appearance", "score"].max()
+    assert gate.passed
+    # without a grid, the check is the two probes of every factor
+    with threadpool_limits(1):
+        plain = visibility_check([c], _probe(), settings)
+    assert set(plain["probe"]) == {"linear", "nonlinear"}

@@ -12,6 +12,7 @@ from tacgen_lib.generate.visibility import (
     VisibilityCorpus,
     VisibilitySettings,
     visibility_check,
+    visibility_mlp,
     visibility_probe,
 )
 from tacgen_lib.io import edges, log
@@ -41,11 +42,13 @@ for corpus, path in zip(params.corpora, snakemake.input.v, strict=True):
     )
     logger.info("%s: %d train, %d test rows", corpus, len(corpora[-1].train), len(corpora[-1].test))
 probe = visibility_probe(params.probes, params.probe_seed, settings)
+# the gate's factors are also read by the probes stage's 2-layer probe (its CV grid)
+mlp = visibility_mlp(params.probes)
 # one BLAS thread in this process or in each of the job's workers (fork_map): the rows do not
 # depend on the cores Snakemake gives the job
 with threadpool_limits(1):
     rows = visibility_check(
-        corpora, probe, settings, progress=logger.info, workers=snakemake.threads
+        corpora, probe, settings, mlp=mlp, progress=logger.info, workers=snakemake.threads
     )
 edges.write(snakemake.output.edge, rows, key="row_id", producer=snakemake.rule)
 write_table(
