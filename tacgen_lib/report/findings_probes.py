@@ -124,9 +124,10 @@ def probe_findings(summary: pd.DataFrame) -> FindingsPart:
                 decision(
                     f"{did}|criterion",
                     "probe",
-                    f"the paper's criterion (Δ ≥ 0.03, CI above 0, Δ_ctrl < Δ; {where})",
+                    f"the paper's criterion (Δ ≥ 0.03, CI above 0, Δ_ctrl "
+                    f"{fmt.signed(r['delta_ctrl'])} < Δ; {where})",
                     "met" if criterion and claims.interval_side(lo, hi) == "above" else "not met",
-                    value=r["delta_ctrl"],
+                    value=delta,
                     threshold=0.03,
                 )
             )

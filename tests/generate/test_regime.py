@@ -624,3 +624,21 @@ def test_ladder_verdict_reads_the_control_then_the_rung_that_loses_the_gain():
     for above in ({}, {(1.0, "look_oracle"): True, (0.0, "look_oracle"): True}):
         words = ladder_verdict(seed_view(_ladder_summary(above)))
         assert len(words) == 1 and words[0].startswith("Positive control fails")
+
+
+def test_one_replicates_chance_gain_at_the_smallest_rho_does_not_undo_the_control():
+    """At rho = 0 the look says nothing of the material; one replicate of three with its CI
+    above 0 there is chance (about one in twenty each), not a gain: a gain is one every
+    replicate shows, at either end of the grid. Every replicate above 0 there fails it."""
+    from tacgen_lib.report.regime import ladder_verdict, seed_view
+
+    s = _ladder_summary({(1.0, "look_oracle"): True})
+    at_0 = (s["rho"] == 0.0) & (s["arm"] == "look_oracle") & (s["n_labelled"] == 8)
+    one = s.copy()
+    one.loc[at_0 & (one["draw"] == 0), "ci_low_vs_nonlinear_v"] = 0.01
+    words = ladder_verdict(seed_view(one))
+    assert words[0].startswith("Positive control works") and "1 of 3 replicates" in words[0]
+    every = s.copy()
+    every.loc[at_0, "ci_low_vs_nonlinear_v"] = 0.01
+    (failed,) = ladder_verdict(seed_view(every))
+    assert failed.startswith("Positive control fails") and "too, where appearance" in failed
