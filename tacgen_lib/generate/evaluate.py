@@ -60,7 +60,9 @@ from tacgen_lib.generate.blocks import feature_block
 from tacgen_lib.generate.cells import RIDGE_INPUTS
 from tacgen_lib.generate.fidelity import (
     PERMUTATION_COLUMNS,
+    centred_gaps,
     fidelity,
+    gap_interval,
 )
 from tacgen_lib.generate.ridge import RIDGE_ALPHAS, ridge_generate
 from tacgen_lib.probes.bootstrap import (
@@ -117,7 +119,33 @@ def _row(
         # the family-wise interval of a generated-touch row (`family_interval`); NaN elsewhere
         "ci_low_fw": boot.get("ci_low_fw", np.nan),
         "ci_high_fw": boot.get("ci_high_fw", np.nan),
+        "ci_low_fw_vs_ridge": np.nan if vs_ridge is None else vs_ridge.get("ci_low_fw", np.nan),
+        "ci_high_fw_vs_ridge": np.nan if vs_ridge is None else vs_ridge.get("ci_high_fw", np.nan),
     }
+
+
+#: The pairing-gap columns of a ``t_gen`` row (`pairing_gap_columns`).
+GAP_COLUMNS = (
+    "pairing_gap",
+    "pairing_gap_ci_low",
+    "pairing_gap_ci_high",
+    *(f"gap_vs_{a}{c}" for a in ("ridge", "ridge_residual") for c in ("", "_ci_low", "_ci_high")),
+)
+
+
+def pairing_gap_columns(
+    gen_gaps: np.ndarray, ridge_gaps: Mapping[str, np.ndarray], resamples: np.ndarray
+) -> dict[str, float]:
+    """The diffusion samples' pairing gap with real touch (`fidelity.pairing_gaps`: matched
+    minus off-diagonal cosine, per test row) with its CI over the target's fixed-test
+    resamples, and its paired differences from the ridge generator's mean (``t_ridge``) and
+    ridge + a sampled residual (``t_ridge_residual``) on the same rows with theirs
+    (`fidelity.gap_interval`): `GAP_COLUMNS`."""
+    out = dict(zip(GAP_COLUMNS[:3], gap_interval(gen_gaps, resamples), strict=True))
+    for arm, inp in (("ridge", "t_ridge"), ("ridge_residual", "t_ridge_residual")):
+        d, lo, hi = gap_interval(gen_gaps - ridge_gaps[inp], resamples)
+        out.update({f"gap_vs_{arm}": d, f"gap_vs_{arm}_ci_low": lo, f"gap_vs_{arm}_ci_high": hi})
+    return out
 
 
 #: The family-wise error rate of the generated-touch rows a page compares (two-sided).
@@ -284,11 +312,12 @@ def evaluate_generator(
         real_row.update(reg=bl.reg["t_real"], reg_source=REG_CV)
         nl_row.update(reg=bl.reg["v_nonlinear"], reg_source=REG_CV)
         # the ridge generator's arms: fitted and bootstrapped once, repeated in every cell
-        ridge_rows, ridge_pred = [], {}
+        ridge_rows, ridge_pred, ridge_gaps = [], {}, {}
         for inp, source in ridge_sources.items():
             r_tr, r_te = feature_block(source, rows.train_ids), feature_block(source, rows.test_ids)
             probe = fit(np.hstack([v_tr, r_tr]), np.hstack([v_te, r_te]))
             ridge_pred[inp] = probe.pred_test
+            ridge_gaps[inp] = centred_gaps(r_te, t_te, t_tr)
             # the fidelity of these vectors on these rows: a target with the same test and
             # train rows (the centring) as another reuses it
             key = (inp, tuple(rows.test_ids), tuple(rows.train_ids))
@@ -355,7 +384,7 @@ def evaluate_generator(
                 "t_gen",
                 boot(p_v, p_gen, generated=True),
                 boot(p_nl, p_gen),
-                boot(ridge_pred["t_ridge"], p_gen),
+                boot(ridge_pred["t_ridge"], p_gen, generated=True),
             )
             shuf_row = _row(
                 cell_base,
@@ -364,6 +393,9 @@ def evaluate_generator(
                 boot(p_nl, p_shuf),
             )
             gen_row.update(reg=reg_gen, reg_source=src_gen)
+            gen_row.update(
+                pairing_gap_columns(centred_gaps(g_te, t_te, t_tr), ridge_gaps, resamples)
+            )
             shuf_row.update(reg=reg_shuf, reg_source=src_shuf)
             rows_cell = [{**cell_base, **real_row}, gen_row, shuf_row, {**cell_base, **nl_row}]
             for r in rows_cell:

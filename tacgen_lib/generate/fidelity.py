@@ -1,12 +1,16 @@
 """How close generated tactile features are to the real ones, row by row and as a distribution:
 matched-pair cosine against the off-diagonal mean, a pairing permutation test, and the Fréchet
-distance (beside the real train-vs-test distance).
+distance (beside the real train-vs-test distance); and the pairing gap row by row
+(`pairing_gaps`), whose mean is matched minus off-diagonal cosine, so that two generators'
+gaps on the same test rows can be compared with a paired interval (`gap_interval`).
 """
 
 from __future__ import annotations
 
 import numpy as np
 from scipy import linalg
+
+from tacgen_lib.probes.bootstrap import percentile_interval
 
 FIDELITY_COLUMNS = ("cos_matched", "cos_offdiag", "pairing_p", "frechet", "frechet_real_ref")
 
@@ -63,6 +67,38 @@ def cosine_pairing(gen: np.ndarray, real: np.ndarray) -> tuple[float, float]:
     matched = float(np.mean(np.diag(sims)))
     off = float((sims.sum() - np.trace(sims)) / (n * (n - 1))) if n > 1 else float("nan")
     return matched, off
+
+
+def pairing_gaps(gen: np.ndarray, real: np.ndarray) -> np.ndarray:
+    """Per test row i, cos(gen_i, real_i) minus the mean over j != i of cos(gen_i, real_j):
+    how much more generated row i resembles its own real row than the others (rows already
+    centred). Their mean is `cosine_pairing`'s matched minus off-diagonal cosine."""
+    g, r = _unit(np.asarray(gen, np.float64)), _unit(np.asarray(real, np.float64))
+    sims = g @ r.T
+    n = sims.shape[0]
+    if n < 2:
+        return np.full(n, np.nan)
+    diag = np.diag(sims)
+    return diag - (sims.sum(axis=1) - diag) / (n - 1)
+
+
+def centred_gaps(gen_test: np.ndarray, real_test: np.ndarray, real_train: np.ndarray):
+    """`pairing_gaps` of generated and real test rows centred on the real train mean, as
+    `fidelity` centres them."""
+    centre = np.asarray(real_train, np.float64).mean(axis=0)
+    return pairing_gaps(
+        np.asarray(gen_test, np.float64) - centre, np.asarray(real_test, np.float64) - centre
+    )
+
+
+def gap_interval(gaps: np.ndarray, resamples: np.ndarray, level: float = 0.95) -> tuple:
+    """(mean, lo, hi) of per-row pairing gaps (or a paired difference of two generators' gaps
+    on the same rows) with its percentile interval over `resamples` (B, n) of the test rows,
+    the fixed-test resamples every probe of the target uses."""
+    g = np.asarray(gaps, dtype=np.float64)
+    means = g[np.asarray(resamples)].mean(axis=1)
+    lo, hi = percentile_interval(means, confidence_level=level)
+    return float(g.mean()), lo, hi
 
 
 def pairing_permutation(

@@ -310,8 +310,8 @@ def read_generator(path: str | os.PathLike[str], *, verify: bool = True) -> Gene
         )
     }
     std = Standardiser(arrays.pop("standardiser.mean"), arrays.pop("standardiser.scale"))
-    s = dict(meta["settings"])
-    s["nonlinear_gammas"] = tuple(s["nonlinear_gammas"])
+    # JSON gives lists back: a settings grid is a tuple
+    s = {k: tuple(v) if isinstance(v, list) else v for k, v in meta["settings"].items()}
     return GeneratorWeights(
         std,
         GenerateSettings(**s),

@@ -133,8 +133,8 @@ def _numeric_edges(run: Path) -> dict[str, list[str]]:
             for c, t in (meta.get("columns") or {}).items()
             if t in _FLOAT_TYPES and c not in vectors
         )
-        if vectors or floats:
-            edge = side.with_name(side.name[: -len(".sha256.json")])
+        edge = side.with_name(side.name[: -len(".sha256.json")])
+        if (vectors or floats) and edge.exists():  # a temporary edge leaves its sidecar
             out[edge.relative_to(run).as_posix()] = vectors + floats
     return out
 
@@ -168,22 +168,16 @@ def relative_column_differences(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
-def _read_column(path: Path, column: str) -> tuple[np.ndarray, np.ndarray]:
-    """(keys, values) of one column of a verified edge: a vector (N, d) or a float scalar
-    (N,)."""
-    meta = json.loads((path.parent / (path.name + ".sha256.json")).read_text())
-    if column in (meta.get("vectors") or {}):
-        return edges.read_vectors(path, column)
-    edge = edges.read(path, columns=[column])
-    return edge.ids, edge.frame[column].to_numpy(dtype=np.float64)
+def _read_columns(path: Path, columns: list[str]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """(keys, column -> values) of a verified edge, read once: a vector column (N, d), a float
+    scalar column (N,)."""
+    edge = edges.read(path, columns=columns)
+    out = {c: edge.vectors[c] for c in columns if c in edge.vectors}
+    out.update({c: edge.frame[c].to_numpy(dtype=np.float64) for c in columns if c not in out})
+    return edge.ids, out
 
 
-def _column_difference(run_a: Path, run_b: Path, edge: str, column: str) -> EdgeDifference:
-    ids_a, a = _read_column(run_a / edge, column)
-    try:
-        ids_b, b = _read_column(run_b / edge, column)
-    except (edges.EdgeError, FileNotFoundError, KeyError) as exc:
-        return EdgeDifference(edge, column, len(ids_a), math.inf, note=f"run b: {exc}")
+def _difference(edge: str, column: str, ids_a, a: np.ndarray, ids_b, b: np.ndarray):
     if set(ids_a) != set(ids_b):
         only = sorted(set(ids_a) ^ set(ids_b))
         return EdgeDifference(
@@ -203,6 +197,18 @@ def _column_difference(run_a: Path, run_b: Path, edge: str, column: str) -> Edge
     return EdgeDifference(edge, column, len(ids_a), float(rel[worst]), str(ids_a[worst]))
 
 
+def _edge_difference(run_a: Path, run_b: Path, edge: str, columns: list[str]) -> list:
+    """The `EdgeDifference` of each of `columns` of one edge, each run's edge read once."""
+    ids_a, a = _read_columns(run_a / edge, columns)
+    try:
+        ids_b, b = _read_columns(run_b / edge, columns)
+    except (edges.EdgeError, FileNotFoundError, KeyError) as exc:
+        return [
+            EdgeDifference(edge, c, len(ids_a), math.inf, note=f"run b: {exc}") for c in columns
+        ]
+    return [_difference(edge, c, ids_a, a[c], ids_b, b[c]) for c in columns]
+
+
 def edge_differences(run_a: str | Path, run_b: str | Path) -> list[EdgeDifference]:
     """Every vector and float scalar column of every keyed edge of run `run_a` (a workflow
     directory with results/) against the same edge of `run_b`, rows joined on the key; an edge
@@ -211,9 +217,7 @@ def edge_differences(run_a: str | Path, run_b: str | Path) -> list[EdgeDifferenc
     run_a, run_b = Path(run_a), Path(run_b)
     in_a, in_b = _numeric_edges(run_a), _numeric_edges(run_b)
     out = [
-        _column_difference(run_a, run_b, edge, column)
-        for edge, columns in in_a.items()
-        for column in columns
+        d for edge, columns in in_a.items() for d in _edge_difference(run_a, run_b, edge, columns)
     ]
     out += [
         EdgeDifference(edge, column, 0, math.inf, note="only in run b")

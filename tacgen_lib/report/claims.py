@@ -72,13 +72,18 @@ def mean_t_interval(values) -> tuple[float, float, float]:
 
 
 def seeds_interval(deltas, lows, highs) -> tuple[float, float, float]:
-    """One difference measured once per training seed (each seed's Δ with its own 95 %
-    interval over the test rows), read as one: the mean over the seeds and an interval that
-    holds both the seeds' spread and each seed's own uncertainty, from the lowest to the highest
-    bound of the seeds' intervals and the mean's t-interval over seeds (`mean_t_interval`).
+    """One difference measured once per replicate (a training seed, a labelled draw), each
+    with its own 95 % interval over the test rows, read as one: the mean over the replicates
+    and an interval that holds every replicate's own interval (a difference one replicate does
+    not show is not called real) and, from three replicates on, the mean's t-interval over
+    them (`mean_t_interval`: the replicates' spread; the test rows they share are in their own
+    intervals, not in the spread). Two replicates give a t-interval of one degree of freedom,
+    whose width is the noise of one difference: their two intervals decide alone. One
+    replicate: its own interval.
 
-    A decision read from it holds whichever of the seeds had been trained: a difference that
-    one seed's heads show and another's do not is not called real. One seed: its own interval.
+    A decision read from it holds whichever of the replicates had been drawn, and a rerun
+    that draws them again (other CPU kernels carry a last-bit difference through training as
+    another seed would) moves it only where the evidence is at its edge.
     """
     d = np.asarray(deltas, dtype=np.float64)
     lo_s, hi_s = np.asarray(lows, dtype=np.float64), np.asarray(highs, dtype=np.float64)
@@ -88,8 +93,11 @@ def seeds_interval(deltas, lows, highs) -> tuple[float, float, float]:
     d, lo_s, hi_s = d[keep], lo_s[keep], hi_s[keep]
     if d.size == 1:
         return float(d[0]), float(lo_s[0]), float(hi_s[0])
-    m, t_lo, t_hi = mean_t_interval(d)
-    return m, float(min(t_lo, lo_s.min())), float(max(t_hi, hi_s.max()))
+    lo, hi = float(lo_s.min()), float(hi_s.max())
+    if d.size >= 3:
+        _, t_lo, t_hi = mean_t_interval(d)
+        lo, hi = min(lo, t_lo), max(hi, t_hi)
+    return float(d.mean()), lo, hi
 
 
 def delta_verdict(delta: float, lo: float, hi: float, *, what: str = "V+T") -> str:
@@ -179,10 +187,15 @@ def generation_verdict(
     return text
 
 
+#: A paired difference with its interval: (Δ, lo, hi).
+Interval = tuple[float, float, float]
+
+
 def ridge_verdict(
-    vs_ridge: tuple[float, float, float],
+    vs_ridge: Interval,
     pairing: Mapping[str, tuple[float, float]],
     pairing_p: float,
+    gaps: Mapping[str, Interval] | None = None,
 ) -> str:
     """Generated touch against the simplest generator, ridge V->T, in two sentences.
 
@@ -192,9 +205,11 @@ def ridge_verdict(
     "t_gen", "t_ridge" (ridge's conditional mean) and "t_ridge_residual" (the mean plus a
     sampled residual) to (matched-pair cosine, off-diagonal cosine) with the real test rows;
     what is paired is the gap between them (on a corpus where nothing is, both are equal).
-    `pairing_p` is the diffusion samples' pairing-permutation p. A sample carries the
-    conditional spread that a mean averages out, so a sampler is judged against the residual
-    arm, and the mean bounds what any sample of the same map reaches."""
+    `pairing_p` is the diffusion samples' pairing-permutation p; `gaps` the paired
+    differences of their gap from ridge's mean ("ridge") and from ridge + residual
+    ("ridge_residual") over the test rows, with intervals (`pairing_decision`). A sample
+    carries the conditional spread that a mean averages out, so a sampler is judged against
+    the residual arm, and the mean bounds what any sample of the same map reaches."""
     side = interval_side(*vs_ridge[1:])
     d = fmt.with_ci(*vs_ridge, sign=True)
     if side == "below":
@@ -211,7 +226,14 @@ def ridge_verdict(
         f"for ridge's conditional mean and {gap['t_ridge_residual']:+.3f} for ridge + a sampled "
         "residual"
     )
-    paired = pairing_decision(pairing, pairing_p)
+    gaps = gaps or {}
+    diff = "; ".join(
+        f"{name} {fmt.with_ci(*gaps[k], sign=True)}"
+        for k, name in (("ridge_residual", "− ridge's samples"), ("ridge", "− ridge's mean"))
+        if k in gaps and not fmt.is_missing(gaps[k][0])
+    )
+    cos = f"{cos}; {diff}" if diff else cos
+    paired = pairing_decision(pairing, pairing_p, gaps)
     if paired == "not measurably paired":
         fid = (
             f"Its samples are not measurably paired with the real rows (pairing p "
@@ -227,8 +249,13 @@ def ridge_verdict(
             f"Its samples are paired with real touch better than ridge's samples but not its "
             f"mean ({cos}): a sample carries the spread a mean averages out."
         )
+    elif paired == "paired better than ridge's mean":
+        fid = f"Its samples are paired with real touch better than ridge's mean ({cos})."
     else:
-        fid = f"Its samples are paired with real touch at least as well as ridge's mean ({cos})."
+        fid = (
+            f"Its samples are paired with real touch as ridge's are, within the test rows' "
+            f"uncertainty ({cos})."
+        )
     return f"{probe} {fid}"
 
 
@@ -236,20 +263,37 @@ def ridge_verdict(
 PAIRING_P = 0.05
 
 
-def pairing_decision(pairing: Mapping[str, tuple[float, float]], pairing_p: float) -> str:
+def pairing_decision(
+    pairing: Mapping[str, tuple[float, float]],
+    pairing_p: float,
+    gaps: Mapping[str, Interval] | None = None,
+) -> str:
     """How the diffusion samples are paired with the real rows (`ridge_verdict`'s fidelity
-    sentence): ``not measurably paired`` (pairing p missing or above `PAIRING_P`), else by the
-    gap of matched minus off-diagonal cosine against ridge's: ``less paired than ridge's
-    samples``, ``paired between ridge's samples and its mean`` or ``paired at least as well as
-    ridge's mean``."""
+    sentence): ``not measurably paired`` (pairing p missing or above `PAIRING_P`); else, read
+    by the intervals of their gap's paired differences from ridge's (`gaps`: "ridge_residual",
+    ridge + a sampled residual; "ridge", ridge's mean): ``less paired than ridge's samples``
+    (below the residual arm's), ``paired better than ridge's mean`` (above the mean's),
+    ``paired between ridge's samples and its mean`` (above the residual arm's, below the
+    mean's), or ``paired as ridge's samples`` (no interval excludes 0: the test rows cannot
+    tell them apart). Without `gaps` (an older edge), the gaps' points decide (`pairing`)."""
     if fmt.is_missing(pairing_p) or pairing_p > PAIRING_P:
         return "not measurably paired"
+    if gaps:
+        vs_res = interval_side(*gaps["ridge_residual"][1:])
+        vs_mean = interval_side(*gaps["ridge"][1:])
+        if vs_res == "below":
+            return "less paired than ridge's samples"
+        if vs_mean == "above":
+            return "paired better than ridge's mean"
+        if vs_res == "above" and vs_mean == "below":
+            return "paired between ridge's samples and its mean"
+        return "paired as ridge's samples"
     gap = {k: m - off for k, (m, off) in pairing.items()}
     if gap["t_gen"] < gap["t_ridge_residual"]:
         return "less paired than ridge's samples"
     if gap["t_gen"] < gap["t_ridge"]:
         return "paired between ridge's samples and its mean"
-    return "paired at least as well as ridge's mean"
+    return "paired better than ridge's mean"
 
 
 def gain_within_uncertainty(cheap_value: float, dear_lo: float, dear_hi: float) -> bool:

@@ -91,6 +91,7 @@ def probe_findings(summary: pd.DataFrame) -> FindingsPart:
                 (headline["family"] == r["family"])
                 & (headline["input"] == "aligned")
                 & (headline["probe_seed"] == r["probe_seed"])
+                & (headline.get("protocol", "raw") == r.get("protocol", "raw"))
                 & headline["align_seed"].notna()
             ].sort_values("align_seed", kind="stable")
         delta, lo, hi = claims.seeds_interval(seeds["delta"], seeds["ci_low"], seeds["ci_high"])
@@ -133,7 +134,7 @@ def probe_findings(summary: pd.DataFrame) -> FindingsPart:
             )
         decided += _majority_decision(did, "probe", where, r)
         mean_note = (
-            f" (mean over {len(seeds)} heads seeds; interval holds each seed's CI and their spread)"
+            f" (mean over {len(seeds)} heads seeds; the interval holds each seed's CI)"
             if len(seeds) > 1
             else ""
         )
@@ -172,8 +173,39 @@ def _first_row(rows: pd.DataFrame) -> pd.Series:
     return rows.sort_values("seed", kind="stable").iloc[0]
 
 
+def _gap_intervals(row: Mapping) -> dict[str, tuple[float, float, float]]:
+    """The t_gen row's pairing-gap differences from ridge's arms with their intervals
+    (`generate.evaluate.pairing_gap_columns`); empty for an edge without them."""
+    out = {}
+    for arm in ("ridge", "ridge_residual"):
+        cols = (f"gap_vs_{arm}", f"gap_vs_{arm}_ci_low", f"gap_vs_{arm}_ci_high")
+        if all(c in row and not fmt.is_missing(row[c]) for c in cols):
+            out[arm] = tuple(float(row[c]) for c in cols)
+    return out if len(out) == 2 else {}
+
+
+def _fw(row: Mapping, col: str = "delta") -> tuple[float, float, float]:
+    """(Δ, lo, hi) of a generated row with its family-wise interval (`ci_low_fw`, or
+    `ci_low_fw_vs_ridge` for `col` delta_vs_ridge), the Generation page's reading of the
+    cells it compares; its 95 % CI where the edge has none."""
+    suffix = col.removeprefix("delta")
+    lo, hi = row.get(f"ci_low_fw{suffix}"), row.get(f"ci_high_fw{suffix}")
+    if lo is None or fmt.is_missing(lo):
+        return delta_with_ci(row, col)
+    return float(row[col]), float(lo), float(hi)
+
+
 def _generation_decisions(
-    did: str, where: str, gen, real, nonlin, vs_ridge, pairing, pairing_p: float, first: Mapping
+    did: str,
+    where: str,
+    gen,
+    real,
+    nonlin,
+    vs_ridge,
+    pairing,
+    pairing_p: float,
+    first: Mapping,
+    gaps: Mapping,
 ) -> list[dict]:
     """The decisions of a generation row: Δ_gen and Δ_real against 0, whether the nonlinear
     V-only probe explains a gain, generated against ridge V→T in the probe, and the pairing
@@ -201,7 +233,7 @@ def _generation_decisions(
             f"{did}|pairing",
             "generation",
             f"pairing of the generated samples with real touch ({where})",
-            claims.pairing_decision(pairing, pairing_p),
+            claims.pairing_decision(pairing, pairing_p, gaps),
             value=pairing_p,
             threshold=claims.PAIRING_P,
         )
@@ -214,21 +246,26 @@ def generation_findings(summary: pd.DataFrame, ref: Mapping) -> FindingsPart:
     """Per corpus × target at the reference sampling cell: generated touch against real touch,
     with the shuffled-pair control, the nonlinear V-only baseline and the ridge V->T generator.
 
-    The verdict reads the first generator seed's fixed-test bootstrap CIs (they carry the test
-    rows' sampling noise; real touch and the baselines do not depend on the generator seed); the
-    mean over seeds with its t-interval, which carries only the seeds' spread, is shown beside."""
+    The verdict reads the first generator seed's fixed-test bootstrap intervals (they carry the
+    test rows' sampling noise; real touch and the baselines do not depend on the generator
+    seed), those of generated touch (Δ_gen, the shuffled control, Δ_gen − ridge) family-wise,
+    as the Generation page reads every generated row it compares (`_fw`: an interval one cell
+    of many would clear by chance is not a finding, and one generator's training decides
+    nothing a rerun's could reverse at its edge); the mean over seeds with its t-interval, which
+    carries only the seeds' spread, is shown beside."""
     s = reference_cell_rows(summary, ref)
     rows, decided = [], []
     for (corpus, target), g in s.groupby(["corpus", "target"], sort=True):
         by = {k: v for k, v in g.groupby("input")}
         if not {"t_gen", "t_real"} <= set(by):
             continue
-        gen, real = _first_seed(by["t_gen"]), _first_seed(by["t_real"])
-        shuffled = _first_seed(by.get("t_gen_shuffled"))
-        nonlin = _first_seed(by.get("v_nonlinear"))
-        ridge = _first_seed(by["t_ridge"])
-        vs_ridge = _first_seed(by["t_gen"], "delta_vs_ridge")
         first_rows = {k: _first_row(by[k]) for k in ("t_gen", "t_ridge", "t_ridge_residual")}
+        gen, real = _fw(first_rows["t_gen"]), _first_seed(by["t_real"])
+        shuffled = _fw(_first_row(by["t_gen_shuffled"])) if "t_gen_shuffled" in by else None
+        shuffled = shuffled or (np.nan, np.nan, np.nan)
+        nonlin = _first_seed(by.get("v_nonlinear"))
+        ridge = _fw(first_rows["t_ridge"])
+        vs_ridge = _fw(first_rows["t_gen"], "delta_vs_ridge")
         pairing = {
             k: (float(r["cos_matched"]), float(r["cos_offdiag"])) for k, r in first_rows.items()
         }
@@ -237,6 +274,7 @@ def generation_findings(summary: pd.DataFrame, ref: Mapping) -> FindingsPart:
         first = int(g["seed"].min())
         metric = g["metric"].iloc[0]
         pairing_p = float(first_rows["t_gen"]["pairing_p"])
+        gaps = _gap_intervals(first_rows["t_gen"])
         flagged = {
             **first_rows["t_gen"].to_dict(),
             "vt_score": first_rows["t_gen"]["score"],
@@ -253,13 +291,15 @@ def generation_findings(summary: pd.DataFrame, ref: Mapping) -> FindingsPart:
             pairing,
             pairing_p,
             flagged,
+            gaps,
         )
         rows.append(
             {
                 "evidence": "generation",
                 "question": f"does touch generated from RGB add to vision on {target}? "
                 f"({corpus}, {metric})",
-                "result": f"Δ_gen {fmt.with_ci(*gen, sign=True)} (seed {first}"
+                "result": f"Δ_gen {fmt.with_ci(*gen, sign=True)} (seed {first}; generated "
+                "rows with their family-wise intervals"
                 + (f"; mean over {n} seeds {fmt.with_ci(*seeds, sign=True)}" if n > 1 else "")
                 + f"); Δ_real {fmt.with_ci(*real, sign=True)}",
                 "control": f"shuffled pairs Δ {fmt.with_ci(*shuffled, sign=True)}; nonlinear "
@@ -268,7 +308,7 @@ def generation_findings(summary: pd.DataFrame, ref: Mapping) -> FindingsPart:
                 "verdict": claims.generation_verdict(gen, real, nonlin)
                 + _flag(flagged)
                 + " "
-                + claims.ridge_verdict(vs_ridge, pairing, pairing_p),
+                + claims.ridge_verdict(vs_ridge, pairing, pairing_p, gaps),
                 "page": category("Generation"),
             }
         )

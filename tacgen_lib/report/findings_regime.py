@@ -10,7 +10,7 @@ from collections.abc import Mapping
 
 import pandas as pd
 
-from tacgen_lib.report.decisions import FindingsPart, decision
+from tacgen_lib.report.decisions import FindingsPart, decision, side_decision
 from tacgen_lib.report.regime_arms import RUNG_LABELS, arm_rows
 from tacgen_lib.report_pages import FINDINGS_COLUMNS, category
 
@@ -23,14 +23,11 @@ def _regime_row(rows: pd.DataFrame, arm: str, probe: str = "linear") -> pd.Serie
 
 def replicates_decision(r: pd.Series, what: str) -> str:
     """A `seed_view` row's Δ against `what` read over its replicates (seed × labelled draw):
-    ``above 0 in every replicate``, ``below 0 in every replicate``, or ``not in every
-    replicate`` (the ladder's rule, `report.regime`: a gain is one every replicate shows)."""
-    n = int(r["n_seeds"])
-    if n > 0 and int(r[f"above_vs_{what}"]) == n:
-        return "above 0 in every replicate"
-    if n > 0 and int(r[f"below_vs_{what}"]) == n:
-        return "below 0 in every replicate"
-    return "not in every replicate"
+    ``above 0`` / ``below 0`` where the replicates' interval read as one lies there
+    (``rep_low_vs_*``, ``rep_high_vs_*``: every replicate's CI, and from three on the mean's
+    t-interval over them), else ``no measurable difference``: one draw of the labelled rows
+    decides nothing, nor a gain the replicates' spread does not support."""
+    return side_decision(r[f"rep_low_vs_{what}"], r[f"rep_high_vs_{what}"])
 
 
 def _ladder_decisions(view: pd.DataFrame) -> list[dict]:
@@ -44,10 +41,13 @@ def _ladder_decisions(view: pd.DataFrame) -> list[dict]:
             decision(
                 f"regime|{r.target}|positive_control",
                 "regime",
-                f"look oracle − nonlinear V above 0 in every replicate, and at the smallest ρ in "
-                f"none ({r.where})",
+                f"look oracle − nonlinear V above 0 over the replicates, and not at the smallest "
+                f"ρ ({r.where})",
                 "works" if r.control else "fails",
                 value=r.a0["delta_vs_nonlinear_v"],
+                ci_low=r.a0["rep_low_vs_nonlinear_v"],
+                ci_high=r.a0["rep_high_vs_nonlinear_v"],
+                threshold=0.0,
             )
         )
         lost = "not read: no positive control"
@@ -100,6 +100,9 @@ def regime_findings(
                 f"V + T_gen − linear V over the replicates ({where})",
                 reading,
                 value=gen["delta_vs_linear_v"],
+                ci_low=gen["rep_low_vs_linear_v"],
+                ci_high=gen["rep_high_vs_linear_v"],
+                threshold=0.0,
             )
         )
         n = int(gen["n_seeds"])

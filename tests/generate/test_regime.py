@@ -639,6 +639,6 @@ def test_one_replicates_chance_gain_at_the_smallest_rho_does_not_undo_the_contro
     words = ladder_verdict(seed_view(one))
     assert words[0].startswith("Positive control works") and "1 of 3 replicates" in words[0]
     every = s.copy()
-    every.loc[at_0, "ci_low_vs_nonlinear_v"] = 0.01
+    every.loc[at_0, ["delta_vs_nonlinear_v", "ci_low_vs_nonlinear_v"]] = [0.1, 0.02]
     (failed,) = ladder_verdict(seed_view(every))
     assert failed.startswith("Positive control fails") and "too, where appearance" in failed

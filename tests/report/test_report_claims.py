@@ -137,7 +137,20 @@ def test_ridge_verdict_reads_the_probe_interval_and_the_pairing_gaps():
     between = claims.ridge_verdict((0.1, 0.01, 0.2), pairing(0.55, 0.7, 0.45), 0.001)
     assert between.startswith("V + T_gen beats V + ridge V→T") and "not its mean" in between
     best = claims.ridge_verdict((0.0, -0.1, 0.1), pairing(0.72, 0.7, 0.45), 0.001)
-    assert "at least as well as ridge's mean" in best
+    assert "better than ridge's mean" in best
+    # with the gaps' paired intervals over the test rows, those decide: a point above ridge's
+    # mean whose interval holds 0 is paired as ridge's samples are
+    gaps = {"ridge": (0.02, -0.03, 0.07), "ridge_residual": (0.27, 0.2, 0.33)}
+    as_ridge = claims.ridge_verdict((0.0, -0.1, 0.1), pairing(0.72, 0.7, 0.45), 0.001, gaps)
+    assert "as ridge's are, within the test rows' uncertainty" in as_ridge
+    assert "− ridge's mean +0.020 [-0.030, +0.070]" in as_ridge
+    less = {"ridge": (-0.2, -0.3, -0.1), "ridge_residual": (-0.1, -0.15, -0.05)}
+    assert claims.pairing_decision({}, 0.001, less) == "less paired than ridge's samples"
+    between = {"ridge": (-0.2, -0.3, -0.1), "ridge_residual": (0.1, 0.05, 0.15)}
+    assert (
+        claims.pairing_decision({}, 0.01, between) == "paired between ridge's samples and its mean"
+    )
+    assert claims.pairing_decision({}, 0.2, less) == "not measurably paired"
     # a null corpus: matched = off-diagonal, the permutation p large -> not paired, whatever
     # the cosines' sizes
     null = claims.ridge_verdict(
@@ -331,19 +344,25 @@ def test_aligned_findings_read_every_heads_seed():
     rows, decided = findings.probe_findings(disagree)
     assert len(rows) == 1 and "per seed 42: +0.130" in rows.iloc[0]["result"]
     (d,) = [d for d in decided if d["decision_id"] == "probe|hardness|aligned"]
-    assert d["decision"] == "no measurable difference" and d["ci_low"] <= -0.25
+    assert d["decision"] == "no measurable difference" and d["ci_low"] == -0.25
     assert d["value"] == pytest.approx(0.36)
-    agree = pd.DataFrame([aligned(42, 0.30, 0.25, 0.35), aligned(43, 0.301, 0.26, 0.36, math.nan)])
+    # both seeds' heads help, by other amounts: above 0, whatever their spread
+    agree = pd.DataFrame([aligned(42, 0.83, 0.76, 0.89), aligned(43, 0.70, 0.63, 0.78, math.nan)])
     _, decided = findings.probe_findings(agree)
     (d,) = [d for d in decided if d["decision_id"] == "probe|hardness|aligned"]
-    assert d["decision"] == "above 0" and d["ci_low"] > 0 and d["ci_high"] >= 0.36
+    assert d["decision"] == "above 0" and (d["ci_low"], d["ci_high"]) == (0.63, 0.89)
 
 
-def test_seeds_interval_holds_each_seed_and_their_spread():
+def test_seeds_interval_holds_each_replicate_and_from_three_their_spread():
     assert claims.seeds_interval([0.2], [0.1], [0.3]) == (0.2, 0.1, 0.3)
-    m, lo, hi = claims.seeds_interval([0.2, 0.4, np.nan], [0.1, 0.35, 0.0], [0.3, 0.45, 0.0])
-    t_m, t_lo, t_hi = claims.mean_t_interval([0.2, 0.4])
-    assert m == pytest.approx(0.3) and lo == min(t_lo, 0.1) and hi == max(t_hi, 0.45)
+    # two replicates: their intervals alone (a t-interval of one degree of freedom is noise)
+    m, lo, hi = claims.seeds_interval([0.83, 0.70, np.nan], [0.76, 0.63, 0.0], [0.89, 0.78, 0.0])
+    assert m == pytest.approx(0.765) and (lo, hi) == (0.63, 0.89)
+    # three: each interval and the mean's t-interval over them
+    d, lo3, hi3 = [0.01, 0.011, 0.03], [0.001, 0.002, 0.02], [0.02, 0.02, 0.04]
+    m, lo, hi = claims.seeds_interval(d, lo3, hi3)
+    _, t_lo, t_hi = claims.mean_t_interval(d)
+    assert t_lo < 0 < min(lo3) and (lo, hi) == (t_lo, max(t_hi, 0.04))
     assert all(math.isnan(x) for x in claims.seeds_interval([np.nan], [0.0], [1.0]))
 
 
