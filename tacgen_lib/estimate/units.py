@@ -238,7 +238,7 @@ UNITS: dict[str, UnitRule] = {
         ),
     ),
     "visibility_check": UnitRule(
-        "row of every simulated corpus (each factor's two probes)",
+        "row of every simulated corpus (each factor's probes; the gate's factors' 2-layer probe)",
         lambda c, w: ("", simulated_rows(c)),
     ),
     "aggregate_regime": UnitRule(
