@@ -21,9 +21,15 @@ from tacgen_lib.generate.baselines import median_sq_distance, nonlinear_baseline
 from tacgen_lib.probes.fit import fit_probe
 from tacgen_lib.probes.folds import make_folds
 from tacgen_lib.probes.metrics import score
-from tacgen_lib.probes.settings import ProbeSettings
+from tacgen_lib.probes.settings import MLPGrid, ProbeSettings
 
-__all__ = ["SmallFit", "fit_kernel_probe", "fit_small_probe", "fit_small_nonlinear"]
+__all__ = [
+    "SmallFit",
+    "fit_kernel_probe",
+    "fit_small_mlp",
+    "fit_small_nonlinear",
+    "fit_small_probe",
+]
 
 
 @dataclass(frozen=True)
@@ -92,6 +98,26 @@ def fit_small_nonlinear(
         x_train, x_test, y, settings, gammas=gammas, n_components=n_components, seed=settings.seed
     )
     return SmallFit(np.asarray(nl.probe.pred_test), float(nl.probe.reg), "cv", nl.multiple)
+
+
+def fit_small_mlp(
+    x_train: np.ndarray,
+    y_train: np.ndarray,
+    x_test: np.ndarray,
+    settings: ProbeSettings,
+    grid: MLPGrid,
+) -> SmallFit:
+    """The probes stage's 2-layer probe (`fit_mlp_probe`: width and weight decay by stratified
+    CV over `grid`, seeded by ``settings.seed``) on a logistic family's labels, or the
+    `fit_small_probe` fallback where CV cannot run on these labels (`_cv_impossible`).
+    SmallFit.reg is the chosen weight decay."""
+    y = np.asarray(y_train)
+    if _cv_impossible(y, settings):
+        return fit_small_probe(x_train, y, x_test, settings)
+    from tacgen_lib.probes.mlp import fit_mlp_probe  # scikit-learn: only where fitted
+
+    fit = fit_mlp_probe(x_train, y, settings.kind, grid, settings.seed)
+    return SmallFit(np.asarray(fit.predict(x_test), dtype=object), fit.weight_decay, "cv")
 
 
 def fit_kernel_probe(

@@ -31,11 +31,10 @@ import pandas as pd
 
 from tacgen_lib.corpus.looks import FACTORS
 from tacgen_lib.generate.blocks import feature_block
-from tacgen_lib.generate.small_probes import fit_kernel_probe, fit_small_probe
+from tacgen_lib.generate.small_probes import fit_kernel_probe, fit_small_mlp, fit_small_probe
 from tacgen_lib.io.schema import SchemaSettings, schema_fields
 from tacgen_lib.probes.bootstrap import resample_indices, score_interval
 from tacgen_lib.probes.metrics import score
-from tacgen_lib.probes.mlp import fit_mlp_probe
 from tacgen_lib.probes.settings import MLPGrid, ProbeSettings
 from tacgen_lib.runtime.workers import fork_map
 
@@ -183,7 +182,7 @@ def visibility_check(
                 v_tr, y_tr, v_te, settings, gammas=visibility.gammas, C=visibility.C
             ).pred
         else:
-            pred = fit_mlp_probe(v_tr, y_tr, "logistic", mlp, settings.seed).predict(v_te)
+            pred = fit_small_mlp(v_tr, y_tr, v_te, settings, mlp).pred
         pred = np.asarray(pred, dtype=object)
         acc = score("accuracy", y_te, pred)
         lo, hi = score_interval("accuracy", y_te, pred, idx)

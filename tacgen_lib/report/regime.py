@@ -160,9 +160,7 @@ def ladder_table(view: pd.DataFrame) -> pd.DataFrame:
 
 def _gains(r: pd.Series) -> bool:
     """A replicate-summarised row gains over nonlinear V: the replicates' interval read as one
-    lies above 0 (`seed_view`'s ``rep_low_vs_nonlinear_v``: every replicate's CI above 0 and,
-    from three replicates on, the mean's t-interval over them too), so that a gain one
-    replicate's draw carries, or the replicates' spread does not support, is not one."""
+    (`seed_view`'s ``rep_low_vs_nonlinear_v``) lies above 0."""
     return bool(r["rep_low_vs_nonlinear_v"] > 0)
 
 

@@ -182,3 +182,20 @@ def test_the_2_layer_probe_reads_the_gates_factors_only_and_a_compositional_clas
     with threadpool_limits(1):
         plain = visibility_check([c], _probe(), settings)
     assert set(plain["probe"]) == {"linear", "nonlinear"}
+
+
+def test_a_gated_factor_with_a_one_row_class_gets_the_small_probe_fallback():
+    """A class with one train row (a tiny corpus's colour): stratified CV cannot run, so the
+    2-layer probe, like the kernel probe, is `fit_small_probe`'s fixed-C fit, not an error."""
+    from tacgen_lib.probes.settings import MLPGrid
+
+    c = _corpus(n=120, seed=5)
+    f = c.factors.copy()
+    f.loc[c.train[0], "colour"] = "7"  # a level of one train row
+    c = VisibilityCorpus(c.name, c.vision, f, c.train, c.test)
+    settings = VisibilitySettings(gammas=(1.0,), bootstrap=200, gate={"colour": 0.5})
+    grid = MLPGrid(widths=(8,), weight_decays=(1.0,), folds=3, max_iter=50)
+    rows = visibility_check([c], _probe(), settings, mlp=grid)
+    colour = rows[rows["factor"] == "colour"].set_index("probe")
+    assert set(colour.index) == {"linear", "nonlinear", "mlp2"}
+    assert colour.loc["mlp2", "score"] == colour.loc["linear", "score"]
