@@ -28,6 +28,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from machine import parse_args
 
 ROOT = Path(__file__).resolve().parents[1]
 TACTILE = (320, 240)
@@ -144,7 +145,7 @@ def main() -> None:
     parser.add_argument("--rgb-size", type=int, nargs=2, default=[240, 320], metavar=("H", "W"))
     parser.add_argument("--in-memory", action="store_true", help="whole tables, for comparison")
     parser.add_argument("--dir", type=Path, default=None, help="where to build (default: a tmp)")
-    args = parser.parse_args()
+    args = parse_args(parser, {"frames": [300]})
     base = Path(tempfile.mkdtemp(prefix="bench_ingest_", dir=args.dir))
     try:
         print(

@@ -8,13 +8,13 @@ include: "transfer_common.smk"
 
 
 rule transfer_evaluate:
-    """Mass-quantile probes on the transfer corpus's unseen objects: V vs V+T per heads view and probe seed, object-bootstrap CIs, the shuffled-touch control; the page."""
+    """Mass-quantile probes on the transfer corpus's unseen objects: V vs V+T per heads view, heads seed and probe seed, object-bootstrap CIs, the shuffled-touch control; the page."""
     input:
         manifest="results/corpus/manifest.parquet",
         splits="results/corpus/splits.parquet",
         v=feature_edge(TRANSFER_CORPUS, "vision"),
         t=feature_edge(TRANSFER_CORPUS, "tactile", config["probes"]["heads"]["variant"]),
-        aligned=[transfer_aligned(v) for v in TRANSFER_VIEWS],
+        aligned=[transfer_aligned(v, s) for s in ALIGN["seeds"] for v in TRANSFER_VIEWS],
         code=imports_of("transfer_evaluate"),
     output:
         summary="results/transfer/summary.parquet",
@@ -44,5 +44,6 @@ rule transfer_evaluate:
         settings=TRANSFER,
         corpus=TRANSFER_CORPUS,
         views=TRANSFER_VIEWS,
+        heads_seeds=ALIGN["seeds"],
     script:
         "../workflow/scripts/transfer_evaluate.py"

@@ -26,9 +26,9 @@ if TRANSFER_CORPUS:
     EDGES += ["results/transfer/summary.parquet"]
 
 
-def transfer_aligned(view):
+def transfer_aligned(view, seed):
     """The transfer corpus's aligned projections by one view's heads (the probes' heads
-    cell, first alignment seed; the transfer corpus's own heads on all of its train rows).
+    cell, alignment seed `seed`; the transfer corpus's own heads on all of its train rows).
     """
     heads = config["probes"]["heads"]
     heads_from = TRANSFER_VIEWS[view]
@@ -37,7 +37,7 @@ def transfer_aligned(view):
         heads_from,
         TRANSFER_CORPUS,
         heads["variant"],
-        ALIGN["seeds"][0],
+        seed,
         heads["tau"],
         n_train,
     )

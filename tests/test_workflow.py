@@ -192,7 +192,14 @@ def test_regime_summary_has_every_arm_of_every_cell(run_dir):
     assert not set(visibility["corpus"]) & set(regime_names[1:])
     natural = visibility[visibility["corpus"] == corpus]
     assert set(natural["factor"]) == {"colour", "texture", "shape", "size", "appearance"}
-    assert sorted(set(natural["probe"])) == ["linear", "nonlinear"]
+    probes = natural.groupby("factor")["probe"].apply(set).to_dict()
+    # the gate's factors (config.yaml's, unless test.yaml sets them): the 2-layer probe's
+    gate = yaml.safe_load((run_dir / "config/config.yaml").read_text())["features"]["visibility"]
+    test_features = yaml.safe_load((run_dir / "config/test.yaml").read_text())["features"]
+    gate = test_features.get("visibility", {}).get("gate", gate["gate"])
+    for factor, got in probes.items():
+        want = {"linear", "nonlinear"} | ({"mlp2"} if factor in gate else set())
+        assert got == want, factor
     # the paired design's appearance_id indexes objects: it is no factor there
     assert "appearance" not in set(visibility.loc[visibility["corpus"] == "sim_paired", "factor"])
     for name in ("table.html", "figure.png"):
@@ -267,7 +274,10 @@ def test_transfer_page_has_every_heads_view_and_probe_seed_and_objects_stay_in_o
     seeds = [str(s) for s in cfg["transfer"]["probe_seeds"]]
     rows = edges.read(run_dir / "results/transfer/summary.parquet").frame
     assert list(rows.columns) == list(TRANSFER_COLUMNS)
-    assert set(rows["row_id"]) == {f"{v}|{s}" for v in HEADS_VIEWS for s in [*seeds, "mean"]}
+    heads_seeds = [str(s) for s in cfg["align"]["seeds"]]  # every alignment seed's heads
+    assert set(rows["row_id"]) == {f"none|-|{s}" for s in [*seeds, "mean"]} | {
+        f"{v}|{h}|{s}" for v in HEADS_VIEWS[1:] for h in heads_seeds for s in [*seeds, "mean"]
+    }
     views = rows.drop_duplicates("heads").set_index("heads")["heads_from"].to_dict()
     assert views == {
         "none": "",

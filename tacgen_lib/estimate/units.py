@@ -262,7 +262,6 @@ UNITS: dict[str, UnitRule] = {
     "aggregate_backbones": UnitRule(
         "family run", lambda c, w: ("", float(len(c["backbones"]["run"])))
     ),
-    # transfer to a second sensor: every probe seed fits V, V+T and shuffled V+T per heads view
     # pixel generators
     "train_pixel_generator": UnitRule(
         "optimiser step × batch × frame pixel (at most; + conv FLOPs), per generator",
@@ -323,11 +322,15 @@ UNITS: dict[str, UnitRule] = {
             ),
         ),
     ),
+    # transfer to a second sensor: every probe seed fits V, V+T and shuffled V+T per heads
+    # view, the three views with heads once per alignment seed
     "transfer_evaluate": UnitRule(
         "contact × probe seed × heads view",
         lambda c, w: (
             "",
-            samples(c, c["transfer"]["corpus"]) * len(c["transfer"]["probe_seeds"]) * 4.0,
+            samples(c, c["transfer"]["corpus"])
+            * len(c["transfer"]["probe_seeds"])
+            * (1.0 + 3.0 * len(c["align"]["seeds"])),
         ),
     ),
     # language

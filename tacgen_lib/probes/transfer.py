@@ -19,6 +19,11 @@ beat). Each is scored by balanced accuracy on the fixed test objects; the CI of
 Δ = BA(V+T) - BA(V) resamples test OBJECTS (all of an object's contacts together), the same
 resamples for every seed, view and arm, so the seeds' mean has a CI too (the mean of each
 resample's Δ over seeds).
+
+Every view with heads is evaluated once per alignment seed the heads were trained with
+(`evaluate_transfer_seeds`, column ``heads_seed``): the heads' training draw is a replicate of
+the transfer, read over its seeds as every replicated difference is (`tacgen_lib.report.claims`
+``seeds_interval``), so a conclusion does not rest on one draw of the heads.
 """
 
 from __future__ import annotations
@@ -43,6 +48,7 @@ __all__ = [
     "beats_shuffled_control",
     "check_views",
     "evaluate_transfer",
+    "evaluate_transfer_seeds",
     "fit_objects",
     "fit_object_probe",
     "shuffled_by_object",
@@ -52,11 +58,13 @@ __all__ = [
 #: the heads views, in report order (module docstring)
 HEADS_VIEWS = ("none", "source", "target", "floor")
 
-#: columns of the transfer summary edge (one row per view and probe seed, plus "mean")
+#: columns of the transfer summary edge (one row per view, heads seed and probe seed, plus a
+#: "mean" row per view and heads seed); the frozen features' view has heads seed ""
 TRANSFER_COLUMNS = (
     "row_id",
     "heads",
     "heads_from",
+    "heads_seed",
     "probe_seed",
     "ba_v",
     "ba_vt",
@@ -210,11 +218,14 @@ def evaluate_transfer(
     settings: TransferSettings,
     heads_from: Mapping[str, str] | None = None,
     progress=None,
+    *,
+    heads_seed: str = "",
 ) -> pd.DataFrame:
     """The transfer table (`TRANSFER_COLUMNS`): for every view name -> (V, T) feature
     matrices over the target corpus's rows (module docstring) and every probe seed, balanced
     accuracy of V, V+T and shuffled V+T on the test objects, Δ with its object-bootstrap CI,
-    and per view a "mean" row over the seeds (with the count of seeds whose Δ > 0)."""
+    and per view a "mean" row over the seeds (with the count of seeds whose Δ > 0). Every
+    row's ``heads_seed`` is `heads_seed` (the alignment seed of the views' heads)."""
     heads_from = dict(heads_from or {})
     y, objects, where = split.y, split.objects, split.split
     uniq, obj_index = np.unique(objects, return_inverse=True)
@@ -259,8 +270,9 @@ def evaluate_transfer(
             ba = {arm: balanced_accuracy(y_test, p) for arm, p in preds.items()}
             per_seed.append((seed, ba, boot, chosen, len(fit_objs)))
             if progress is not None:
+                heads = f" (heads seed {heads_seed})" if heads_seed else ""
                 progress(
-                    f"{view} seed {seed}: BA V {ba['v']:.3f}, V+T {ba['vt']:.3f}, "
+                    f"{view}{heads} seed {seed}: BA V {ba['v']:.3f}, V+T {ba['vt']:.3f}, "
                     f"V+T shuffled {ba['vt_shuffled']:.3f}"
                 )
         for seed, ba, boot, chosen, n_fit in per_seed:
@@ -278,8 +290,35 @@ def evaluate_transfer(
     out["n_test_objects"] = int(test_objects.size)
     out["n_test_rows"] = int(test_rows.size)
     out["chance"] = 1.0 / n_classes
-    out["row_id"] = [f"{h}|{s}" for h, s in zip(out["heads"], out["probe_seed"], strict=True)]
+    out["heads_seed"] = heads_seed
+    out["row_id"] = [
+        f"{h}|{heads_seed or '-'}|{s}" for h, s in zip(out["heads"], out["probe_seed"], strict=True)
+    ]
     return out[list(TRANSFER_COLUMNS)]
+
+
+def evaluate_transfer_seeds(
+    raw: tuple[np.ndarray, np.ndarray],
+    aligned: Mapping[int, Mapping[str, tuple[np.ndarray, np.ndarray]]],
+    split: TransferSplit,
+    settings: TransferSettings,
+    heads_from: Mapping[str, str] | None = None,
+    progress=None,
+) -> pd.DataFrame:
+    """`evaluate_transfer` of the frozen features (`raw`, heads seed "") and, per alignment
+    seed -> {view -> (V, T)} in `aligned`, of that seed's views with heads (`views_from_edges`
+    order), one table. Every call draws the same object resamples (the first probe seed's),
+    so the heads seeds' intervals are over the same test-object draws."""
+    if not aligned:
+        raise ValueError("evaluate_transfer_seeds: no alignment seed's views given")
+    parts = [evaluate_transfer({"none": raw}, split, settings, heads_from, progress)]
+    for seed, views in aligned.items():
+        headed = {k: v for k, v in views_from_edges(raw, views).items() if k != "none"}
+        check_views(headed, len(split.y))
+        parts.append(
+            evaluate_transfer(headed, split, settings, heads_from, progress, heads_seed=str(seed))
+        )
+    return pd.concat(parts, ignore_index=True)
 
 
 def _row(

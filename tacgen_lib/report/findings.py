@@ -185,39 +185,50 @@ def backbone_findings(
     return FindingsPart(pd.DataFrame(rows, columns=FINDINGS_COLUMNS), decided)
 
 
+def _over_heads_seeds(means: pd.DataFrame, view: str, col: str) -> tuple[float, float, float]:
+    """A transfer view's probe-seed mean of `col` with its interval, read over the heads
+    seeds (`claims.seeds_interval`: the heads' training draw as a replicate)."""
+    g = means[means["heads"] == view]
+    return claims.seeds_interval(g[col], g[f"{col}_ci_low"], g[f"{col}_ci_high"])
+
+
 def transfer_findings(summary: pd.DataFrame) -> FindingsPart:
-    """One row for the transfer to a second sensor (`tacgen_lib.probes.transfer`): the seeds'
-    mean Δ balanced accuracy with the first sensor's heads and with retrained heads, the null
-    corpus's heads and shuffled touch as the controls, and the verdict on the transferred
-    heads' Δ, whether it beats the shuffled control and whether it beats the floor."""
-    means = summary[summary["probe_seed"] == "mean"].set_index("heads")
-    if "source" not in means.index:
+    """One row for the transfer to a second sensor (`tacgen_lib.probes.transfer`): the probe
+    seeds' mean Δ balanced accuracy with the first sensor's heads and with retrained heads,
+    the null corpus's heads and shuffled touch as the controls, each read over the heads
+    seeds (`_over_heads_seeds`), and the verdict on the transferred heads' Δ, whether it
+    beats the shuffled control and whether it beats the floor."""
+    means = summary[summary["probe_seed"] == "mean"]
+    if "source" not in set(means["heads"]):
         return FindingsPart(pd.DataFrame(columns=FINDINGS_COLUMNS), [])
 
     def delta(view: str, col: str = "delta") -> str:
-        if view not in means.index:
+        g = means[means["heads"] == view]
+        if g.empty:
             return "not run"
-        x = means.loc[view]
-        text = fmt.with_ci(x[col], x[f"{col}_ci_low"], x[f"{col}_ci_high"], sign=True)
-        return (
-            f"{text} ({int(x['positive_seeds'])}/{int(x['n_seeds'])} seeds > 0)"
-            if (col == "delta")
-            else text
-        )
+        text = fmt.with_ci(*_over_heads_seeds(means, view, col), sign=True)
+        if col != "delta":
+            return text
+        seeds = f"{int(g['positive_seeds'].sum())}/{int(g['n_seeds'].sum())} probe seeds > 0"
+        if len(g) > 1:
+            seeds += f", over {len(g)} heads seeds"
+        return f"{text} ({seeds})"
 
-    src = means.loc["source"]
-    verdict = claims.delta_verdict(src["delta"], src["delta_ci_low"], src["delta_ci_high"])
-    beats = beats_shuffled_control(src["delta_ci_low"], src["delta_shuffled_ci_high"])
+    src = means[means["heads"] == "source"].iloc[0]
+    d, lo, hi = _over_heads_seeds(means, "source", "delta")
+    _, _, shuffled_hi = _over_heads_seeds(means, "source", "delta_shuffled")
+    verdict = claims.delta_verdict(d, lo, hi)
+    beats = beats_shuffled_control(lo, shuffled_hi)
     what = "with the first sensor's heads, mass tertiles of the second sensor's test objects"
     decided = [
         decision(
             "transfer|source",
             "transfer to a second sensor",
-            f"V+T − V {what}",
-            side_decision(src["delta_ci_low"], src["delta_ci_high"]),
-            value=src["delta"],
-            ci_low=src["delta_ci_low"],
-            ci_high=src["delta_ci_high"],
+            f"V+T − V {what}, over the heads seeds",
+            side_decision(lo, hi),
+            value=d,
+            ci_low=lo,
+            ci_high=hi,
             threshold=0.0,
         ),
         decision(
@@ -225,34 +236,32 @@ def transfer_findings(summary: pd.DataFrame) -> FindingsPart:
             "transfer to a second sensor",
             f"V+T − V {what}, against the shuffled-touch control's upper bound",
             "above the control" if beats else "not above the control",
-            value=src["delta_ci_low"],
-            threshold=src["delta_shuffled_ci_high"],
+            value=lo,
+            threshold=shuffled_hi,
         ),
     ]
     if beats:
         verdict += " It lies above the shuffled-touch control."
     else:
         verdict += " It does not separate from the shuffled-touch control."
-    if "floor" in means.index:
-        floor = means.loc["floor"]
+    if "floor" in set(means["heads"]):
+        floor, _, _ = _over_heads_seeds(means, "floor", "delta")
         decided.append(
             decision(
                 "transfer|source_vs_floor",
                 "transfer to a second sensor",
                 f"V+T − V {what}, against the null corpus's heads",
-                "above the floor"
-                if src["delta_ci_low"] > floor["delta"]
-                else "not above the floor",
-                value=src["delta_ci_low"],
-                threshold=floor["delta"],
+                "above the floor" if lo > floor else "not above the floor",
+                value=lo,
+                threshold=floor,
             )
         )
-        if src["delta_ci_low"] > floor["delta"]:
+        if lo > floor:
             verdict += " The transferred heads beat the null corpus's heads."
         else:
             verdict += (
                 " The null corpus's heads do as well (Δ "
-                f"{fmt.signed(floor['delta'])}): what touch adds here is not what alignment learnt."
+                f"{fmt.signed(floor)}): what touch adds here is not what alignment learnt."
             )
     rows = pd.DataFrame(
         [
@@ -260,7 +269,7 @@ def transfer_findings(summary: pd.DataFrame) -> FindingsPart:
                 "evidence": "transfer to a second sensor",
                 "question": "do heads trained on one sensor make touch add to vision on unseen "
                 f"objects of another? (mass tertiles, balanced accuracy, {int(src['n_test_objects'])} "
-                f"test objects, mean of {int(src['n_seeds'])} probe seeds)",
+                f"test objects, mean of {int(src['n_seeds'])} probe seeds per heads seed)",
                 "result": f"heads from {src['heads_from']}: V+T − V {delta('source')}; heads "
                 f"retrained on the second sensor (upper reference): {delta('target')}",
                 "control": f"null corpus's heads (floor): {delta('floor')}; shuffled touch with "

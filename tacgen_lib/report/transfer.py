@@ -1,7 +1,7 @@
 """The report page *Transfer to a second sensor* (`tacgen_lib.probes.transfer`): balanced
-accuracy of V and V+T on the transfer corpus's test objects for every heads view, Δ with its
-object-bootstrap CI per probe seed and over the seeds, the shuffled-touch control beside each,
-and one sentence per view from the numbers."""
+accuracy of V and V+T on the transfer corpus's test objects for every heads view and heads
+seed, Δ with its object-bootstrap CI per probe seed and over the seeds, the shuffled-touch
+control beside each, and one sentence per view and heads seed from the numbers."""
 
 from __future__ import annotations
 
@@ -33,7 +33,8 @@ VIEW_SHORT = {
 
 def _label(row) -> str:
     base = VIEW_LABELS.get(row.heads, row.heads)
-    return f"{base}: {row.heads_from}" if row.heads_from else base
+    base = f"{base}: {row.heads_from}" if row.heads_from else base
+    return f"{base}, heads seed {row.heads_seed}" if row.heads_seed else base
 
 
 def _heads_from(rows: pd.DataFrame, view: str) -> str:
@@ -44,21 +45,23 @@ def _heads_from(rows: pd.DataFrame, view: str) -> str:
 def _ordered(rows: pd.DataFrame) -> pd.DataFrame:
     rank = {v: i for i, v in enumerate(HEADS_VIEWS)}
     seed_rank = rows["probe_seed"].map(lambda s: 1e9 if s == "mean" else float(s))
+    heads_rank = rows["heads_seed"].map(lambda s: -1.0 if s == "" else float(s))
     return (
-        rows.assign(_v=rows["heads"].map(rank), _s=seed_rank)
-        .sort_values(["_v", "_s"], ignore_index=True)
-        .drop(columns=["_v", "_s"])
+        rows.assign(_v=rows["heads"].map(rank), _h=heads_rank, _s=seed_rank)
+        .sort_values(["_v", "_h", "_s"], ignore_index=True)
+        .drop(columns=["_v", "_h", "_s"])
     )
 
 
 def transfer_table(rows: pd.DataFrame) -> pd.DataFrame:
-    """One row per heads view and probe seed (the seeds' mean last), with the shuffled-touch
-    control's Δ beside the real one."""
+    """One row per heads view, heads seed and probe seed (the probe seeds' mean last), with the
+    shuffled-touch control's Δ beside the real one."""
     r = _ordered(rows)
     return pd.DataFrame(
         {
             "heads": [VIEW_SHORT.get(x, x) for x in r["heads"]],
             "trained on": [x or "(frozen features)" for x in r["heads_from"]],
+            "heads seed": [x or "–" for x in r["heads_seed"]],
             "probe seed": [
                 f"mean of {x.n_seeds} ({x.positive_seeds}/{x.n_seeds} Δ > 0)"
                 if x.probe_seed == "mean"
@@ -83,7 +86,7 @@ def transfer_table(rows: pd.DataFrame) -> pd.DataFrame:
 
 
 def transfer_sentences(rows: pd.DataFrame, corpus: str) -> list[str]:
-    """A sentence per heads view from its seeds' mean row: the verdict on Δ, how many seeds
+    """A sentence per heads view and heads seed from its probe seeds' mean row: the verdict on Δ, how many seeds
     are positive, whether the gain beats the shuffled-touch control, and, for a view whose
     projected V scores below the frozen features' V, that its Δ is measured against a weaker V
     (its V+T against the frozen V is given beside)."""
@@ -120,13 +123,15 @@ def transfer_sentences(rows: pd.DataFrame, corpus: str) -> list[str]:
 
 
 def transfer_figure(rows: pd.DataFrame, corpus: str) -> plt.Figure:
-    """Δ balanced accuracy per heads view: each probe seed's point with its CI, the seeds'
-    mean (black) and the shuffled-touch control's mean (grey), with the 0 line."""
+    """Δ balanced accuracy per heads view, one column per heads seed: each probe seed's point
+    with its CI, the probe seeds' mean (black) and the shuffled-touch control's mean (grey),
+    with the 0 line."""
     r = _ordered(rows)
     views = [v for v in HEADS_VIEWS if v in set(r["heads"])]
-    fig, ax = plt.subplots(figsize=(7.5, 4.2))
-    for i, view in enumerate(views):
-        g = r[r["heads"] == view]
+    columns = [(v, h) for v in views for h in r.loc[r["heads"] == v, "heads_seed"].unique()]
+    fig, ax = plt.subplots(figsize=(max(7.5, 1.3 * len(columns)), 4.4))
+    for i, (view, heads_seed) in enumerate(columns):
+        g = r[(r["heads"] == view) & (r["heads_seed"] == heads_seed)]
         seeds = g[g["probe_seed"] != "mean"]
         offsets = np.linspace(-0.25, 0.05, max(len(seeds), 1))
         for off, x in zip(offsets, seeds.itertuples(), strict=False):
@@ -148,7 +153,7 @@ def transfer_figure(rows: pd.DataFrame, corpus: str) -> plt.Figure:
             fmt="s",
             ms=5,
             color="black",
-            label="mean over seeds" if i == 0 else None,
+            label="mean over probe seeds" if i == 0 else None,
         )
         ax.errorbar(
             i + 0.3,
@@ -163,8 +168,14 @@ def transfer_figure(rows: pd.DataFrame, corpus: str) -> plt.Figure:
             label="shuffled touch (control)" if i == 0 else None,
         )
     ax.axhline(0.0, color="k", lw=0.8, ls="--")
-    ax.set_xticks(range(len(views)))
-    ax.set_xticklabels([f"{VIEW_SHORT[v]}\n{_heads_from(r, v)}" for v in views], fontsize=8)
+    ax.set_xticks(range(len(columns)))
+    ax.set_xticklabels(
+        [
+            f"{VIEW_SHORT[v]}\n{_heads_from(r, v)}" + (f"\nheads seed {h}" if h else "")
+            for v, h in columns
+        ],
+        fontsize=8,
+    )
     ax.set_ylabel("Δ balanced accuracy (V+T − V)")
     ax.set_title(f"{corpus}: mass tertiles on unseen objects of a second sensor", fontsize=10)
     ax.plot([], [], "o", color="tab:blue", ms=3, label="one probe seed (95 % CI)")

@@ -24,6 +24,7 @@ from tacgen_lib.probes.transfer import (
     TransferSettings,
     TransferSplit,
     evaluate_transfer,
+    evaluate_transfer_seeds,
     fit_objects,
     shuffled_by_object,
 )
@@ -183,3 +184,43 @@ def test_the_page_reads_the_summary():
     assert row["page"].endswith("Transfer to a second sensor")
     assert "heads from sim_paired" in row["result"] and "not run" in row["result"]
     assert row["verdict"].startswith(("No measurable difference", "V+T"))
+
+
+def test_every_heads_seed_is_a_replicate_and_one_seed_alone_decides_nothing():
+    """Two heads seeds: one whose touch carries the class, one whose does not. The page has a
+    row per (view, heads seed, probe seed); the findings read the transfer over both heads
+    seeds (claims.seeds_interval), so the gain one draw of the heads shows is not called one."""
+    V, T, split = _synthetic(signal=3.0)
+    noise = np.random.default_rng(5).normal(size=T.shape)
+    aligned = {42: {"source": (V, T)}, 43: {"source": (V, noise)}}
+    out = evaluate_transfer_seeds(
+        (V, T), aligned, split, SMALL, heads_from={"source": "sim_paired"}
+    )
+    assert list(out.columns) == list(TRANSFER_COLUMNS)
+    assert out["row_id"].is_unique and len(out) == 3 * 4
+    assert set(out["heads_seed"]) == {"", "42", "43"}
+    assert set(out.loc[out["heads"] == "none", "heads_seed"]) == {""}
+    means = out[(out["probe_seed"] == "mean") & (out["heads"] == "source")]
+    by_seed = means.set_index("heads_seed")
+    assert by_seed.loc["42", "delta_ci_low"] > 0 >= by_seed.loc["43", "delta_ci_low"]
+    # the seed-42 rows are evaluate_transfer's own on that seed's view
+    alone = evaluate_transfer({"source": (V, T)}, split, SMALL, heads_from={"source": "sim_paired"})
+    got = out[out["heads_seed"] == "42"].reset_index(drop=True)
+    np.testing.assert_allclose(got["delta"], alone["delta"], rtol=1e-12)
+    part = findings.transfer_findings(out)
+    source = next(d for d in part.decisions if d["decision_id"] == "transfer|source")
+    assert source["decision"] != "above 0"
+    assert source["ci_low"] == pytest.approx(means["delta_ci_low"].min())
+    assert "over 2 heads seeds" in part.rows.iloc[0]["result"]
+    # only the first seed's heads: the gain is called
+    first = findings.transfer_findings(out[out["heads_seed"] != "43"])
+    assert (
+        next(d for d in first.decisions if d["decision_id"] == "transfer|source")["decision"]
+        == "above 0"
+    )
+    table = report.transfer_table(out)
+    assert list(table["heads seed"].unique()) == ["–", "42", "43"]
+    assert len(report.transfer_sentences(out, "sim_transfer")) == 1 + 3
+    assert figure_problems(report.transfer_figure(out, "sim_transfer")) == []
+    with pytest.raises(ValueError, match="no alignment seed"):
+        evaluate_transfer_seeds((V, T), {}, split, SMALL)

@@ -14,8 +14,7 @@ from tacgen_lib.probes.transfer import (
     TransferSettings,
     TransferSplit,
     check_views,
-    evaluate_transfer,
-    views_from_edges,
+    evaluate_transfer_seeds,
 )
 from tacgen_lib.report import transfer as report
 from tacgen_lib.report.write import write_figure, write_table
@@ -53,27 +52,28 @@ def vectors(path, *columns):
 
 
 raw = (*vectors(snakemake.input.v, "vit"), *vectors(snakemake.input.t, "vit"))
+check_views({"none": raw}, len(ids))
+paths = iter(snakemake.input.aligned)  # the rule's order: heads seed, then view
 aligned = {
-    view: vectors(path, "v_aligned", "t_aligned")
-    for view, path in zip(snakemake.params.views, snakemake.input.aligned, strict=True)
+    seed: {view: vectors(next(paths), "v_aligned", "t_aligned") for view in snakemake.params.views}
+    for seed in snakemake.params.heads_seeds
 }
-views = views_from_edges(raw, aligned)
-check_views(views, len(ids))
 objects = rows["appearance_id"].to_numpy()
 y = np.array([classes[o] for o in objects])
 data = TransferSplit(y=y, objects=objects, split=split)
 logger.info(
-    "%s: %d contacts of %d objects (%d test objects), %d mass classes, views %s",
+    "%s: %d contacts of %d objects (%d test objects), %d mass classes, views %s, heads seeds %s",
     corpus,
     len(ids),
     len(masses),
     len(set(objects[split == "test"])),
     settings.classes,
-    list(views),
+    ["none", *snakemake.params.views],
+    list(snakemake.params.heads_seeds),
 )
 with threadpool_limits(snakemake.threads):
-    summary = evaluate_transfer(
-        views, data, settings, heads_from=snakemake.params.views, progress=logger.info
+    summary = evaluate_transfer_seeds(
+        raw, aligned, data, settings, heads_from=snakemake.params.views, progress=logger.info
     )
 edges.write(snakemake.output.summary, summary, key="row_id", producer=snakemake.rule)
 notes = report.transfer_sentences(summary, corpus)
