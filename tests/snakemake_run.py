@@ -14,20 +14,14 @@ from pathlib import Path
 
 import yaml
 
+from tacgen_lib.io.run_compare import copy_workflow
+
 ROOT = Path(__file__).resolve().parents[1]
 SNAKEMAKE = [sys.executable, "-m", "snakemake"]
-TREE = ["Snakefile", "rules", "config", "workflow", "tacgen_lib", "profiles", "envs"]
 
 
 def copy_tree(dest: Path) -> Path:
-    dest.mkdir(parents=True, exist_ok=True)
-    for name in TREE:
-        src = ROOT / name
-        if src.is_dir():
-            shutil.copytree(src, dest / name, ignore=shutil.ignore_patterns("__pycache__"))
-        else:
-            shutil.copy2(src, dest / name)
-    return dest
+    return copy_workflow(ROOT, dest)
 
 
 def copy_run(src: Path, dest: Path) -> Path:

@@ -33,25 +33,16 @@ from tacgen_lib.io.run_compare import (  # noqa: E402 - after the repository is 
     DecisionComparison,
     StageDifference,
     compare_decisions,
+    copy_workflow,
     stage_differences,
 )
 
-#: what a run needs of the repository (the workflow, its library and configs)
-TREE = ("Snakefile", "rules", "config", "workflow", "tacgen_lib", "profiles", "envs")
 
-
-def copy_workflow(dest: Path) -> Path:
+def fresh_workflow(dest: Path) -> Path:
     """A fresh copy of the workflow in `dest` (removed first where it exists)."""
     if dest.exists():
         shutil.rmtree(dest)
-    dest.mkdir(parents=True)
-    for name in TREE:
-        src = ROOT / name
-        if src.is_dir():
-            shutil.copytree(src, dest / name, ignore=shutil.ignore_patterns("__pycache__"))
-        else:
-            shutil.copy2(src, dest / name)
-    return dest
+    return copy_workflow(ROOT, dest)
 
 
 def run_folders(work: Path, devices: Sequence[str]) -> list[Path]:
@@ -82,7 +73,7 @@ def run(folder: Path, command: list[str]) -> float:
     library comes first on PYTHONPATH, so every job, also those the preloaded interpreter
     runs (it does not put the working directory on its path), uses the copy's code. Output
     goes to folder/device_check.log; a failure stops the check naming it."""
-    copy_workflow(folder)
+    fresh_workflow(folder)
     log = folder / "device_check.log"
     path = os.pathsep.join(p for p in (str(folder), os.environ.get("PYTHONPATH", "")) if p)
     started = time.perf_counter()

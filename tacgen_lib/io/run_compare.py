@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -31,11 +32,13 @@ from tacgen_lib.io import edges
 
 __all__ = [
     "DECISIONS",
+    "WORKFLOW_TREE",
     "STAGE_TOLERANCES",
     "DecisionComparison",
     "EdgeDifference",
     "StageDifference",
     "compare_decisions",
+    "copy_workflow",
     "stage_differences",
     "edge_differences",
     "relative_column_differences",
@@ -287,3 +290,20 @@ def compare_decisions(run_a: str | Path, run_b: str | Path) -> DecisionCompariso
         for k in (*differ, *only_a, *only_b)
     )
     return DecisionComparison(len(a), differ, only_a, only_b, lines)
+
+
+#: what a run of the workflow reads from the repository: a copy of these is a workflow to run
+WORKFLOW_TREE = ("Snakefile", "rules", "config", "workflow", "tacgen_lib", "profiles", "envs")
+
+
+def copy_workflow(root: Path, dest: Path) -> Path:
+    """A copy of the workflow at `root` (`WORKFLOW_TREE`, no ``__pycache__``) in `dest`, the
+    folder made where missing; a run of it writes under `dest` only."""
+    dest.mkdir(parents=True, exist_ok=True)
+    for name in WORKFLOW_TREE:
+        src = Path(root) / name
+        if src.is_dir():
+            shutil.copytree(src, dest / name, ignore=shutil.ignore_patterns("__pycache__"))
+        else:
+            shutil.copy2(src, dest / name)
+    return dest
