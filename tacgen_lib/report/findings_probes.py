@@ -270,8 +270,11 @@ def generation_findings(summary: pd.DataFrame, ref: Mapping) -> FindingsPart:
             continue
         first_rows = {k: _first_row(by[k]) for k in ("t_gen", "t_ridge", "t_ridge_residual")}
         gen, real = _fw_over_seeds(by["t_gen"]), _first_seed(by["t_real"])
-        shuffled = _fw_over_seeds(by["t_gen_shuffled"]) if "t_gen_shuffled" in by else None
-        shuffled = shuffled or (np.nan, np.nan, np.nan)
+        shuffled = (
+            _fw_over_seeds(by["t_gen_shuffled"])
+            if "t_gen_shuffled" in by
+            else (np.nan, np.nan, np.nan)
+        )
         nonlin = _first_seed(by.get("v_nonlinear"))
         ridge = _fw(first_rows["t_ridge"])
         vs_ridge = _fw_over_seeds(by["t_gen"], "delta_vs_ridge")
