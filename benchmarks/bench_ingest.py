@@ -145,7 +145,7 @@ def main() -> None:
     parser.add_argument("--rgb-size", type=int, nargs=2, default=[240, 320], metavar=("H", "W"))
     parser.add_argument("--in-memory", action="store_true", help="whole tables, for comparison")
     parser.add_argument("--dir", type=Path, default=None, help="where to build (default: a tmp)")
-    args = parse_args(parser, {"frames": [300]})
+    args = parse_args(parser, {"frames": [60], "per_traj": 20})
     base = Path(tempfile.mkdtemp(prefix="bench_ingest_", dir=args.dir))
     try:
         print(

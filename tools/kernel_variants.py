@@ -75,12 +75,19 @@ NOT_NUMERIC = (
     "tests/estimate/test_estimate.py",  # run-time estimates: sums of benchmark seconds
     "tests/test_kernel_variants.py",  # which variant a CPU class gets
     "tests/test_benchmarks.py",  # runs the benchmark scripts, whose figures are timings
+    # which jobs ask for a GPU, and what: Snakemake's resources and sbatch arguments, read
+    # from dry runs; which torch build setup installs; paper.yaml's DAG and time limits
+    "tests/runtime/test_gpus.py",
+    "tests/test_slurm_gpu.py",
+    "tests/test_torch_build.py",
+    "tests/test_paper_config.py",
 )
 #: single tests of numeric modules that compare no float: what a process imports, and which
 #: checkpoint keys and shapes an architecture accepts
 NOT_NUMERIC_TESTS = (
     "tests/test_optim.py::test_training_with_adamw_does_not_import_dynamo",
     "tests/features/test_backbone_families.py::test_mae_release_patch_of_16_needs_its_own_arch",
+    "tests/test_device_check.py::test_the_run_mode_makes_one_copy_per_device",  # two dry runs
 )
 
 #: name -> (environment, torch intra-op threads, what the variant stands for)
