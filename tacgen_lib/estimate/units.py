@@ -234,7 +234,7 @@ UNITS: dict[str, UnitRule] = {
             * len(c["regime"]["targets"])
             * len(c["regime"]["n_labelled"])
             * len(c["regime"]["n_pool"])
-            * int(c["regime"].get("label_draws", 1)),
+            * int(c["regime"]["label_draws"]),
         ),
     ),
     "visibility_check": UnitRule(

@@ -143,7 +143,7 @@ def evaluate_regime(
     n_classes: int,
     ceiling_gammas: Sequence[float],
     ceiling_C: Sequence[float],
-    label_draws: int = 1,
+    label_draws: int,
     progress: Any = None,
     workers: int = 1,
 ) -> pd.DataFrame:
