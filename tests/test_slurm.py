@@ -270,10 +270,6 @@ def test_align_grid_through_slurm_profile(reference_run, tmp_path):
             "config/slurm_test.yaml",
             "--slurm-init-seconds-before-status-checks",
             "1",
-            # squeue every 2 s, not every 10: on one node the sbatch jobs run one after another,
-            # and each finished job would otherwise wait up to 10 s to be seen
-            "--seconds-between-status-checks",
-            "2",
             "--slurm-no-account",
             "--slurm-keep-successful-logs",
         ]
