@@ -431,9 +431,12 @@ def _cmdline(pid: int) -> bytes:
 def _sleeping_job(server, tmp_path):
     """A job that sleeps in the server: (its process, the pid of its copy)."""
     pidfile = tmp_path / "pid"
+    # written whole, then renamed into place: the test reads it as soon as it exists
     body = f"""
     import os, time, pathlib
-    pathlib.Path({str(pidfile)!r}).write_text(str(os.getpid()))
+    part = pathlib.Path({str(pidfile)!r} + ".part")
+    part.write_text(str(os.getpid()))
+    part.rename({str(pidfile)!r})
     time.sleep(120)
     """
     proc = _start(job_script(tmp_path, body), env_for(server))
