@@ -78,10 +78,9 @@ write_table(
     ),
     mono=(),
     notes=[
-        "The paper: cross-seed ΔR²_gen +0.589 [+0.544, +0.634] over 5 generator seeds × "
-        "guidance {0.5, 1, 1.5, 2, 3}, real touch +0.585 inside the interval. A corpus where "
-        "appearance carries the label (natural, ρ = 1) is where that pattern can hold; where "
-        "it does not (ρ = 0, the paired and null corpora) it must fail.",
+        gen_report.paper_protocol_note()
+        + " A corpus where appearance carries the label (natural, ρ = 1) is where that pattern "
+        "can hold; where it does not (ρ = 0, the paired and null corpora) it must fail.",
         "The interval spans generator seeds only: every seed's cells score the same test rows, "
         "so it leaves out test-row sampling, and an interval above 0 is not a gain (read the "
         "null corpus's rows). The fixed-test bootstrap CIs of the other tables include it.",
