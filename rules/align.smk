@@ -49,8 +49,8 @@ rule train_heads:
     conda:
         "../envs/align.yaml"
     # one thread, so two cells train side by side: at the default's sizes a second thread
-    # bought nothing (sim_paired, seed 42, tau 0.07, all rows: 9.6 s wall and 15.1 CPU-s on
-    # 2 threads, 8.3 s and 8.1 CPU-s on 1, 2-core AVX-512 EPYC); profiles/slurm gives 2.
+    # shortens a cell little and costs more CPU than it saves (benchmarks/bench_align.py prints
+    # both thread counts); profiles/slurm gives 2.
     # Reruns are bit-identical per thread count.
     threads: 1
     params:

@@ -4,9 +4,12 @@ resolves, and config/README.md is the schema's own reference."""
 
 from __future__ import annotations
 
+import ast
+import io
 import re
 import subprocess
 import sys
+import tokenize
 from pathlib import Path
 
 import pytest
@@ -14,14 +17,35 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 
-#: numbers a page may state: every number written in the config files and the library's source
-#: (settings, defaults, constants such as a test level), which a run does not measure
-_SOURCES = [*(ROOT / "config").glob("*.yaml"), *(ROOT / "tacgen_lib").rglob("*.py")]
-KNOWN = set(re.findall(r"\d+(?:\.\d+)?", "".join(p.read_text() for p in _SOURCES)))
+
+def _number(text: str) -> str:
+    """A number's value written one way (``0.20``, ``0.2`` and ``.2`` are one number)."""
+    return repr(float(text))
+
+
+def _stated_numbers() -> set[str]:
+    """Every number the config files write and every number constant in the library's code
+    (settings, defaults, constants such as a test level or the paper's reported figures):
+    numbers a run does not measure. The library's comments and docstrings are not read: a
+    figure there is prose, and prose holds no measurement (`test_no_measured_figure_in_the_code_prose`)."""
+    config = "".join(p.read_text() for p in (ROOT / "config").glob("*.yaml"))
+    known = {_number(x) for x in re.findall(r"\d+(?:\.\d+)?", config)}
+    for path in (ROOT / "tacgen_lib").rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            value = getattr(node, "value", None) if isinstance(node, ast.Constant) else None
+            if isinstance(value, int | float) and not isinstance(value, bool):
+                known.add(_number(repr(abs(value))))
+    return known
+
+
+#: numbers a page may state (`_stated_numbers`)
+KNOWN = _stated_numbers()
 #: a number with a unit of time, speed or size is a measurement wherever it stands
 MEASURE_UNITS = ("s", "ms", "min", "h", "CPU-s", "GF/s", "GFLOP/s", "GB", "MB", "/s")
+#: a number, and its unit where one follows (a ratio as ``3×``, ``3 ×`` or ``3x``)
 _NUMBER = re.compile(
-    r"(?<![\w.~/-])([+−-]?\d[\d,]*(?:\.\d+)?)\s?(CPU-s|GFLOP/s|GF/s|min|ms|GB|MB|/s|s|h|×|%)?(?![\w.])"
+    r"(?<![\w.~/-])([+−-]?\d[\d,]*(?:\.\d+)?)"
+    r"(?:\s?(CPU-s|GFLOP/s|GF/s|min|ms|GB|MB|/s|s|h|×|%)|(x))?(?!\w|\.\d)"
 )
 
 
@@ -33,17 +57,19 @@ def measured_figures(markdown: str) -> list[tuple[int, str]]:
     text = re.sub(r"```.*?```", lambda m: "\n" * m.group(0).count("\n"), markdown, flags=re.S)
     found = []
     for number, line in enumerate(text.split("\n"), 1):
-        line = re.sub(r"`[^`]*`", "", line)
+        line = re.sub(r"``.*?``|`[^`]*`", "", line)
         line = re.sub(r"\]\([^)]*\)", "]", line)
         for m in _NUMBER.finditer(line):
-            value, unit = m.group(1), m.group(2)
+            value, unit = m.group(1), m.group(2) or ("×" if m.group(3) else None)
             plain = value.lstrip("+−-").replace(",", "")
             decimals = len(plain.split(".")[1]) if "." in plain else 0
             if unit in MEASURE_UNITS or (unit == "%" and decimals):
                 found.append((number, m.group(0).strip()))
-            elif unit == "×" and plain not in KNOWN:  # a speed-up, unless a setting's ratio
+            elif (
+                unit == "×" and _number(plain) not in KNOWN
+            ):  # a speed-up, unless a setting's ratio
                 found.append((number, m.group(0).strip()))
-            elif decimals >= 2 and plain not in KNOWN:
+            elif decimals >= 2 and _number(plain) not in KNOWN:
                 found.append((number, m.group(0).strip()))
     return found
 
@@ -151,3 +177,81 @@ def test_the_reference_check_reads_comments_and_docstrings(tmp_path):
     lines = dict(_prose(f))
     assert OUTSIDE.search(lines[1]) and REPO_PATH.findall(lines[3]) == ["docs/x.md"]
     assert REPO_PATH.findall(lines[5]) == ["tools/y"]  # the comment, not the string
+
+
+def _docstrings_and_comments(path: Path) -> list[tuple[int, str]]:
+    """(line number, text) of a Python file's docstrings and comments (its other strings are
+    code: an XML template's coordinates are not prose); of a rules file's or the Snakefile's
+    comments and triple-quoted strings (`_prose`); of a config file's comments."""
+    text = path.read_text()
+    if path.suffix == ".yaml":
+        return [
+            (n, line[line.index("#") :])
+            for n, line in enumerate(text.splitlines(), 1)
+            if "#" in line
+        ]
+    if path.suffix != ".py":
+        return _prose(path)
+    out = [
+        (t.start[0], t.string)
+        for t in tokenize.generate_tokens(io.StringIO(text).readline)
+        if t.type == tokenize.COMMENT
+    ]
+    for node in ast.walk(ast.parse(text)):
+        if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef):
+            body = node.body[0] if node.body else None
+            if isinstance(body, ast.Expr) and isinstance(body.value, ast.Constant):
+                if isinstance(body.value.value, str):
+                    lines = body.value.value.splitlines()
+                    out += [(body.lineno + i, line) for i, line in enumerate(lines)]
+    return sorted(out)
+
+
+#: the code whose prose a reader of the project meets: the library, the rules, the workflow's
+#: scripts, the tools and the config files
+PROSE_FILES = sorted(
+    [
+        *(ROOT / "tacgen_lib").rglob("*.py"),
+        *(ROOT / "workflow" / "scripts").glob("*.py"),
+        *(ROOT / "tools").glob("*.py"),
+        *(ROOT / "rules").glob("*.smk"),
+        ROOT / "Snakefile",
+        *(ROOT / "config").glob("*.yaml"),
+    ]
+)
+
+
+#: a speed-up or slow-down as code prose writes one: ``5x``, ``~2x``, ``2-3x``, ``1.7×``
+SPEEDUP = re.compile(r"(?<![\w.])~?\d+(?:\.\d+)?(?:-\d+(?:\.\d+)?)?[x×](?!\w|\.\d)")
+
+
+def prose_figures(line: str) -> list[str]:
+    """The measured figures of one line of code prose: `measured_figures`' and every
+    speed-up (`SPEEDUP`), whatever the number (a page's ``2×`` may be a setting's ratio; a
+    comment's ``2x faster`` is a measurement)."""
+    found = [figure for _, figure in measured_figures(line)]
+    plain = re.sub(r"``.*?``|`[^`]*`", "", line)
+    return found + [m.group(0).strip() for m in SPEEDUP.finditer(plain) if m.group(0) not in found]
+
+
+@pytest.mark.parametrize("path", PROSE_FILES, ids=lambda p: str(p.relative_to(ROOT)))
+def test_no_measured_figure_in_the_code_prose(path):
+    """Comments, docstrings and config comments say why, not how fast on which machine: a
+    figure measured once goes stale with the code and the machine. Measurements come from
+    what a benchmark prints (docs/cost.md lists them) and from the run's report."""
+    found = [
+        f"{path.relative_to(ROOT)}:{n}: {figure}  | {line.strip()[:100]}"
+        for n, line in _docstrings_and_comments(path)
+        for figure in prose_figures(line)
+    ]
+    assert not found, "\n".join(found)
+
+
+def test_the_code_prose_reader_skips_code_strings(tmp_path):
+    f = tmp_path / "m.py"
+    f.write_text(
+        '"""Module: took 3 s."""\n\nXML = """<geom size="0.25 0.013"/>"""  # 2x faster\n\n\n'
+        'def g():\n    """Ran 1.7x slower."""\n'
+    )
+    got = [figure for _, line in _docstrings_and_comments(f) for figure in prose_figures(line)]
+    assert got == ["3 s", "2x", "1.7x"]

@@ -49,7 +49,7 @@ def make_optimizer(heads: AlignHeads, *, lr: float, weight_decay: float) -> Adam
     """AdamW (betas 0.9/0.999) over both heads; torch's fused single-kernel variant, through
     `tacgen_lib.optim` (no torch._dynamo import).
 
-    Fused AdamW is about 5x cheaper per step than the foreach variant on CPU and is
+    Fused AdamW is several times cheaper per step than the foreach variant on CPU and is
     deterministic on CPU (checked by the reproducibility test).
     """
     return AdamW(

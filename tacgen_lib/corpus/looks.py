@@ -37,7 +37,7 @@ __all__ = [
 #: A texture darkens the colour it is drawn on (a MuJoCo texture multiplies the material's
 #: rgba; `scenes.texture_faces`), so the darkest colour sets how much texture a frame can show:
 #: "black" is a charcoal, about as dark as red, whose checks, stripes and speckles still differ
-#: from the ground by tens of grey levels. At (0.12, 0.12, 0.13) they differed by a few, and
+#: from the ground by tens of grey levels. At a near-black they differed by a few, and
 #: black was the one colour whose texture even a classifier trained on the texture labels
 #: could not read, so no vision side could see the appearance class of a black object.
 PALETTE: dict[str, tuple[float, float, float]] = {

@@ -138,9 +138,9 @@ def calibration_points(
 
 
 #: Wall / CPU seconds of a job on idle cores, by threads: a single-threaded job waits for
-#: nothing but a little I/O (1.13-1.39 over the corpus and preprocess jobs of a default run on a
-#: lightly loaded 2-core EPYC); each further thread adds ~0.8 of a core (benchmarks/bench_align:
-#: 2 threads train heads 1.7-1.8x faster than one).
+#: nothing but a little I/O (its benchmark files' wall against CPU seconds show it); each
+#: further thread adds most of a core (benchmarks/bench_align.py prints the heads' speed-up
+#: from a second thread).
 IDLE_WALL_PER_CPU = 1.2
 EXTRA_THREAD_CORES = 0.8
 

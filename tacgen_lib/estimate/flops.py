@@ -2,8 +2,8 @@
 through a backbone (a ViT, a ResNet), of one row through the latent generator's MLP, of one
 frame through a pixel generator, read from the merged config; and their seconds at the
 calibration CPU's effective GEMM rate (`flop_seconds`). `tacgen_lib.estimate.units` charges a
-rule's FLOPs this way, so a model 100x larger than any calibrated one costs 100x its
-arithmetic, not 100x its calibrated overheads.
+rule's FLOPs this way, so a model a hundred times larger than any calibrated one costs a
+hundred times its arithmetic, not a hundred times its calibrated overheads.
 """
 
 from __future__ import annotations
@@ -34,9 +34,9 @@ Config = Mapping[str, Any]
 
 
 #: Effective dense float32 rate per thread of the calibration's CPU (2-core AMD EPYC, AVX-512):
-#: half its measured GEMM peak of 100 GFLOP/s per thread (README, Speed: training reaches
-#: 0.58-0.69 of the roofline at batch 256, less on small layers). Scale with --speed-factor on
-#: another CPU class.
+#: about half its one-thread GEMM peak (benchmarks/machine.py prints a machine's), as training
+#: reaches only part of the roofline, less on small layers (README, Speed). Scale with
+#: --speed-factor on another CPU class.
 GFLOPS_PER_THREAD = 50.0
 
 

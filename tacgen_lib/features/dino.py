@@ -204,7 +204,7 @@ def pretrain_dino(
     (the order is reshuffled every epoch, so all frames are seen); batch_size is capped at N.
 
     CPU threads: set torch.set_num_threads(...) to the cores the job owns. On an oversubscribed
-    machine 2 OpenMP threads were measured ~5x slower than 1 (spin-waits). Bit-identical
+    machine 2 OpenMP threads run several times slower than 1 (spin-waits). Bit-identical
     reruns need the same thread count.
     """
     s = settings

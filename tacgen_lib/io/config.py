@@ -42,7 +42,8 @@ class ConfigError(ValueError):
 
 #: libyaml's C parser where PyYAML was built with it (the wheels are), else the pure-Python
 #: one: the same safe YAML subset and the same values (tests/io/test_config.py checks every
-#: config file of the repository), ~9x faster on the schema, which every Snakemake start reads.
+#: config file of the repository), several times faster on the schema, which every Snakemake
+#: start reads.
 SAFE_LOADER: type = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
 
 

@@ -98,7 +98,7 @@ def block_basis(blk: DesignBlock, curvature: float, pen: float) -> BlockBasis:
     T = V diag(h^-1/2) V^T with h = curvature * s^2 / n + pen and Z^T Z = V diag(s^2) V^T:
     symmetric (a rotation, a scaling and the rotation back), so the penalty stays diagonal.
     Directions whose loss curvature is below 1e-3 of the penalty get h = pen exactly (a
-    change of at most 0.05 % in their scaling; any SPD T gives the same optimum): with fewer
+    relative change of their scaling below half of 1e-3; any SPD T gives the same optimum): with fewer
     rows than columns that leaves T = pen^-1/2 I plus a rank <= n term, applied in about
     2 n / d of a dense product's time. Private blocks (random features, standardised
     columns) are only scaled.
@@ -142,7 +142,7 @@ def lbfgs_direction(
 class Preconditioner:
     """The change of variables w = T gamma of every block (`block_basis`), applied to B
     problems' coefficients (B, p, K) with one product per block (d x (B K)); a broadcast
-    matmul would run B small products, ~40x slower here."""
+    matmul would run B small products, far slower here."""
 
     bases: list[BlockBasis]
     n_problems: int

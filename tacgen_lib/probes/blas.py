@@ -2,7 +2,7 @@
 
 lbfgs on probe-sized problems makes thousands of tiny BLAS/LAPACK calls (inside scipy's
 L-BFGS-B): with 2 BLAS threads on a loaded 2-core machine each call waits for a busy core,
-measured 10-18x slower than one thread. Logistic fits, the ridge deletion paths and the PCG
+an order of magnitude slower than one thread. Logistic fits, the ridge deletion paths and the PCG
 set-up therefore run single-threaded.
 """
 

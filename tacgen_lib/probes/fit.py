@@ -19,9 +19,9 @@ from tacgen_lib.probes.settings import ProbeSettings
 
 #: lbfgs tolerance of the logistic refits inside controls: scikit-learn's default. The main
 #: probes use `probes.fit_logistic`'s tighter 1e-6. Controls are distributions over hundreds of
-#: refits; at 1e-4 the hardness tactile-permutation Δ_ctrl moved by 0.004 against 1e-6 (0.013
-#: vs 0.017), while 1e-6 made the batched train-resample refits of the 3-class density probe
-#: run for minutes.
+#: refits; at 1e-4 the hardness tactile-permutation Δ_ctrl moved by a few thousandths against
+#: 1e-6, while 1e-6 made the batched train-resample refits of the 3-class density probe run
+#: for minutes.
 CONTROL_TOL = 1e-4
 
 

@@ -16,8 +16,8 @@ problems, within the solver's tolerance on ill-conditioned ones), tested against
 ``LogisticRegression`` in tests/probes/test_lbfgs.py; the speed-up is measured by
 benchmarks/bench_probes.py. The batched objective of the controls
 (`objective.LogisticObjective`) computes the same loss for B problems; at B = 1 its
-generality costs more than scikit-learn's overhead (measured 44 s against 37 s on a regime
-evaluation job), hence this separate single-problem path.
+generality costs more than scikit-learn's overhead (on a regime evaluation job), hence this
+separate single-problem path.
 
 The fitted model is a scikit-learn ``LogisticRegression`` with its fitted attributes set
 (``classes_``, ``coef_``, ``intercept_``, ``n_iter_``, ``n_features_in_``): predictions and

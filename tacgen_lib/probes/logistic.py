@@ -11,8 +11,7 @@ This module owns:
   decision is within the solvers' tolerance of 0). Convergence is never silently assumed:
   lbfgs runs up to ``max_iter`` (by default the cap itself, one run: lbfgs's iterates do not
   depend on its iteration budget, so a first run at 200 that is doubled until it converges
-  returns the same coefficients bit for bit after ~2x the work, measured 3.0 s against
-  1.35 s of CPU on the default hardness CV); an unconverged run (where scikit-learn would
+  returns the same coefficients bit for bit after about twice the work); an unconverged run (where scikit-learn would
   warn) doubles a smaller ``max_iter`` and refits, up to the cap; iterations and convergence
   are recorded, and a probe that still fails to converge re-emits the warning.
 - `FixedLogistic`: the probe at its chosen C; `FixedLogistic.refit_many` solves a control's
@@ -193,15 +192,13 @@ def cv_batches(shape: tuple[int, int], folds: Sequence[np.ndarray]) -> bool:
 
 
 #: Iterations the batched CV solve may take before the folds it has not solved are refitted
-#: one at a time by scikit-learn. Its iterations cost ~2.6 ms for 5 folds of 960 x 384 (numpy
-#: call overhead, not FLOPs) against ~0.2 ms per fold for scikit-learn's, so it pays only when
-#: preconditioning cuts the iterations several-fold: measured 48 and 109 on the paired
-#: hardness probe's V and V+T (against ~970 for scikit-learn), but 231-535 on V + an RBF
-#: Nystroem map (the generator's nonlinear baseline) and 10,619 at its largest gamma, where
-#: an unbounded batched solve took 28 s against scikit-learn's 1.4 s. (Measured against
-#: scikit-learn's own loop; the one-fit loop now solves with `lbfgs.fit_lbfgs_logistic`, and
-#: the batched CV still pays on the ViT probes: on the default's paired hardness probe V
-#: 0.30 s against 1.98 s, V+T 0.64 s against 2.53 s, same scores and C.)
+#: one at a time. Its iterations cost several one-fold iterations each (numpy call overhead,
+#: not FLOPs), so it pays only when preconditioning cuts the iterations several-fold: it does
+#: on the ViT probes (V, V+T: tens to about a hundred iterations against the loop's hundreds,
+#: same scores and C), not on V + an RBF Nystroem map (the generator's nonlinear baseline),
+#: where it needs hundreds to thousands and an unbounded batched solve is many times slower
+#: than the loop. benchmarks/bench_probes.py prints both solvers' times on a hardness-like
+#: probe.
 CV_BATCH_BUDGET = 200
 
 
@@ -228,8 +225,8 @@ def _cv_scores_batched(
     benchmarks/bench_probes.py: C 1 against 10; on the default config's probes no selection
     changed). The probe's final fit at the chosen C stays `fit_logistic_once`'s. A fold the
     batched solve has not finished within `budget` iterations is refitted by it, as the loop
-    would (`CV_BATCH_BUDGET`). Measured 3.9x faster than the one-fit-at-a-time loop on the
-    paired hardness probe (960 rows, 384 features, 5 folds x 3 C, one thread).
+    would (`CV_BATCH_BUDGET`). Faster than the one-fit-at-a-time loop on the ViT probes
+    (benchmarks/bench_probes.py prints the two on a hardness-like probe).
     """
     n = X.shape[0]
     weights = np.ones((len(folds), n))
@@ -307,12 +304,12 @@ class FixedLogistic:
         private random-feature blocks) only when ``n_train >= n_features``: the solver's
         preconditioner comes from the shared scatter, and with fewer rows than columns a
         problem that drops or reweights rows has directions whose only curvature is the L2
-        term, which that scatter does not see. Measured on the default density probe
-        (3 classes, 120 rows, 960 columns, C = 10, one thread, 200 refits): train resamples
-        batched 173 s against 37 s for the scikit-learn loop and random features 1.4 s
-        against 0.4 s (so both loop there), tactile and label permutations 8 s and 23 s
-        against 78 s and 77 s; on hardness (2 classes, 960 rows, 384 columns) batched is
-        15-90x faster in every control. Only concatenated blocks batch (other fusions are
+        term, which that scatter does not see. On the default density probe (3 classes,
+        fewer rows than columns) the batched solve is several times slower than the loop for
+        train resamples and random features (so both loop there) and several times faster
+        for tactile and label permutations; on hardness (more rows than columns) it is an
+        order of magnitude faster or more in every control (benchmarks/bench_probes.py
+        prints the permutation controls of a hardness-like probe). Only concatenated blocks batch (other fusions are
         not linear in the blocks), and an empty batch has nothing to solve.
         """
         if refits.fusion != "concat" and len(refits.train) > 1 or refits.n_problems == 0:

@@ -22,7 +22,7 @@ Squaring loses singular directions below ``sqrt(eps)`` of the largest one; that 
 whenever the smallest lambda exceeds ``GRAM_GUARD`` times the eigenvalue error scale, and
 otherwise the folds fall back to the SVD. `ridge_path` itself always uses the SVD.
 BLAS threads: on a shared machine, cap them at the rule's ``threads`` (OPENBLAS_NUM_THREADS /
-threadpoolctl); oversubscribed BLAS threads slow these solves by more than 10x.
+threadpoolctl); oversubscribed BLAS threads slow these solves by an order of magnitude.
 """
 
 from __future__ import annotations

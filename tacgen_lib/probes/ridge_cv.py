@@ -230,8 +230,8 @@ def select_lambda_cv(
     G0 = X0 @ X0.T if p > n - max(len(f) for f in folds) else None
     scores = np.empty((len(folds), lam.size))
     solver = []
-    # one BLAS thread: the deletion paths' many small solves ran 2-5x slower with two
-    # (measured), and their eigh gains ~10%
+    # one BLAS thread: the deletion paths' many small solves run slower with two, and their
+    # eigh gains little
     with single_blas_thread():
         if G0 is not None:
             deleted, kind = _deletion_predictions(G0, y, folds, lam), "dual"

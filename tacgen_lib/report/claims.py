@@ -350,7 +350,8 @@ def proportion_interval(
     successes: int, n: int, z: float = 1.959963984540054
 ) -> tuple[float, float]:
     """Wilson score interval of a proportion (95 % by default). Unlike a bootstrap, it does not
-    collapse to a point when every trial succeeds (or fails): 128/128 gives [0.971, 1]."""
+    collapse to a point when every trial succeeds (or fails): 128 successes of 128 keep a
+    lower end below 1."""
     if n <= 0:
         return math.nan, math.nan
     p = successes / n

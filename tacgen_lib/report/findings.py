@@ -42,7 +42,7 @@ __all__ = [
 
 
 def _success(r: Mapping) -> str:
-    # claims' function, not report.policy's wrapper: that module pulls in MuJoCo (2 s of imports)
+    # claims' function, not report.policy's wrapper: that module pulls in MuJoCo (seconds of imports)
     return claims.proportion_with_ci(r["success"], r["ci_low"], r["ci_high"], int(r["n_episodes"]))
 
 

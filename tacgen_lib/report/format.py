@@ -89,7 +89,7 @@ def with_ci(
 
 def _integral_column(values: pd.Series) -> bool:
     """A float column holding counts: every defined value integral, and not all in [-1, 1]
-    (a score column of 0s and 1s stays a score)."""
+    (a score column of zeros and ones stays a score)."""
     v = pd.to_numeric(values, errors="coerce").dropna().to_numpy(dtype=float)
     return v.size > 0 and bool(np.all(v == np.round(v))) and bool(np.any(np.abs(v) > 1))
 

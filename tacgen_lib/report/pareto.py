@@ -6,8 +6,8 @@ Input is the points table of `tacgen_lib.cost.points` (one row per knob x settin
 - `pareto_front`: the settings no other setting beats on both seconds (fewer) and metric
   (better in the metric's direction);
 - `knob_sentence`: what moving the knob away from its default buys and costs, in words
-  written from the numbers ("from 1,000 to 5,000 resamples ... moves by 0.004 and the job
-  takes 3.1x as long");
+  written from the numbers (how far the metric moves, and how many times as long the job
+  takes);
 - `marginal_table`: between consecutive points of each front, the metric gained per extra
   minute of wall time.
 """

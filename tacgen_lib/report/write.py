@@ -31,7 +31,7 @@ __all__ = [
 ]
 
 FIGURE_DPI = 110
-#: the largest figure Snakemake's viewer shows whole and at full size at a 1600 × 1000 window:
+#: the largest figure Snakemake's viewer shows whole and at full size in a 1600-by-1000 window:
 #: its image pane is 1,070–1,180 px wide beside the menu (the menu grows with its labels), and
 #: it centres an image vertically,
 #: cutting off (unscrollably) whatever is taller than the window

@@ -1,8 +1,8 @@
 """Snakemake `benchmark:` files: the one source of a job's run time (never an edge's contents).
 
 A benchmark TSV has one row per repeat with wall seconds `s`, `cpu_time` and memory columns.
-Snakemake samples memory and CPU sparsely (every 0.5 s for the first 30 samples, then every
-30 s: snakemake#851, #2147), so `cpu_time` and `max_rss` of long jobs are under-reported; wall
+Snakemake samples memory and CPU sparsely, and ever more rarely as a job runs
+(snakemake#851, #2147), so `cpu_time` and `max_rss` of long jobs are under-reported; wall
 `s` is reliable. Where a figure needs peak memory or CPU time, the job measures it itself and
 writes it beside the benchmark, not into an edge.
 
@@ -140,7 +140,7 @@ def cpuinfo() -> dict[str, str]:
 
 def cpu_label() -> str:
     """The CPU a figure was measured on: model, core count and widest x86 vector extension
-    (the same code runs 2-3x slower on the 2-core class without AVX-512)."""
+    (the same code runs markedly slower on the 2-core class without AVX-512)."""
     info = cpuinfo()
     model, flags = info.get("model name", "unknown CPU"), set(info.get("flags", "").split())
     vector = next((f for f in ("avx512f", "avx2", "avx", "sse4_2") if f in flags), "-")

@@ -47,9 +47,8 @@ __all__ = [
 #: (the simulator's: corpus shards and demonstrations), then the heavy rest (scikit-learn,
 #: torch, matplotlib), which the jobs that need it come after. Between two imports the server
 #: forks the jobs waiting for it (`serve`). mujoco comes last: imported before scikit-learn and
-#: torch, beside OpenCV, it made every later scikit-learn fit in the copies slower (a 5x5
-#: Ridge: 0.26 against 0.02 CPU-s, measured; the OpenMP and BLAS libraries load in another
-#: order), so the simulator's first jobs import it themselves.
+#: torch, beside OpenCV, it made every later scikit-learn fit in the copies slower (a tiny
+#: Ridge took many times its CPU time: the OpenMP and BLAS libraries load in another order), so the simulator's first jobs import it themselves.
 PRELOADED_MODULES = (
     "numpy",
     "threadpoolctl",

@@ -13,7 +13,7 @@ timer threads alive (measured on a 2-core machine; `tests/runtime/test_scheduler
 the chains grow and the patch stops them).
 
 A local run needs no submission rate limit: the cores already bound what runs at once, and
-Snakemake before 8.17 had none. `drop_local_rate_limit` removes it from a local run's
+Snakemake before version ``8.17`` had none. `drop_local_rate_limit` removes it from a local run's
 scheduler when it is Snakemake's default, before the first pass, so the loop wakes only when a
 job finishes, as it did then. A rate limit given on the command line, and any cluster or cloud
 executor's (whose submissions the limit exists to pace), are kept.

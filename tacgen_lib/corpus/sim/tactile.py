@@ -216,7 +216,8 @@ def marker_pattern(
 
 
 # Gaussian quantiles at the 65536 mid-points of (0, 1): noise = table[uniform uint16], an exact
-# inverse-CDF draw quantised to 16 bits, ~5x faster than rng.standard_normal for a frame.
+# inverse-CDF draw quantised to 16 bits, several times faster than rng.standard_normal for a
+# frame.
 _NOISE_TABLE = (NOISE_SIGMA * ndtri((np.arange(65536) + 0.5) / 65536)).astype(np.float32)
 
 
