@@ -655,3 +655,17 @@ def test_policy_cost_table_and_cost_page_give_one_run_the_same_seconds(run_dir):
         assert cells, (p.label, list(table))
         totals = [float(table[c]["total s"]) for c in cells]
         assert np.mean(totals) == pytest.approx(p.wall_s, abs=0.01), (p.label, totals)
+
+
+def test_the_browser_check_names_wide_tables_and_broken_words():
+    sys.path.insert(0, str(ROOT / "tools"))
+    from browse_report import check_frame
+
+    fits = {"empty": False, "scroll": [1000, 1000], "broken": []}
+    assert check_frame(fits) == []
+    wide = {**fits, "scroll": [1300, 1200], "broken": ["hardness"]}
+    assert check_frame(wide) == [
+        "wider than its frame: 1300 px in 1200 px",
+        "words broken across lines: ['hardness']",
+    ]
+    assert check_frame({"empty": True}) == ["shows nothing: empty HTML page"]

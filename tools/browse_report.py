@@ -8,7 +8,9 @@ the driver's path given, so nothing is downloaded. A problem is reported when:
 - a figure is cropped by the viewer (any edge of the image outside the visible content area) or
   shown smaller than its pixels (the viewer scales down an image wider than its pane: its text
   would shrink below the size it was drawn at);
-- an HTML table is wider than its frame (a horizontal scroll bar hides columns);
+- an HTML table is wider than its frame (a horizontal scroll bar hides columns), or a word of
+  one of its cells is broken across lines (a long identifier may break between its parts,
+  `tacgen_lib.report.tables.cell_html`; a monospaced hash or path column anywhere);
 - a result has no caption, or a caption that is only its file name.
 
     usage: python tools/browse_report.py results/report.html [--shots DIR] [--size 1600x1000]
@@ -127,8 +129,24 @@ return {natural: [img.naturalWidth, img.naturalHeight], shown: [r.width, r.heigh
 _FRAME_GEOMETRY = """
 const d = document;
 if (!d.body) { return {empty: true}; }
+// words of table cells laid out on more than one line: broken mid-word (a text node is a run
+// between two line-break opportunities the page allows, <wbr>)
+const broken = [];
+for (const cell of d.querySelectorAll('td:not(.mono), th')) {
+  const walk = d.createTreeWalker(cell, NodeFilter.SHOW_TEXT);
+  for (let node = walk.nextNode(); node; node = walk.nextNode()) {
+    for (const m of node.data.matchAll(/[^\\s\\-–]+[\\-–]?/g)) {
+      const r = d.createRange();
+      r.setStart(node, m.index);
+      r.setEnd(node, m.index + m[0].length);
+      const tops = new Set([...r.getClientRects()].map((x) => Math.round(x.top)));
+      if (tops.size > 1) { broken.push(m[0]); }
+    }
+  }
+}
 return {empty: d.body.innerText.trim().length === 0,
         scroll: [d.documentElement.scrollWidth, d.documentElement.clientWidth],
+        broken: broken.slice(0, 5),
         text: d.body.innerText.slice(0, 200)};
 """
 
@@ -159,10 +177,13 @@ def check_frame(geometry: dict | None) -> list[str]:
     """Problems of an HTML item from its iframe's document (see `_FRAME_GEOMETRY`)."""
     if geometry is None or geometry.get("empty"):
         return ["shows nothing: empty HTML page"]
+    problems = []
     width, frame = geometry["scroll"]
     if width > frame + 1:
-        return [f"wider than its frame: {width} px in {frame} px"]
-    return []
+        problems.append(f"wider than its frame: {width} px in {frame} px")
+    if geometry.get("broken"):
+        problems.append(f"words broken across lines: {geometry['broken']}")
+    return problems
 
 
 def _in_frame(driver, script: str):

@@ -116,31 +116,61 @@ def _comparison_columns(rows: pd.DataFrame) -> pd.DataFrame:
             "metric": rows["metric"],
             "V": rows["v_score"].map(_num),
             "V+T": rows["vt_score"].map(_num),
-            "train mean": _col(rows, "baseline_score").map(_num),
-            "shape-only": _col(rows, "visible_score").map(_num),
+            "train mean / shape-only": [
+                f"{_num(m)} / {_num(s)}"
+                for m, s in zip(
+                    _col(rows, "baseline_score"), _col(rows, "visible_score"), strict=True
+                )
+            ],
             "Δ [95% CI]": rows.apply(_delta_ci, axis=1),
             "p(Δ>0)": rows["p_gt0"].map(_num),
             "Δ_ctrl": rows["delta_ctrl"].map(lambda x: _num(x, "{:+.3f}")),
-            "criterion": rows["criterion_met"].map(_criterion),
-            "criterion (Holm, family)": _col(rows, "criterion_adjusted").map(_criterion),
-            "p (Holm, family)": _col(rows, "p_holm_family").map(lambda x: _num(x, "{:.4f}")),
-            "q (BH, all)": _col(rows, "p_bh").map(lambda x: _num(x, "{:.4f}")),
-            "n train/test": rows["n_train"].astype(str) + "/" + rows["n_test"].astype(str),
-            "flag": [
-                claims.extreme_flag(
-                    r.metric,
-                    r.v_score,
-                    r.vt_score,
-                    r.ci_low,
-                    r.ci_high,
-                    getattr(r, "baseline_score", math.nan),
-                    getattr(r, "n_test", math.nan),
+            "criterion (paper / Holm, family)": [
+                _criteria(a, b)
+                for a, b in zip(
+                    rows["criterion_met"], _col(rows, "criterion_adjusted"), strict=True
                 )
+            ],
+            "p Holm (family) / q BH (all)": [
+                _p_pair(p, q)
+                for p, q in zip(_col(rows, "p_holm_family"), _col(rows, "p_bh"), strict=True)
+            ],
+            "n train/test": rows["n_train"].astype(str) + "/" + rows["n_test"].astype(str),
+            # a row's warning and notes, one text (the page writes it as a footnote mark)
+            "notes": [
+                "; ".join(t for t in (_flag(r), r.notes if isinstance(r.notes, str) else "") if t)
                 for r in rows.itertuples()
             ],
-            "notes": rows["notes"],
         }
     ).reset_index(drop=True)
+
+
+def _criteria(paper: object, holm: object) -> str:
+    """The paper's criterion and its Holm-adjusted reading, as one cell ("yes / no"); "not
+    evaluated" once where neither was."""
+    a, b = _criterion(paper), _criterion(holm)
+    return a if a == b == "not evaluated" else f"{a} / {b}"
+
+
+def _p_pair(p: float, q: float) -> str:
+    """A row's family-wise Holm p and its all-comparisons BH q, as one cell ("p / q"); a
+    row without them (a summary from before they existed) gets the missing mark."""
+    if not (np.isfinite(p) or np.isfinite(q)):
+        return fmt.MISSING
+    return f"{_num(p, '{:.4f}')} / {_num(q, '{:.4f}')}"
+
+
+def _flag(r) -> str:
+    """The warning `claims.extreme_flag` gives a comparison row, or ""."""
+    return claims.extreme_flag(
+        r.metric,
+        r.v_score,
+        r.vt_score,
+        r.ci_low,
+        r.ci_high,
+        getattr(r, "baseline_score", math.nan),
+        getattr(r, "n_test", math.nan),
+    )
 
 
 def skipped_note(summary: pd.DataFrame, controlled: bool) -> list[str]:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import html
+import re
 from collections.abc import Iterable
 from pathlib import Path
 
@@ -11,7 +12,14 @@ import pandas as pd
 from tacgen_lib.io import hashed
 from tacgen_lib.report import format as fmt
 
-__all__ = ["edge_manifest_table", "pretrained_vs_random_view", "to_html"]
+__all__ = [
+    "cell_html",
+    "constants_to_lead",
+    "edge_manifest_table",
+    "footnote_column",
+    "pretrained_vs_random_view",
+    "to_html",
+]
 
 
 def edge_manifest_table(paths: Iterable[str]) -> pd.DataFrame:
@@ -66,7 +74,7 @@ def pretrained_vs_random_view(table: pd.DataFrame) -> pd.DataFrame:
 _STYLE = (
     "body{font-family:sans-serif;font-size:13px;margin:8px}"
     "table{border-collapse:collapse;width:100%}"
-    "td,th{border:1px solid #ccc;padding:3px 5px;vertical-align:top;overflow-wrap:anywhere}"
+    "td,th{border:1px solid #ccc;padding:3px 5px;vertical-align:top;overflow-wrap:break-word}"
     "th{background:#eee}td.mono{font-family:monospace;font-size:11px;word-break:break-all}"
     "td.num{text-align:right;white-space:nowrap}p.note{color:#444;max-width:70em}"
     "p.lead{max-width:70em;margin:4px 0 8px}"
@@ -74,6 +82,56 @@ _STYLE = (
 
 # a column of differences: its numbers are written with their sign
 _SIGNED = ("Δ", "delta", "gain")
+
+#: where a long identifier may break across lines (after each of these characters): a cell's
+#: words stay whole (``overflow-wrap: break-word`` breaks a word only where it alone is wider
+#: than its column), and an identifier of `LONG_IDENTIFIER` characters or more, such as
+#: ``sim_natural_r05|32|1024``, breaks between its parts, never inside one; a short one
+#: (``N_L``, ``Δ_ctrl``) stays whole
+_ID_SEPARATORS = re.compile(r"([_|/~])(?=\S)")
+LONG_IDENTIFIER = 12
+
+
+def cell_html(text: str) -> str:
+    """A cell's text, escaped, with a line-break opportunity (``<wbr>``) after each identifier
+    separator (`_ID_SEPARATORS`) inside a long identifier; the text itself, as copied from the
+    page, is unchanged."""
+    return "".join(
+        _ID_SEPARATORS.sub(r"\1<wbr>", html.escape(part))
+        if len(part) >= LONG_IDENTIFIER
+        else html.escape(part)
+        for part in re.split(r"(\s+)", text)
+    )
+
+
+def footnote_column(table: pd.DataFrame, column: str) -> tuple[pd.DataFrame, list[str]]:
+    """A column of long texts as footnote marks: each distinct non-empty text gets a number in
+    order of first appearance, its cells the mark (``[1]``), and the notes list the texts
+    (``[1] text``). A column of sentences no longer sets the table's width; the rows keep
+    which note is theirs."""
+    marks: dict[str, int] = {}
+    cells = []
+    for text in table[column].fillna("").astype(str):
+        text = text.strip()
+        if text:
+            marks.setdefault(text, len(marks) + 1)
+        cells.append(f"[{marks[text]}]" if text else "")
+    return table.assign(**{column: cells}), [f"[{n}] {text}" for text, n in marks.items()]
+
+
+def constants_to_lead(
+    table: pd.DataFrame, columns: Iterable[str]
+) -> tuple[pd.DataFrame, list[str]]:
+    """The `columns` whose every row holds one value, stated once above the table (``Every
+    row: V features vit, probe seed 42.``) and dropped from it; a column that varies, or a
+    table of fewer than two rows, keeps its column."""
+    if len(table) < 2:
+        return table, []
+    same = [c for c in columns if c in table and table[c].astype(str).nunique() == 1]
+    if not same:
+        return table, []
+    stated = ", ".join(f"{c} {table[c].astype(str).iloc[0]}" for c in same)
+    return table.drop(columns=same), [f"Every row: {stated}."]
 
 
 def to_html(
@@ -94,12 +152,12 @@ def to_html(
     columns = [str(c) for c in table.columns]
     cells = {c: fmt.column_cells(table[c], sign=str(c).startswith(_SIGNED)) for c in table.columns}
     numeric = {c for c in table.columns if table[c].dtype.kind in "iuf"}
-    head = "".join(f"<th>{html.escape(c)}</th>" for c in columns)
+    head = "".join(f"<th>{cell_html(c)}</th>" for c in columns)
     body = []
     for i in range(len(table)):
         row = "".join(
             f'<td class="{"mono" if c in mono else "num" if c in numeric else ""}">'
-            f"{html.escape(cells[c][i])}</td>"
+            f"{cell_html(cells[c][i])}</td>"
             for c in table.columns
         )
         body.append(f"<tr>{row}</tr>")

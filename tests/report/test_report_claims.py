@@ -6,6 +6,7 @@ a degenerate interval, values that round to zero."""
 from __future__ import annotations
 
 import math
+import re
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -20,7 +21,7 @@ from tacgen_lib.policy.settings import PolicySettings
 from tacgen_lib.report import claims, findings
 from tacgen_lib.report import format as fmt
 from tacgen_lib.report.pareto import knob_sentence, marginal_table
-from tacgen_lib.report.tables import to_html
+from tacgen_lib.report.tables import cell_html, constants_to_lead, footnote_column, to_html
 from tacgen_lib.report.write import MAX_FIGURE_PX, figure_problems, panel_grid, write_figure
 from tacgen_lib.report_pages import PAGES, category, page_of
 
@@ -70,6 +71,35 @@ def test_tables_write_no_nan_and_footnote_the_dash():
     # a lead paragraph comes before the table, a note after it
     page = to_html(table, title="t", lead=["What it says."], notes=["How it was made."])
     assert page.index("What it says.") < page.index("<table>") < page.index("How it was made.")
+
+
+def test_long_identifiers_break_between_their_parts_and_words_never():
+    # a long identifier gets a break opportunity after each separator; short ones, plain
+    # words and the text a reader copies stay as they are
+    got = cell_html("sim_natural_r05|32|1024 at N_L = 8, x<y")
+    assert got == "sim_<wbr>natural_<wbr>r05|<wbr>32|<wbr>1024 at N_L = 8, x&lt;y"
+    assert cell_html("Δ_ctrl hardness") == "Δ_ctrl hardness"
+    assert re.sub("<wbr>", "", cell_html("a_very_long_identifier")) == "a_very_long_identifier"
+    page = to_html(pd.DataFrame({"N_L": [8], "cell": ["sim_natural_r05|32"]}), title="t")
+    assert "<th>N_L</th>" in page and "sim_<wbr>natural_<wbr>r05|<wbr>32" in page
+
+
+def test_a_column_of_sentences_becomes_footnote_marks():
+    table = pd.DataFrame({"x": [1, 2, 3, 4], "notes": ["too wide", "", "too wide", "one class"]})
+    marked, notes = footnote_column(table, "notes")
+    assert list(marked["notes"]) == ["[1]", "", "[1]", "[2]"]
+    assert notes == ["[1] too wide", "[2] one class"]
+    assert list(table["notes"])[0] == "too wide"  # the input is not changed
+
+
+def test_columns_every_row_shares_move_above_the_table():
+    table = pd.DataFrame({"seed": [42, 42], "metric": ["r2", "accuracy"], "v": [0.1, 0.2]})
+    rest, lead = constants_to_lead(table, ("seed", "metric", "absent"))
+    assert list(rest.columns) == ["metric", "v"] and lead == ["Every row: seed 42."]
+    # one row, or nothing shared: the table keeps every column
+    one, lead = constants_to_lead(table.head(1), ("seed",))
+    assert one.equals(table.head(1)) and lead == []
+    assert constants_to_lead(table, ("metric",))[1] == []
 
 
 @given(st.floats(allow_nan=True, allow_infinity=True, width=64))

@@ -13,6 +13,7 @@ from tacgen_lib.io import edges, log
 from tacgen_lib.probes.multiplicity import adjust
 from tacgen_lib.probes.protocol import tidy
 from tacgen_lib.report import probes as report_probes
+from tacgen_lib.report.tables import constants_to_lead, footnote_column
 from tacgen_lib.report.write import write_figure, write_table
 
 logger = log.for_rule(snakemake)
@@ -66,8 +67,22 @@ notes = {
     "controlled": report_probes.skipped_note(summary, controlled=True),
     "paired": report_probes.skipped_note(summary, controlled=False),
 }
+lead = {}
+for name in ("controlled", "paired"):
+    # narrower comparison tables: what every row shares above, each row's notes as a mark
+    table, title = tables[name]
+    table, lead[name] = constants_to_lead(table, ("V features", "probe seed", "n train/test"))
+    table, marks = footnote_column(table, "notes")
+    tables[name], notes[name] = (table, title), [*notes[name], *marks]
 for name, (table, title) in tables.items():
-    write_table(table, snakemake.output[name], title=title, mono=(), notes=notes.get(name, ()))
+    write_table(
+        table,
+        snakemake.output[name],
+        title=title,
+        mono=(),
+        notes=notes.get(name, ()),
+        lead=lead.get(name, ()),
+    )
     logger.info("table %s: %d rows", name, len(table))
 # one figure per family: forest plots and confusion matrices (report directories)
 Path(snakemake.output.forest).mkdir(parents=True, exist_ok=True)

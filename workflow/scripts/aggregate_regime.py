@@ -12,6 +12,7 @@ from tacgen_lib.generate.regime import SUMMARY_COLUMNS
 from tacgen_lib.generate.visibility import visibility_gate
 from tacgen_lib.io import edges, log
 from tacgen_lib.report import regime as report
+from tacgen_lib.report.tables import constants_to_lead
 from tacgen_lib.report.write import write_figure, write_table
 
 logger = log.for_rule(snakemake)
@@ -60,11 +61,14 @@ write_table(
         "not V: it is the positive control.",
     ],
 )
+# what every row shares (one pool size by construction, often one target) above the table
+arms, shared = constants_to_lead(report.regime_table(view), ("target", "N_P"))
 write_table(
-    report.regime_table(view),
+    arms,
     out.table,
     title="Every arm at the largest pool, the fewest and the most labels (mean over replicates)",
     mono=(),
+    lead=shared,
     notes=[
         "Δ: paired on the same test rows and fixed-test resamples; ↑/↓: replicates (seed × "
         "labelled draw) whose 95% CI lies above/below 0. Gap closed = (arm − nonlinear V) / "
