@@ -103,3 +103,9 @@ def validated(overlay: str | None = None) -> dict:
         update_config(cfg, yaml.safe_load((ROOT / "config" / overlay).read_text()))
     cfg["scenes_file"] = str(ROOT / cfg["scenes_file"])
     return validate_config(cfg, ROOT / "config" / "config.schema.yaml")
+
+
+def report_page(path: Path) -> str:
+    """A report page's HTML as its reader's text runs: without the line-break opportunities
+    (``<wbr>``) that `tacgen_lib.report.tables.cell_html` puts inside long identifiers."""
+    return Path(path).read_text().replace("<wbr>", "")

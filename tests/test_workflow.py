@@ -25,6 +25,7 @@ from snakemake_run import (
     merged_config,
     plan_of,
     planned_rules,
+    report_page,
     smk,
 )
 
@@ -116,7 +117,7 @@ def test_full_run_makes_verified_edges_logs_and_benchmarks(run_dir):
         for figure in ("examples", "labels"):
             assert (run_dir / f"results/report/corpus/{corpus}_{figure}.png").stat().st_size > 5000
         # the force bands against the true force, beside the shuffled-force control
-        bands = (run_dir / f"results/report/corpus/{corpus}_force_bands.html").read_text()
+        bands = report_page(run_dir / f"results/report/corpus/{corpus}_force_bands.html")
         assert "share of nominal forces inside [p05, p95]" in bands and "(control)" in bands
     table = (run_dir / "results/report/edge_manifest.tsv").read_text()
     assert hashed.sha256_file(run_dir / "results/corpus/splits.parquet") in table
@@ -181,7 +182,7 @@ def test_regime_summary_has_every_arm_of_every_cell(run_dir):
     page = run_dir / "results/report/regime"
     for name in ("findings.html", "table.html", "ladder.html", "heatmap.png", "curves.png"):
         assert (page / name).stat().st_size > 500, name
-    findings = (page / "findings.html").read_text()
+    findings = report_page(page / "findings.html")
     assert "visibility gate on sim_natural_r0" in findings and "Positive control" in findings
     assert "H1 (ρ = 0" in findings
     # the visibility check: every simulated corpus, each factor it shows, both probes
@@ -205,7 +206,7 @@ def test_regime_summary_has_every_arm_of_every_cell(run_dir):
     for name in ("table.html", "figure.png"):
         assert (run_dir / "results/report/visibility" / name).stat().st_size > 500, name
     # the natural corpora's scene presses once: their force-band table says there is no band
-    bands = (run_dir / "results/report/corpus/sim_natural_r1_force_bands.html").read_text()
+    bands = report_page(run_dir / "results/report/corpus/sim_natural_r1_force_bands.html")
     assert "no band to check" in bands
 
 
@@ -222,9 +223,9 @@ def test_language_evidence_reads_every_generator_corpus(run_dir):
     for _, g in rows.groupby(["corpus", "attribute"]):
         assert sorted(g["input"]) == sorted(INPUTS)
     assert rows["accuracy"].between(0, 1).all()
-    page = (run_dir / "results/report/language/table.html").read_text()
+    page = report_page(run_dir / "results/report/language/table.html")
     assert "generated − shuffled" in page
-    findings = (run_dir / "results/report/findings.html").read_text()
+    findings = report_page(run_dir / "results/report/findings.html")
     assert "Where generated touch helps" in findings  # the regime's rows
 
 
@@ -255,10 +256,10 @@ def test_backbone_families_page_has_every_family_probe_and_protocol(run_dir):
             hashed.verify(run_dir / f"results/features/families/{family}/{modality}.pt")
     labels = dict(zip(rows["family"], rows["vision_backbone"], strict=False))
     assert labels["resnet"] == "resnet_tiny (random init)" and labels["mae"] == "vit_tiny (MAE)"
-    page = (run_dir / "results/report/backbones/table.html").read_text()
+    page = report_page(run_dir / "results/report/backbones/table.html")
     for needle in ("2-layer MLP", "null", "resnet (V resnet_tiny (random init)"):
         assert needle in page, needle
-    findings = (run_dir / "results/report/findings.html").read_text()
+    findings = report_page(run_dir / "results/report/findings.html")
     assert "another encoder family? (resnet" in findings and "null corpus V+T − V" in findings
 
 
@@ -293,9 +294,9 @@ def test_transfer_page_has_every_heads_view_and_probe_seed_and_objects_stay_in_o
     assert len(t) == cfg["corpora"]["sim_transfer"]["n"]
     assert (t.groupby("appearance_id")["split"].nunique() == 1).all()
     assert (t.groupby("appearance_id").size() == cfg["corpora"]["sim_transfer"]["contacts"]).all()
-    page = (run_dir / "results/report/transfer/table.html").read_text()
+    page = report_page(run_dir / "results/report/transfer/table.html")
     assert "shuffled" in page and "retrained (upper)" in page
-    findings = (run_dir / "results/report/findings.html").read_text()
+    findings = report_page(run_dir / "results/report/findings.html")
     assert "transfer to a second sensor" in findings
 
 
@@ -331,9 +332,9 @@ def test_pixel_page_judges_every_arm_on_both_axes_and_the_curve_has_every_point(
     # p = 0 once (both pairings share the real-only heads); every p > 0 both pairings
     assert set(points.loc[points["fraction"] > 0, "pairing"]) == {"generated", "shuffled"}
     assert set(points.loc[points["fraction"] == 0, "pairing"]) == {"generated"}
-    page = (run_dir / "results/report/pixel/architecture.html").read_text()
+    page = report_page(run_dir / "results/report/pixel/architecture.html")
     assert "Pix2Pix" in page and "shuffled" in page and "LPIPS" in page
-    findings = (run_dir / "results/report/findings.html").read_text()
+    findings = report_page(run_dir / "results/report/findings.html")
     assert "pixel generators" in findings
 
 
@@ -587,7 +588,7 @@ def test_real_corpus_path_runs_on_fixtures(tmp_path):
     assert manifest["corpus"].value_counts().to_dict() == {"ssvtp": 12, "hct": 8}
     assert (work / "results/report/corpus/ssvtp_examples.png").stat().st_size > 1000
     for corpus in ("ssvtp", "hct"):  # real corpora record no contact force, and say so
-        bands = (work / f"results/report/corpus/{corpus}_force_bands.html").read_text()
+        bands = report_page(work / f"results/report/corpus/{corpus}_force_bands.html")
         assert "no true contact force recorded" in bands
     assert len(edges.read(work / "results/features/hct/tactile~clip128.parquet")) == 8
     vision = edges.read(work / "results/features/ssvtp/vision.parquet", require={"vit": 384})
@@ -643,7 +644,7 @@ def test_policy_cost_table_and_cost_page_give_one_run_the_same_seconds(run_dir):
     import pandas as pd
 
     points = pd.read_parquet(run_dir / "results/cost/points/policy_width.parquet")
-    page = (run_dir / "results/report/policy/cost.html").read_text()
+    page = report_page(run_dir / "results/report/policy/cost.html")
     rows = re.findall(r"<tr>(.*?)</tr>", page)
     heads = [html_lib.unescape(h) for h in re.findall(r"<th>(.*?)</th>", rows[0])]
     table = {}

@@ -1,4 +1,4 @@
-"""Tables and figures of the probes stage, built from the probe summary (pure functions).
+"""Tables of the probes stage, built from the probe summary (pure functions).
 
 Input is the tidy summary written by rule ``aggregate_probes`` (one row per family, input,
 tactile variant, fusion, alignment seed, probe seed and control; see `tacgen_lib.probes.protocol`), plus its
@@ -14,31 +14,28 @@ HTML with `report_tables.to_html`) or a matplotlib Figure; none reads or writes 
 - `align_seed_table`: aligned-input results as mean +- sd over alignment seeds.
 - `variant_table`: the tactile preprocessing ablation (raw V + raw T of each variant, concat).
 - `controls_table`: every control row next to its comparison's Delta.
-- `forest_plot`: Delta with its 95% CI for every main comparison of one family, labelled by
-  family / input / fusion and seeds; null-corpus families in their own colour.
-- `confusion_figures`: confusion matrices of the logistic probes (concat comparisons), per family.
+
+Its figures (forest plots, confusion matrices) are `tacgen_lib.report.probe_figures`'.
 """
 
 from __future__ import annotations
 
 import math
 
-import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
 from tacgen_lib.probes.fusion import fusion_table
-from tacgen_lib.probes.rows import class_order
-from tacgen_lib.report import PALETTE, claims
+from tacgen_lib.report import claims
 from tacgen_lib.report import format as fmt
 
 __all__ = [
     "align_seed_table",
-    "confusion_figures",
+    "baselines_text",
     "controlled_table",
     "controls_table",
-    "forest_plot",
-    "forest_families",
+    "headline_rows",
+    "seed_text",
     "skipped_note",
     "fusions_frame",
     "main_rows",
@@ -58,7 +55,7 @@ def _num(x: object, spec: str = "{:.3f}") -> str:
     return fmt.number(x, 4 if ".4f" in spec else 3)
 
 
-def _seed(x: object) -> str:
+def seed_text(x: object) -> str:
     if x is None or x is pd.NA or (isinstance(x, float) and math.isnan(x)):
         return "-"
     return str(int(x))
@@ -85,7 +82,7 @@ def main_rows(summary: pd.DataFrame) -> pd.DataFrame:
     ).drop(columns="_a")
 
 
-def _headline(rows: pd.DataFrame) -> pd.DataFrame:
+def headline_rows(rows: pd.DataFrame) -> pd.DataFrame:
     """Main comparisons with the heads' tactile variant (the ablation has its own table)."""
     return rows.loc[rows["t_variant"] == rows["heads_variant"]]
 
@@ -95,7 +92,7 @@ def _col(rows: pd.DataFrame, name: str) -> pd.Series:
     return rows[name] if name in rows else pd.Series(math.nan, index=rows.index)
 
 
-def _baselines(r: pd.Series) -> str:
+def baselines_text(r: pd.Series) -> str:
     """V, V+T and the baselines that size a Delta, as one short text."""
     text = f"V {_num(r['v_score'])}  V+T {_num(r['vt_score'])}"
     text += f"  mean {_num(r.get('baseline_score', math.nan))}"
@@ -111,8 +108,8 @@ def _comparison_columns(rows: pd.DataFrame) -> pd.DataFrame:
             "V features": rows.get("vision", pd.Series("", index=rows.index)),
             "input": rows["input"],
             "fusion": rows["fusion"],
-            "align seed": rows["align_seed"].map(_seed),
-            "probe seed": rows["probe_seed"].map(_seed),
+            "align seed": rows["align_seed"].map(seed_text),
+            "probe seed": rows["probe_seed"].map(seed_text),
             "metric": rows["metric"],
             "V": rows["v_score"].map(_num),
             "V+T": rows["vt_score"].map(_num),
@@ -176,7 +173,7 @@ def _flag(r) -> str:
 def skipped_note(summary: pd.DataFrame, controlled: bool) -> list[str]:
     """One footnote for the comparisons planned as skipped on a corpus design (they are left
     out of its table): how many, and each distinct reason once."""
-    rows = _headline(main_rows(summary))
+    rows = headline_rows(main_rows(summary))
     rows = rows.loc[
         ((rows["design"] == "controlled") == controlled) & (rows["status"] == "skipped")
     ]
@@ -191,7 +188,7 @@ def skipped_note(summary: pd.DataFrame, controlled: bool) -> list[str]:
 def controlled_table(summary: pd.DataFrame) -> pd.DataFrame:
     """Families on the appearance-controlled corpus: pixel-V families first (the headline).
     Comparisons planned as skipped are left out (`skipped_note` says which and why)."""
-    rows = _headline(main_rows(summary))
+    rows = headline_rows(main_rows(summary))
     rows = rows.loc[(rows["design"] == "controlled") & (rows["status"] != "skipped")].copy()
     rows["_vit"] = rows["vision"] != "pixel"
     rows = rows.sort_values(["_vit", "family"], kind="stable")
@@ -202,7 +199,7 @@ def _keys(rows: pd.DataFrame, columns: list[str]) -> list[str]:
     """One text key per row from `columns` (missing values as "-")."""
     return [
         "|".join(
-            _seed(v)
+            seed_text(v)
             if isinstance(v, (int, float, np.integer)) or v is pd.NA or v is None
             else str(v)
             for v in r
@@ -214,7 +211,7 @@ def _keys(rows: pd.DataFrame, columns: list[str]) -> list[str]:
 def paired_table(summary: pd.DataFrame) -> pd.DataFrame:
     """Paired-corpus families, each with its ``_null`` sibling's result in the columns beside;
     comparisons planned as skipped are left out (`skipped_note`)."""
-    rows = _headline(main_rows(summary))
+    rows = headline_rows(main_rows(summary))
     rows = rows.loc[(rows["design"] != "controlled") & (rows["status"] != "skipped")]
     families = sorted(rows["family"].unique())
     main = [f for f in families if not (f.endswith("_null") and f[: -len("_null")] in families)]
@@ -254,7 +251,7 @@ def sweep_table(sweep: pd.DataFrame, summary: pd.DataFrame) -> pd.DataFrame:
     sw["cell"] = [
         f"{v:+.3f}{'*' if s else ''}" for v, s in zip(sw["value"], sw["selected_vt"], strict=True)
     ]
-    sw["_a"] = sw["align_seed"].map(_seed)
+    sw["_a"] = sw["align_seed"].map(seed_text)
     sw["column"] = sw["reg_name"] + "=" + sw["reg"].map(lambda r: f"{r:g}")
     sw["measure"] = np.where(sw["reg_name"] == "lambda", "Δ test R²", "Δ CV accuracy")
     index = ["family", "measure", "input", "fusion", "_a", "probe_seed"]
@@ -284,7 +281,7 @@ def align_seed_table(summary: pd.DataFrame) -> pd.DataFrame:
                 "target": g["target"].iloc[0],
                 "fusion": fusion,
                 "probe seed": int(seed),
-                "align seeds": ", ".join(map(_seed, g["align_seed"])),
+                "align seeds": ", ".join(map(seed_text, g["align_seed"])),
                 "V": ms("v_score"),
                 "V+T": ms("vt_score"),
                 "Δ": ms("delta"),
@@ -331,8 +328,8 @@ def controls_table(summary: pd.DataFrame) -> pd.DataFrame:
             "family": ctrl["family"],
             "input": ctrl["input"],
             "fusion": ctrl["fusion"],
-            "align seed": ctrl["align_seed"].map(_seed),
-            "probe seed": ctrl["probe_seed"].map(_seed),
+            "align seed": ctrl["align_seed"].map(seed_text),
+            "probe seed": ctrl["probe_seed"].map(seed_text),
             "Δ (comparison)": [_num(main.loc[p, "delta"], "{:+.3f}") for p in parent],
             "control": ctrl["control"],
             "draws": ctrl["n_resamples"].astype(str),
@@ -351,117 +348,3 @@ def controls_table(summary: pd.DataFrame) -> pd.DataFrame:
 def fusions_frame() -> pd.DataFrame:
     """The fusion variants (`fusion.fusion_table`) as a table."""
     return pd.DataFrame(fusion_table())
-
-
-def forest_plot(summary: pd.DataFrame, family: str, *, min_delta: float = 0.03) -> plt.Figure:
-    """Delta with its 95% fixed-test bootstrap CI for every main comparison (heads' variant) of
-    one probe family: one figure per family, so each is shown at full size in the viewer.
-
-    Lines are labelled ``input / fusion  a~align seed s~probe seed``, with 0 (solid) and the
-    paper's min Delta (dashed). Null-corpus families are drawn in grey. The marker says what
-    the paper's criterion says of the line: a diamond where it is met, a filled circle where it
-    is not, an open circle where it was not evaluated (its controls run on one comparison per
-    family: concat, first seeds). Beside each line, the scores that size its Delta: V, V+T, the
-    train-mean baseline and (where the manifest has shape and scale) the shape-only ceiling; a
-    grey bar marks where Delta would be if V+T scored the shape-only ceiling.
-    """
-    rows = _headline(main_rows(summary))
-    part = rows.loc[(rows["status"] == "ok") & (rows["family"] == family)].iloc[::-1]
-    fig, ax = plt.subplots(figsize=(9.5, 1.9 + 0.34 * max(len(part), 1)))
-    null = bool(part["null_corpus"].astype(bool).any()) if len(part) else False
-    colour = PALETTE["grey"] if null else PALETTE["blue"]
-    y = np.arange(len(part))
-    for yi, (_, r) in zip(y, part.iterrows(), strict=True):
-        ax.plot([r["ci_low"], r["ci_high"]], [yi, yi], color=colour, lw=1.6)
-        met = r["criterion_met"]
-        if fmt.is_missing(met):
-            ax.plot([r["delta"]], [yi], marker="o", mfc="white", mec=colour, ms=6)
-        else:
-            ax.plot(
-                [r["delta"]], [yi], marker="D" if met else "o", color=colour, ms=7 if met else 5
-            )
-        shape = r.get("visible_score", math.nan)
-        if shape is not None and np.isfinite(shape):
-            ax.plot([shape - r["v_score"]], [yi], marker="|", color="#999999", ms=9)
-        ax.text(
-            1.02, yi, _baselines(r), transform=ax.get_yaxis_transform(), fontsize=8, va="center"
-        )
-    labels = [
-        f"{r['input']} / {r['fusion']}  a~{_seed(r['align_seed'])} s~{_seed(r['probe_seed'])}"
-        for _, r in part.iterrows()
-    ]
-    ax.set_yticks(y, labels, fontsize=8)
-    ax.set_ylim(-0.8, max(len(part), 1) - 0.2)
-    ax.axvline(0.0, color="black", lw=0.8)
-    ax.axvline(min_delta, color="black", lw=0.8, ls="--")
-    metric = part["metric"].iloc[0] if len(part) else ""
-    corpus = part["corpus"].iloc[0] if len(part) else ""
-    ax.set_title(
-        f"{family} ({corpus}, {metric}{', null corpus' if null else ''}): Δ = V+T − V with 95% "
-        "CI\n◆ criterion met  ● not met  ○ not evaluated; dashed: the paper's min Δ",
-        fontsize=9,
-    )
-    ax.set_xlabel("Δ = V+T − V, 95% fixed-test bootstrap CI", fontsize=8)
-    ax.tick_params(axis="x", labelsize=8)
-    ax.grid(axis="x", color="#dddddd", lw=0.6)
-    fig.tight_layout()
-    fig.subplots_adjust(right=0.64)
-    return fig
-
-
-def forest_families(summary: pd.DataFrame) -> list[str]:
-    """The families `forest_plot` draws, in summary order."""
-    rows = _headline(main_rows(summary))
-    return list(dict.fromkeys(rows.loc[rows["status"] == "ok", "family"]))
-
-
-def confusion_figures(confusion: pd.DataFrame) -> dict[str, plt.Figure]:
-    """Confusion matrices (test rows) of the logistic probes' concat comparisons, V beside
-    V+T: one figure per family (two comparisons side by side per row)."""
-    conf = confusion.loc[confusion["fusion"] == "concat"] if len(confusion) else confusion
-    if len(conf):
-        conf = conf.loc[conf["t_variant"] == conf["heads_variant"]]
-    out = {}
-    if not len(conf):
-        return out
-    conf = conf.assign(_a=conf["align_seed"].fillna(-1))
-    for fam, fam_rows in conf.groupby("family", sort=True):
-        groups = list(fam_rows.groupby(["input", "_a", "probe_seed"], sort=True))
-        per_row = 1 if len(groups) == 1 else 2
-        nrows = -(-len(groups) // per_row)
-        fig, axes = plt.subplots(
-            nrows, 2 * per_row, figsize=(4.6 * per_row, min(2.9 * nrows, 8.6)), squeeze=False
-        )
-        for ax in axes.flat[2 * len(groups) :]:
-            ax.axis("off")
-        for k, ((inp, a, s), g) in enumerate(groups):
-            classes = class_order(g["true"])
-            row, col = divmod(k, per_row)
-            for m_i, model in enumerate(("V", "V+T")):
-                ax = axes[row, 2 * col + m_i]
-                m = g.loc[g["model"] == model]
-                mat = (
-                    m.pivot_table(index="true", columns="pred", values="count", aggfunc="sum")
-                    .reindex(index=classes, columns=classes)
-                    .fillna(0)
-                    .to_numpy()
-                )
-                top = max(mat.max(), 1)
-                ax.imshow(mat, cmap="Blues", vmin=0, vmax=top)
-                for (i, j), v in np.ndenumerate(mat):
-                    colour = "white" if v > 0.6 * top else "black"
-                    ax.text(j, i, f"{int(v)}", ha="center", va="center", fontsize=8, color=colour)
-                ax.set_xticks(range(len(classes)), classes, fontsize=8, rotation=30)
-                ax.set_yticks(range(len(classes)), classes, fontsize=8)
-                ax.set_xlabel("predicted", fontsize=8)
-                ax.set_ylabel("true", fontsize=8)
-                acc = np.trace(mat) / max(mat.sum(), 1)
-                ax.set_title(
-                    f"{inp} a~{_seed(a if a >= 0 else None)} s~{int(s)}\n"
-                    f"{model}: accuracy {fmt.number(acc)}",
-                    fontsize=8,
-                )
-        fig.suptitle(f"{fam}: confusion matrices on the test rows", fontsize=9)
-        fig.tight_layout()
-        out[str(fam)] = fig
-    return out

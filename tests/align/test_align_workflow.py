@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from snakemake_run import copy_tree, smk
+from snakemake_run import copy_tree, report_page, smk
 
 from tacgen_lib.align import checkpoint as align_checkpoint
 from tacgen_lib.align import grid as align_grid  # noqa: E402
@@ -105,9 +105,9 @@ def test_cell_outputs_are_verified_edges(align_run):
 def test_report_items_exist(align_run):
     report = align_run / "results/report/align"
     for name in ("tau_ablation.html", "n_scaling.html", "seeds.html"):
-        html = (report / name).read_text()
+        html = report_page(report / name)
         assert "<table>" in html and "sim_paired" in html and "sim_null" in html, name
-    assert "τ ablation" in (report / "tau_ablation.html").read_text()
+    assert "τ ablation" in report_page(report / "tau_ablation.html")
     assert (report / "curves.png").read_bytes()[:4] == b"\x89PNG"
 
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 import yaml
-from snakemake_run import copy_run, copy_tree, plan_of, planned_rules, smk
+from snakemake_run import copy_run, copy_tree, plan_of, planned_rules, report_page, smk
 
 from tacgen_lib.cost.points import read_points
 
@@ -105,7 +105,7 @@ def test_tiny_sweep_writes_points_and_the_page(reference_run: Path, tmp_path):
     perm = points["probe_permutations"]
     res = perm[perm["metric"].str.contains("resolution")].set_index("label")["value"]
     assert res.to_dict() == pytest.approx({"5": 1 / 6, "10": 1 / 11})
-    page = (work / "results/report/cost_of_accuracy.html").read_text()
+    page = report_page(work / "results/report/cost_of_accuracy.html")
     assert "align_steps: " in page and "probe_permutations: " in page
     figures = sorted((work / "results/report/cost_of_accuracy").glob("*.png"))
     assert figures and all(f.stat().st_size > 5_000 for f in figures)  # one figure per knob

@@ -23,6 +23,7 @@ from tacgen_lib.probes import plan as ps_plan
 from tacgen_lib.probes import protocol as ps_protocol
 from tacgen_lib.probes import rows as ps_rows
 from tacgen_lib.probes import settings as ps_settings
+from tacgen_lib.report import probe_figures
 from tacgen_lib.report import probes as report_probes
 from tacgen_lib.report.write import figure_problems
 
@@ -503,10 +504,10 @@ def test_report_tables_and_figures_from_a_summary(ridge_signal, logistic_signal)
         & (summary["status"] == "ok")
         & (summary["t_variant"] == summary["heads_variant"])
     ]
-    families = report_probes.forest_families(summary)
+    families = probe_figures.forest_families(summary)
     assert set(families) == set(shown["family"])  # one figure per family
     for fam in families:
-        fig = report_probes.forest_plot(summary, fam)
+        fig = probe_figures.forest_plot(summary, fam)
         assert not figure_problems(fig)  # fits the viewer, text >= 8 pt
         (ax,) = fig.axes
         assert ax.get_title().startswith(f"{fam} (")
@@ -516,7 +517,7 @@ def test_report_tables_and_figures_from_a_summary(ridge_signal, logistic_signal)
             assert "raw / concat  a~- s~42" in labels
         plt.close(fig)
     conf = logistic_signal.confusion.assign(family="hard")
-    figs = report_probes.confusion_figures(conf)
+    figs = probe_figures.confusion_figures(conf)
     assert list(figs) == ["hard"]
     assert sum(ax.has_data() for ax in figs["hard"].axes) == 2 * 3  # raw + two seeds, V and V+T
     assert not figure_problems(figs["hard"])

@@ -14,12 +14,12 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from snakemake_run import copy_tree, merged_config, smk
+from snakemake_run import copy_tree, merged_config, report_page, smk
 
 from tacgen_lib.io import edges  # noqa: E402
 from tacgen_lib.probes.compare import CONTROLS  # noqa: E402
 from tacgen_lib.probes.protocol import tidy  # noqa: E402
-from tacgen_lib.report import probes as report_probes  # noqa: E402
+from tacgen_lib.report import probe_figures  # noqa: E402
 
 pytestmark = pytest.mark.workflow
 
@@ -235,16 +235,16 @@ def test_null_corpus_rows_are_present_and_show_no_gain(summary):
 def test_report_items_exist(probes_run):
     report = probes_run / "results/report/probes"
     for name in TABLES:
-        html = (report / f"{name}.html").read_text()
+        html = report_page(report / f"{name}.html")
         assert "<table>" in html and "<tr>" in html, name
-    paired = (report / "paired.html").read_text()
+    paired = report_page(report / "paired.html")
     assert "hardness" in paired and "null: Δ [95% CI]" in paired
-    assert "mass_vit" in (report / "controlled.html").read_text()
+    assert "mass_vit" in report_page(report / "controlled.html")
     # one figure per family: every family with a comparison has a forest plot, every family
     # with a logistic probe its confusion matrices
     summary = edges.read(probes_run / "results/probes/summary.parquet").frame
     forest = sorted(p.stem for p in (report / "forest").glob("*.png"))
-    assert forest == sorted(report_probes.forest_families(summary))
+    assert forest == sorted(probe_figures.forest_families(summary))
     confusion = sorted(p.stem for p in (report / "confusion").glob("*.png"))
     assert "hardness" in confusion and "force" not in confusion
     for png in [*(report / "forest").glob("*.png"), *(report / "confusion").glob("*.png")]:
@@ -306,7 +306,7 @@ def test_robustness_outputs(probes_run, cfg):
     assert set(long["protocol"]) == set(rob["protocols"])
     hard_std = long.loc[(long["family"] == "hardness") & (long["protocol"] == "standardised")]
     assert len(hard_std) and hard_std["same_as_raw"].all()
-    html = (probes_run / "results/report/probes/robustness.html").read_text()
+    html = report_page(probes_run / "results/report/probes/robustness.html")
     assert "under every protocol variant" in html and "force" in html
     size = edges.read(probes_run / "results/probes/training_size.parquet").frame
     assert set(size["family"]) == set(rob["training_size"]["families"])
@@ -324,4 +324,4 @@ def test_robustness_outputs(probes_run, cfg):
     assert "within-scale split of the train/val rows" in log
     assert (splits.loc[splits.index.str.startswith("sim_controlled"), "split"] == "test").any()
     for name in ROBUSTNESS:
-        assert "<table>" in (probes_run / f"results/report/probes/{name}.html").read_text(), name
+        assert "<table>" in report_page(probes_run / f"results/report/probes/{name}.html"), name

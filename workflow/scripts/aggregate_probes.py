@@ -12,6 +12,7 @@ import pandas as pd
 from tacgen_lib.io import edges, log
 from tacgen_lib.probes.multiplicity import adjust
 from tacgen_lib.probes.protocol import tidy
+from tacgen_lib.report import probe_figures
 from tacgen_lib.report import probes as report_probes
 from tacgen_lib.report.tables import constants_to_lead, footnote_column
 from tacgen_lib.report.write import write_figure, write_table
@@ -86,10 +87,10 @@ for name, (table, title) in tables.items():
     logger.info("table %s: %d rows", name, len(table))
 # one figure per family: forest plots and confusion matrices (report directories)
 Path(snakemake.output.forest).mkdir(parents=True, exist_ok=True)
-for fam in report_probes.forest_families(summary):
-    write_figure(report_probes.forest_plot(summary, fam), f"{snakemake.output.forest}/{fam}.png")
+for fam in probe_figures.forest_families(summary):
+    write_figure(probe_figures.forest_plot(summary, fam), f"{snakemake.output.forest}/{fam}.png")
 Path(snakemake.output.confusion_png).mkdir(parents=True, exist_ok=True)
-for fam, fig in report_probes.confusion_figures(confusion).items():
+for fam, fig in probe_figures.confusion_figures(confusion).items():
     write_figure(fig, f"{snakemake.output.confusion_png}/{fam}.png")
 main = summary.loc[summary["control"] == "none"]
 logger.info(
