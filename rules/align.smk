@@ -49,8 +49,8 @@ rule train_heads:
     conda:
         "../envs/align.yaml"
     # one thread, so two cells train side by side: at the default's sizes a second thread
-    # shortens a cell little and costs more CPU than it saves (benchmarks/bench_align.py prints
-    # both thread counts); profiles/slurm gives 2.
+    # shortens a cell little and costs more CPU than it saves (benchmarks/bench_align.py with
+    # --threads 1 and --threads 2 measures both); profiles/slurm gives 2.
     # Reruns are bit-identical per thread count.
     threads: 1
     params:

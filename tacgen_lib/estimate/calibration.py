@@ -139,8 +139,8 @@ def calibration_points(
 
 #: Wall / CPU seconds of a job on idle cores, by threads: a single-threaded job waits for
 #: nothing but a little I/O (its benchmark files' wall against CPU seconds show it); each
-#: further thread adds most of a core (benchmarks/bench_align.py prints the heads' speed-up
-#: from a second thread).
+#: further thread adds most of a core (benchmarks/bench_align.py with --threads 1 and
+#: --threads 2 measures the heads' speed-up from a second thread).
 IDLE_WALL_PER_CPU = 1.2
 EXTRA_THREAD_CORES = 0.8
 
