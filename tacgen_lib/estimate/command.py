@@ -25,7 +25,7 @@ import pandas as pd
 from tacgen_lib.estimate.calibration import MissingCalibrationError
 from tacgen_lib.estimate.dag import dag_jobs
 from tacgen_lib.estimate.predict import Estimate, choose_calibration, estimate_run
-from tacgen_lib.estimate.schedule import local_machine, slurm_machine
+from tacgen_lib.estimate.schedule import Machine, local_machine, slurm_machine
 from tacgen_lib.estimate.units import MissingUnitsError
 
 __all__ = [
@@ -197,7 +197,8 @@ def write_table(est: Estimate, out: str | os.PathLike[str]) -> None:
     tmp.replace(out)
 
 
-def main(argv: Sequence[str] | None = None) -> Estimate:
+def _parser() -> argparse.ArgumentParser:
+    """The command line of `main` (README, "Cost of accuracy and the run-time estimate")."""
     parser = argparse.ArgumentParser(
         prog="python -m tacgen_lib.estimate",
         description="Predict per-rule and total wall time of a config's DAG before running it.",
@@ -254,27 +255,65 @@ def main(argv: Sequence[str] | None = None) -> Estimate:
     )
     parser.add_argument("--workdir", default=".", help="the workflow's directory")
     parser.add_argument("--out", default=None, help="write the per-rule table (.parquet/.csv/.tsv)")
-    args = parser.parse_args(argv)
+    return parser
+
+
+def _machine(args: argparse.Namespace) -> tuple[Machine, str, int, dict]:
+    """The machine the DAG is priced on, its label, the most cores one job may take, and the
+    SLURM profile's thread counts (none on a local machine)."""
+    if not args.slurm_nodes:
+        return local_machine(args.cores), f"{args.cores} local cores", args.cores, {}
+    machine = slurm_machine(
+        args.slurm_nodes,
+        args.cores_per_node,
+        queue_s=args.queue_s,
+        max_jobs=args.max_jobs,
+        local_cores=args.cores,
+    )
+    label = (
+        f"SLURM, {args.slurm_nodes} nodes x {args.cores_per_node} cores, {args.queue_s:g} s "
+        f"queue per job, <= {args.max_jobs} jobs at once, localrules on {args.cores} cores, "
+        f"threads of {args.profile or 'the rules'}"
+    )
+    threads = profile_threads(Path(args.workdir) / args.profile)
+    return machine, label, args.cores_per_node, threads
+
+
+def _speed_words(args: argparse.Namespace) -> str:
+    """What the label adds for a load, a speed factor and an assumed GPU rate."""
+    words = ""
+    if args.load_factor != 1.0:
+        words += f", load factor {args.load_factor:g}"
+    if args.speed_factor != 1.0:
+        words += f", x{args.speed_factor:g} the calibration CPU's seconds"
+    if args.gpu_tflops is not None:
+        words += (
+            f", a GPU per job whose model runs in torch at an assumed {args.gpu_tflops:g} "
+            "TFLOP/s effective (not calibrated)"
+        )
+    return words
+
+
+def _print_missing(missing: dict) -> None:
+    """Name the checkpoint files a run would stop on, and where each is published."""
+    from tacgen_lib.features.families import OFFICIAL_CHECKPOINTS
+
+    print(
+        f"\nnote: {len(missing)} checkpoint keys name files that are not here; priced as if "
+        "they were, but a run stops at parse time until they are downloaded:"
+    )
+    for key, path in missing.items():
+        where = OFFICIAL_CHECKPOINTS.get(Path(path).name, "no official release of that name")
+        print(f"  {key}.checkpoint: {path} ({where})")
+
+
+def main(argv: Sequence[str] | None = None) -> Estimate:
+    """Price a config's DAG on a local machine or a SLURM cluster and print the estimate."""
+    args = _parser().parse_args(argv)
 
     if args.max_jobs is None:
         args.max_jobs = profile_jobs(Path(args.workdir) / args.profile)
-    if args.slurm_nodes:
-        machine = slurm_machine(
-            args.slurm_nodes,
-            args.cores_per_node,
-            queue_s=args.queue_s,
-            max_jobs=args.max_jobs,
-            local_cores=args.cores,
-        )
-        label = (
-            f"SLURM, {args.slurm_nodes} nodes x {args.cores_per_node} cores, {args.queue_s:g} s "
-            f"queue per job, <= {args.max_jobs} jobs at once, localrules on {args.cores} cores, "
-            f"threads of {args.profile or 'the rules'}"
-        )
-        cap = args.cores_per_node
-    else:
-        machine, label, cap = local_machine(args.cores), f"{args.cores} local cores", args.cores
-    set_threads = profile_threads(Path(args.workdir) / args.profile) if args.slurm_nodes else {}
+    machine, label, cap, set_threads = _machine(args)
     # official checkpoints not downloaded yet: priced as if they were (a run stops on them)
     merged = merged_config(args.configfile, args.workdir)
     missing = missing_checkpoints(merged, args.workdir)
@@ -290,15 +329,7 @@ def main(argv: Sequence[str] | None = None) -> Estimate:
         workdir=args.workdir,
     )
     configs = " + ".join(["config/config.yaml", *args.configfile])
-    if args.load_factor != 1.0:
-        label += f", load factor {args.load_factor:g}"
-    if args.speed_factor != 1.0:
-        label += f", x{args.speed_factor:g} the calibration CPU's seconds"
-    if args.gpu_tflops is not None:
-        label += (
-            f", a GPU per job whose model runs in torch at an assumed {args.gpu_tflops:g} "
-            "TFLOP/s effective (not calibrated)"
-        )
+    label += _speed_words(args)
     try:
         est = estimate_run(
             jobs,
@@ -314,15 +345,7 @@ def main(argv: Sequence[str] | None = None) -> Estimate:
         raise SystemExit(f"estimate: {exc}") from None
     print(format_estimate(est))
     if missing:
-        from tacgen_lib.features.families import OFFICIAL_CHECKPOINTS
-
-        print(
-            f"\nnote: {len(missing)} checkpoint keys name files that are not here; priced as if "
-            "they were, but a run stops at parse time until they are downloaded:"
-        )
-        for key, path in missing.items():
-            where = OFFICIAL_CHECKPOINTS.get(Path(path).name, "no official release of that name")
-            print(f"  {key}.checkpoint: {path} ({where})")
+        _print_missing(missing)
     if args.out:
         write_table(est, args.out)
         print(f"per-rule table: {args.out}", file=sys.stderr)

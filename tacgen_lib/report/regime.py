@@ -3,7 +3,8 @@ gate and the verdict read from the generator ladder, Delta heatmaps over (rho, N
 size, score against N_L per arm with the V ceiling, the vision ceiling and real touch, the
 ladder table, the table of every arm, and a sentence per panel generated from the numbers. The
 arms' labels are in `tacgen_lib.report.regime_arms`, the figures in
-`tacgen_lib.report.regime_figures`.
+`tacgen_lib.report.regime_figures`, the hypotheses' sentences in
+`tacgen_lib.report.regime_hypotheses`.
 
 Replicates (seed x labelled draw) are summarised, never averaged into a claim: a cell shows
 the mean over replicates and how many replicates' fixed-test CIs lie above (or below) zero.
@@ -18,8 +19,9 @@ import pandas as pd
 
 from tacgen_lib.report import claims
 from tacgen_lib.report import format as fmt
-from tacgen_lib.report.regime_arms import ARM_LABELS, NOT_BUILT_ON_V, RUNG_LABELS, arm_rows
+from tacgen_lib.report.regime_arms import ARM_LABELS, RUNG_LABELS, arm_rows
 from tacgen_lib.report.regime_figures import curves_figure, heatmap_figure
+from tacgen_lib.report.regime_hypotheses import hypothesis_sentences, replicate_words
 
 __all__ = [
     "ARM_LABELS",
@@ -284,22 +286,6 @@ def ladder_verdict(
     return out
 
 
-def replicate_words(r: pd.Series, what: str) -> str:
-    """A `seed_view` row's mean Delta against `what` (linear_v | nonlinear_v | distilled) with
-    the replicates' interval read as one (what a gain is decided on, `_gains`) and how many
-    replicates' CIs lie above or below 0, in words."""
-    d, n = r[f"delta_vs_{what}"], int(r["n_seeds"])
-    rep = f"[{fmt.signed(r[f'rep_low_vs_{what}'])}, {fmt.signed(r[f'rep_high_vs_{what}'])}]"
-    up, down = int(r[f"above_vs_{what}"]), int(r[f"below_vs_{what}"])
-    if up:
-        side = f"CI above 0 in {up} of {n} replicates"
-    elif down:
-        side = f"CI below 0 in {down} of {n} replicates"
-    else:
-        side = f"CI includes 0 in each of {n} replicates"
-    return f"{fmt.signed(d)} {rep} ({side})"
-
-
 def panel_sentences(view: pd.DataFrame) -> list[str]:
     """One sentence per heatmap panel (target x pool size), read from the numbers: where V +
     T_gen gains over linear V, whether that survives nonlinear V and distillation."""
@@ -321,116 +307,6 @@ def panel_sentences(view: pd.DataFrame) -> list[str]:
             f"{cells}; of these, {len(survive_nl)} also beat nonlinear V and {len(survive_gd)} "
             "beat generalised distillation (a V-only student of the same pool) in every replicate."
         )
-    return out
-
-
-def hypothesis_sentences(view: pd.DataFrame) -> list[str]:
-    """The issue's four expectations, each tested on the numbers and stated as measured."""
-    out = []
-    rhos = sorted(view["rho"].unique())
-    ls = sorted(view["n_labelled"].unique())
-    n_p = view["n_pool"].max()
-    built_on_v = view[~view["arm"].isin(NOT_BUILT_ON_V)]
-    # H1: at rho = 0 every arm matches nonlinear V
-    r0 = built_on_v[
-        (built_on_v["rho"] == rhos[0])
-        & ~((built_on_v["arm"] == "v") & (built_on_v["probe"] == "nonlinear"))
-    ]
-    off = r0[
-        (r0["above_vs_nonlinear_v"] == r0["n_seeds"])
-        | (r0["below_vs_nonlinear_v"] == r0["n_seeds"])
-    ]
-    above = int((off["above_vs_nonlinear_v"] == off["n_seeds"]).sum())
-    out.append(
-        f"H1 (ρ = {rhos[0]:g}: no arm built on V beats nonlinear V): {above} of {len(r0)} "
-        f"arm × cell rows beat it with the CI above 0 in every replicate; "
-        f"{len(off) - above} fall below it in every replicate."
-    )
-    # H2: at the largest rho, smallest N_L, largest pool, V + T_gen beats linear V
-    top = view[(view["rho"] == rhos[-1]) & (view["n_labelled"] == ls[0]) & (view["n_pool"] == n_p)]
-    for probe in ("linear", "nonlinear"):
-        g = arm_rows(top, "v_tgen", probe)
-        if g.empty:
-            continue
-        r = g.iloc[0]
-        out.append(
-            f"H2 (ρ = {rhos[-1]:g}, N_L = {ls[0]}, N_P = {n_p}: V + T_gen beats linear V), "
-            f"{probe} probe: Δ vs linear V "
-            f"{replicate_words(r, 'linear_v')}"
-            f"; vs nonlinear V "
-            f"{replicate_words(r, 'nonlinear_v')}"
-            f"; vs distillation "
-            f"{replicate_words(r, 'distilled')}."
-        )
-    # H3: the gain shrinks as N_L grows
-    g = arm_rows(view[(view["rho"] == rhos[-1]) & (view["n_pool"] == n_p)], "v_tgen", "linear")
-    for target, t in g.groupby("target", sort=True):
-        t = t.sort_values("n_labelled")
-        d = t["delta_vs_linear_v"].to_numpy()
-        if d[0] <= 0:
-            verdict = (
-                f"untestable: there is no gain at N_L = {ls[0]} to shrink "
-                f"({fmt.signed(d[0])}; {fmt.signed(d[-1])} at N_L = {ls[-1]})"
-            )
-        else:
-            trend = "shrinks" if d[-1] < d[0] else "does not shrink"
-            verdict = (
-                f"the Δ of V + T_gen over linear V {trend} from {fmt.signed(d[0])} at N_L = "
-                f"{ls[0]} to {fmt.signed(d[-1])} at N_L = {ls[-1]}"
-            )
-        out.append(f"H3 ({target}, ρ = {rhos[-1]:g}, N_P = {n_p}): {verdict}.")
-    # the pool without generation: distillation against linear V and against V + T_gen
-    for target, t in top.groupby("target", sort=True):
-        d = arm_rows(t, "distilled", "linear").iloc[0]
-        gen = arm_rows(t, "v_tgen", "linear").iloc[0]
-        pool_only = gen["above_vs_distilled"] < gen["n_seeds"]
-        out.append(
-            f"The pool without generation ({target}, ρ = {rhos[-1]:g}, N_L = {ls[0]}, N_P = "
-            f"{n_p}): generalised distillation (linear student on V) vs linear V "
-            f"{replicate_words(d, 'linear_v')}"
-            f"; V + T_gen vs distillation "
-            f"{replicate_words(gen, 'distilled')}"
-            + (
-                ": generation adds nothing the pool does not give without it."
-                if pool_only
-                else ": generation beats the V-only use of the pool in every replicate."
-            )
-        )
-    # H4: no arm built on V exceeds the vision ceiling
-    ceiling = view[view["arm"] == "vision_ceiling"].set_index(
-        ["corpus", "rho", "n_labelled", "n_pool", "target"]
-    )
-    exceed = []
-    for r in built_on_v.itertuples():
-        c = ceiling.loc[(r.corpus, r.rho, r.n_labelled, r.n_pool, r.target)]
-        if r.ci_low > c["ci_high"]:
-            exceed.append(f"{ARM_LABELS[(r.arm, r.probe)]} at ρ = {r.rho:g}, N_L = {r.n_labelled}")
-    out.append(
-        "H4 (no arm built on V exceeds the vision ceiling): "
-        + (
-            "holds: no arm's mean CI lies above the ceiling's."
-            if not exceed
-            else f"fails in {len(exceed)} rows, e.g. {exceed[0]}."
-        )
-    )
-    # H5: no arm built on V exceeds the V ceiling (the best probe on V with every label)
-    v_ceiling = arm_rows(view, "v_ceiling", "nonlinear").set_index(
-        ["corpus", "rho", "n_labelled", "n_pool", "target"]
-    )
-    above = [
-        f"{ARM_LABELS[(r.arm, r.probe)]} at ρ = {r.rho:g}, N_L = {r.n_labelled}"
-        for r in built_on_v.itertuples()
-        if r.ci_low > v_ceiling.loc[(r.corpus, r.rho, r.n_labelled, r.n_pool, r.target), "ci_high"]
-    ]
-    out.append(
-        "H5 (no arm built on V exceeds the V ceiling, nonlinear V with every non-test label): "
-        + (
-            "holds: no arm's mean CI lies above it."
-            if not above
-            else f"fails in {len(above)} rows, e.g. {above[0]}: an arm beats a probe on V with "
-            "every label, so it carries what V does not."
-        )
-    )
     return out
 
 
