@@ -42,6 +42,19 @@ def validate_config(config: dict, schema_path: str | Path, *, source: str = "con
     join config corpora first, so that each is checked like any declared corpus and other keys
     (features.pretrain.corpus) may name them; a declared corpus of one of their names that is
     not the regime's own is refused."""
+    joined = _join_regime_corpora(config, source)
+    validate_schema(config, schema_path, source=source)
+    _check_simulated_corpora(config, joined, source)
+    _check_corpus_references(config, source)
+    _check_variants_and_heads(config, source)
+    fr = config["splits"]["fractions"]
+    if abs(sum(fr.values()) - 1.0) > 1e-9:
+        raise ConfigError(f"{source}: splits.fractions: must sum to 1, got {sum(fr.values()):g}")
+    return config
+
+
+def _join_regime_corpora(config: dict, source: str) -> dict:
+    """Add the regime's natural corpora to config corpora (`validate_config`); returns them."""
     regime, corpora = config.get("regime"), config.setdefault("corpora", {})
     # a malformed regime or corpora is left to the schema, which names the key
     joined = {}
@@ -58,7 +71,11 @@ def validate_config(config: dict, schema_path: str | Path, *, source: str = "con
                 f"{decl['rho']:g} (config regime.corpus, regime.rhos); rename your corpus"
             )
         config["corpora"][name] = decl
-    validate_schema(config, schema_path, source=source)
+    return joined
+
+
+def _check_simulated_corpora(config: dict, joined: dict, source: str) -> None:
+    """Every simulated corpus's keys, and its scene in the scenes file."""
     scenes_file = Path(config["scenes_file"])
     scenes = load_yaml(scenes_file) if scenes_file.exists() else None
 
@@ -77,6 +94,11 @@ def validate_config(config: dict, schema_path: str | Path, *, source: str = "con
                     f"{source}: {written_at(name, 'scene')}: unknown scene {corpus['scene']!r} "
                     f"(scenes in {scenes_file}: {', '.join(sorted(scenes))})"
                 )
+
+
+def _check_corpus_references(config: dict, source: str) -> None:
+    """Every key that names a corpus names a declared one; every probe family's heads come
+    from a corpus the alignment trains on."""
     for name in config["splits"].get("by_scale", {}):
         if name not in config["corpora"]:
             raise ConfigError(
@@ -111,6 +133,11 @@ def validate_config(config: dict, schema_path: str | Path, *, source: str = "con
                 f"{source}: probes.families.{fam}.heads_from: {spec['heads_from']!r} is not in align.corpora, "
                 "so no heads are trained on it"
             )
+
+
+def _check_variants_and_heads(config: dict, source: str) -> None:
+    """Every key that names a tactile variant names a preprocessed one; the probes' heads are
+    a cell the alignment grid trains."""
     variants = set(config["preprocess"]["variants"])
     vrefs = [
         ("features.pretrain.variant", config["features"]["pretrain"]["variant"]),
@@ -131,7 +158,3 @@ def validate_config(config: dict, schema_path: str | Path, *, source: str = "con
         raise ConfigError(
             f"{source}: probes.heads.n_train: {heads['n_train']} is not in align.n_train"
         )
-    fr = config["splits"]["fractions"]
-    if abs(sum(fr.values()) - 1.0) > 1e-9:
-        raise ConfigError(f"{source}: splits.fractions: must sum to 1, got {sum(fr.values()):g}")
-    return config
