@@ -143,6 +143,26 @@ class MaePretrainResult(PretrainResult):
     (epoch, loss: the mean masked-patch MSE of its steps, lr)."""
 
 
+def _mae_optimizer(vit: torch.nn.Module, decoder: torch.nn.Module, s: MaeSettings) -> AdamW:
+    """AdamW over encoder and decoder as MAE sets it: betas 0.9, 0.95, weight decay on the
+    weight matrices only (none on biases, norms, tokens and position embeddings)."""
+    params = [
+        *vit.named_parameters(),
+        *(("decoder." + k, p) for k, p in decoder.named_parameters()),
+    ]
+    decay = [p for k, p in params if p.ndim > 1 and "token" not in k and "pos_embed" not in k]
+    keep_ids = {id(p) for p in decay}
+    no_decay = [p for _k, p in params if id(p) not in keep_ids]
+    return AdamW(
+        [
+            {"params": decay, "weight_decay": s.weight_decay},
+            {"params": no_decay, "weight_decay": 0.0},
+        ],
+        lr=s.lr,
+        betas=(0.9, 0.95),
+    )
+
+
 def pretrain_mae(
     images: np.ndarray,
     settings: MaeSettings,
@@ -184,21 +204,7 @@ def pretrain_mae(
     dev = torch.device(device)
     vit.to(dev)
     decoder.to(dev)
-    params = [
-        *vit.named_parameters(),
-        *(("decoder." + k, p) for k, p in decoder.named_parameters()),
-    ]
-    decay = [p for k, p in params if p.ndim > 1 and "token" not in k and "pos_embed" not in k]
-    keep_ids = {id(p) for p in decay}
-    no_decay = [p for _k, p in params if id(p) not in keep_ids]
-    opt = AdamW(
-        [
-            {"params": decay, "weight_decay": s.weight_decay},
-            {"params": no_decay, "weight_decay": 0.0},
-        ],
-        lr=s.lr,
-        betas=(0.9, 0.95),
-    )
+    opt = _mae_optimizer(vit, decoder, s)
     steps_per_epoch = max(1, n // batch)
     total = steps_per_epoch * s.epochs
     warm = min(total, s.warmup_epochs * steps_per_epoch)

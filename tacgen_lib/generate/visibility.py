@@ -110,6 +110,21 @@ class VisibilityCorpus:
     test: Sequence[str]
 
 
+def _split_ids(c: VisibilityCorpus) -> tuple[list[str], list[str]]:
+    """A corpus's train and test sample_ids, each with its visible factors; else ValueError
+    naming the corpus and the first sample_id without them."""
+    train, test = [str(i) for i in c.train], [str(i) for i in c.test]
+    if not train or not test:
+        raise ValueError(f"visibility_check: corpus {c.name!r} has no train or no test rows")
+    missing = [i for i in (*train, *test) if i not in c.factors.index]
+    if missing:
+        raise ValueError(
+            f"visibility_check: corpus {c.name!r}: sample_id {missing[0]!r} has no visible "
+            f"factors ({len(missing)} such rows)"
+        )
+    return train, test
+
+
 def visibility_check(
     corpora: Sequence[VisibilityCorpus],
     settings: ProbeSettings,
@@ -141,15 +156,7 @@ def visibility_check(
     twin_of: dict[str, str] = {}  # corpus -> the earlier corpus whose inputs it repeats
     seen: dict[str, str] = {}
     for c in corpora:
-        train, test = [str(i) for i in c.train], [str(i) for i in c.test]
-        if not train or not test:
-            raise ValueError(f"visibility_check: corpus {c.name!r} has no train or no test rows")
-        missing = [i for i in (*train, *test) if i not in c.factors.index]
-        if missing:
-            raise ValueError(
-                f"visibility_check: corpus {c.name!r}: sample_id {missing[0]!r} has no visible "
-                f"factors ({len(missing)} such rows)"
-            )
+        train, test = _split_ids(c)
         v_tr, v_te = feature_block(c.vision, train), feature_block(c.vision, test)
         shown = [f for f in FACTORS if f in c.factors and _decodable(c.factors[f], train, test)]
         # a corpus whose frames are another's (a null corpus shares its paired twin's): the

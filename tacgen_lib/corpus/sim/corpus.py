@@ -91,6 +91,24 @@ def appearance_grid_key(cfg: CorpusSettings) -> CorpusSettings:
     return replace(cfg, name="", rho=0.0)
 
 
+def _grid_settings(corpora: Sequence[CorpusSettings | Mapping[str, Any]]) -> list[CorpusSettings]:
+    """The settings of corpora `simulate_shards` may simulate at once: at least one, each
+    named once, all differing only in name and rho (`appearance_grid_key`); else ValueError."""
+    cfgs = [_settings(c) for c in corpora]
+    if not cfgs:
+        raise ValueError("simulate_shards: no corpus to simulate")
+    names = [str(c.name) for c in cfgs]
+    if len(set(names)) != len(names):
+        raise ValueError(f"simulate_shards: a corpus is named twice in {names}")
+    for other in cfgs[1:]:
+        if appearance_grid_key(other) != appearance_grid_key(cfgs[0]):
+            raise ValueError(
+                f"simulate_shards: corpus {other.name!r} differs from {cfgs[0].name!r} in more "
+                "than its name and rho, so their physics differ; simulate them one at a time"
+            )
+    return cfgs
+
+
 def simulate_shards(
     corpora: Sequence[CorpusSettings | Mapping[str, Any]],
     scenes: dict,
@@ -109,18 +127,8 @@ def simulate_shards(
 
     Raises ValueError if the corpora differ in anything else or name a corpus twice.
     """
-    cfgs = [_settings(c) for c in corpora]
-    if not cfgs:
-        raise ValueError("simulate_shards: no corpus to simulate")
+    cfgs = _grid_settings(corpora)
     names = [str(c.name) for c in cfgs]
-    if len(set(names)) != len(names):
-        raise ValueError(f"simulate_shards: a corpus is named twice in {names}")
-    for other in cfgs[1:]:
-        if appearance_grid_key(other) != appearance_grid_key(cfgs[0]):
-            raise ValueError(
-                f"simulate_shards: corpus {other.name!r} differs from {cfgs[0].name!r} in more "
-                "than its name and rho, so their physics differ; simulate them one at a time"
-            )
     cfg = cfgs[0]
     if not 0 <= shard < n_shards:
         raise ValueError(f"corpus {cfg.name!r}: shard {shard} not in [0, {n_shards})")
