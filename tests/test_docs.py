@@ -32,9 +32,8 @@ def _stated_numbers() -> set[str]:
     known = {_number(x) for x in re.findall(r"\d+(?:\.\d+)?", config)}
     for path in (ROOT / "tacgen_lib").rglob("*.py"):
         for node in ast.walk(ast.parse(path.read_text())):
-            value = getattr(node, "value", None) if isinstance(node, ast.Constant) else None
-            if isinstance(value, int | float) and not isinstance(value, bool):
-                known.add(_number(repr(abs(value))))
+            if isinstance(node, ast.Constant) and type(node.value) in (int, float):
+                known.add(_number(repr(abs(node.value))))
     return known
 
 
@@ -42,6 +41,8 @@ def _stated_numbers() -> set[str]:
 KNOWN = _stated_numbers()
 #: a number with a unit of time, speed or size is a measurement wherever it stands
 MEASURE_UNITS = ("s", "ms", "min", "h", "CPU-s", "GF/s", "GFLOP/s", "GB", "MB", "/s")
+#: inline code in a line of prose (``double`` or `single` backticks): never a figure
+_INLINE_CODE = re.compile(r"``.*?``|`[^`]*`")
 #: a number, and its unit where one follows (a ratio as ``3×``, ``3 ×`` or ``3x``)
 _NUMBER = re.compile(
     r"(?<![\w.~/-])([+−-]?\d[\d,]*(?:\.\d+)?)"
@@ -57,7 +58,7 @@ def measured_figures(markdown: str) -> list[tuple[int, str]]:
     text = re.sub(r"```.*?```", lambda m: "\n" * m.group(0).count("\n"), markdown, flags=re.S)
     found = []
     for number, line in enumerate(text.split("\n"), 1):
-        line = re.sub(r"``.*?``|`[^`]*`", "", line)
+        line = _INLINE_CODE.sub("", line)
         line = re.sub(r"\]\([^)]*\)", "]", line)
         for m in _NUMBER.finditer(line):
             value, unit = m.group(1), m.group(2) or ("×" if m.group(3) else None)
@@ -65,9 +66,8 @@ def measured_figures(markdown: str) -> list[tuple[int, str]]:
             decimals = len(plain.split(".")[1]) if "." in plain else 0
             if unit in MEASURE_UNITS or (unit == "%" and decimals):
                 found.append((number, m.group(0).strip()))
-            elif (
-                unit == "×" and _number(plain) not in KNOWN
-            ):  # a speed-up, unless a setting's ratio
+            # a speed-up, unless a setting's ratio
+            elif unit == "×" and _number(plain) not in KNOWN:
                 found.append((number, m.group(0).strip()))
             elif decimals >= 2 and _number(plain) not in KNOWN:
                 found.append((number, m.group(0).strip()))
@@ -230,7 +230,7 @@ def prose_figures(line: str) -> list[str]:
     speed-up (`SPEEDUP`), whatever the number (a page's ``2×`` may be a setting's ratio; a
     comment's ``2x faster`` is a measurement)."""
     found = [figure for _, figure in measured_figures(line)]
-    plain = re.sub(r"``.*?``|`[^`]*`", "", line)
+    plain = _INLINE_CODE.sub("", line)
     return found + [m.group(0).strip() for m in SPEEDUP.finditer(plain) if m.group(0) not in found]
 
 

@@ -447,8 +447,8 @@ def test_report_builds_offline_and_reads_in_a_browser(run_dir):
     """The report as a reader meets it: opened in headless Chromium (Debian's chromium and
     chromium-driver, driven by Selenium) at 1600 × 1000, every category and every result
     clicked. Fails if the findings page is not first, a result shows nothing, a figure is
-    cropped or shown smaller than its pixels, a table is wider than its frame, or a caption is
-    missing (tools/browse_report.py says which and why)."""
+    cropped or shown smaller than its pixels, a table is wider than its frame or breaks a word
+    across lines, or a caption is missing (tools/browse_report.py says which and why)."""
     built = smk(run_dir, "--report", "results/report.html")
     # nothing a user cannot act on: no warning from Snakemake's resource evaluation
     assert "RuntimeWarning" not in built.stdout + built.stderr, built.stderr[-3000:]

@@ -28,10 +28,13 @@ import pandas as pd
 from tacgen_lib.probes.fusion import fusion_table
 from tacgen_lib.report import claims
 from tacgen_lib.report import format as fmt
+from tacgen_lib.report.tables import constants_to_lead, footnote_column
 
 __all__ = [
+    "SHARED_COLUMNS",
     "align_seed_table",
     "baselines_text",
+    "comparison_page",
     "controlled_table",
     "controls_table",
     "headline_rows",
@@ -168,6 +171,19 @@ def _flag(r) -> str:
         getattr(r, "baseline_score", math.nan),
         getattr(r, "n_test", math.nan),
     )
+
+
+#: the comparison tables' columns stated once above the table where every row shares a value
+SHARED_COLUMNS = ("V features", "probe seed", "n train/test")
+
+
+def comparison_page(table: pd.DataFrame) -> tuple[pd.DataFrame, list[str], list[str]]:
+    """A comparison table (`controlled_table`, `paired_table`) as its page shows it, narrow
+    enough for its frame: (the table, the lead stating the `SHARED_COLUMNS` every row shares,
+    the footnotes its "notes" column's marks point to)."""
+    table, lead = constants_to_lead(table, SHARED_COLUMNS)
+    table, marks = footnote_column(table, "notes")
+    return table, lead, marks
 
 
 def skipped_note(summary: pd.DataFrame, controlled: bool) -> list[str]:

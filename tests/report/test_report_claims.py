@@ -6,7 +6,6 @@ a degenerate interval, values that round to zero."""
 from __future__ import annotations
 
 import math
-import re
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -79,7 +78,7 @@ def test_long_identifiers_break_between_their_parts_and_words_never():
     got = cell_html("sim_natural_r05|32|1024 at N_L = 8, x<y")
     assert got == "sim_<wbr>natural_<wbr>r05|<wbr>32|<wbr>1024 at N_L = 8, x&lt;y"
     assert cell_html("Δ_ctrl hardness") == "Δ_ctrl hardness"
-    assert re.sub("<wbr>", "", cell_html("a_very_long_identifier")) == "a_very_long_identifier"
+    assert cell_html("a_very_long_identifier").replace("<wbr>", "") == "a_very_long_identifier"
     page = to_html(pd.DataFrame({"N_L": [8], "cell": ["sim_natural_r05|32"]}), title="t")
     assert "<th>N_L</th>" in page and "sim_<wbr>natural_<wbr>r05|<wbr>32" in page
 

@@ -14,7 +14,6 @@ from tacgen_lib.probes.multiplicity import adjust
 from tacgen_lib.probes.protocol import tidy
 from tacgen_lib.report import probe_figures
 from tacgen_lib.report import probes as report_probes
-from tacgen_lib.report.tables import constants_to_lead, footnote_column
 from tacgen_lib.report.write import write_figure, write_table
 
 logger = log.for_rule(snakemake)
@@ -70,10 +69,8 @@ notes = {
 }
 lead = {}
 for name in ("controlled", "paired"):
-    # narrower comparison tables: what every row shares above, each row's notes as a mark
     table, title = tables[name]
-    table, lead[name] = constants_to_lead(table, ("V features", "probe seed", "n train/test"))
-    table, marks = footnote_column(table, "notes")
+    table, lead[name], marks = report_probes.comparison_page(table)
     tables[name], notes[name] = (table, title), [*notes[name], *marks]
 for name, (table, title) in tables.items():
     write_table(
