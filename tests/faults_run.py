@@ -76,6 +76,14 @@ def _scheduled(work: Path, rule: str) -> bool:
     return bool(logs) and re.search(rf"(?m)^(local)?rule {rule}:", logs[-1].read_text()) is not None
 
 
+def _recorded(work: Path) -> bool:
+    """Snakemake has recorded a started job: its incomplete marker is written. Snakemake's
+    local executor starts the job's process before it writes the marker, so a job seen running
+    may not be recorded yet; killed in that moment, the run would leave no marker behind."""
+    marks = work / ".snakemake/incomplete"
+    return marks.is_dir() and any(p.is_file() for p in marks.rglob("*"))
+
+
 def wait_for_job(proc: subprocess.Popen, work: Path, rule: str) -> list[int] | None:
     """Pids of a running job of `rule`, or None if the run ended first."""
     found = wait_for_any_job(proc, work, [rule])
@@ -85,13 +93,14 @@ def wait_for_job(proc: subprocess.Popen, work: Path, rule: str) -> list[int] | N
 def wait_for_any_job(
     proc: subprocess.Popen, work: Path, rules: list[str]
 ) -> tuple[str, list[int]] | None:
-    """The first of `rules` seen with a running job (in the order of `rules` when several
-    are), and its pids; None if the run ended first."""
+    """The first of `rules` seen with a running job that Snakemake has recorded as started
+    (`_recorded`; in the order of `rules` when several are), and its pids; None if the run
+    ended first."""
     deadline = time.monotonic() + START_TIMEOUT
     while time.monotonic() < deadline:
         running = running_jobs(work, rules)
         for rule in rules:
-            if rule in running and _scheduled(work, rule):
+            if rule in running and _scheduled(work, rule) and _recorded(work):
                 return rule, running[rule]
         if proc.poll() is not None:
             return None
