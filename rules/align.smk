@@ -4,13 +4,7 @@
 include: "align_common.smk"
 
 
-for _c in ALIGN_CORPORA:
-    if _c not in CORPORA:
-        raise ValueError(
-            f"config align.corpora: {_c!r} is not a corpus (have {sorted(CORPORA)})"
-        )
-
-TARGETS += align_grid(f"{ALIGN_CELL}/metrics.parquet")
+TARGETS += PLANS.align.grid(f"{ALIGN_CELL}/metrics.parquet")
 TARGETS += ["results/align/summary.parquet"]
 TARGETS += expand(
     f"{ALIGN_REPORT}/{{item}}",
@@ -18,7 +12,7 @@ TARGETS += expand(
 )
 EDGES += ["results/align/metrics.parquet"]
 for _name in ("metrics.parquet", "ranks.parquet", "curve.parquet", "heads.pt"):
-    EDGES += align_grid(f"{ALIGN_CELL}/{_name}")
+    EDGES += PLANS.align.grid(f"{ALIGN_CELL}/{_name}")
 
 
 localrules:
@@ -94,9 +88,11 @@ rule project_aligned:
 rule aggregate_align:
     """One row per grid cell with its train time (benchmark), and the τ, N and seed tables and curves."""
     input:
-        metrics=align_grid(f"{ALIGN_CELL}/metrics.parquet"),
-        curves=align_grid(f"{ALIGN_CELL}/curve.parquet"),
-        benchmarks=align_grid(f"results/benchmarks/train_heads/{CELL_PATTERN}.tsv"),
+        metrics=PLANS.align.grid(f"{ALIGN_CELL}/metrics.parquet"),
+        curves=PLANS.align.grid(f"{ALIGN_CELL}/curve.parquet"),
+        benchmarks=PLANS.align.grid(
+            f"results/benchmarks/train_heads/{CELL_PATTERN}.tsv"
+        ),
         code=imports_of("aggregate_align"),
     output:
         summary="results/align/summary.parquet",
@@ -140,8 +136,8 @@ rule aggregate_align:
         mem_mb=1000,
         runtime=5,
     params:
-        cells=align_cells(),  # the order of the metrics, curves and benchmarks inputs
-        n_ref=_align_ref_n(),
-        tau_ref=_align_ref_tau(),
+        cells=PLANS.align.cells(),  # the order of the metrics, curves and benchmarks inputs
+        n_ref=PLANS.align.reference_n(),
+        tau_ref=PLANS.align.reference_tau(),
     script:
         "../workflow/scripts/aggregate_align.py"

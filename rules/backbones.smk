@@ -14,11 +14,11 @@ localrules:
 rule family_backbone:
     """One family's frozen backbone of a modality (checkpoint, MAE or DINO pretraining on the pretraining corpus's train split, or the seeded random init) and its features of every frame of each probe corpus."""
     input:
-        frames=lambda w: pretraining_frames(
-            w.modality, family_spec(w.family, w.modality)
+        frames=lambda w: PLANS.features.pretraining_frames(
+            w.modality, PLANS.families.spec(w.family, w.modality)
         ),
         splits="results/corpus/splits.parquet",
-        extract=lambda w: family_frames(w.modality),
+        extract=lambda w: PLANS.families.frames(w.modality),
         code=imports_of("pretrain_backbone"),
     output:
         weights="results/features/families/{family}/{modality}.pt",
@@ -46,19 +46,21 @@ rule family_backbone:
         pretrain=PRETRAIN,
         corpora=PRETRAIN_CORPORA,  # whose train frames DINO, MAE and SimCLR pretrain on
         mae=lambda w: (
-            FEAT["mae"] if family_spec(w.family, w.modality).objective == "mae" else {}
+            FEAT["mae"]
+            if PLANS.families.spec(w.family, w.modality).objective == "mae"
+            else {}
         ),
         # SimCLR's settings only where a backbone is SimCLR-pretrained
         simclr=lambda w: (
             FEAT["simclr"]
-            if family_spec(w.family, w.modality).objective == "simclr"
+            if PLANS.families.spec(w.family, w.modality).objective == "simclr"
             else {}
         ),
         image_size=lambda w: backbone_image_size(
             FEAT, FAMILIES.families[w.family][w.modality].__dict__
         ),
         batch_size=FEAT["batch_size"],
-        pool=lambda w: family_spec(w.family, w.modality).pool or FEAT["pool"],
+        pool=lambda w: PLANS.families.spec(w.family, w.modality).pool or FEAT["pool"],
     script:
         "../workflow/scripts/pretrain_backbone.py"
 
@@ -69,10 +71,11 @@ rule family_probe:
         manifest="results/corpus/manifest.parquet",
         splits="results/corpus/splits.parquet",
         vision=lambda w: [
-            family_features(w.family, c, "vision") for c in FAMILY_CORPORA
+            PLANS.families.features_edge(w.family, c, "vision") for c in FAMILY_CORPORA
         ],
         tactile=lambda w: [
-            family_features(w.family, c, "tactile") for c in FAMILY_CORPORA
+            PLANS.families.features_edge(w.family, c, "tactile")
+            for c in FAMILY_CORPORA
         ],
         code=imports_of("family_probe"),
     output:
@@ -95,7 +98,7 @@ rule family_probe:
         settings=PROBE_SETTINGS,
         protocols=FAMILIES.protocols,
         seed=PROBES["seeds"][0],
-        labels=lambda w: family_labels(w.family),
+        labels=lambda w: PLANS.families.labels(w.family),
     script:
         "../workflow/scripts/family_probe.py"
 
@@ -130,7 +133,7 @@ rule aggregate_backbones:
         runtime=5,
     params:
         order=list(FAMILIES.run),
-        main={f: family_labels(f) for f in MAIN_FROM_PROBES},
+        main={f: PLANS.families.labels(f) for f in MAIN_FROM_PROBES},
         main_jobs=FAMILY_JOBS,
         heads_variant=FAMILY_VARIANT,
     script:

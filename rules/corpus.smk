@@ -1,5 +1,7 @@
 """Corpus stage: simulate (or ingest) corpora, fuse their manifest, fix the splits."""
 
+from tacgen_lib.generate.regime_sets import natural_grid_ends
+
 for _c in config["splits"].get("by_object") or {}:
     if _c not in CORPORA:
         raise ValueError(
@@ -19,7 +21,7 @@ localrules:
 
 # the regime's natural corpora (one per rho) differ only in what their objects look like: one
 # job per shard simulates their physics and touch once (simulate_natural_grid)
-NATURAL_GRID = list(regime_corpora(config.get("regime")))
+NATURAL_GRID = PLANS.features.natural_grid
 # and a corpus between the grid's ends (rho 0 and 1) looks as one of them in every sample: it
 # shares their vision features (share_natural_vision)
 NATURAL_ENDS, NATURAL_BETWEEN = natural_grid_ends(config.get("regime"))

@@ -23,7 +23,7 @@ rule cost_knob_points:
     """Points of a knob: what each setting's edges show (a swept knob's main-rule edges, a free
     knob's stage summary), against the seconds of its jobs' benchmark files."""
     input:
-        unpack(cost_knob_inputs),
+        unpack(COST_PLAN.knob_inputs),
         code=imports_of("cost_knob_points"),
     output:
         points=COST_POINTS,
@@ -32,7 +32,7 @@ rule cost_knob_points:
     benchmark:
         "results/benchmarks/cost_knob_points/{knob}.tsv"
     wildcard_constraints:
-        knob=one_of(cost_knobs()),
+        knob=one_of(COST_PLAN.knobs()),
     conda:
         "../envs/report.yaml"
     threads: 1
@@ -40,9 +40,9 @@ rule cost_knob_points:
         mem_mb=1000,
         runtime=5,
     params:
-        plan=lambda w: cost_setting_plan(w.knob),
+        plan=lambda w: COST_PLAN.setting_plan(w.knob),
         reads=lambda w: KNOBS[w.knob].reads,
-        options=lambda w: cost_knob_options(w.knob),
+        options=lambda w: COST_PLAN.knob_options(w.knob),
     script:
         "../workflow/scripts/cost_knob_points.py"
 
@@ -57,7 +57,7 @@ localrules:
 rule cost_of_accuracy:
     """The cost page: per knob, metric ± uncertainty against seconds, default, Pareto front."""
     input:
-        points=cost_points,
+        points=COST_PLAN.points,
         code=imports_of("cost_of_accuracy"),
     output:
         html=report(
@@ -92,7 +92,7 @@ rule cost_of_accuracy:
         mem_mb=1000,
         runtime=5,
     params:
-        stages={k: KNOBS[k].stage for k in cost_knobs()},
-        swept=sorted(COST_KNOB_CONFIG),
+        stages={k: KNOBS[k].stage for k in COST_PLAN.knobs()},
+        swept=sorted(COST_PLAN.knob_config),
     script:
         "../workflow/scripts/cost_of_accuracy.py"

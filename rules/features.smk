@@ -1,34 +1,15 @@
 """Features stage: a DINOv2-architecture backbone per modality, frozen features per corpus."""
 
-from tacgen_lib.features.families import BackboneSpec as _Backbone
-from tacgen_lib.features.settings import backbone_image_size, pretraining_corpora
+from tacgen_lib.features.settings import backbone_image_size
+from tacgen_lib.plan.features import MODALITIES, VISIBILITY_EDGE, VISIBILITY_ITEMS
 
 FEAT = config["features"]
 PRETRAIN = FEAT["pretrain"]
-PRETRAIN_CORPORA = list(pretraining_corpora(PRETRAIN))
-MODALITIES = ["vision", "tactile"]
+PRETRAIN_CORPORA = PLANS.features.pretraining_corpora
 
-
-# corpora only the regime reads (its natural corpora) need the generator's tactile variant
-# alone, not the preprocessing ablation's every variant (a pretraining corpus's frames are the
-# input of pretrain_backbone, which Snakemake makes on demand: no target needed)
-_REGIME_ONLY = (
-    set(regime_corpora(config.get("regime")))
-    - set(config["align"]["corpora"])
-    - set(config["generate"]["corpora"])
-    - {f["corpus"] for f in config["probes"]["families"].values()}
-    - {FEAT["pretrained_vs_random"]["corpus"]}
-)
-# and the transfer corpus only the heads' variant (config probes.heads)
-_ONE_VARIANT = {c: config["generate"]["variant"] for c in _REGIME_ONLY}
-if TRANSFER_CORPUS:
-    _ONE_VARIANT[TRANSFER_CORPUS] = config["probes"]["heads"]["variant"]
-for _corpus in sorted(CORPORA):
-    TARGETS.append(feature_edge(_corpus, "vision"))
-    EDGES.append(feature_edge(_corpus, "vision"))
-    for _variant in [_ONE_VARIANT[_corpus]] if _corpus in _ONE_VARIANT else VARIANTS:
-        TARGETS.append(feature_edge(_corpus, "tactile", _variant))
-        EDGES.append(feature_edge(_corpus, "tactile", _variant))
+_FEATURE_EDGES = PLANS.features.corpus_feature_edges(config)
+TARGETS += _FEATURE_EDGES
+EDGES += _FEATURE_EDGES
 TARGETS += ["results/features/pretrained_vs_random.html"]
 EDGES += expand("results/features/backbones/{m}.pt", m=MODALITIES)
 EDGES += ["results/features/pretrained_vs_random.parquet"]
@@ -37,9 +18,7 @@ EDGES += ["results/features/pretrained_vs_random.parquet"]
 rule pretrain_backbone:
     """DINO, MAE (a ViT) or SimCLR (a ResNet) pretraining on the pretraining corpus's train split only, an official checkpoint, or the seeded random init."""
     input:
-        frames=lambda w: pretraining_frames(
-            w.modality, _Backbone.from_config(FEAT["backbones"][w.modality])
-        ),
+        frames=lambda w: PLANS.features.pretraining_frames(w.modality),
         splits="results/corpus/splits.parquet",
         code=imports_of("pretrain_backbone"),
     output:
@@ -95,10 +74,10 @@ rule extract_vision_features:
     wildcard_constraints:
         # natural corpora between the rho grid's ends share the ends' features (below)
         corpus=none_of(NATURAL_BETWEEN),
-    priority: extraction_priority
+    priority: PLANS.features.extraction_priority
     conda:
         "../envs/features.yaml"
-    threads: extraction_threads  # config features.threads (1: two jobs side by side)
+    threads: PLANS.features.extraction_threads  # config features.threads (1: two jobs side by side)
     resources:
         mem_mb=4000,
         runtime=30,
@@ -126,10 +105,10 @@ rule extract_tactile_features:
         # the rho grid's natural corpora after the first share its features (below)
         corpus=none_of(NATURAL_GRID[1:]),
         variant=one_of(VARIANTS),
-    priority: extraction_priority
+    priority: PLANS.features.extraction_priority
     conda:
         "../envs/features.yaml"
-    threads: extraction_threads  # config features.threads (1: two jobs side by side)
+    threads: PLANS.features.extraction_threads  # config features.threads (1: two jobs side by side)
     resources:
         mem_mb=4000,
         runtime=30,
@@ -199,7 +178,9 @@ rule pretrained_vs_random:
     """Linear probes on pretrained vs random-init backbone features, with a bootstrap CI."""
     input:
         vision=corpus_edge(FEAT["pretrained_vs_random"]["corpus"]),
-        tactile=backbone_frames("tactile", FEAT["pretrained_vs_random"]["corpus"]),
+        tactile=PLANS.features.backbone_frames(
+            "tactile", FEAT["pretrained_vs_random"]["corpus"]
+        ),
         pretrained_vision=feature_edge(FEAT["pretrained_vs_random"]["corpus"], "vision"),
         pretrained_tactile=feature_edge(
             FEAT["pretrained_vs_random"]["corpus"], "tactile", PRETRAIN["variant"]
@@ -213,6 +194,7 @@ rule pretrained_vs_random:
             "results/features/pretrained_vs_random.html",
             "../workflow/report/pretrained_vs_random.rst",
             {"table": "pretrained vs random init"},
+            FEATURES_SHOWN,
         ),
     log:
         "results/logs/pretrained_vs_random.log",
@@ -238,13 +220,11 @@ rule pretrained_vs_random:
 # what V sees (tacgen_lib.generate.visibility): every simulated corpus's visible factors
 # decoded from its vision features; the report page What vision sees and the regime's gate
 VISIBILITY = FEAT["visibility"]  # the schema fills its defaults
-VISIBILITY_EDGE = "results/features/visibility.parquet"
 # every simulated corpus, and of the regime's rho grid its first corpus only: at every rho
 # the appearance class is uniform and a frame depends on its look (colour, texture, shape,
 # size, jitter, pose), never on the material (tacgen_lib.corpus.sim.samples), so each corpus of
 # the grid would estimate the same accuracies; the grid's gate reads the first corpus's rows
 VISIBILITY_CORPORA = [c for c in SIM_CORPORA if c not in NATURAL_GRID[1:]]
-VISIBILITY_ITEMS = {"table": "html", "figure": "png"}
 if SIM_CORPORA:
     EDGES.append(VISIBILITY_EDGE)
     TARGETS += [

@@ -15,11 +15,11 @@ TARGETS += ["results/generate/summary.parquet"]
 TARGETS += [f"{GENERATE_REPORT}/{n}.{e}" for n, e in GENERATE_ITEMS.items()]
 EDGES += ["results/generate/evaluation.parquet"]
 EDGES += [BASELINES.format(corpus=c) for c in BASELINE_CORPORA]
-EDGES += generator_files(f"{GENERATOR}/generator.arrow")
-EDGES += generator_files(f"{GENERATOR}/curve.parquet")
-EDGES += generator_files(f"{GENERATOR}/evaluation.parquet")
-EDGES += generator_files(f"{GENERATOR}/permutations.parquet")
-EDGES += [sample_edge(*cell) for cell in all_sample_cells()]
+EDGES += PLANS.generate.generator_files(f"{GENERATOR}/generator.arrow")
+EDGES += PLANS.generate.generator_files(f"{GENERATOR}/curve.parquet")
+EDGES += PLANS.generate.generator_files(f"{GENERATOR}/evaluation.parquet")
+EDGES += PLANS.generate.generator_files(f"{GENERATOR}/permutations.parquet")
+EDGES += [sample_edge(*cell) for cell in PLANS.generate.all_sample_cells()]
 
 
 localrules:
@@ -30,7 +30,7 @@ rule train_generator:
     """Residual-MLP diffusion model of T given V on one corpus's train split, early-stopped on val."""
     input:
         v=lambda w: feature_edge(w.corpus, "vision"),
-        t=lambda w: generate_tactile(w.corpus),
+        t=lambda w: PLANS.generate.tactile(w.corpus),
         splits="results/corpus/splits.parquet",
         code=imports_of("train_generator"),
     output:
@@ -100,7 +100,7 @@ rule fit_generator_baselines:
         manifest="results/corpus/manifest.parquet",
         splits="results/corpus/splits.parquet",
         v=lambda w: feature_edge(w.corpus, "vision"),
-        t=lambda w: generate_tactile(w.corpus),
+        t=lambda w: PLANS.generate.tactile(w.corpus),
         code=imports_of("fit_generator_baselines"),
     output:
         baselines=BASELINES,
@@ -135,7 +135,7 @@ rule evaluate_generator:
         manifest="results/corpus/manifest.parquet",
         splits="results/corpus/splits.parquet",
         v=lambda w: feature_edge(w.corpus, "vision"),
-        t=lambda w: generate_tactile(w.corpus),
+        t=lambda w: PLANS.generate.tactile(w.corpus),
         baselines=lambda w: BASELINES.format(corpus=w.corpus),
         t_gen=lambda w: [
             sample_edge(w.corpus, w.seed, *cell) for cell in GENERATE_CELLS
@@ -165,7 +165,7 @@ rule evaluate_generator:
         grids=GENERATE_GRIDS,
         probe_seed=config["probes"]["seeds"][0],
         cells=GENERATE_CELLS,  # the order of the t_gen inputs
-        reference=generate_ref_cell(),  # its CV chooses the logistic C of every cell
+        reference=PLANS.generate.reference_cell(),  # its CV chooses the logistic C of every cell
         # the generated-touch rows a page compares per corpus x target (family-wise CIs)
         family=family_size(len(GENERATE_CELLS), len(GENERATE["seeds"])),
     script:
@@ -175,21 +175,24 @@ rule evaluate_generator:
 rule aggregate_generate:
     """One summary of every generator and cell with its wall times; the Generation report."""
     input:
-        rows=generator_files(f"{GENERATOR}/evaluation.parquet"),
-        permutations=generator_files(f"{GENERATOR}/permutations.parquet"),
-        curves=generator_files(f"{GENERATOR}/curve.parquet"),
+        rows=PLANS.generate.generator_files(f"{GENERATOR}/evaluation.parquet"),
+        permutations=PLANS.generate.generator_files(f"{GENERATOR}/permutations.parquet"),
+        curves=PLANS.generate.generator_files(f"{GENERATOR}/curve.parquet"),
         train_bench=[
-            f"results/benchmarks/train_generator/{c}/{s}.tsv" for c, s in generators()
+            f"results/benchmarks/train_generator/{c}/{s}.tsv"
+            for c, s in PLANS.generate.generators()
         ],
-        sample_bench=[sample_benchmark(*cell) for cell in all_sample_cells()],
+        sample_bench=[
+            sample_benchmark(*cell) for cell in PLANS.generate.all_sample_cells()
+        ],
         splits="results/corpus/splits.parquet",
-        pca_real=generate_tactile(GENERATE_CORPORA[0]),
+        pca_real=PLANS.generate.tactile(GENERATE_CORPORA[0]),
         pca_gen=sample_edge(
             GENERATE_CORPORA[0],
             GENERATE["seeds"][0],
-            generate_ref()["sampler"],
-            generate_ref()["guidance"],
-            generate_ref()["steps"],
+            PLANS.generate.reference()["sampler"],
+            PLANS.generate.reference()["guidance"],
+            PLANS.generate.reference()["steps"],
         ),
         code=imports_of("aggregate_generate"),
     output:
@@ -216,9 +219,9 @@ rule aggregate_generate:
         mem_mb=2000,
         runtime=10,
     params:
-        ref=generate_ref(),
-        generators=generators(),
-        sample_cells=all_sample_cells(),
+        ref=PLANS.generate.reference(),
+        generators=PLANS.generate.generators(),
+        sample_cells=PLANS.generate.all_sample_cells(),
         pca_corpus=GENERATE_CORPORA[0],
         pca_seed=GENERATE["seeds"][0],
     script:

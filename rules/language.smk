@@ -5,7 +5,9 @@ forced choices of real, generated and shuffled generated touch on the test rows.
 LANGUAGE = config.get("language") or {}
 LANGUAGE_CORPORA = GENERATE_CORPORA if LANGUAGE.get("enabled", True) else []
 LANGUAGE_EDGE = "results/language/{corpus}/evidence.parquet"
-_REF = generate_ref_cell()  # (sampler, guidance, steps): the T_gen the adapter reads
+_REF = (
+    PLANS.generate.reference_cell()
+)  # (sampler, guidance, steps): the T_gen the adapter reads
 LANGUAGE_CELL = (
     f"generator seed {GENERATE['seeds'][0]}, {_REF[0]} {_REF[2]} steps, w = {_REF[1]}"
 )
@@ -21,9 +23,9 @@ rule language_evidence:
     input:
         manifest="results/corpus/manifest.parquet",
         splits="results/corpus/splits.parquet",
-        t=lambda w: generate_tactile(w.corpus),
+        t=lambda w: PLANS.generate.tactile(w.corpus),
         t_gen=lambda w: sample_edge(
-            w.corpus, GENERATE["seeds"][0], *generate_ref_cell()
+            w.corpus, GENERATE["seeds"][0], *PLANS.generate.reference_cell()
         ),
         code=imports_of("language_evidence"),
     output:

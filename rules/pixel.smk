@@ -89,7 +89,9 @@ rule evaluate_pixel_generators:
         tactile=lambda w: f"results/preprocess/{w.corpus}/clip128.parquet",
         backbone="results/features/backbones/tactile.pt",
         baselines=lambda w: BASELINES.format(corpus=w.corpus),
-        arms=lambda w: [pixel_arm_edge(w.corpus, a, w.seed) for a in PIXEL_JUDGED_ARMS],
+        arms=lambda w: [
+            PLANS.pixel.arm_edge(w.corpus, a, w.seed) for a in PIXEL_JUDGED_ARMS
+        ],
         code=imports_of("evaluate_pixel_generators"),
     output:
         rows=f"{PIXEL_EVAL}/evaluation.parquet",
@@ -130,7 +132,7 @@ rule pixel_curve_point:
         splits="results/corpus/splits.parquet",
         v=lambda w: feature_edge(w.corpus, "vision"),
         t=lambda w: feature_edge(w.corpus, "tactile", "clip128"),
-        t_gen=lambda w: pixel_arm_edge(w.corpus, PIXEL_CURVE_ARM, w.seed),
+        t_gen=lambda w: PLANS.pixel.arm_edge(w.corpus, PIXEL_CURVE_ARM, w.seed),
         code=imports_of("pixel_curve_point"),
     output:
         PIXEL_POINT,
@@ -141,7 +143,7 @@ rule pixel_curve_point:
     wildcard_constraints:
         corpus=one_of(PIXEL_CURVE_CORPORA),
         seed=r"\d+",
-        fraction=one_of([pixel_fraction_text(p) for p in PIXEL_CURVE["fractions"]]),
+        fraction=one_of([fraction_text(p) for p in PIXEL_CURVE["fractions"]]),
     conda:
         "../envs/probes.yaml"
     threads: 1
@@ -165,12 +167,12 @@ rule pixel_curve_point:
 rule aggregate_pixel:
     """The pixel generators' summary and page: the architecture table, filmstrips, the p-curve, reconstruction against utility."""
     input:
-        rows=pixel_eval_files("evaluation.parquet"),
-        reconstruction=pixel_eval_files("reconstruction.parquet"),
-        points=pixel_points(),
+        rows=PLANS.pixel.eval_files("evaluation.parquet"),
+        reconstruction=PLANS.pixel.eval_files("reconstruction.parquet"),
+        points=PLANS.pixel.points(),
         frames=(
             [
-                pixel_arm_edge(PIXEL_CORPORA[0], a, pixel_seeds()[0])
+                PLANS.pixel.arm_edge(PIXEL_CORPORA[0], a, PLANS.pixel.seeds()[0])
                 for a in PIXEL_JUDGED_ARMS
             ]
             if PIXEL_CORPORA
@@ -183,11 +185,11 @@ rule aggregate_pixel:
             else []
         ),
         splits="results/corpus/splits.parquet",
-        train_bench=pixel_benchmarks("train_pixel_generator"),
-        sample_bench=pixel_benchmarks("sample_pixel_generator"),
+        train_bench=PLANS.pixel.benchmarks("train_pixel_generator"),
+        sample_bench=PLANS.pixel.benchmarks("sample_pixel_generator"),
         curves=[
             w.replace("generator.safetensors", "curve.parquet")
-            for w in pixel_weights()
+            for w in PLANS.pixel.weights()
         ],
         latent="results/generate/evaluation.parquet",
         code=imports_of("aggregate_pixel"),
@@ -216,8 +218,8 @@ rule aggregate_pixel:
     params:
         arms=PIXEL_JUDGED_ARMS,
         corpus=PIXEL_CORPORA[0] if PIXEL_CORPORA else "",
-        seed=pixel_seeds()[0] if pixel_seeds() else "",
+        seed=PLANS.pixel.seeds()[0] if PLANS.pixel.seeds() else "",
         size=PIXEL.get("size"),
-        latent_ref=generate_ref(),
+        latent_ref=PLANS.generate.reference(),
     script:
         "../workflow/scripts/aggregate_pixel.py"

@@ -18,8 +18,8 @@ if POLICY_ON:
     )
     TARGETS += expand("{d}/{t}.html", d=POLICY_REPORT, t=POLICY_TABLES)
     TARGETS += expand("{d}/{f}.png", d=POLICY_REPORT, f=POLICY_FIGURES)
-    EDGES += policy_episodes() + [f"{POLICY_DIR}/palpation.parquet"]
-    EDGES += policy_rollouts()
+    EDGES += PLANS.policy.episodes() + [f"{POLICY_DIR}/palpation.parquet"]
+    EDGES += PLANS.policy.rollouts()
     EDGES += expand(
         "{d}/{name}.parquet",
         d=POLICY_DIR,
@@ -59,10 +59,10 @@ rule collect_demos:
 rule palpate:
     """Frozen V and T features of every episode's palpation, and T projected by the press corpus's heads."""
     input:
-        episodes=policy_episodes(),
+        episodes=PLANS.policy.episodes(),
         vision="results/features/backbones/vision.pt",
         tactile="results/features/backbones/tactile.pt",
-        heads=list(policy_heads().values()),
+        heads=list(PLANS.policy.heads().values()),
         code=imports_of("palpate"),
     output:
         f"{POLICY_DIR}/palpation.parquet",
@@ -81,7 +81,7 @@ rule palpate:
         device=DEVICE,  # config device (tacgen_lib.runtime.device)
         settings=POLICY,
         features=config["features"],
-        align_seeds=list(policy_heads()),
+        align_seeds=list(PLANS.policy.heads()),
     script:
         "../workflow/scripts/palpate.py"
 
@@ -117,10 +117,10 @@ rule train_policy:
 rule rollout_policy:
     """Physics-only lifts of one shard of held-out episodes with one policy's grip forces."""
     input:
-        episodes=policy_episodes("heldout"),
+        episodes=PLANS.policy.episodes("heldout"),
         palpation=f"{POLICY_DIR}/palpation.parquet",
         scenes=config["scenes_file"],
-        weights=policy_weights,
+        weights=PLANS.policy.weights,
         code=imports_of("rollout_policy"),
     output:
         f"{POLICY_DIR}/rollouts/{POLICY_CELL_PATTERN}/shard~{{shard}}.parquet",
@@ -163,7 +163,7 @@ rule policy_regression:
         runtime=10,
     params:
         settings=POLICY,
-        align_seeds=list(policy_heads()),
+        align_seeds=list(PLANS.policy.heads()),
     script:
         "../workflow/scripts/policy_regression.py"
 
@@ -171,16 +171,18 @@ rule policy_regression:
 rule aggregate_policy:
     """Success with CIs per cell, paired Δ against V, failure modes, the sweep; the Policy report."""
     input:
-        rollouts=policy_rollouts(),
-        benchmarks=policy_rollouts("results/benchmarks/rollout_policy/{cell}/{k}.tsv"),
-        train_benchmarks=policy_train_benchmarks(),
+        rollouts=PLANS.policy.rollouts(),
+        benchmarks=PLANS.policy.rollouts(
+            "results/benchmarks/rollout_policy/{cell}/{k}.tsv"
+        ),
+        train_benchmarks=PLANS.policy.train_benchmarks(),
         collect=[
             p.replace(f"{POLICY_DIR}/episodes/", "results/benchmarks/collect_demos/")
             .replace("shard~", "")
             .replace(".parquet", ".tsv")
-            for p in policy_episodes()
+            for p in PLANS.policy.episodes()
         ],
-        heldout=policy_episodes("heldout"),
+        heldout=PLANS.policy.episodes("heldout"),
         regression=f"{POLICY_DIR}/regression.parquet",
         code=imports_of("aggregate_policy"),
     output:

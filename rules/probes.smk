@@ -13,7 +13,7 @@ include: "probes_common.smk"
 TARGETS += ["results/probes/summary.parquet"]
 TARGETS += expand("{d}/{t}.html", d=PROBE_REPORT, t=PROBE_TABLES)
 TARGETS += expand("{d}/{f}", d=PROBE_REPORT, f=PROBE_FIGURES)  # one PNG per family
-EDGES += [path for edge in PROBE_EDGES for path in probe_job_edges(edge)]
+EDGES += [path for edge in PROBE_EDGES for path in PLANS.probes.job_edges(edge)]
 EDGES += expand("results/probes/{t}.parquet", t=["summary", "sweep", "confusion"])
 
 
@@ -22,7 +22,7 @@ rule probe:
     bootstrap, controls (the raw protocol; the variants as configured in probes.robustness).
     """
     input:
-        unpack(probe_inputs),
+        unpack(PLANS.probes.inputs),
         code=imports_of("probe"),
     output:
         rows=f"{PROBE_DIR}/seed~{{seed}}.parquet",
@@ -44,12 +44,12 @@ rule probe:
         runtime=30,
     params:
         family=lambda w: PROBES["families"][w.family],
-        corpus=lambda w: CORPORA[probe_family(w.family)["corpus"]],
+        corpus=lambda w: CORPORA[PLANS.probes.family(w.family)["corpus"]],
         settings=PROBE_SETTINGS,
         fusions=PROBES["fusions"],
         heads_variant=PROBES["heads"]["variant"],
         variants=config["preprocess"]["variants"],
-        align_seeds=lambda w: probe_align_seeds(w.family),
+        align_seeds=lambda w: PLANS.probes.align_seeds(w.family),
         # the protocol variant's budget: headline comparisons only? controls?
         headline_only=lambda w: ROBUST.headline_only(w.protocol),
         controls=lambda w: ROBUST.run_controls(w.protocol),
@@ -60,9 +60,9 @@ rule probe:
 rule aggregate_probes:
     """One summary of every probe family and seed; the probe tables and figures of the report."""
     input:
-        rows=probe_job_edges("seed~{seed}"),
-        sweep=probe_job_edges("sweep~{seed}"),
-        confusion=probe_job_edges("confusion~{seed}"),
+        rows=PLANS.probes.job_edges("seed~{seed}"),
+        sweep=PLANS.probes.job_edges("sweep~{seed}"),
+        confusion=PLANS.probes.job_edges("confusion~{seed}"),
         code=imports_of("aggregate_probes"),
     output:
         summary="results/probes/summary.parquet",
@@ -112,7 +112,7 @@ EDGES += expand(
 rule probe_training_size:
     """Raw V vs V+T (concat) of one family on nested training subsets, several subset seeds."""
     input:
-        unpack(probe_raw_inputs),
+        unpack(PLANS.probes.raw_inputs),
         code=imports_of("probe_training_size"),
     output:
         rows="results/probes/{family}/training_size.parquet",
@@ -130,7 +130,7 @@ rule probe_training_size:
         runtime=30,
     params:
         family=lambda w: PROBES["families"][w.family],
-        corpus=lambda w: CORPORA[probe_family(w.family)["corpus"]],
+        corpus=lambda w: CORPORA[PLANS.probes.family(w.family)["corpus"]],
         settings=PROBE_SETTINGS,
         robustness=PROBES["robustness"],
         heads_variant=PROBES["heads"]["variant"],
@@ -143,7 +143,7 @@ rule probe_within_scale:
     """Held-out-scale diagnosis: one family's headline comparison on a random within-scale split
     of its training rows, under every protocol variant."""
     input:
-        unpack(probe_raw_inputs),
+        unpack(PLANS.probes.raw_inputs),
         code=imports_of("probe_within_scale"),
     output:
         rows="results/probes/{family}/within_scale.parquet",
@@ -161,7 +161,7 @@ rule probe_within_scale:
         runtime=30,
     params:
         family=lambda w: PROBES["families"][w.family],
-        corpus=lambda w: CORPORA[probe_family(w.family)["corpus"]],
+        corpus=lambda w: CORPORA[PLANS.probes.family(w.family)["corpus"]],
         settings=PROBE_SETTINGS,
         robustness=PROBES["robustness"],
         heads_variant=PROBES["heads"]["variant"],

@@ -11,18 +11,18 @@ if REGIME_CORPORA:
     TARGETS += [f"{REGIME_DIR}/summary.parquet"]
     TARGETS += [f"{REGIME_REPORT}/{n}.{e}" for n, e in REGIME_ITEMS.items()]
     EDGES += [f"{REGIME_DIR}/evaluation.parquet"]
-    EDGES += [p for c, s in regime_cells() for p in regime_t_gen(c, s)]
+    EDGES += [p for c, s in PLANS.regime.cells() for p in PLANS.regime.t_gen(c, s)]
 
 
 rule regime_generators:
     """Latent V->T diffusion generators on the unlabelled pools of one corpus x seed (real and re-paired pairs), sampled for its labelled and test rows."""
     input:
         v=lambda w: feature_edge(w.corpus, "vision"),
-        t=lambda w: generate_tactile(w.corpus),
+        t=lambda w: PLANS.generate.tactile(w.corpus),
         splits="results/corpus/splits.parquet",
         code=imports_of("regime_generators"),
     output:
-        t_gen=regime_t_gen("{corpus}", "{seed}"),
+        t_gen=PLANS.regime.t_gen("{corpus}", "{seed}"),
         curves=f"{REGIME_CELL}/curves.parquet",
     log:
         "results/logs/regime_generators/{corpus}/{seed}.log",
@@ -52,8 +52,8 @@ rule regime_evaluate:
         manifest="results/corpus/manifest.parquet",
         splits="results/corpus/splits.parquet",
         v=lambda w: feature_edge(w.corpus, "vision"),
-        t=lambda w: generate_tactile(w.corpus),
-        t_gen=lambda w: regime_t_gen(w.corpus, w.seed),
+        t=lambda w: PLANS.generate.tactile(w.corpus),
+        t_gen=lambda w: PLANS.regime.t_gen(w.corpus, w.seed),
         code=imports_of("regime_evaluate"),
     output:
         rows=f"{REGIME_CELL}/evaluation.parquet",
@@ -86,9 +86,9 @@ rule regime_evaluate:
 rule aggregate_regime:
     """One summary of every regime cell and arm; the report page Where generated touch helps."""
     input:
-        rows=regime_files(f"{REGIME_CELL}/evaluation.parquet"),
+        rows=PLANS.regime.files(f"{REGIME_CELL}/evaluation.parquet"),
         visibility=VISIBILITY_EDGE,
-        curves=regime_files(f"{REGIME_CELL}/curves.parquet"),
+        curves=PLANS.regime.files(f"{REGIME_CELL}/curves.parquet"),
         code=imports_of("aggregate_regime"),
     output:
         **{

@@ -72,6 +72,7 @@ rule pretrain_curve:
             "results/report/features/{modality}_pretrain_curve.png",
             "../workflow/report/pretrain_curve.rst",
             {"modality": "{modality}", "figure": "pretraining curve"},
+            FEATURES_SHOWN,
         ),
     log:
         "results/logs/pretrain_curve/{modality}.log",
@@ -125,12 +126,14 @@ TARGETS += ["results/report/findings.html"]
 rule findings:
     """The findings page: headline results with their controls and generated verdicts."""
     input:
-        unpack(findings_policy_inputs),
-        unpack(findings_regime_inputs),
-        unpack(findings_visibility_inputs),
-        unpack(findings_backbone_inputs),
-        unpack(findings_transfer_inputs),
-        unpack(findings_pixel_inputs),
+        **findings_inputs(
+            policy=POLICY_ON,
+            regime=bool(REGIME_CORPORA),
+            visibility=bool(SIM_CORPORA),
+            backbones=PLANS.families.on_findings,
+            transfer=bool(TRANSFER_CORPUS),
+            pixel=bool(PIXEL_CORPORA),
+        ),
         probes="results/probes/summary.parquet",
         generation="results/generate/evaluation.parquet",
         code=imports_of("findings"),
@@ -156,7 +159,7 @@ rule findings:
         runtime=5,
     params:
         run_name=config["run_name"],
-        generate_ref=generate_ref(),
+        generate_ref=PLANS.generate.reference(),
         policy=POLICY_ON,
         regime=bool(REGIME_CORPORA),
         regime_corpora=REGIME_CORPORA,
@@ -165,8 +168,8 @@ rule findings:
         transfer=bool(TRANSFER_CORPUS),
         pixel=bool(PIXEL_CORPORA),
         backbones=(
-            {"main": MAIN_FAMILIES, "order": list(FAMILIES.run)}
-            if FAMILY_FINDINGS
+            {"main": PLANS.families.main, "order": list(FAMILIES.run)}
+            if PLANS.families.on_findings
             else {}
         ),
     script:

@@ -14,7 +14,11 @@ rule transfer_evaluate:
         splits="results/corpus/splits.parquet",
         v=feature_edge(TRANSFER_CORPUS, "vision"),
         t=feature_edge(TRANSFER_CORPUS, "tactile", config["probes"]["heads"]["variant"]),
-        aligned=[transfer_aligned(v, s) for s in ALIGN["seeds"] for v in TRANSFER_VIEWS],
+        aligned=[
+            PLANS.transfer.aligned(v, s)
+            for s in ALIGN["seeds"]
+            for v in TRANSFER_VIEWS
+        ],
         code=imports_of("transfer_evaluate"),
     output:
         summary="results/transfer/summary.parquet",

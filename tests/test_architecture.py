@@ -23,8 +23,13 @@ strictly down (within one package anything goes, its circles being caught by the
 5. the stages built on features and heads: `generate`, `policy`;
 6. what reads every stage's settings or edges: `cost` (the cost of accuracy), `estimate` (the
    run-time estimate);
-7. the top: `report` (the pages) and `workflow_config` (the config as the Snakefile checks it:
-   the schema, then the corpus key rules and cross-references).
+7. `report` (the pages) and `workflow_config` (the config as the Snakefile checks it: the
+   schema, then the corpus key rules and cross-references);
+8. the roof: `plan` (what the rules expand, ask for and name; only rules/*.smk import it).
+
+The rules hold rules, not a second program: all `.smk` files together define at most
+`MAX_SMK_FUNCTIONS` functions, none over `MAX_SMK_FUNCTION_LINES` lines (`tacgen_lib.plan`
+holds the rest).
 """
 
 from __future__ import annotations
@@ -37,6 +42,8 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = "tacgen_lib"
 MAX_LINES = 450
+MAX_SMK_FUNCTIONS = 10
+MAX_SMK_FUNCTION_LINES = 10
 
 #: package (or top-level module) -> its floor (the longest prefix of a module's name that is a key
 #: wins)
@@ -58,6 +65,7 @@ FLOORS: dict[str, int] = {
     "tacgen_lib.estimate": 6,
     "tacgen_lib.report": 7,
     "tacgen_lib.workflow_config": 7,
+    "tacgen_lib.plan": 8,
 }
 
 
@@ -220,3 +228,44 @@ def test_no_module_over_max_lines(path):
     assert lines <= MAX_LINES, (
         f"{path.relative_to(ROOT)}: {lines} lines; split it by concept (at most {MAX_LINES})"
     )
+
+
+def smk_functions(root: Path = ROOT) -> list[tuple[str, int, int]]:
+    """(file, line, length) of every function a `def` in the Snakefile or rules/*.smk defines
+    (a Snakemake file is not Python, so its `def` lines are read as text: a function ends at the
+    next line indented no deeper than its `def`)."""
+    out = []
+    for path in [root / "Snakefile", *sorted((root / "rules").glob("*.smk"))]:
+        lines = path.read_text().splitlines()
+        for i, line in enumerate(lines):
+            stripped = line.lstrip()
+            if not stripped.startswith("def "):
+                continue
+            indent, end = len(line) - len(stripped), i + 1
+            while end < len(lines) and (
+                not lines[end].strip() or len(lines[end]) - len(lines[end].lstrip()) > indent
+            ):
+                end += 1
+            while not lines[end - 1].strip():
+                end -= 1
+            out.append((str(path.relative_to(root)), i + 1, end - i))
+    return out
+
+
+def test_smk_functions_are_read_from_a_rule_file(tmp_path):
+    (tmp_path / "rules").mkdir()
+    (tmp_path / "Snakefile").write_text("rule all:\n    input: []\n")
+    (tmp_path / "rules" / "a.smk").write_text(
+        "def f(w):\n    x = 1\n\n    return x\n\n\nrule r:\n    input: f\n"
+    )
+    assert smk_functions(tmp_path) == [("rules/a.smk", 1, 4)]
+
+
+def test_the_rules_hold_no_second_program():
+    found = smk_functions()
+    long = [f"{f}:{line} ({n} lines)" for f, line, n in found if n > MAX_SMK_FUNCTION_LINES]
+    assert len(found) <= MAX_SMK_FUNCTIONS, (
+        f"{len(found)} functions in the rule files (at most {MAX_SMK_FUNCTIONS}); move the "
+        "Python into tacgen_lib.plan"
+    )
+    assert not long, "rule-file functions over the limit: " + ", ".join(long)

@@ -1,0 +1,150 @@
+"""The workflow's plan (tacgen_lib.plan): what the rules expand and ask for, read from the
+validated config; the rule files only name it (tests/test_architecture.py)."""
+
+from __future__ import annotations
+
+import copy
+import re
+from types import SimpleNamespace
+
+import pytest
+
+from tacgen_lib.plan.align import AlignPlan
+from tacgen_lib.plan.cost import CostPlan
+from tacgen_lib.plan.paths import MATCHES_NOTHING, benchmark_file, none_of, one_of
+from tacgen_lib.plan.pixel import PixelPlan
+from tacgen_lib.plan.report_items import findings_inputs
+from tacgen_lib.plan.stages import StagePlans
+from tacgen_lib.plan.transfer import TransferPlan
+from tests.snakemake_run import validated
+
+
+@pytest.fixture(scope="module")
+def default() -> dict:
+    return validated()
+
+
+@pytest.fixture(scope="module")
+def tiny() -> dict:
+    return validated("test.yaml")
+
+
+def test_one_of_matches_exactly_its_names_and_none_of_everything_else():
+    pattern = re.compile(f"^(?:{one_of(['sim_a', 'sim.b'])})$")
+    assert pattern.match("sim_a") and pattern.match("sim.b")
+    assert not pattern.match("simxb") and not pattern.match("sim_ab")
+    assert one_of([]) == MATCHES_NOTHING and not re.match(MATCHES_NOTHING, "anything")
+    other = re.compile(f"^{none_of(['sim_a'])}$")
+    assert other.match("sim_ab") and other.match("sim_b") and not other.match("sim_a")
+    assert not other.match("a/b"), "a wildcard segment never spans a folder"
+
+
+def test_benchmark_file_is_the_benchmark_directive_path():
+    assert benchmark_file("probe", "force/protocol~raw/seed~0") == (
+        "results/benchmarks/probe/force/protocol~raw/seed~0.tsv"
+    )
+
+
+def test_align_grid_expands_every_cell_in_config_order(tiny):
+    plan = AlignPlan.from_config(tiny)
+    a = tiny["align"]
+    cells = plan.cells()
+    assert len(cells) == (
+        len(a["corpora"])
+        * len(a["variants"])
+        * len(a["seeds"])
+        * len(a["taus"])
+        * len(a["n_train"])
+    )
+    assert cells[0].startswith(f"{a['corpora'][0]}/{a['variants'][0]}/seed~{a['seeds'][0]}/")
+    assert plan.grid("results/align/{corpus}/x")[0] == f"results/align/{a['corpora'][0]}/x"
+
+
+def test_aligned_edge_refuses_heads_that_are_not_trained(tiny):
+    plan = AlignPlan.from_config(tiny)
+    with pytest.raises(ValueError, match="not in align.corpora"):
+        plan.aligned_edge("no_such_corpus", "sim_paired", "clip128", 0, 0.07, "all")
+
+
+def test_a_grid_corpus_that_is_not_a_corpus_stops_the_plan(tiny):
+    cfg = copy.deepcopy(tiny)
+    cfg["align"]["corpora"] = [*cfg["align"]["corpora"], "sim_missing"]
+    with pytest.raises(ValueError, match="config align.corpora: 'sim_missing' is not a corpus"):
+        StagePlans.from_config(cfg)
+
+
+def test_every_stage_plan_builds_from_each_shipped_config(default, tiny):
+    for cfg in (default, tiny):
+        plans = StagePlans.from_config(cfg)
+        assert plans.generate.reference_cell() in plans.generate.cells
+        assert set(plans.regime.corpora) <= set(cfg["corpora"])
+        assert plans.probes.jobs and all(
+            f in cfg["probes"]["families"] for f, _ in plans.probes.jobs
+        )
+
+
+def test_every_corpus_gets_vision_and_its_tactile_variants(tiny):
+    plans = StagePlans.from_config(tiny)
+    edges = plans.features.corpus_feature_edges(tiny)
+    for corpus in tiny["corpora"]:
+        assert f"results/features/{corpus}/vision.parquet" in edges
+    # a corpus only the regime reads gets only the generator's variant
+    regime_only = [c for c in plans.regime.corpora if c not in tiny["align"]["corpora"]]
+    for corpus in regime_only:
+        tactile = [e for e in edges if e.startswith(f"results/features/{corpus}/tactile~")]
+        assert tactile == [
+            f"results/features/{corpus}/tactile~{tiny['generate']['variant']}.parquet"
+        ]
+
+
+def test_extraction_runs_one_thread_at_low_priority_only_for_natural_corpora(tiny):
+    plans = StagePlans.from_config(tiny)
+    natural = SimpleNamespace(corpus=plans.regime.corpora[0])
+    other = SimpleNamespace(corpus="sim_paired")
+    assert plans.features.extraction_threads(natural) == 1
+    assert plans.features.extraction_priority(natural) < plans.features.extraction_priority(other)
+    assert plans.features.extraction_threads(other) == tiny["features"]["threads"]
+
+
+def test_pixel_refuses_a_corpus_split_by_object(tiny):
+    cfg = copy.deepcopy(tiny)
+    by_object = sorted(cfg["splits"]["by_object"])[0]
+    cfg["pixel"]["corpora"] = {by_object: {"hardness": "classification"}}
+    with pytest.raises(ValueError, match="is split by object"):
+        PixelPlan.from_config(cfg)
+
+
+def test_transfer_views_need_trained_heads(tiny):
+    align = AlignPlan.from_config(tiny)
+    cfg = copy.deepcopy(tiny)
+    cfg["transfer"]["source"] = "sim_null_missing"
+    with pytest.raises(ValueError, match="transfer.source"):
+        TransferPlan.from_config(cfg, align)
+    plan = TransferPlan.from_config(tiny, align)
+    target = plan.aligned("target", 0)
+    assert "/n~all/" in target, "the transfer corpus's own heads train on all its train rows"
+
+
+def test_findings_read_only_the_stages_that_run():
+    none = findings_inputs(
+        policy=False, regime=False, visibility=False, backbones=False, transfer=False, pixel=False
+    )
+    assert none == {}
+    every = findings_inputs(
+        policy=True, regime=True, visibility=True, backbones=True, transfer=True, pixel=True
+    )
+    assert {"policy_summary", "regime", "visibility", "backbones", "transfer", "pixel"} <= set(
+        every
+    )
+
+
+def test_the_cost_plan_reads_each_knobs_benchmarks_once():
+    cfg = validated("cost_tiny.yaml")
+    plan = CostPlan.from_config(cfg, StagePlans.from_config(cfg))
+    assert plan.knobs(), "config/cost_tiny.yaml sweeps knobs"
+    for knob in plan.knobs():
+        inputs = plan.knob_inputs(SimpleNamespace(knob=knob))
+        assert len(inputs["benchmarks"]) == len(set(inputs["benchmarks"]))
+        assert all(b.startswith("results/") and b.endswith(".tsv") for b in inputs["benchmarks"])
+        for run in plan.setting_plan(knob):
+            assert set(run["benchmarks"]) <= set(inputs["benchmarks"])
