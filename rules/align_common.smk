@@ -3,7 +3,12 @@
 `aligned_edge(...)` is the entry point other stages (probes) use to ask for aligned projections.
 """
 
-from tacgen_lib.align.cells import CELL_CONSTRAINTS, CELL_PATTERN, cell_name, tau_text
+from tacgen_lib.align.cell_names import (
+    CELL_CONSTRAINTS,
+    CELL_PATTERN,
+    cell_name,
+    tau_text,
+)
 
 ALIGN = config["align"]
 ALIGN_CORPORA = ALIGN["corpora"]

@@ -10,8 +10,8 @@ grids and rerun nothing: a setting run is a cell of the grid (per seed), read fr
 summary. Both kinds go through rule cost_knob_points with a plan of setting runs.
 """
 
-from tacgen_lib.align.cells import cell_name
-from tacgen_lib.policy.cells import all_cells as _policy_all_cells
+from tacgen_lib.align.cell_names import cell_name
+from tacgen_lib.policy.policy_cells import all_cells as _policy_all_cells
 from tacgen_lib.features.settings import backbones_pretrained
 from tacgen_lib.cost.knobs import (
     KNOBS,

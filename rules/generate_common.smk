@@ -1,6 +1,6 @@
 """Helpers of the generate stage (grid expansion, canonical cell paths); included by generate.smk."""
 
-from tacgen_lib.generate.cells import (
+from tacgen_lib.generate.sampling_cells import (
     BASELINES,
     GENERATOR,
     SAMPLE_CELL,

@@ -1,7 +1,7 @@
 """Helpers of the policy stage (cells, episode shards, heads, rollouts); included by policy.smk."""
 
-from tacgen_lib.align.cells import cell_name as align_cell_name
-from tacgen_lib.policy.cells import (
+from tacgen_lib.align.cell_names import cell_name as align_cell_name
+from tacgen_lib.policy.policy_cells import (
     CELL_CONSTRAINTS as POLICY_CELL_CONSTRAINTS,
     CELL_PATTERN as POLICY_CELL_PATTERN,
     all_cells,

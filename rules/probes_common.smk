@@ -1,11 +1,11 @@
 """Helpers of the probes stage (family specs, input lists, report items); included by probes.smk."""
 
+from tacgen_lib.probes.protocol_variants import PROTOCOLS
 from tacgen_lib.probes.settings import (
     RobustnessSettings,
     check_families,
     has_aligned_rows,
 )
-from tacgen_lib.probes.variants import PROTOCOLS
 
 PROBES = config["probes"]
 check_families(PROBES["families"])  # no family repeats another's rows
