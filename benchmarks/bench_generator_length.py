@@ -6,7 +6,7 @@ early stopping on the val split decides where it stops) and prints, per setting:
 step and the steps run, whether it stopped early, the best val loss, the training seconds, and
 the matched-pair cosine of DDIM-25 samples of the test rows at w = 1 and w = 3 (centred on the
 real train mean, `fidelity.cosine_pairing`). First the reference measured in the same run:
-ridge V->T's conditional mean (`ridge.ridge_generate`) on the same rows.
+ridge V->T's conditional mean (`ridge_generator.ridge_generate`) on the same rows.
 
     .venv/bin/python benchmarks/bench_generator_length.py [--results results]
         [--corpus sim_paired] [--seed 0] [--threads 1] [--configfile config/config.yaml]
@@ -29,7 +29,7 @@ from machine import TINY_CONFIG, parse_args, run_config
 
 from tacgen_lib.corpus.splits import ids_in_split
 from tacgen_lib.generate.fidelity import cosine_pairing
-from tacgen_lib.generate.ridge import ridge_generate
+from tacgen_lib.generate.ridge_generator import ridge_generate
 from tacgen_lib.generate.sampling import generate
 from tacgen_lib.generate.settings import GenerateSettings
 from tacgen_lib.generate.train import fit_generator

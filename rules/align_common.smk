@@ -4,7 +4,12 @@
 projections.
 """
 
-from tacgen_lib.align.cells import CELL_CONSTRAINTS, CELL_PATTERN, cell_name, tau_text
+from tacgen_lib.align.cell_names import (
+    CELL_CONSTRAINTS,
+    CELL_PATTERN,
+    cell_name,
+    tau_text,
+)
 from tacgen_lib.plan.align import ALIGN_CELL, ALIGN_REPORT
 
 ALIGN = config["align"]

@@ -1,6 +1,6 @@
 """The generate stage's names (tacgen_lib.plan.generate); included by generate.smk."""
 
-from tacgen_lib.generate.cells import (
+from tacgen_lib.generate.sampling_cells import (
     BASELINES,
     GENERATOR,
     SAMPLE_CELL,

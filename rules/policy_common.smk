@@ -6,8 +6,8 @@ from tacgen_lib.plan.policy import (
     POLICY_REPORT,
     POLICY_TABLES,
 )
-from tacgen_lib.policy.cells import CELL_CONSTRAINTS as POLICY_CELL_CONSTRAINTS
-from tacgen_lib.policy.cells import CELL_PATTERN as POLICY_CELL_PATTERN
+from tacgen_lib.policy.policy_cells import CELL_CONSTRAINTS as POLICY_CELL_CONSTRAINTS
+from tacgen_lib.policy.policy_cells import CELL_PATTERN as POLICY_CELL_PATTERN
 
 POLICY = config["policy"]
 POLICY_SETTINGS = PLANS.policy.settings

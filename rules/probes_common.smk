@@ -9,7 +9,7 @@ from tacgen_lib.plan.probes import (
     ROBUSTNESS_TABLES,
 )
 from tacgen_lib.plan.report_items import probe_report_dir, probe_report_item
-from tacgen_lib.probes.variants import PROTOCOLS
+from tacgen_lib.probes.protocol_variants import PROTOCOLS
 
 PROBES = config["probes"]
 PROBE_FAMILIES = PLANS.probes.families

@@ -19,8 +19,8 @@ from tacgen_lib.estimate.flops import (
     spec_flops,
 )
 from tacgen_lib.features.settings import MaeSettings, SimclrSettings, pretraining_corpora
-from tacgen_lib.generate.cells import guidance_passes
 from tacgen_lib.generate.regime_sets import regime_corpora
+from tacgen_lib.generate.sampling_cells import guidance_passes
 from tacgen_lib.io.config import load_yaml
 
 Config = Mapping[str, Any]

@@ -19,7 +19,7 @@ stage's own (`tacgen_lib.probes.fit.fit_probe` on the same `family_rows` train/t
   touch; ``delta_vs_nonlinear`` = score(V + x) - score(V + phi(V)) says.
 - ``t_ridge`` / ``t_ridge_residual``: V + the simplest generator's output, ridge V->T fitted on
   the generator's own train rows (its conditional mean; the mean plus a sampled train
-  residual: `tacgen_lib.generate.ridge`). A diffusion generator that does no better than it
+  residual: `tacgen_lib.generate.ridge_generator`). A diffusion generator that does no better than it
   has learnt nothing a linear map does not give; ``delta_vs_ridge`` = score(V + T_gen) -
   score(V + T_ridge) on the ``t_gen`` rows says, and each ridge row carries its own fidelity.
 
@@ -57,14 +57,14 @@ import pandas as pd
 
 from tacgen_lib.generate.baselines import BASELINE_INPUTS, Baselines, TargetSpec
 from tacgen_lib.generate.blocks import feature_block
-from tacgen_lib.generate.cells import RIDGE_INPUTS
 from tacgen_lib.generate.fidelity import (
     PERMUTATION_COLUMNS,
     centred_gaps,
     fidelity,
     gap_interval,
 )
-from tacgen_lib.generate.ridge import RIDGE_ALPHAS, ridge_generate
+from tacgen_lib.generate.ridge_generator import RIDGE_ALPHAS, ridge_generate
+from tacgen_lib.generate.sampling_cells import RIDGE_INPUTS
 from tacgen_lib.probes.bootstrap import (
     fixed_test_bootstrap,
     percentile_interval,
@@ -198,12 +198,12 @@ def evaluate_generator(
     function free of edge I/O); t_gen: (sampler, guidance, steps) -> sample_id -> vector;
     baselines: target -> its `fit_baselines` (V, V + T_real, nonlinear V: shared by seeds).
     `generator_train_ids`: the rows the generator learnt from; the ridge V->T generator
-    (`tacgen_lib.generate.ridge`, its residual draw seeded by `seed`) is fitted on them, and
+    (`tacgen_lib.generate.ridge_generator`, its residual draw seeded by `seed`) is fitted on them, and
     its two arms are evaluated beside every cell: rows ``t_ridge`` and ``t_ridge_residual``,
     each with its own fidelity, and ``delta_vs_ridge`` = score(V + T_gen) - score(V + T_ridge)
     on the ``t_gen`` rows. `reference`: the cell whose CV chooses the logistic C of every cell
     (module docstring; default: the first cell). `family`: how many generated-touch rows the
-    page compares (`cells.family_size`); each generated row (``t_gen``, ``t_gen_shuffled``, the
+    page compares (`sampling_cells.family_size`); each generated row (``t_gen``, ``t_gen_shuffled``, the
     ridge arms) also carries its family-wise interval, ``ci_low_fw`` / ``ci_high_fw``
     (`family_interval`), from the same resamples as its CI.
     """

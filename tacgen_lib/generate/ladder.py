@@ -13,7 +13,7 @@ same test rows. Reading the rungs from the top tells where a gain is lost:
 - ``knn`` (A1): the mean real T of the k nearest pool rows in (standardised) V, k chosen by
   K-fold CV of the T prediction on the pool: nonparametric, and only as good as V's
   neighbourhoods;
-- ``ridge``: multi-output ridge T ~ V on the pool (`generate.ridge.ridge_generate`), the
+- ``ridge``: multi-output ridge T ~ V on the pool (`generate.ridge_generator.ridge_generate`), the
   simplest generator;
 - ``gen_mean`` (A2): the mean of K samples of the diffusion generator (its conditional mean);
 - ``v_tgen`` (A3): one sample of it, the paper's arm.
@@ -215,10 +215,10 @@ def ladder_rungs(
     seed: int = 0,
 ) -> LadderRungs:
     """Every rung of `LADDER` but the one-sample ``v_tgen`` for `rows`, each learnt from the
-    pool only: `look_oracle`, `knn_generate`, ridge (`generate.ridge.ridge_generate`, its
+    pool only: `look_oracle`, `knn_generate`, ridge (`generate.ridge_generator.ridge_generate`, its
     conditional mean) and ``gen_mean`` (given: the mean of the diffusion generator's samples,
     `regime_generators.pool_generators`)."""
-    from tacgen_lib.generate.ridge import ridge_generate
+    from tacgen_lib.generate.ridge_generator import ridge_generate
 
     pool = [str(i) for i in pool]
     rows = [str(i) for i in rows]

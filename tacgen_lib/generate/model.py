@@ -18,8 +18,8 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
+from tacgen_lib.generate import inference
 from tacgen_lib.generate.inference import DenoiserArrays, Standardiser, fit_standardiser
-from tacgen_lib.generate.inference import sinusoidal_embedding as _sinusoidal
 
 __all__ = [
     "Denoiser",
@@ -31,7 +31,9 @@ __all__ = [
 
 def sinusoidal_embedding(t: Tensor, dim: int, max_period: float = 10_000.0) -> Tensor:
     """`inference.sinusoidal_embedding` of integer timesteps as a float32 tensor (B,) -> (B, dim)."""
-    return torch.from_numpy(_sinusoidal(t.detach().cpu().numpy(), dim, max_period))
+    return torch.from_numpy(
+        inference.sinusoidal_embedding(t.detach().cpu().numpy(), dim, max_period)
+    )
 
 
 class ResidualBlock(nn.Module):

@@ -26,8 +26,8 @@ from typing import Any
 
 import numpy as np
 
-from tacgen_lib.generate.cells import guidance_passes
 from tacgen_lib.generate.inference import DenoiserArrays, GeneratorWeights
+from tacgen_lib.generate.sampling_cells import guidance_passes
 from tacgen_lib.generate.schedules import Schedule
 
 __all__ = [

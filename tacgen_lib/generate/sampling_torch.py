@@ -5,7 +5,7 @@ classifier-free guidance as `sampling` (numpy), on any torch device.
 no torch, and its edges stay bit-identical). This module is its twin where `device` is a GPU
 (`tacgen_lib.runtime.device`): the same noise (one numpy Generator seeded with `seed`, drawn in
 the same order, moved to the device), the same steps in float32, the same guided output with
-only the passes w needs (`cells.guidance_passes`). The two agree within float rounding
+only the passes w needs (`sampling_cells.guidance_passes`). The two agree within float rounding
 (tests/generate/test_sampling_torch.py, on the CPU); the torch denoiser runs the full forward
 pass (`model.Denoiser`), not the numpy one's precomputed condition share, a difference of
 rounding only.
@@ -18,10 +18,10 @@ from typing import Any
 import numpy as np
 import torch
 
-from tacgen_lib.generate.cells import guidance_passes
 from tacgen_lib.generate.inference import GeneratorWeights
 from tacgen_lib.generate.model import Denoiser
 from tacgen_lib.generate.sampling import sampling_plan
+from tacgen_lib.generate.sampling_cells import guidance_passes
 from tacgen_lib.generate.schedules import Schedule
 
 __all__ = ["denoiser_module", "generate_torch", "guided_output_torch", "sample_torch"]

@@ -9,7 +9,7 @@ from typing import Any
 
 from snakemake.io import expand
 
-from tacgen_lib.align.cells import CELL_PATTERN, cell_name, tau_text
+from tacgen_lib.align.cell_names import CELL_PATTERN, cell_name, tau_text
 
 #: a grid cell's folder
 ALIGN_CELL = f"results/align/{CELL_PATTERN}"

@@ -7,15 +7,15 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from tacgen_lib.align.cells import cell_name
+from tacgen_lib.align.cell_names import cell_name
 from tacgen_lib.features.settings import pretraining_corpora
 from tacgen_lib.plan.features import MODALITIES
 from tacgen_lib.plan.generate import sample_benchmark
 from tacgen_lib.plan.paths import benchmark_file, corpus_edge
 from tacgen_lib.plan.policy import POLICY_DIR
 from tacgen_lib.plan.stages import StagePlans
-from tacgen_lib.policy.cells import all_cells
-from tacgen_lib.policy.cells import cell_name as policy_cell_name
+from tacgen_lib.policy.policy_cells import all_cells
+from tacgen_lib.policy.policy_cells import cell_name as policy_cell_name
 
 #: edges by role and benchmark files of one swept setting run
 Files = tuple[dict[str, list[str]], list[str]]

@@ -7,7 +7,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
-from tacgen_lib.generate.cells import SAMPLE_CELL, guidance_text, sample_cells
+from tacgen_lib.generate.sampling_cells import SAMPLE_CELL, guidance_text, sample_cells
 from tacgen_lib.generate.settings import check_grid, generate_grids
 from tacgen_lib.plan.paths import benchmark_file, feature_edge
 

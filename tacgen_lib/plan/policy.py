@@ -7,10 +7,10 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from tacgen_lib.align.cells import cell_name as align_cell_name
+from tacgen_lib.align.cell_names import cell_name as align_cell_name
 from tacgen_lib.plan.paths import benchmark_file
-from tacgen_lib.policy.cells import CELL_PATTERN, REFERENCES, all_cells
-from tacgen_lib.policy.cells import cell_name as policy_cell_name
+from tacgen_lib.policy.policy_cells import CELL_PATTERN, REFERENCES, all_cells
+from tacgen_lib.policy.policy_cells import cell_name as policy_cell_name
 from tacgen_lib.policy.settings import PolicySettings
 
 POLICY_DIR = "results/policy"

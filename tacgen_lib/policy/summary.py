@@ -18,8 +18,8 @@ from collections.abc import Mapping, Sequence
 import pandas as pd
 
 from tacgen_lib.policy import oracle
-from tacgen_lib.policy.cells import Cell, cell_name, main_cells, sweep_cells
 from tacgen_lib.policy.evaluate import failure_counts, gap_closed, paired_delta_ci, success_ci
+from tacgen_lib.policy.policy_cells import Cell, cell_name, main_cells, sweep_cells
 from tacgen_lib.policy.settings import PolicySettings
 from tacgen_lib.policy.task import FAILURE_MODES
 

@@ -24,7 +24,7 @@ from typing import Literal
 import numpy as np
 import scipy.linalg
 
-from tacgen_lib.probes.blas import single_blas_thread
+from tacgen_lib.probes.blas_threads import single_blas_thread
 from tacgen_lib.probes.objective import DesignBlock, LogisticObjective
 
 __all__ = [

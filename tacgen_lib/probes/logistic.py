@@ -31,10 +31,10 @@ from sklearn.pipeline import Pipeline
 from sklearn.preprocessing import StandardScaler
 
 from tacgen_lib.probes.batched import fit_logistic_batch
-from tacgen_lib.probes.blas import single_blas_thread
+from tacgen_lib.probes.blas_threads import single_blas_thread
 from tacgen_lib.probes.bootstrap import resample_counts
 from tacgen_lib.probes.folds import make_folds
-from tacgen_lib.probes.inputs import check_features, check_target
+from tacgen_lib.probes.input_checks import check_features, check_target
 from tacgen_lib.probes.lbfgs import fit_lbfgs_logistic
 from tacgen_lib.probes.metrics import accuracy
 from tacgen_lib.probes.objective import standardise_block

@@ -32,9 +32,9 @@ from sklearn.neural_network import MLPClassifier, MLPRegressor
 from sklearn.pipeline import make_pipeline
 from sklearn.preprocessing import StandardScaler
 
-from tacgen_lib.probes.blas import single_blas_thread
+from tacgen_lib.probes.blas_threads import single_blas_thread
 from tacgen_lib.probes.folds import make_folds
-from tacgen_lib.probes.inputs import check_features, check_target
+from tacgen_lib.probes.input_checks import check_features, check_target
 from tacgen_lib.probes.metrics import score
 from tacgen_lib.probes.refits import Refits, Refitted
 from tacgen_lib.probes.settings import MLPGrid

@@ -45,7 +45,7 @@ Protocol (paper, "Probes")
   one-hot(shape) x scale^3, of log-mass in one-hot(shape) and log(scale)); NaN where the
   manifest has no shape and scale.
 
-Protocol variants (`variants.PROTOCOLS`): ``settings.protocol`` picks the probe
+Protocol variants (`protocol_variants.PROTOCOLS`): ``settings.protocol`` picks the probe
 `fit_probe` fits -- ``raw`` (the above), ``standardised`` (`scaling`) or ``mlp2`` (`mlp`) --
 and every row carries a ``protocol`` column. `run_family` can restrict a variant to the
 headline comparisons (``concat`` with the heads' variant, raw and aligned) and leave its

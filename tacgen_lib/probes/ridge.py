@@ -34,7 +34,7 @@ from typing import Literal
 import numpy as np
 
 from tacgen_lib.probes.batched import concat_ridge_permuted
-from tacgen_lib.probes.inputs import check_features, check_target
+from tacgen_lib.probes.input_checks import check_features, check_target
 from tacgen_lib.probes.refits import Refits, Refitted
 from tacgen_lib.probes.ridge_cv import LambdaSelection, select_lambda_cv
 from tacgen_lib.probes.ridge_path import (

@@ -13,9 +13,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
-from tacgen_lib.probes.blas import single_blas_thread
+from tacgen_lib.probes.blas_threads import single_blas_thread
 from tacgen_lib.probes.folds import make_folds
-from tacgen_lib.probes.inputs import check_features, check_lambdas, check_target
+from tacgen_lib.probes.input_checks import check_features, check_lambdas, check_target
 from tacgen_lib.probes.ridge_path import (
     FLOAT64_EPS,
     GRAM_GUARD,

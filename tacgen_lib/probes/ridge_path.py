@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.linalg
 
-from tacgen_lib.probes.inputs import check_features, check_lambdas, check_target
+from tacgen_lib.probes.input_checks import check_features, check_lambdas, check_target
 
 FLOAT64_EPS = np.finfo(np.float64).eps
 

@@ -13,7 +13,7 @@ never move a mean or an SD -- and then solves the ridge of `ridge` on the scaled
   one scaled refit at a time.
 
 Logistic probes need no twin: `logistic.fit_logistic` has standardised inside every fit
-since it was written, so for them ``standardised`` is ``raw`` (see `variants.PROTOCOLS`).
+since it was written, so for them ``standardised`` is ``raw`` (see `protocol_variants.PROTOCOLS`).
 A zero-variance column is centred only (scale 1), as scikit-learn's scaler does.
 """
 
@@ -26,7 +26,7 @@ import numpy as np
 from sklearn.preprocessing import StandardScaler
 
 from tacgen_lib.probes.folds import make_folds
-from tacgen_lib.probes.inputs import check_features, check_lambdas, check_target
+from tacgen_lib.probes.input_checks import check_features, check_lambdas, check_target
 from tacgen_lib.probes.metrics import score_rows
 from tacgen_lib.probes.refits import Refits, Refitted
 from tacgen_lib.probes.ridge_cv import LambdaCV

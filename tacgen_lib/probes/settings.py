@@ -16,7 +16,7 @@ from dataclasses import dataclass, replace
 
 from tacgen_lib.io.config import settings_from
 from tacgen_lib.io.schema import SchemaSettings, check_settings, not_config, schema_fields, setting
-from tacgen_lib.probes.variants import check_protocol, same_as_raw
+from tacgen_lib.probes.protocol_variants import check_protocol, same_as_raw
 
 __all__ = [
     "ALIGNED_VISION",
@@ -148,7 +148,7 @@ class RobustnessSettings:
 
     def jobs(self, families: Mapping[str, Mapping]) -> list[tuple[str, str]]:
         """(family, protocol) of every probe job: raw for every family, each other protocol
-        for `families` where it differs from raw (`variants.same_as_raw`)."""
+        for `families` where it differs from raw (`protocol_variants.same_as_raw`)."""
         out = [(f, "raw") for f in sorted(families)]
         for p in self.protocols:
             if p == "raw":
@@ -179,7 +179,7 @@ class ProbeSettings:
     seed: int = not_config()  # the probe seed (a grid value of probes.seeds)
     #: the smallest gain the comparisons call meaningful (the paper's, not a config key)
     min_delta: float = not_config(0.03)
-    protocol: str = not_config("raw")  # a name of `variants.PROTOCOLS`
+    protocol: str = not_config("raw")  # a name of `protocol_variants.PROTOCOLS`
     #: seed of the bootstrap resamples and control draws; None: `seed` (which also draws the
     #: CV folds). The cost sweep's probe knobs vary it alone to measure Monte Carlo error.
     resample_seed: int | None = setting("probes.resample_seed")

@@ -16,7 +16,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 
-from tacgen_lib.align.cells import CELL_COLUMNS
+from tacgen_lib.align.cell_names import CELL_COLUMNS
 from tacgen_lib.align.retrieval import RETRIEVAL_METRICS
 from tacgen_lib.report import claims
 from tacgen_lib.report.write import panel_grid

@@ -6,7 +6,7 @@ frames or a Figure out.
 
 - `headline_long`: the headline comparisons (``concat`` with the heads' tactile variant, raw and
   aligned inputs) under every protocol, one row each; a logistic family's ``standardised``
-  row is its ``raw`` row (`variants.same_as_raw`), marked so.
+  row is its ``raw`` row (`protocol_variants.same_as_raw`), marked so.
 - `robustness_table` + `survival_sentence`: family x input x protocol Delta [95% CI], and a
   sentence generated from it saying which results have a CI above 0 under every protocol.
 - `multiplicity_table`: CIs excluding 0, Holm / BH rejections, chance expectation.
@@ -23,7 +23,7 @@ import numpy as np
 import pandas as pd
 from matplotlib.ticker import NullFormatter
 
-from tacgen_lib.probes.variants import same_as_raw
+from tacgen_lib.probes.protocol_variants import same_as_raw
 from tacgen_lib.report import claims
 from tacgen_lib.report import format as fmt
 from tacgen_lib.report.write import panel_grid

@@ -18,7 +18,7 @@ from snakemake_run import copy_tree, report_page, smk
 
 from tacgen_lib.align import checkpoint as align_checkpoint
 from tacgen_lib.align import grid as align_grid  # noqa: E402
-from tacgen_lib.align.cells import cell_name
+from tacgen_lib.align.cell_names import cell_name
 from tacgen_lib.align.settings import AlignSettings  # noqa: E402
 from tacgen_lib.corpus.splits import LeakageError  # noqa: E402
 from tacgen_lib.io import edges  # noqa: E402

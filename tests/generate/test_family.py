@@ -8,8 +8,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from tacgen_lib.generate.cells import family_size
 from tacgen_lib.generate.evaluate import FAMILY_ALPHA, family_interval
+from tacgen_lib.generate.sampling_cells import family_size
 from tacgen_lib.probes.bootstrap import percentile_interval
 from tacgen_lib.report.generate_family import family_rows, family_table
 

@@ -31,7 +31,6 @@ from tacgen_lib.generate.baselines import (
     baselines_from_frame,
     fit_baselines,
 )
-from tacgen_lib.generate.cells import guidance_text, sample_cells
 from tacgen_lib.generate.evaluate import evaluate_generator, shuffled_rows
 from tacgen_lib.generate.fidelity import (
     cosine_pairing,
@@ -50,6 +49,7 @@ from tacgen_lib.generate.sampling import (
     project_guidance,
     sample,
 )
+from tacgen_lib.generate.sampling_cells import guidance_text, sample_cells
 from tacgen_lib.generate.schedules import cosine_betas, linear_betas, make_schedule
 from tacgen_lib.generate.settings import GenerateSettings, check_grid
 from tacgen_lib.generate.train import (
@@ -262,7 +262,7 @@ def test_sampling_modules_do_not_import_torch_or_pandas():
     ~0.25 s)."""
     code = (
         "import sys; import tacgen_lib.generate.inference, tacgen_lib.generate.sampling, "
-        "tacgen_lib.generate.cells, tacgen_lib.runtime.benchmarks, tacgen_lib.runtime.workers, "
+        "tacgen_lib.generate.sampling_cells, tacgen_lib.runtime.benchmarks, tacgen_lib.runtime.workers, "
         "tacgen_lib.io.edges, tacgen_lib.io.log, tacgen_lib.runtime.device, threadpoolctl; "
         "print('torch' in sys.modules, 'pandas' in sys.modules)"
     )
@@ -958,7 +958,12 @@ def test_cell_seed_is_the_per_cell_jobs_seed_and_cells_keep_their_paths():
     """One job per generator samples each cell with the seed a job per cell used (generator
     seed, steps, guidance in thousandths), so the edges stay the same bytes; its outputs are
     the cells' paths with corpus and seed left as wildcards, in the cells' order."""
-    from tacgen_lib.generate.cells import SAMPLE_CELL, cell_seed, generator_cells, sample_cells
+    from tacgen_lib.generate.sampling_cells import (
+        SAMPLE_CELL,
+        cell_seed,
+        generator_cells,
+        sample_cells,
+    )
 
     assert cell_seed(0, "1", "25") == 25 * 101 + 1000
     assert cell_seed("3", 1.5, 1000) == 3 * 1_000_003 + 1000 * 101 + 1500

@@ -1,4 +1,4 @@
-"""The ridge V->T generator (tacgen_lib.generate.ridge) against float64 references: its mean is
+"""The ridge V->T generator (tacgen_lib.generate.ridge_generator) against float64 references: its mean is
 the closed-form ridge solution at the penalty that brute-force leave-one-out picks, also with
 fewer train rows than visual dimensions; its residual arm adds train residuals, seeded; and in
 the evaluation a generator equal to it scores exactly as it."""
@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from tacgen_lib.generate.ridge import RIDGE_ALPHAS, ridge_generate
+from tacgen_lib.generate.ridge_generator import RIDGE_ALPHAS, ridge_generate
 
 
 def linear_world(n: int, d_v: int, d_t: int, seed: int = 0):

@@ -9,7 +9,7 @@ import pytest
 import yaml
 from snakemake_run import ROOT, validated
 
-from tacgen_lib.policy import bc, cells, evaluate
+from tacgen_lib.policy import bc, evaluate, policy_cells
 from tacgen_lib.policy.settings import LEARNED_CONDITIONS, PolicySettings
 
 SCHEMA = ROOT / "config" / "config.schema.yaml"
@@ -22,7 +22,7 @@ def test_every_config_builds_policy_settings(overlay):
     assert s.n_demos == cfg["policy"]["n_demos"] and s.n_heldout == cfg["policy"]["n_heldout"]
     if overlay == "paper.yaml":
         assert (s.n_demos, s.n_heldout) == (96, 300)
-        assert len(cells.sweep_cells(s)) == 24  # H {128..1024} x E {200, 400} x 3 seeds
+        assert len(policy_cells.sweep_cells(s)) == 24  # H {128..1024} x E {200, 400} x 3 seeds
 
 
 def test_policy_fields_are_schema_keys_with_equal_defaults():
@@ -45,9 +45,9 @@ def test_policy_settings_refuse_bad_values():
 
 def test_cells_are_unique_and_matched():
     s = PolicySettings.tiny()
-    all_cells = cells.all_cells(s)
+    all_cells = policy_cells.all_cells(s)
     assert len(set(all_cells)) == len(all_cells)
-    main = cells.main_cells(s)
+    main = policy_cells.main_cells(s)
     learned = [c for c in main if c[0] in LEARNED_CONDITIONS]
     assert {c[1:] for c in learned} == {(s.hidden, s.epochs, s.seeds[0])}  # matched capacity
 

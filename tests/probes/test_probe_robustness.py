@@ -23,13 +23,13 @@ from tacgen_lib.probes.folds import make_folds
 from tacgen_lib.probes.mlp import FixedMLP, MLPGrid, fit_mlp_probe
 from tacgen_lib.probes.objective import DesignBlock
 from tacgen_lib.probes.protocol import run_family
+from tacgen_lib.probes.protocol_variants import same_as_raw
 from tacgen_lib.probes.refits import Refits
 from tacgen_lib.probes.robustness import RobustnessSettings, training_size_sweep
 from tacgen_lib.probes.rows import family_rows
 from tacgen_lib.probes.scaling import FixedStandardisedRidge, fit_standardised_ridge
 from tacgen_lib.probes.settings import ProbeSettings
 from tacgen_lib.probes.subsets import nested_subsets, within_scale_split
-from tacgen_lib.probes.variants import same_as_raw
 
 LAMBDAS = (0.01, 0.1, 1.0, 10.0, 100.0)
 

@@ -10,7 +10,7 @@ import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from tacgen_lib.align.cells import CELL_COLUMNS
+from tacgen_lib.align.cell_names import CELL_COLUMNS
 from tacgen_lib.io import edges, hashed, log
 from tacgen_lib.report import align as align_report
 from tacgen_lib.report.write import write_figure, write_table

@@ -12,8 +12,8 @@ import pandas as pd
 
 from tacgen_lib.io import edges, log
 from tacgen_lib.policy import summary as policy_summary
-from tacgen_lib.policy.cells import all_cells, cell_name, main_cells
 from tacgen_lib.policy.palpation import frame_names
+from tacgen_lib.policy.policy_cells import all_cells, cell_name, main_cells
 from tacgen_lib.policy.settings import PolicySettings
 from tacgen_lib.report import policy as report_policy
 from tacgen_lib.report.write import write_figure, write_table

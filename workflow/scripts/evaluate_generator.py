@@ -9,7 +9,7 @@ from threadpoolctl import threadpool_limits
 
 from tacgen_lib.corpus.keys import corpus_labels
 from tacgen_lib.generate.evaluate import evaluate_generator
-from tacgen_lib.generate.job import GeneratorJob
+from tacgen_lib.generate.generator_job import GeneratorJob
 from tacgen_lib.generate.settings import GenerateSettings
 from tacgen_lib.io import edges, log
 

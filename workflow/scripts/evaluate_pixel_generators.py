@@ -15,7 +15,7 @@ from tacgen_lib.corpus.splits import ids_in_split
 from tacgen_lib.features.backbones import read_backbone
 from tacgen_lib.features.extract import extract_with
 from tacgen_lib.features.settings import FeatureSettings
-from tacgen_lib.generate.job import GeneratorJob
+from tacgen_lib.generate.generator_job import GeneratorJob
 from tacgen_lib.generate.pixel.frames import resize_frames, tactile_units
 from tacgen_lib.generate.pixel.quality import reconstruction_row
 from tacgen_lib.generate.pixel.settings import PixelSettings

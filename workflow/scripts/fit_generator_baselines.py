@@ -8,7 +8,7 @@ run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpre
 from threadpoolctl import threadpool_limits
 
 from tacgen_lib.generate.baselines import baselines_frame, fit_baselines
-from tacgen_lib.generate.job import job_target_specs
+from tacgen_lib.generate.generator_job import job_target_specs
 from tacgen_lib.generate.settings import GenerateSettings
 from tacgen_lib.io import edges, log
 

@@ -17,7 +17,7 @@ from tacgen_lib.align.heads import project
 from tacgen_lib.align.settings import AlignSettings
 from tacgen_lib.align.train import fit_heads
 from tacgen_lib.corpus.splits import assert_trainable
-from tacgen_lib.generate.job import job_target_specs
+from tacgen_lib.generate.generator_job import job_target_specs
 from tacgen_lib.generate.pixel.curve import PAIRINGS, curve_point
 from tacgen_lib.io import edges, log
 from tacgen_lib.runtime.device import torch_device

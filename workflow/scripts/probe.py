@@ -9,7 +9,7 @@ from threadpoolctl import threadpool_limits
 
 from tacgen_lib.corpus.keys import corpus_labels
 from tacgen_lib.io import edges, log
-from tacgen_lib.probes.job import FamilyJob
+from tacgen_lib.probes.family_job import FamilyJob
 from tacgen_lib.probes.protocol import run_family
 from tacgen_lib.probes.settings import ProbeSettings
 

@@ -8,7 +8,7 @@ run_in_preloaded_interpreter(snakemake)  # returns only if no preloaded interpre
 from threadpoolctl import threadpool_limits
 
 from tacgen_lib.io import edges, log
-from tacgen_lib.probes.job import FamilyJob
+from tacgen_lib.probes.family_job import FamilyJob
 from tacgen_lib.probes.robustness import RobustnessSettings, training_size_sweep
 from tacgen_lib.probes.settings import ProbeSettings
 

@@ -11,7 +11,7 @@ from threadpoolctl import threadpool_limits
 
 from tacgen_lib.corpus.splits import assert_trainable
 from tacgen_lib.io import edges, log
-from tacgen_lib.probes.job import FamilyJob
+from tacgen_lib.probes.family_job import FamilyJob
 from tacgen_lib.probes.protocol import run_family, tidy
 from tacgen_lib.probes.robustness import RobustnessSettings
 from tacgen_lib.probes.settings import ProbeSettings

@@ -22,9 +22,9 @@ import time
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from tacgen_lib.generate.cells import cell_seed, guidance_passes
 from tacgen_lib.generate.inference import read_generator
 from tacgen_lib.generate.sampling import generate
+from tacgen_lib.generate.sampling_cells import cell_seed, guidance_passes
 from tacgen_lib.io import edges, log
 from tacgen_lib.runtime.benchmarks import write_benchmark
 from tacgen_lib.runtime.device import torch_device

@@ -10,7 +10,7 @@ from threadpoolctl import threadpool_limits
 
 from tacgen_lib.align import checkpoint as align_checkpoint
 from tacgen_lib.align import grid as align_grid
-from tacgen_lib.align.cells import cell_name
+from tacgen_lib.align.cell_names import cell_name
 from tacgen_lib.align.settings import AlignSettings
 from tacgen_lib.io import edges, log
 from tacgen_lib.runtime.device import torch_device

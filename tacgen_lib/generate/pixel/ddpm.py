@@ -10,7 +10,7 @@ What the latent generator already defines is reused, not re-derived: the schedul
 the training loop with its EMA and early stopping (`train.make_optimiser`,
 `train.run_training_steps`, `stopping.EarlyStopping`), the DDIM
 arithmetic (`sampling.predicted_x0_eps`, `sampling.ddim_step`, `sampling.ddim_timesteps`) and
-which guidance passes run (`cells.guidance_passes`). Nothing is clipped: x0 is never clamped
+which guidance passes run (`sampling_cells.guidance_passes`). Nothing is clipped: x0 is never clamped
 and the frames come out in the target's units, so a bad model shows.
 
 The frames are scaled to unit variance before diffusion (`data_scale`: 1 / the train frames'
@@ -38,10 +38,10 @@ import torch
 from diffusers.models.unets.unet_2d import UNet2DModel
 from torch import Tensor, nn
 
-from tacgen_lib.generate.cells import guidance_passes
-from tacgen_lib.generate.pixel.fit import PixelFit
+from tacgen_lib.generate.pixel.pixel_fit import PixelFit
 from tacgen_lib.generate.pixel.settings import PixelDDPMSettings, frames_tensor
 from tacgen_lib.generate.sampling import ddim_step, ddim_timesteps, predicted_x0_eps
+from tacgen_lib.generate.sampling_cells import guidance_passes
 from tacgen_lib.generate.schedules import Schedule, make_schedule
 from tacgen_lib.generate.train import ValidationDraws, train_ema
 
@@ -235,7 +235,7 @@ def guided_unet_output(
 ) -> np.ndarray:
     """Classifier-free guidance at one timestep: out_u + w (out_c - out_u) (Ho & Salimans).
 
-    Only the passes `cells.guidance_passes` names run: the conditional pass alone at w = 1
+    Only the passes `sampling_cells.guidance_passes` names run: the conditional pass alone at w = 1
     (exactly out_c), the unconditional alone at w = 0 (exactly out_u), else both in one batch
     of 2B. x_t, rgb: (B, 3, H, W) float32; returns float32 (B, 3, H, W). Runs on the U-Net's
     device (on the CPU no move).

@@ -30,7 +30,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from tacgen_lib.generate.pixel.fit import PixelFit
+from tacgen_lib.generate.pixel.pixel_fit import PixelFit
 from tacgen_lib.generate.pixel.settings import Pix2PixSettings, frames_tensor
 from tacgen_lib.generate.stopping import EarlyStopping
 from tacgen_lib.optim import AdamW

@@ -28,7 +28,7 @@ BASELINES = "results/generate/{corpus}/baselines.parquet"
 #: Directory of one sampling cell of a generator.
 SAMPLE_CELL = GENERATOR + "/sampler~{sampler}/guidance~{guidance}/steps~{steps}"
 #: What the ridge V->T generator's two arms add to V in an evaluation row
-#: (`tacgen_lib.generate.ridge`): its conditional mean, and the mean plus a sampled residual.
+#: (`tacgen_lib.generate.ridge_generator`): its conditional mean, and the mean plus a sampled residual.
 RIDGE_INPUTS = ("t_ridge", "t_ridge_residual")
 #: Wildcard constraints that keep cell text canonical.
 SAMPLE_CONSTRAINTS = {
