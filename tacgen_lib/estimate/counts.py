@@ -173,7 +173,7 @@ def align_steps(c: Config, w: Wildcards) -> float:
 
 def baseline_targets(c: Config, corpus: str) -> set[str]:
     """The targets of a corpus's generator baselines: the latent generator's and the pixel
-    generators' (rules/generate_common.smk, BASELINE_TARGETS)."""
+    generators' (tacgen_lib.plan.generate.GeneratePlan.baseline_targets)."""
     pixel = ((c.get("pixel") or {}).get("corpora") or {}).get(corpus, {})
     return set(c["generate"]["corpora"].get(corpus, {})) | set(pixel)
 
