@@ -9,6 +9,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -124,6 +125,180 @@ def _evaluate(
     return loss_sum / val_idx.size, top1
 
 
+def _checked_inputs(
+    v: np.ndarray | Tensor,
+    t: np.ndarray | Tensor,
+    train_idx: Sequence[int] | np.ndarray,
+    val_idx: Sequence[int] | np.ndarray,
+    tau: float,
+    s: AlignSettings,
+) -> tuple[Tensor, Tensor, np.ndarray, np.ndarray]:
+    """(V, T, train positions, validation positions) as `fit_heads` trains on them, after
+    checking that V and T pair the same rows, the positions are disjoint, the training rows
+    give in-batch negatives, and the budget, batch, evaluation, patience and tau are usable."""
+    v_t = as_features(v, "fit_heads: vision features v")
+    t_t = as_features(t, "fit_heads: tactile features t")
+    if v_t.shape[0] != t_t.shape[0]:
+        raise ValueError(
+            f"fit_heads: v has {v_t.shape[0]} rows but t has {t_t.shape[0]}; rows must be the "
+            "same samples in the same order (join on sample_id first)"
+        )
+    n = v_t.shape[0]
+    tr = _as_index(train_idx, n, "train_idx")
+    va = _as_index(val_idx, n, "val_idx")
+    overlap = np.intersect1d(tr, va)
+    if overlap.size:
+        raise ValueError(
+            f"fit_heads: {overlap.size} rows are in both train_idx and val_idx "
+            f"(first: position {int(overlap[0])}); validation rows must be held out"
+        )
+    if tr.size < 2:
+        raise ValueError("fit_heads: InfoNCE needs >= 2 training pairs (in-batch negatives)")
+    if s.budget not in ("epochs", "steps"):
+        raise ValueError(f"fit_heads: budget must be 'epochs' or 'steps', got {s.budget!r}")
+    for name, val, low in (("batch_size", s.batch_size, 2), ("eval_every", s.eval_every, 1)):
+        if int(val) != val or val < low:
+            raise ValueError(f"fit_heads: {name} must be an integer >= {low}, got {val!r}")
+    if s.patience < 0:
+        raise ValueError(f"fit_heads: patience must be >= 0 (0 disables), got {s.patience}")
+    if not (math.isfinite(tau) and tau > 0):
+        raise ValueError(f"fit_heads: tau must be > 0, got {tau!r}")
+    return v_t, t_t, tr, va
+
+
+def _total_steps(s: AlignSettings, steps_per_epoch: int) -> int:
+    """The run's number of steps under its budget (``"epochs"`` or ``"steps"``)."""
+    if s.budget == "epochs":
+        if s.epochs < 1:
+            raise ValueError(f"fit_heads: budget 'epochs' needs epochs >= 1, got {s.epochs}")
+        return int(s.epochs) * steps_per_epoch
+    if s.steps < 1:
+        raise ValueError(f"fit_heads: budget 'steps' needs steps >= 1, got {s.steps}")
+    return int(s.steps)
+
+
+def _run_config(
+    s: AlignSettings, *, tau: float, seed: int, bsz: int, n_train: int, n_val: int
+) -> dict:
+    """The run's configuration as `AlignResult.config` records it (the batch as used)."""
+    return {
+        "tau": float(tau),
+        "seed": int(seed),
+        "budget": s.budget,
+        "epochs": int(s.epochs),
+        "steps": int(s.steps),
+        "batch_size": bsz,
+        "lr": float(s.lr),
+        "weight_decay": float(s.weight_decay),
+        "warmup_frac": float(s.warmup_frac),
+        "clip_grad": float(s.clip_grad),
+        "patience": int(s.patience),
+        "eval_every": int(s.eval_every),
+        "n_train": int(n_train),
+        "n_val": int(n_val),
+    }
+
+
+@dataclass
+class _Tracker:
+    """What training carries from one validation evaluation to the next: the heads, the
+    features and validation rows it evaluates on, the curve, the best weights with their
+    validation loss and step, the evaluations without improvement since, and the running train
+    loss since the last evaluation."""
+
+    heads: AlignHeads
+    v: Tensor
+    t: Tensor
+    val_idx: np.ndarray
+    tau: float
+    batch_size: int
+    steps_per_epoch: int
+    total: int
+    patience: int
+    progress: Callable[[str], Any] | None
+    best_state: dict[str, dict[str, Tensor]]
+    curve: list[dict[str, float | None]] = field(default_factory=list)
+    best_loss: float = math.inf
+    best_step: int = 0
+    bad_evals: int = 0
+    running: float = 0.0
+    running_n: int = 0
+
+    def record(self, step: int, lr_now: float) -> bool:
+        """Evaluate; returns True when early stopping should fire."""
+        val_loss, val_top1 = _evaluate(
+            self.heads, self.v, self.t, self.val_idx, self.tau, self.batch_size
+        )
+        train_loss = self.running / self.running_n if self.running_n else None
+        self.running, self.running_n = 0.0, 0
+        epoch = step / self.steps_per_epoch
+        self.curve.append(
+            {
+                "step": step,
+                "epoch": epoch,
+                "lr": lr_now,
+                "train_loss": train_loss,
+                "val_loss": val_loss,
+                "val_top1": val_top1,
+            }
+        )
+        if val_loss < self.best_loss:
+            self.best_loss, self.best_step, self.bad_evals = val_loss, step, 0
+            self.best_state = _state_copy(self.heads)
+        else:
+            self.bad_evals += 1
+        if self.progress is not None:
+            self.progress(
+                f"align step {step}/{self.total} epoch {epoch:.2f} "
+                f"lr {lr_now:.3g} train_loss {'-' if train_loss is None else f'{train_loss:.4f}'} "
+                f"val_loss {val_loss:.4f} "
+                f"val_top1 {val_top1:.4f} best_step {self.best_step}"
+            )
+        return self.patience > 0 and self.bad_evals >= self.patience
+
+
+def _train(
+    track: _Tracker,
+    opt: AdamW,
+    tr: np.ndarray,
+    rng: np.random.Generator,
+    s: AlignSettings,
+) -> tuple[int, bool]:
+    """The training steps after the first evaluation: each epoch a fresh permutation of the
+    train rows (from `rng`) cut into full batches, `train_step` at the `cosine_warmup_lr` of
+    the step, an evaluation every `eval_every` steps and at the last; (steps run, whether
+    early stopping fired)."""
+    heads, bsz, total, steps_per_epoch = (
+        track.heads,
+        track.batch_size,
+        track.total,
+        track.steps_per_epoch,
+    )
+    order = np.empty(0, dtype=np.int64)
+    step = 0
+    while step < total:
+        pos = step % steps_per_epoch
+        if pos == 0:
+            order = tr[rng.permutation(tr.size)]
+        ix = torch.from_numpy(order[pos * bsz : (pos + 1) * bsz])
+        lr_now = cosine_warmup_lr(step, total, s.lr, s.warmup_frac)
+        loss = train_step(
+            heads, opt, track.v[ix], track.t[ix], tau=track.tau, lr=lr_now, clip_grad=s.clip_grad
+        )
+        if not math.isfinite(loss):
+            raise FloatingPointError(
+                f"fit_heads: training loss became {loss} at step {step} "
+                f"(tau={track.tau}, lr={lr_now:.3g}); lower lr or raise tau"
+            )
+        track.running += loss
+        track.running_n += 1
+        step += 1
+        if step % s.eval_every == 0 or step == total:
+            if track.record(step, lr_now) and step < total:
+                return step, True
+    return step, False
+
+
 def fit_heads(
     v: np.ndarray | Tensor,
     t: np.ndarray | Tensor,
@@ -163,47 +338,10 @@ def fit_heads(
     """
     started = time.perf_counter()
     s = settings
-    budget, epochs, steps, batch_size = s.budget, s.epochs, s.steps, s.batch_size
-    lr, weight_decay, warmup_frac, clip_grad = s.lr, s.weight_decay, s.warmup_frac, s.clip_grad
-    patience, eval_every = s.patience, s.eval_every
-    v_t = as_features(v, "fit_heads: vision features v")
-    t_t = as_features(t, "fit_heads: tactile features t")
-    if v_t.shape[0] != t_t.shape[0]:
-        raise ValueError(
-            f"fit_heads: v has {v_t.shape[0]} rows but t has {t_t.shape[0]}; rows must be the "
-            "same samples in the same order (join on sample_id first)"
-        )
-    n = v_t.shape[0]
-    tr = _as_index(train_idx, n, "train_idx")
-    va = _as_index(val_idx, n, "val_idx")
-    overlap = np.intersect1d(tr, va)
-    if overlap.size:
-        raise ValueError(
-            f"fit_heads: {overlap.size} rows are in both train_idx and val_idx "
-            f"(first: position {int(overlap[0])}); validation rows must be held out"
-        )
-    if tr.size < 2:
-        raise ValueError("fit_heads: InfoNCE needs >= 2 training pairs (in-batch negatives)")
-    if budget not in ("epochs", "steps"):
-        raise ValueError(f"fit_heads: budget must be 'epochs' or 'steps', got {budget!r}")
-    for name, val, low in (("batch_size", batch_size, 2), ("eval_every", eval_every, 1)):
-        if int(val) != val or val < low:
-            raise ValueError(f"fit_heads: {name} must be an integer >= {low}, got {val!r}")
-    if patience < 0:
-        raise ValueError(f"fit_heads: patience must be >= 0 (0 disables), got {patience}")
-    if not (math.isfinite(tau) and tau > 0):
-        raise ValueError(f"fit_heads: tau must be > 0, got {tau!r}")
-
-    bsz = min(int(batch_size), tr.size)
+    v_t, t_t, tr, va = _checked_inputs(v, t, train_idx, val_idx, tau, s)
+    bsz = min(int(s.batch_size), tr.size)
     steps_per_epoch = tr.size // bsz
-    if budget == "epochs":
-        if epochs < 1:
-            raise ValueError(f"fit_heads: budget 'epochs' needs epochs >= 1, got {epochs}")
-        total = int(epochs) * steps_per_epoch
-    else:
-        if steps < 1:
-            raise ValueError(f"fit_heads: budget 'steps' needs steps >= 1, got {steps}")
-        total = int(steps)
+    total = _total_steps(s, steps_per_epoch)
 
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(seed)
@@ -213,91 +351,31 @@ def fit_heads(
     heads.to(dev)
     v_t, t_t = v_t.to(dev), t_t.to(dev)
     heads.train()
-    opt = make_optimizer(heads, lr=lr, weight_decay=weight_decay)
+    opt = make_optimizer(heads, lr=s.lr, weight_decay=s.weight_decay)
     rng = np.random.default_rng(seed)
-    config = {
-        "tau": float(tau),
-        "seed": int(seed),
-        "budget": budget,
-        "epochs": int(epochs),
-        "steps": int(steps),
-        "batch_size": bsz,
-        "lr": float(lr),
-        "weight_decay": float(weight_decay),
-        "warmup_frac": float(warmup_frac),
-        "clip_grad": float(clip_grad),
-        "patience": int(patience),
-        "eval_every": int(eval_every),
-        "n_train": int(tr.size),
-        "n_val": int(va.size),
-    }
-
-    curve: list[dict[str, float | None]] = []
-    best_state = _state_copy(heads)
-    best_loss, best_step, bad_evals = math.inf, 0, 0
-    running, running_n = 0.0, 0
-    stopped_early = False
-
-    def record(step: int, lr_now: float) -> bool:
-        """Evaluate; returns True when early stopping should fire."""
-        nonlocal best_state, best_loss, best_step, bad_evals, running, running_n
-        val_loss, val_top1 = _evaluate(heads, v_t, t_t, va, tau, bsz)
-        train_loss = running / running_n if running_n else None
-        running, running_n = 0.0, 0
-        curve.append(
-            {
-                "step": step,
-                "epoch": step / steps_per_epoch,
-                "lr": lr_now,
-                "train_loss": train_loss,
-                "val_loss": val_loss,
-                "val_top1": val_top1,
-            }
-        )
-        if val_loss < best_loss:
-            best_loss, best_step, bad_evals = val_loss, step, 0
-            best_state = _state_copy(heads)
-        else:
-            bad_evals += 1
-        if progress is not None:
-            progress(
-                f"align step {step}/{total} epoch {step / steps_per_epoch:.2f} "
-                f"lr {lr_now:.3g} train_loss {'-' if train_loss is None else f'{train_loss:.4f}'} "
-                f"val_loss {val_loss:.4f} "
-                f"val_top1 {val_top1:.4f} best_step {best_step}"
-            )
-        return patience > 0 and bad_evals >= patience
-
-    record(0, 0.0)
-    order = np.empty(0, dtype=np.int64)
-    step = 0
-    while step < total:
-        pos = step % steps_per_epoch
-        if pos == 0:
-            order = tr[rng.permutation(tr.size)]
-        ix = torch.from_numpy(order[pos * bsz : (pos + 1) * bsz])
-        lr_now = cosine_warmup_lr(step, total, lr, warmup_frac)
-        loss = train_step(heads, opt, v_t[ix], t_t[ix], tau=tau, lr=lr_now, clip_grad=clip_grad)
-        if not math.isfinite(loss):
-            raise FloatingPointError(
-                f"fit_heads: training loss became {loss} at step {step} "
-                f"(tau={tau}, lr={lr_now:.3g}); lower lr or raise tau"
-            )
-        running += loss
-        running_n += 1
-        step += 1
-        if step % eval_every == 0 or step == total:
-            if record(step, lr_now) and step < total:
-                stopped_early = True
-                break
-
+    config = _run_config(s, tau=tau, seed=seed, bsz=bsz, n_train=tr.size, n_val=va.size)
+    track = _Tracker(
+        heads=heads,
+        v=v_t,
+        t=t_t,
+        val_idx=va,
+        tau=tau,
+        batch_size=bsz,
+        steps_per_epoch=steps_per_epoch,
+        total=total,
+        patience=s.patience,
+        progress=progress,
+        best_state=_state_copy(heads),
+    )
+    track.record(0, 0.0)
+    step, stopped_early = _train(track, opt, tr, rng, s)
     return AlignResult(
-        heads=best_state,
+        heads=track.best_state,
         dims=heads.dims(),
         config=config,
-        curve=curve,
-        best_step=best_step,
-        best_val_loss=best_loss,
+        curve=track.curve,
+        best_step=track.best_step,
+        best_val_loss=track.best_loss,
         steps_run=step,
         total_steps=total,
         stopped_early=stopped_early,

@@ -31,14 +31,14 @@ Same images + same arguments + same torch build and thread count => bit-identica
 curve on CPU.
 
 The losses and the collapse diagnostics live in `dino_losses`, the multi-crop augmentation in
-`augment`; this module holds the head and the training loop (`pretrain_dino`).
+`augment`, the loop's steps in `dino_loop`; this module holds the head and the run
+(`pretrain_dino`: its checks, networks, optimiser and schedules).
 """
 
 from __future__ import annotations
 
 import contextlib
 import copy
-import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
@@ -47,15 +47,7 @@ import torch
 import torch.nn.functional as F
 from torch import Tensor, nn
 
-from tacgen_lib.features.augment import multi_crop
-from tacgen_lib.features.dino_losses import (
-    CURVE_MEANS,
-    centre_and_sharpen,
-    collapse_diagnostics,
-    dino_cross_entropy,
-    koleo_loss,
-    sinkhorn_knopp,
-)
+from tacgen_lib.features.dino_loop import DinoRun, DinoSchedules, dino_epoch
 from tacgen_lib.features.extract import check_train_frames, to_unit_tensor
 from tacgen_lib.features.settings import DinoSettings
 from tacgen_lib.features.vit import PATCH_SIZE, DinoVisionTransformer, build_vit
@@ -168,6 +160,97 @@ def deterministic_algorithms(warn_only: bool = False) -> Iterator[None]:
         torch.utils.deterministic.fill_uninitialized_memory = fill_before
 
 
+def _checked_sizes(images: np.ndarray, s: DinoSettings, image_size: int) -> tuple[int, int]:
+    """(batch size, local crop size) of a run: the batch capped at the number of frames, the
+    local size `pretrain_dino`'s default where unset; after checking the frames, the sizes
+    against the patch, the centering and the regularisers' signs."""
+    check_train_frames(images, "pretrain_dino")
+    if image_size % PATCH_SIZE:
+        raise ValueError(
+            f"pretrain_dino: image_size {image_size} is not a multiple of {PATCH_SIZE}"
+        )
+    n = images.shape[0]
+    batch_size = min(s.batch_size, n)
+    if batch_size < 1 or s.epochs < 1:
+        raise ValueError(f"pretrain_dino: need batch_size >= 1 and epochs >= 1 (n={n})")
+    local_size = s.local_size
+    if local_size is None:
+        local_size = max(2 * PATCH_SIZE, round(image_size * 3 / 7 / PATCH_SIZE) * PATCH_SIZE)
+    if local_size % PATCH_SIZE:
+        raise ValueError(
+            f"pretrain_dino: local_size {local_size} is not a multiple of {PATCH_SIZE}"
+        )
+    if s.centering not in ("sinkhorn_knopp", "centre"):
+        raise ValueError(
+            f"pretrain_dino: centering must be 'sinkhorn_knopp' or 'centre', got {s.centering!r}"
+        )
+    if s.koleo_weight < 0 or s.freeze_last_layer_epochs < 0 or s.warmup_teacher_temp_epochs < 0:
+        raise ValueError(
+            "pretrain_dino: koleo_weight, freeze_last_layer_epochs and warmup_teacher_temp_epochs "
+            f"must be >= 0, got {s.koleo_weight}, {s.freeze_last_layer_epochs}, "
+            f"{s.warmup_teacher_temp_epochs}"
+        )
+    return batch_size, local_size
+
+
+def _dino_nets(
+    s: DinoSettings, *, arch: str, image_size: int, dev: torch.device
+) -> tuple[_Net, _Net]:
+    """(student, teacher) on `dev`: the student's weights drawn under torch's RNG forked and
+    seeded with `seed`, the teacher its copy with no gradients."""
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(s.seed)
+        backbone = build_vit(arch, img_size=image_size)
+        head = DINOHead(backbone.embed_dim, s.out_dim, s.hidden_dim, s.bottleneck_dim)
+        student = _Net(backbone, head)
+    teacher = copy.deepcopy(student)
+    for p in teacher.parameters():
+        p.requires_grad_(False)
+    student.to(dev)
+    teacher.to(dev)
+    return student, teacher
+
+
+def _dino_optimizer(student: _Net, s: DinoSettings) -> AdamW:
+    """AdamW over the student: weight decay on its weight matrices, none on biases, norms,
+    LayerScale, tokens and the position embedding."""
+    decay = [p for nm, p in student.named_parameters() if p.ndim > 1 and "token" not in nm]
+    no_decay = [p for nm, p in student.named_parameters() if not (p.ndim > 1 and "token" not in nm)]
+    # pos_embed has ndim 3: keep it out of weight decay too (DINO does not decay it)
+    decay = [p for p in decay if p is not student.backbone.pos_embed]
+    no_decay.append(student.backbone.pos_embed)
+    return AdamW(
+        [
+            {"params": decay, "weight_decay": s.weight_decay},
+            {"params": no_decay, "weight_decay": 0.0},
+        ],
+        lr=s.lr,
+    )
+
+
+def _dino_schedules(s: DinoSettings, *, n: int, batch_size: int) -> DinoSchedules:
+    """The per-step schedules of a run on `n` frames: lr warm-up then cosine
+    (`warmup_cosine_lr`), teacher momentum cosine to 1, teacher temperature linear over its
+    warm-up then constant, and the steps of the frozen last layer."""
+    steps_per_epoch = max(1, n // batch_size)
+    total = steps_per_epoch * s.epochs
+    warm = min(total, s.warmup_epochs * steps_per_epoch)
+    t_warm = min(total, s.warmup_teacher_temp_epochs * steps_per_epoch)
+    tt_start = s.teacher_temp if s.warmup_teacher_temp is None else s.warmup_teacher_temp
+    return DinoSchedules(
+        steps_per_epoch=steps_per_epoch,
+        lr=warmup_cosine_lr(s.lr, warm, total),
+        momentum=cosine_schedule(s.momentum_teacher, 1.0, total),
+        teacher_temp=np.concatenate(
+            [
+                np.linspace(tt_start, s.teacher_temp, t_warm),
+                np.full(total - t_warm, s.teacher_temp),
+            ]
+        ),
+        frozen_steps=s.freeze_last_layer_epochs * steps_per_epoch,
+    )
+
+
 def pretrain_dino(
     images: np.ndarray,
     settings: DinoSettings,
@@ -208,176 +291,36 @@ def pretrain_dino(
     reruns need the same thread count.
     """
     s = settings
-    epochs, batch_size, lr, seed = s.epochs, s.batch_size, s.lr, s.seed
-    n_local_crops, local_size, jitter = s.n_local_crops, s.local_size, s.jitter
-    out_dim, hidden_dim, bottleneck_dim = s.out_dim, s.hidden_dim, s.bottleneck_dim
-    student_temp, teacher_temp = s.student_temp, s.teacher_temp
-    warmup_teacher_temp, warmup_teacher_temp_epochs = (
-        s.warmup_teacher_temp,
-        s.warmup_teacher_temp_epochs,
-    )
-    centering, sinkhorn_iterations, center_momentum = (
-        s.centering,
-        s.sinkhorn_iterations,
-        s.center_momentum,
-    )
-    koleo_weight, freeze_last_layer_epochs = s.koleo_weight, s.freeze_last_layer_epochs
-    momentum_teacher, weight_decay = s.momentum_teacher, s.weight_decay
-    warmup_epochs, clip_grad = s.warmup_epochs, s.clip_grad
-    check_train_frames(images, "pretrain_dino")
-    if image_size % PATCH_SIZE:
-        raise ValueError(
-            f"pretrain_dino: image_size {image_size} is not a multiple of {PATCH_SIZE}"
-        )
-    n = images.shape[0]
-    batch_size = min(batch_size, n)
-    if batch_size < 1 or epochs < 1:
-        raise ValueError(f"pretrain_dino: need batch_size >= 1 and epochs >= 1 (n={n})")
-    if local_size is None:
-        local_size = max(2 * PATCH_SIZE, round(image_size * 3 / 7 / PATCH_SIZE) * PATCH_SIZE)
-    if local_size % PATCH_SIZE:
-        raise ValueError(
-            f"pretrain_dino: local_size {local_size} is not a multiple of {PATCH_SIZE}"
-        )
-    if centering not in ("sinkhorn_knopp", "centre"):
-        raise ValueError(
-            f"pretrain_dino: centering must be 'sinkhorn_knopp' or 'centre', got {centering!r}"
-        )
-    if koleo_weight < 0 or freeze_last_layer_epochs < 0 or warmup_teacher_temp_epochs < 0:
-        raise ValueError(
-            "pretrain_dino: koleo_weight, freeze_last_layer_epochs and warmup_teacher_temp_epochs "
-            f"must be >= 0, got {koleo_weight}, {freeze_last_layer_epochs}, "
-            f"{warmup_teacher_temp_epochs}"
-        )
+    batch_size, local_size = _checked_sizes(images, s, image_size)
     say = progress or (lambda _msg: None)
 
     dev = torch.device(device)
     with deterministic_algorithms(warn_only=dev.type != "cpu"):
-        with torch.random.fork_rng(devices=[]):
-            torch.manual_seed(seed)
-            backbone = build_vit(arch, img_size=image_size)
-            head = DINOHead(backbone.embed_dim, out_dim, hidden_dim, bottleneck_dim)
-            student = _Net(backbone, head)
-        teacher = copy.deepcopy(student)
-        for p in teacher.parameters():
-            p.requires_grad_(False)
-        student.to(dev)
-        teacher.to(dev)
-
+        student, teacher = _dino_nets(s, arch=arch, image_size=image_size, dev=dev)
         # resized once, in chunks, so large raw frames never sit in memory as float32
+        n = images.shape[0]
         data = torch.cat(
             [to_unit_tensor(images[i : i + 256], image_size) for i in range(0, n, 256)]
         )
-        order_rng = np.random.default_rng(seed)
-        gen = torch.Generator().manual_seed(seed)
-
-        decay = [p for nm, p in student.named_parameters() if p.ndim > 1 and "token" not in nm]
-        no_decay = [
-            p for nm, p in student.named_parameters() if not (p.ndim > 1 and "token" not in nm)
-        ]
-        # pos_embed has ndim 3: keep it out of weight decay too (DINO does not decay it)
-        decay = [p for p in decay if p is not student.backbone.pos_embed]
-        no_decay.append(student.backbone.pos_embed)
-        opt = AdamW(
-            [
-                {"params": decay, "weight_decay": weight_decay},
-                {"params": no_decay, "weight_decay": 0.0},
-            ],
-            lr=lr,
+        order_rng = np.random.default_rng(s.seed)
+        gen = torch.Generator().manual_seed(s.seed)
+        run = DinoRun(
+            settings=s,
+            student=student,
+            teacher=teacher,
+            opt=_dino_optimizer(student, s),
+            sched=_dino_schedules(s, n=n, batch_size=batch_size),
+            dev=dev,
+            batch_size=batch_size,
+            image_size=image_size,
+            local_size=local_size,
         )
-        steps_per_epoch = max(1, n // batch_size)
-        total = steps_per_epoch * epochs
-        warm = min(total, warmup_epochs * steps_per_epoch)
-        lr_sched = warmup_cosine_lr(lr, warm, total)
-        mom_sched = cosine_schedule(momentum_teacher, 1.0, total)
-        t_warm = min(total, warmup_teacher_temp_epochs * steps_per_epoch)
-        tt_start = teacher_temp if warmup_teacher_temp is None else warmup_teacher_temp
-        tt_sched = np.concatenate(
-            [np.linspace(tt_start, teacher_temp, t_warm), np.full(total - t_warm, teacher_temp)]
-        )
-        frozen_steps = freeze_last_layer_epochs * steps_per_epoch
-        center: Tensor | None = None  # set from the first teacher batch (see docstring)
-
         curve: list[dict[str, float]] = []
-        step = 0
-        for epoch in range(epochs):
-            t0 = time.perf_counter()
-            perm = order_rng.permutation(n)
-            sums = dict.fromkeys(CURVE_MEANS, 0.0)
-            student.train()
-            for bi in range(steps_per_epoch):
-                idx = torch.from_numpy(perm[bi * batch_size : (bi + 1) * batch_size])
-                views = multi_crop(
-                    data[idx],
-                    gen,
-                    global_size=image_size,
-                    local_size=local_size,
-                    n_local=n_local_crops,
-                    jitter=jitter,
-                )
-                views = [v.to(dev) for v in views]
-                b = idx.shape[0]
-                t_temp = float(tt_sched[step])
-                with torch.no_grad():
-                    t_cls, t_out = teacher(torch.cat(views[:2]))
-                    t_out = t_out.view(2, b, out_dim)
-                    if centering == "sinkhorn_knopp":
-                        p_t = sinkhorn_knopp(t_out, t_temp, sinkhorn_iterations)
-                    else:
-                        if center is None:
-                            center = t_out.mean(dim=(0, 1)).view(1, out_dim)
-                        p_t = centre_and_sharpen(t_out, center, t_temp)
-                s_cls, s_glob = student(torch.cat(views[:2]))
-                s_glob = s_glob.view(2, b, out_dim)
-                if n_local_crops:
-                    s_loc = student(torch.cat(views[2:]))[1].view(n_local_crops, b, out_dim)
-                    s_out = torch.cat((s_glob, s_loc))
-                else:
-                    s_out = s_glob
-                loss, ent, kl = dino_cross_entropy(s_out, p_t, student_temp)
-                koleo = sum(koleo_loss(c) for c in s_cls.view(2, b, -1))
-                total_loss = loss + koleo_weight * koleo if koleo_weight else loss
-                if not torch.isfinite(total_loss):
-                    raise FloatingPointError(
-                        f"pretrain_dino: non-finite loss at epoch {epoch} step {bi}; lower lr "
-                        f"(now {lr_sched[step]:.2e}) or check the frames"
-                    )
-                for g in opt.param_groups:
-                    g["lr"] = float(lr_sched[step])
-                opt.zero_grad(set_to_none=True)
-                total_loss.backward()
-                if step < frozen_steps:  # DINO: prototypes fixed while the rest settles
-                    for p in student.head.last_layer.parameters():
-                        p.grad = None
-                if clip_grad:
-                    nn.utils.clip_grad_norm_(student.parameters(), clip_grad)
-                opt.step()
-                with torch.no_grad():
-                    m = float(mom_sched[step])
-                    for ps, pt in zip(student.parameters(), teacher.parameters(), strict=True):
-                        pt.mul_(m).add_(ps.detach(), alpha=1 - m)
-                    if centering == "centre":
-                        batch_center = t_out.mean(dim=(0, 1)).view(1, out_dim)
-                        center = center * center_momentum + batch_center * (1 - center_momentum)
-                    diag = collapse_diagnostics(p_t, t_cls.view(2, b, -1))
-                sums["loss"] += loss.item()
-                sums["teacher_entropy"] += ent.item()
-                sums["kl"] += kl.item()
-                sums["koleo"] += float(koleo.detach())
-                for key, val in diag.items():
-                    sums[key] += val
-                step += 1
-            row = {"epoch": float(epoch + 1)}
-            row |= {key: val / steps_per_epoch for key, val in sums.items()}
-            row |= {
-                "lr": float(lr_sched[step - 1]),
-                "momentum": float(mom_sched[step - 1]),
-                "teacher_temp": float(tt_sched[step - 1]),
-                "seconds": time.perf_counter() - t0,
-            }
+        for epoch in range(s.epochs):
+            row = dino_epoch(run, data, order_rng, gen, epoch)
             curve.append(row)
             say(
-                f"dino epoch {epoch + 1}/{epochs}: loss {row['loss']:.4f} "
+                f"dino epoch {epoch + 1}/{s.epochs}: loss {row['loss']:.4f} "
                 f"H(teacher) {row['teacher_entropy']:.3f} "
                 f"H(batch-mean teacher) {row['teacher_batch_entropy']:.3f} "
                 f"KL {row['kl']:.4f} KoLeo {row['koleo']:.3f} "

@@ -45,35 +45,36 @@ the real train mean (ViT features share a large common component that makes ever
 near 1).
 
 The fidelity measures live in `fidelity`, the baselines fitted once per corpus in `baselines`;
-this module evaluates one generator's cells against them (`evaluate_generator`).
+this module evaluates one generator's cells against them (`evaluate_generator`), with one
+target's probes, bootstrap and family-wise interval from `evaluate_probes` and the edges' rows
+from `evaluate_rows`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
 
 import numpy as np
 import pandas as pd
 
 from tacgen_lib.generate.baselines import BASELINE_INPUTS, Baselines, TargetSpec
 from tacgen_lib.generate.blocks import feature_block
-from tacgen_lib.generate.fidelity import (
-    PERMUTATION_COLUMNS,
-    centred_gaps,
-    fidelity,
-    gap_interval,
-)
-from tacgen_lib.generate.ridge_generator import RIDGE_ALPHAS, ridge_generate
 from tacgen_lib.generate.sampling_cells import RIDGE_INPUTS
-from tacgen_lib.probes.bootstrap import (
-    fixed_test_bootstrap,
-    percentile_interval,
-    resample_indices,
+from tacgen_lib.generate.evaluate_probes import (
+    REG_CV,
+    TargetProbes,
+    target_probes,
 )
-from tacgen_lib.probes.fit import FittedProbe, fit_probe
-from tacgen_lib.probes.logistic import FixedLogistic
-from tacgen_lib.probes.rows import FamilyRows, baseline_score
-from tacgen_lib.probes.settings import ProbeSettings
+from tacgen_lib.generate.evaluate_rows import (
+    permutation_frame,
+    permutation_rows,
+    summary_row,
+    summary_row_id,
+)
+from tacgen_lib.generate.fidelity import centred_gaps, fidelity, gap_interval
+from tacgen_lib.generate.ridge_generator import RIDGE_ALPHAS, ridge_generate
+from tacgen_lib.probes.rows import baseline_score
 
 #: What is added to V in a summary row.
 INPUTS = ("t_real", "t_gen", "t_gen_shuffled", "v_nonlinear", *RIDGE_INPUTS)
@@ -91,37 +92,6 @@ def shuffled_rows(n: int, seed: int) -> np.ndarray:
             j = (i + 1) % n
             perm[i], perm[j] = perm[j], perm[i]
     return perm
-
-
-#: ``reg_source`` of a probe whose regulariser was chosen by its own CV / taken from the
-#: reference cell's CV of the same input kind (logistic t_gen and t_gen_shuffled only).
-REG_CV, REG_REFERENCE = "cv", "reference cell"
-
-
-def _row(
-    base: dict, inp: str, boot: dict, vs_nl: dict | None, vs_ridge: dict | None = None
-) -> dict:
-    return {
-        **base,
-        "input": inp,
-        "score": boot["vt_score"],
-        "v_score": boot["v_score"],
-        "delta": boot["delta"],
-        "ci_low": boot["ci_low"],
-        "ci_high": boot["ci_high"],
-        "p_gt0": boot["p_gt0"],
-        "delta_vs_nonlinear": np.nan if vs_nl is None else vs_nl["delta"],
-        "ci_low_vs_nonlinear": np.nan if vs_nl is None else vs_nl["ci_low"],
-        "ci_high_vs_nonlinear": np.nan if vs_nl is None else vs_nl["ci_high"],
-        "delta_vs_ridge": np.nan if vs_ridge is None else vs_ridge["delta"],
-        "ci_low_vs_ridge": np.nan if vs_ridge is None else vs_ridge["ci_low"],
-        "ci_high_vs_ridge": np.nan if vs_ridge is None else vs_ridge["ci_high"],
-        # the family-wise interval of a generated-touch row (`family_interval`); NaN elsewhere
-        "ci_low_fw": boot.get("ci_low_fw", np.nan),
-        "ci_high_fw": boot.get("ci_high_fw", np.nan),
-        "ci_low_fw_vs_ridge": np.nan if vs_ridge is None else vs_ridge.get("ci_low_fw", np.nan),
-        "ci_high_fw_vs_ridge": np.nan if vs_ridge is None else vs_ridge.get("ci_high_fw", np.nan),
-    }
 
 
 #: The pairing-gap columns of a ``t_gen`` row (`pairing_gap_columns`).
@@ -148,21 +118,6 @@ def pairing_gap_columns(
     return out
 
 
-#: The family-wise error rate of the generated-touch rows a page compares (two-sided).
-FAMILY_ALPHA = 0.05
-
-
-def family_interval(deltas: np.ndarray, size: int) -> tuple[float, float]:
-    """The Bonferroni interval of one of `size` compared bootstrap differences: the central
-    1 - `FAMILY_ALPHA` / size percentile interval (`bootstrap.percentile_interval`). All
-    `size` intervals hold together with probability at least 1 - `FAMILY_ALPHA`; at size 1 it
-    is the 95 % CI. Its lower bound above 0 is a gain read family-wise, the first step of
-    Holm's procedure (`probes.multiplicity.holm`) on the same comparisons."""
-    if size < 1:
-        raise ValueError(f"family_interval: family size must be at least 1, got {size}")
-    return percentile_interval(deltas, confidence_level=1.0 - FAMILY_ALPHA / size)
-
-
 def _cell_order(
     cells: Sequence[tuple[str, str, str]], reference: tuple[str, str, str] | None
 ) -> list[tuple[str, str, str]]:
@@ -174,6 +129,197 @@ def _cell_order(
     if ref not in cells:
         raise ValueError(f"evaluate_generator: reference cell {ref} is not among the cells {cells}")
     return [ref] + [c for c in cells if c != ref]
+
+
+@dataclass
+class _Generator:
+    """What every target of one generator's evaluation shares: its corpus, seed and fidelity
+    permutations, the corpus' rows (`vision`) with the row each is shuffled to, the ridge V->T
+    generator's alpha and arms (`RIDGE_INPUTS` -> sample_id -> vector), the fidelity computed
+    so far (a target on the same rows reuses it) and the progress line."""
+
+    corpus: str
+    seed: int
+    permutations: int
+    vision: Mapping[str, np.ndarray]
+    shuffled_of: dict
+    ridge_alpha: float
+    ridge_sources: dict[str, Mapping[str, np.ndarray]]
+    say: Callable[[str], None]
+    fid_cache: dict[tuple, dict] = field(default_factory=dict)
+
+
+@dataclass
+class _Repeated:
+    """What every cell of one target repeats: the target's columns, V's and nonlinear V's test
+    predictions, the V + T_real and nonlinear V rows, and the ridge V->T generator's rows, test
+    predictions and pairing gaps (per arm)."""
+
+    base: dict
+    p_v: np.ndarray
+    p_nl: np.ndarray
+    real_row: dict
+    nl_row: dict
+    ridge_rows: list[dict]
+    ridge_pred: dict[str, np.ndarray]
+    ridge_gaps: dict[str, np.ndarray]
+
+
+def _target_base(
+    g: _Generator, tg: TargetProbes, gamma: float, labels: Mapping[str, object] | None
+) -> dict:
+    """The columns every summary row of one target carries."""
+    rows, ps = tg.rows, tg.ps
+    return {
+        "corpus": g.corpus,
+        "target": tg.name,
+        "kind": ps.kind,
+        "metric": ps.metric,
+        "seed": int(g.seed),
+        "probe_seed": ps.seed,
+        "n_train": rows.n_train,
+        "n_test": rows.n_test,
+        # the constant predictor's test score (train mean / majority class): a V score
+        # below it is a probe failing, not vision lacking the label
+        "baseline_score": baseline_score(rows.y_train, rows.y_test, ps.metric),
+        "nonlinear_gamma": gamma,
+        **(labels or {}),
+    }
+
+
+def _ridge_arms(
+    g: _Generator, tg: TargetProbes, p_v: np.ndarray, p_nl: np.ndarray
+) -> tuple[list[dict], dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """The ridge V->T generator's arms on one target, fitted and bootstrapped once (every cell
+    repeats them): their rows (each with its own fidelity), test predictions and pairing gaps."""
+    rows = tg.rows
+    ridge_rows, ridge_pred, ridge_gaps = [], {}, {}
+    for inp, source in g.ridge_sources.items():
+        r_tr, r_te = feature_block(source, rows.train_ids), feature_block(source, rows.test_ids)
+        probe = tg.fit(np.hstack([tg.v_tr, r_tr]), np.hstack([tg.v_te, r_te]))
+        ridge_pred[inp] = probe.pred_test
+        ridge_gaps[inp] = centred_gaps(r_te, tg.t_te, tg.t_tr)
+        # the fidelity of these vectors on these rows: a target with the same test and
+        # train rows (the centring) as another reuses it
+        key = (inp, tuple(rows.test_ids), tuple(rows.train_ids))
+        if key not in g.fid_cache:
+            fid, _ = fidelity(r_te, tg.t_te, tg.t_tr, n_permutations=g.permutations, seed=g.seed)
+            g.fid_cache[key] = fid
+        r_fid = g.fid_cache[key]
+        r_row = summary_row(
+            {}, inp, tg.boot(p_v, probe.pred_test, generated=True), tg.boot(p_nl, probe.pred_test)
+        )
+        r_row.update(reg=float(probe.reg), reg_source=REG_CV, **r_fid)
+        ridge_rows.append(r_row)
+        g.say(
+            f"{tg.name}: V+T_{inp.removeprefix('t_')} delta {r_row['delta']:+.3f} "
+            f"[{r_row['ci_low']:+.3f}, {r_row['ci_high']:+.3f}], cos "
+            f"{r_fid['cos_matched']:.3f} vs {r_fid['cos_offdiag']:.3f}"
+        )
+    return ridge_rows, ridge_pred, ridge_gaps
+
+
+def _repeated(
+    g: _Generator,
+    tg: TargetProbes,
+    baselines: Mapping[str, Baselines],
+    labels: Mapping[str, object] | None,
+) -> _Repeated:
+    """The rows of one target that do not depend on the cell, each bootstrapped once: V +
+    T_real and nonlinear V (against the target's `fit_baselines`) and the ridge arms."""
+    if tg.name not in baselines:
+        raise ValueError(f"evaluate_generator: no baselines for target {tg.name!r}")
+    bl = baselines[tg.name]
+    p_v, p_real, p_nl = (np.asarray(bl.pred[k]) for k in BASELINE_INPUTS)
+    if not len(p_v) == len(p_real) == len(p_nl) == tg.rows.n_test:
+        raise ValueError(
+            f"evaluate_generator: {tg.name} baselines are not on its {tg.rows.n_test} test rows"
+        )
+    base = _target_base(g, tg, bl.gamma, labels)
+    real_row = summary_row({}, "t_real", tg.boot(p_v, p_real), tg.boot(p_nl, p_real))
+    nl_row = summary_row({}, "v_nonlinear", tg.boot(p_v, p_nl), None)
+    real_row.update(reg=bl.reg["t_real"], reg_source=REG_CV)
+    nl_row.update(reg=bl.reg["v_nonlinear"], reg_source=REG_CV)
+    ridge_rows, ridge_pred, ridge_gaps = _ridge_arms(g, tg, p_v, p_nl)
+    g.say(
+        f"{tg.name}: V {real_row['v_score']:.3f}, V+T_real delta {real_row['delta']:+.3f} "
+        f"[{real_row['ci_low']:+.3f}, {real_row['ci_high']:+.3f}], nonlinear V delta "
+        f"{nl_row['delta']:+.3f}"
+    )
+    return _Repeated(base, p_v, p_nl, real_row, nl_row, ridge_rows, ridge_pred, ridge_gaps)
+
+
+def _cell_fidelity(
+    g: _Generator, tg: TargetProbes, cell: tuple[str, str, str], g_te: np.ndarray
+) -> tuple[dict, list[dict]]:
+    """The fidelity of one cell's test vectors, and its permutation rows where it is computed
+    here (none where a target on the same test rows computed it before)."""
+    key = (cell, tuple(tg.rows.test_ids))
+    perm_rows: list[dict] = []
+    if key not in g.fid_cache:
+        fid, null = fidelity(g_te, tg.t_te, tg.t_tr, n_permutations=g.permutations, seed=g.seed)
+        g.fid_cache[key] = fid
+        perm_rows = permutation_rows(g.corpus, g.seed, tg.name, cell, null, fid["cos_matched"])
+    return g.fid_cache[key], perm_rows
+
+
+def _cell_rows(
+    g: _Generator,
+    tg: TargetProbes,
+    rep: _Repeated,
+    cell: tuple[str, str, str],
+    gen: Mapping[str, np.ndarray],
+) -> tuple[list[dict], list[dict]]:
+    """One cell's summary rows (V + T_real, V + T_gen, its shuffled control, nonlinear V and
+    the ridge arms) and its permutation rows."""
+    rows = tg.rows
+    sampler, guidance, steps = cell
+    cell_base = {**rep.base, "sampler": sampler, "guidance": float(guidance), "steps": int(steps)}
+    g_tr, g_te = feature_block(gen, rows.train_ids), feature_block(gen, rows.test_ids)
+    shuf = {i: gen[g.shuffled_of[i]] for i in g.vision}
+    s_tr, s_te = feature_block(shuf, rows.train_ids), feature_block(shuf, rows.test_ids)
+    p_gen, reg_gen, src_gen = tg.fit_cell(
+        "t_gen", np.hstack([tg.v_tr, g_tr]), np.hstack([tg.v_te, g_te])
+    )
+    p_shuf, reg_shuf, src_shuf = tg.fit_cell(
+        "t_gen_shuffled", np.hstack([tg.v_tr, s_tr]), np.hstack([tg.v_te, s_te])
+    )
+    fid, perm_rows = _cell_fidelity(g, tg, cell, g_te)
+    gen_row = summary_row(
+        cell_base,
+        "t_gen",
+        tg.boot(rep.p_v, p_gen, generated=True),
+        tg.boot(rep.p_nl, p_gen),
+        tg.boot(rep.ridge_pred["t_ridge"], p_gen, generated=True),
+    )
+    shuf_row = summary_row(
+        cell_base,
+        "t_gen_shuffled",
+        tg.boot(rep.p_v, p_shuf, generated=True),
+        tg.boot(rep.p_nl, p_shuf),
+    )
+    gen_row.update(reg=reg_gen, reg_source=src_gen)
+    gen_row.update(
+        pairing_gap_columns(centred_gaps(g_te, tg.t_te, tg.t_tr), rep.ridge_gaps, tg.resamples)
+    )
+    shuf_row.update(reg=reg_shuf, reg_source=src_shuf)
+    rows_cell = [{**cell_base, **rep.real_row}, gen_row, shuf_row, {**cell_base, **rep.nl_row}]
+    for r in rows_cell:
+        r.update(fid)
+    rows_cell += [{**cell_base, **r} for r in rep.ridge_rows]  # with their own fidelity
+    for r in rows_cell:
+        r["ridge_alpha"] = g.ridge_alpha
+        r["row_id"] = summary_row_id(g.corpus, tg.name, g.seed, cell, r["input"])
+    g.say(
+        f"{tg.name} {sampler} w={guidance} steps={steps}: V+T_gen delta "
+        f"{gen_row['delta']:+.3f} [{gen_row['ci_low']:+.3f}, {gen_row['ci_high']:+.3f}]"
+        f" (C/lambda {reg_gen:g}, {src_gen}), vs nonlinear V "
+        f"{gen_row['delta_vs_nonlinear']:+.3f}, vs ridge V->T "
+        f"{gen_row['delta_vs_ridge']:+.3f}; shuffled {shuf_row['delta']:+.3f}; "
+        f"cos {fid['cos_matched']:.3f} vs {fid['cos_offdiag']:.3f} "
+        f"(p {fid['pairing_p']:.3f}), FD {fid['frechet']:.2f}"
+    )
+    return rows_cell, perm_rows
 
 
 def evaluate_generator(
@@ -205,232 +351,32 @@ def evaluate_generator(
     (module docstring; default: the first cell). `family`: how many generated-touch rows the
     page compares (`sampling_cells.family_size`); each generated row (``t_gen``, ``t_gen_shuffled``, the
     ridge arms) also carries its family-wise interval, ``ci_low_fw`` / ``ci_high_fw``
-    (`family_interval`), from the same resamples as its CI.
+    (`evaluate_probes.family_interval`), from the same resamples as its CI. The rows' columns:
+    `evaluate_rows.summary_row`; the draws': `evaluate_rows.permutation_frame`.
     """
     say = progress or (lambda _m: None)
     ridge = ridge_generate(vision, t_real, generator_train_ids, seed=seed, alphas=RIDGE_ALPHAS)
     say(f"ridge V->T generator: alpha {ridge.alpha:g} by leave-one-out on {ridge.n_train} rows")
-    ridge_sources = dict(zip(RIDGE_INPUTS, (ridge.mean, ridge.residual), strict=True))
-
     all_ids = np.array(sorted(vision), dtype=object)
     perm = shuffled_rows(len(all_ids), seed)
-    shuffled_of = dict(zip(all_ids, all_ids[perm], strict=True))
+    g = _Generator(
+        corpus=corpus,
+        seed=seed,
+        permutations=permutations,
+        vision=vision,
+        shuffled_of=dict(zip(all_ids, all_ids[perm], strict=True)),
+        ridge_alpha=ridge.alpha,
+        ridge_sources=dict(zip(RIDGE_INPUTS, (ridge.mean, ridge.residual), strict=True)),
+        say=say,
+    )
     cells = _cell_order(list(t_gen), reference)
     out_rows: list[dict] = []
     perm_rows: list[dict] = []
-    fid_cache: dict[tuple, dict] = {}
     for spec in targets:
-        rows, ps = spec.rows, spec.settings
-        v_tr, v_te = feature_block(vision, rows.train_ids), feature_block(vision, rows.test_ids)
-        t_tr, t_te = feature_block(t_real, rows.train_ids), feature_block(t_real, rows.test_ids)
-        # one draw of the 5,000 test resamples, shared by every bootstrap of this target
-        resamples = resample_indices(
-            len(rows.y_test), ps.bootstrap, ps.seed, strata=rows.strata_test
-        )
-
-        def fit(
-            x_tr: np.ndarray, x_te: np.ndarray, ps: ProbeSettings = ps, rows: FamilyRows = rows
-        ) -> FittedProbe:
-            return fit_probe(
-                x_tr, rows.y_train, x_te, ps, train_ids=rows.train_ids, test_ids=rows.test_ids
-            )
-
-        def boot(
-            pred_a: np.ndarray,
-            pred_b: np.ndarray,
-            ps: ProbeSettings = ps,
-            rows: FamilyRows = rows,
-            resamples: np.ndarray = resamples,
-            generated: bool = False,
-        ) -> dict:
-            out = fixed_test_bootstrap(
-                rows.y_test,
-                pred_a,
-                pred_b,
-                ps.metric,
-                n_resamples=ps.bootstrap,
-                seed=ps.seed,
-                indices=resamples,
-                sample_ids=rows.test_ids,
-                return_distribution=generated,
-            )
-            if generated:
-                out["ci_low_fw"], out["ci_high_fw"] = family_interval(out.pop("deltas"), family)
-            return out
-
-        chosen: dict[str, float] = {}  # input kind -> C chosen on the reference cell
-
-        def fit_cell(
-            inp: str,
-            x_tr: np.ndarray,
-            x_te: np.ndarray,
-            ps: ProbeSettings = ps,
-            rows: FamilyRows = rows,
-            chosen: dict[str, float] = chosen,
-        ) -> tuple[np.ndarray, float, str]:
-            """(test predictions, regulariser, its source) of one cell's V + x probe."""
-            if ps.kind == "logistic" and inp in chosen:
-                # lbfgs from max_iter = the cap at once: the iterates do not depend on max_iter,
-                # so a fit that converges gives the probe's own fit without its restarts
-                # (fit_logistic_once doubles max_iter from 200 and starts again from zero)
-                cap = FixedLogistic.max_iter_cap
-                fixed = FixedLogistic(chosen[inp], max_iter=cap, max_iter_cap=cap)
-                pred = np.asarray(fixed.fit_predict(x_tr, rows.y_train, x_te), dtype=object)
-                return pred, chosen[inp], REG_REFERENCE
-            probe = fit(x_tr, x_te)
-            if ps.kind == "logistic":
-                chosen[inp] = float(probe.reg)
-            return probe.pred_test, float(probe.reg), REG_CV
-
-        if spec.name not in baselines:
-            raise ValueError(f"evaluate_generator: no baselines for target {spec.name!r}")
-        bl = baselines[spec.name]
-        p_v, p_real, p_nl = (np.asarray(bl.pred[k]) for k in BASELINE_INPUTS)
-        if not len(p_v) == len(p_real) == len(p_nl) == rows.n_test:
-            raise ValueError(
-                f"evaluate_generator: {spec.name} baselines are not on its {rows.n_test} test rows"
-            )
-        gamma = bl.gamma
-        base = {
-            "corpus": corpus,
-            "target": spec.name,
-            "kind": ps.kind,
-            "metric": ps.metric,
-            "seed": int(seed),
-            "probe_seed": ps.seed,
-            "n_train": rows.n_train,
-            "n_test": rows.n_test,
-            # the constant predictor's test score (train mean / majority class): a V score
-            # below it is a probe failing, not vision lacking the label
-            "baseline_score": baseline_score(rows.y_train, rows.y_test, ps.metric),
-            "nonlinear_gamma": gamma,
-            **(labels or {}),
-        }
-        # the rows every cell repeats (they do not depend on the cell): bootstrapped once
-        real_row = _row({}, "t_real", boot(p_v, p_real), boot(p_nl, p_real))
-        nl_row = _row({}, "v_nonlinear", boot(p_v, p_nl), None)
-        real_row.update(reg=bl.reg["t_real"], reg_source=REG_CV)
-        nl_row.update(reg=bl.reg["v_nonlinear"], reg_source=REG_CV)
-        # the ridge generator's arms: fitted and bootstrapped once, repeated in every cell
-        ridge_rows, ridge_pred, ridge_gaps = [], {}, {}
-        for inp, source in ridge_sources.items():
-            r_tr, r_te = feature_block(source, rows.train_ids), feature_block(source, rows.test_ids)
-            probe = fit(np.hstack([v_tr, r_tr]), np.hstack([v_te, r_te]))
-            ridge_pred[inp] = probe.pred_test
-            ridge_gaps[inp] = centred_gaps(r_te, t_te, t_tr)
-            # the fidelity of these vectors on these rows: a target with the same test and
-            # train rows (the centring) as another reuses it
-            key = (inp, tuple(rows.test_ids), tuple(rows.train_ids))
-            if key not in fid_cache:
-                fid, _ = fidelity(r_te, t_te, t_tr, n_permutations=permutations, seed=seed)
-                fid_cache[key] = fid
-            r_fid = fid_cache[key]
-            r_row = _row(
-                {}, inp, boot(p_v, probe.pred_test, generated=True), boot(p_nl, probe.pred_test)
-            )
-            r_row.update(reg=float(probe.reg), reg_source=REG_CV, **r_fid)
-            ridge_rows.append(r_row)
-            say(
-                f"{spec.name}: V+T_{inp.removeprefix('t_')} delta {r_row['delta']:+.3f} "
-                f"[{r_row['ci_low']:+.3f}, {r_row['ci_high']:+.3f}], cos "
-                f"{r_fid['cos_matched']:.3f} vs {r_fid['cos_offdiag']:.3f}"
-            )
-        say(
-            f"{spec.name}: V {real_row['v_score']:.3f}, V+T_real delta {real_row['delta']:+.3f} "
-            f"[{real_row['ci_low']:+.3f}, {real_row['ci_high']:+.3f}], nonlinear V delta "
-            f"{nl_row['delta']:+.3f}"
-        )
+        tg = target_probes(spec, vision, t_real, family)
+        rep = _repeated(g, tg, baselines, labels)
         for cell in cells:
-            gen = t_gen[cell]
-            sampler, guidance, steps = cell
-            cell_base = {
-                **base,
-                "sampler": sampler,
-                "guidance": float(guidance),
-                "steps": int(steps),
-            }
-            g_tr, g_te = feature_block(gen, rows.train_ids), feature_block(gen, rows.test_ids)
-            shuf = {i: gen[shuffled_of[i]] for i in vision}
-            s_tr, s_te = feature_block(shuf, rows.train_ids), feature_block(shuf, rows.test_ids)
-            p_gen, reg_gen, src_gen = fit_cell(
-                "t_gen", np.hstack([v_tr, g_tr]), np.hstack([v_te, g_te])
-            )
-            p_shuf, reg_shuf, src_shuf = fit_cell(
-                "t_gen_shuffled", np.hstack([v_tr, s_tr]), np.hstack([v_te, s_te])
-            )
-            key = (cell, tuple(rows.test_ids))
-            if key not in fid_cache:
-                fid, null = fidelity(g_te, t_te, t_tr, n_permutations=permutations, seed=seed)
-                fid_cache[key] = fid
-                label = f"{sampler}|w={guidance}|steps={steps}"
-                perm_rows += [
-                    {
-                        "row_id": f"{corpus}|seed~{seed}|{label}|{spec.name}|perm~{k}",
-                        "corpus": corpus,
-                        "seed": int(seed),
-                        "target": spec.name,
-                        "sampler": sampler,
-                        "guidance": float(guidance),
-                        "steps": int(steps),
-                        "permutation": k,
-                        "statistic": float(s),
-                        "observed": fid["cos_matched"],
-                    }
-                    for k, s in enumerate(null)
-                ]
-            fid = fid_cache[key]
-            gen_row = _row(
-                cell_base,
-                "t_gen",
-                boot(p_v, p_gen, generated=True),
-                boot(p_nl, p_gen),
-                boot(ridge_pred["t_ridge"], p_gen, generated=True),
-            )
-            shuf_row = _row(
-                cell_base,
-                "t_gen_shuffled",
-                boot(p_v, p_shuf, generated=True),
-                boot(p_nl, p_shuf),
-            )
-            gen_row.update(reg=reg_gen, reg_source=src_gen)
-            gen_row.update(
-                pairing_gap_columns(centred_gaps(g_te, t_te, t_tr), ridge_gaps, resamples)
-            )
-            shuf_row.update(reg=reg_shuf, reg_source=src_shuf)
-            rows_cell = [{**cell_base, **real_row}, gen_row, shuf_row, {**cell_base, **nl_row}]
-            for r in rows_cell:
-                r.update(fid)
-            rows_cell += [{**cell_base, **r} for r in ridge_rows]  # with their own fidelity
-            for r in rows_cell:
-                r["ridge_alpha"] = ridge.alpha
-                r["row_id"] = (
-                    f"{corpus}|{spec.name}|seed~{seed}|{sampler}|w={guidance}|"
-                    f"steps={steps}|{r['input']}"
-                )
+            rows_cell, perms = _cell_rows(g, tg, rep, cell, t_gen[cell])
+            perm_rows += perms
             out_rows += rows_cell
-            say(
-                f"{spec.name} {sampler} w={guidance} steps={steps}: V+T_gen delta "
-                f"{gen_row['delta']:+.3f} [{gen_row['ci_low']:+.3f}, {gen_row['ci_high']:+.3f}]"
-                f" (C/lambda {reg_gen:g}, {src_gen}), vs nonlinear V "
-                f"{gen_row['delta_vs_nonlinear']:+.3f}, vs ridge V->T "
-                f"{gen_row['delta_vs_ridge']:+.3f}; shuffled {shuf_row['delta']:+.3f}; "
-                f"cos {fid['cos_matched']:.3f} vs {fid['cos_offdiag']:.3f} "
-                f"(p {fid['pairing_p']:.3f}), FD {fid['frechet']:.2f}"
-            )
-    perm_frame = pd.DataFrame(perm_rows, columns=list(PERMUTATION_COLUMNS))
-    if perm_frame.empty:
-        perm_frame = perm_frame.astype(
-            {
-                "row_id": "str",
-                "corpus": "str",
-                "target": "str",
-                "sampler": "str",
-                "seed": "int64",
-                "steps": "int64",
-                "permutation": "int64",
-                "guidance": "float64",
-                "statistic": "float64",
-                "observed": "float64",
-            }
-        )
-    return pd.DataFrame(out_rows), perm_frame
+    return pd.DataFrame(out_rows), permutation_frame(perm_rows)

@@ -89,7 +89,7 @@ def cell_seed(generator_seed: int | str, guidance: float | str, steps: int | str
 
 def family_size(n_cells: int, n_seeds: int) -> int:
     """How many generated-touch rows of one corpus x target the Generation page compares (the
-    family of `generate.evaluate.family_interval`): V + T_gen and its shuffled control in each
-    of `n_cells` sampling cells, and the ridge V->T generator's arms (`RIDGE_INPUTS`), for
+    family of `generate.evaluate_probes.family_interval`): V + T_gen and its shuffled control in
+    each of `n_cells` sampling cells, and the ridge V->T generator's arms (`RIDGE_INPUTS`), for
     each of `n_seeds` generator seeds."""
     return int(n_seeds) * (2 * int(n_cells) + len(RIDGE_INPUTS))

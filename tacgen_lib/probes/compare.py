@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -67,6 +67,144 @@ def _control_row(name: str, out: dict) -> dict:
     }
 
 
+def _main_row(
+    boot: dict, v_probe: FittedProbe, vt_probe: FittedProbe, dims: tuple[int, int], controls: bool
+) -> dict:
+    """The comparison's main row from its fixed-test bootstrap and its two probes (their
+    regularisers, convergence and iterations; `dims`: of V and of V+T); the control Delta and
+    the criterion are filled in once the controls have run."""
+    return {
+        "control": "none",
+        "status": "ok",
+        "v_score": boot["v_score"],
+        "vt_score": boot["vt_score"],
+        "delta": boot["delta"],
+        "delta_sd": math.nan,
+        "ci_low": boot["ci_low"],
+        "ci_high": boot["ci_high"],
+        "p_gt0": boot["p_gt0"],
+        "n_resamples": boot["n_resamples"],
+        "n_constant_resamples": boot["n_constant_resamples"],
+        "v_reg": v_probe.reg,
+        "vt_reg": vt_probe.reg,
+        "dim_v": int(dims[0]),
+        "dim_vt": int(dims[1]),
+        "converged": bool(v_probe.converged and vt_probe.converged),
+        "n_iter_v": v_probe.n_iter,
+        "n_iter_vt": vt_probe.n_iter,
+        "controls": "run" if controls else "not run",
+        "delta_ctrl": math.nan,
+        "criterion_met": None,
+        "notes": "",
+    }
+
+
+def _band_columns(bands: pd.DataFrame, pred_v: np.ndarray, pred_vt: np.ndarray) -> dict:
+    """The test rows' mean force band (low, high) and the share of V's and V+T's predictions
+    inside each row's band."""
+    lo, hi = (bands[c].to_numpy() for c in bands.columns)
+    return {
+        "band_low_mean": float(np.mean(lo)),
+        "band_high_mean": float(np.mean(hi)),
+        "v_in_band": float(np.mean((pred_v >= lo) & (pred_v <= hi))),
+        "vt_in_band": float(np.mean((pred_vt >= lo) & (pred_vt <= hi))),
+    }
+
+
+def _sweep(
+    v_probe: FittedProbe, vt_probe: FittedProbe, y_test: np.ndarray, settings: ProbeSettings
+) -> list[dict]:
+    """One row per regulariser value of the grid: both probes' CV scores, their test R^2 (ridge,
+    where the probes kept every lambda's predictions; NaN otherwise) and which value each
+    chose."""
+    test_v = test_vt = np.full(v_probe.grid.size, np.nan)
+    if (
+        settings.kind == "ridge"
+        and v_probe.pred_grid is not None
+        and vt_probe.pred_grid is not None
+    ):
+        test_v = np.array([score("r2", y_test, p) for p in v_probe.pred_grid])
+        test_vt = np.array([score("r2", y_test, p) for p in vt_probe.pred_grid])
+    # the mlp2 grid is 2-D (width x weight decay): its choice is in the notes, not the sweep
+    return [
+        {
+            "reg": float(reg),
+            "cv_v": float(v_probe.cv_scores[i]),
+            "cv_vt": float(vt_probe.cv_scores[i]),
+            "test_v": float(test_v[i]),
+            "test_vt": float(test_vt[i]),
+            "delta_test": float(test_vt[i] - test_v[i]),
+            "selected_v": bool(reg == v_probe.reg),
+            "selected_vt": bool(reg == vt_probe.reg),
+        }
+        for i, reg in enumerate(v_probe.grid if settings.protocol != "mlp2" else [])
+    ]
+
+
+def _control_calls(
+    v_probe: FittedProbe, vt_probe: FittedProbe, settings: ProbeSettings
+) -> list[tuple[str, Callable[..., dict], dict]]:
+    """(name, function, keyword arguments) of each control with a positive number of draws, in
+    `CONTROLS` order; the probes (at their chosen regularisers) are the V and the V+T probe, or
+    the V+T probe that is refitted and the V probe."""
+    kind = settings.kind
+    fixed_v, fixed_vt = v_probe.fixed(kind), vt_probe.fixed(kind)
+    common = {"metric": settings.metric, "seed": settings.draw_seed}
+    pair = {"probe_v": fixed_v, "probe_vt": fixed_vt, **common}
+    refit = {"probe": fixed_vt, "probe_v": fixed_v, **common}
+    runs = {
+        "train_resample": (train_resample_diagnostic, pair),
+        "tactile_permutation": (tactile_permutation_control, refit),
+        "label_permutation": (label_permutation_control, pair),
+        "random_features": (random_feature_control, refit),
+    }
+    draws = {
+        "train_resample": ("n_resamples", settings.train_resamples),
+        "tactile_permutation": ("n_permutations", settings.permutations),
+        "label_permutation": ("n_permutations", settings.label_permutations),
+        "random_features": ("n_draws", settings.random_draws),
+    }
+    return [
+        (name, runs[name][0], {**runs[name][1], draws[name][0]: draws[name][1]})
+        for name in CONTROLS
+        if draws[name][1] > 0
+    ]
+
+
+def _run_control(name: str, control: Callable[..., dict], paired: PairedRows, kwargs: dict) -> dict:
+    """One control's row (`_control_row`), or a failed row with the error; the convergence
+    warnings of its logistic refits are counted into its notes, other warnings passed on."""
+    from sklearn.exceptions import ConvergenceWarning  # only where controls are run
+
+    with warnings.catch_warnings(record=True) as caught:
+        # A logistic refit that misses convergence at the iteration cap warns once per
+        # refit; the warnings are counted into the control's notes, not flooded to the log.
+        warnings.simplefilter("always", category=ConvergenceWarning)
+        try:
+            row = _control_row(name, control(paired, **kwargs))
+        except ValueError as exc:  # e.g. a training resample left holding one class
+            row = {"control": name, "status": "failed", "notes": f"control failed: {exc}"}
+    for w in caught:
+        if not issubclass(w.category, ConvergenceWarning):
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    unconverged = sum(issubclass(w.category, ConvergenceWarning) for w in caught)
+    if unconverged:
+        row["notes"] = f"{unconverged} refit(s) did not converge within the iteration cap"
+    return row
+
+
+def _judge(main: dict, chosen: str, settings: ProbeSettings) -> None:
+    """The main row's notes and the paper's criterion once the controls have run: without a
+    tactile-permutation Delta, a note and no criterion."""
+    main["notes"] = chosen
+    if math.isnan(main["delta_ctrl"]):
+        main["notes"] = "no tactile-permutation control (probes.permutations = 0, or it failed)"
+    else:
+        main["criterion_met"] = paper_criterion(
+            main["delta"], main["ci_low"], main["delta_ctrl"], settings.min_delta
+        )
+
+
 def compare(
     v_train: np.ndarray,
     v_test: np.ndarray,
@@ -87,7 +225,6 @@ def compare(
     row per control in `CONTROLS`; seeds are all ``settings.draw_seed``, so every comparison of a
     family sees the same bootstrap resamples and permutations (paired across comparisons).
     """
-    kind, metric = settings.kind, settings.metric
     y_tr, y_te = rows.y_train, rows.y_test
     x_vt_tr, x_vt_te = fuse(fusion, v_train, t_train), fuse(fusion, v_test, t_test)
     if v_probe is None:
@@ -101,62 +238,19 @@ def compare(
         y_te,
         v_probe.pred_test,
         vt_probe.pred_test,
-        metric,
+        settings.metric,
         n_resamples=settings.bootstrap,
         seed=settings.draw_seed,
         strata=rows.strata_test,
         sample_ids=rows.test_ids,
     )
-    main = {
-        "control": "none",
-        "status": "ok",
-        "v_score": boot["v_score"],
-        "vt_score": boot["vt_score"],
-        "delta": boot["delta"],
-        "delta_sd": math.nan,
-        "ci_low": boot["ci_low"],
-        "ci_high": boot["ci_high"],
-        "p_gt0": boot["p_gt0"],
-        "n_resamples": boot["n_resamples"],
-        "n_constant_resamples": boot["n_constant_resamples"],
-        "v_reg": v_probe.reg,
-        "vt_reg": vt_probe.reg,
-        "dim_v": int(v_train.shape[1]),
-        "dim_vt": int(x_vt_tr.shape[1]),
-        "converged": bool(v_probe.converged and vt_probe.converged),
-        "n_iter_v": v_probe.n_iter,
-        "n_iter_vt": vt_probe.n_iter,
-        "controls": "run" if controls else "not run",
-        "delta_ctrl": math.nan,
-        "criterion_met": None,
-        "notes": "",
-    }
+    dims = (v_train.shape[1], x_vt_tr.shape[1])
+    main = _main_row(boot, v_probe, vt_probe, dims, controls)
     chosen = "; ".join(f"{m}: {p.notes}" for m, p in (("V", v_probe), ("V+T", vt_probe)) if p.notes)
     if rows.bands_test is not None:
-        lo, hi = (rows.bands_test[c].to_numpy() for c in rows.bands_test.columns)
-        main["band_low_mean"] = float(np.mean(lo))
-        main["band_high_mean"] = float(np.mean(hi))
-        main["v_in_band"] = float(np.mean((v_probe.pred_test >= lo) & (v_probe.pred_test <= hi)))
-        main["vt_in_band"] = float(np.mean((vt_probe.pred_test >= lo) & (vt_probe.pred_test <= hi)))
+        main |= _band_columns(rows.bands_test, v_probe.pred_test, vt_probe.pred_test)
     result = Comparison(main, pred_v=v_probe.pred_test, pred_vt=vt_probe.pred_test)
-    test_v = test_vt = np.full(v_probe.grid.size, np.nan)
-    if kind == "ridge" and v_probe.pred_grid is not None and vt_probe.pred_grid is not None:
-        test_v = np.array([score("r2", y_te, p) for p in v_probe.pred_grid])
-        test_vt = np.array([score("r2", y_te, p) for p in vt_probe.pred_grid])
-    # the mlp2 grid is 2-D (width x weight decay): its choice is in the notes, not the sweep
-    for i, reg in enumerate(v_probe.grid if settings.protocol != "mlp2" else []):
-        result.sweep.append(
-            {
-                "reg": float(reg),
-                "cv_v": float(v_probe.cv_scores[i]),
-                "cv_vt": float(vt_probe.cv_scores[i]),
-                "test_v": float(test_v[i]),
-                "test_vt": float(test_vt[i]),
-                "delta_test": float(test_vt[i] - test_v[i]),
-                "selected_v": bool(reg == v_probe.reg),
-                "selected_vt": bool(reg == vt_probe.reg),
-            }
-        )
+    result.sweep += _sweep(v_probe, vt_probe, y_te, settings)
     if not controls:
         main["notes"] = "; ".join(
             x
@@ -168,55 +262,14 @@ def compare(
             if x
         )
         return result
-    fixed_v, fixed_vt = v_probe.fixed(kind), vt_probe.fixed(kind)
-    common = {"metric": metric, "seed": settings.draw_seed}
+    calls = _control_calls(v_probe, vt_probe, settings)
     paired = PairedRows(v_train, t_train, y_tr, v_test, t_test, y_te, fusion)
-    # each control: its function and its probes (the V and the V+T probe, or the V+T probe
-    # that is refitted and the V probe), then its number of draws
-    pair = {"probe_v": fixed_v, "probe_vt": fixed_vt, **common}
-    refit = {"probe": fixed_vt, "probe_v": fixed_v, **common}
-    runs = {
-        "train_resample": (train_resample_diagnostic, pair),
-        "tactile_permutation": (tactile_permutation_control, refit),
-        "label_permutation": (label_permutation_control, pair),
-        "random_features": (random_feature_control, refit),
-    }
-    draws = {
-        "train_resample": ("n_resamples", settings.train_resamples),
-        "tactile_permutation": ("n_permutations", settings.permutations),
-        "label_permutation": ("n_permutations", settings.label_permutations),
-        "random_features": ("n_draws", settings.random_draws),
-    }
-    from sklearn.exceptions import ConvergenceWarning  # only where controls are run
-
-    for name in CONTROLS:
-        (control, probes), (count_name, count) = runs[name], draws[name]
-        if count <= 0:
-            continue
-        with warnings.catch_warnings(record=True) as caught:
-            # A logistic refit that misses convergence at the iteration cap warns once per
-            # refit; the warnings are counted into the control's notes, not flooded to the log.
-            warnings.simplefilter("always", category=ConvergenceWarning)
-            try:
-                row = _control_row(name, control(paired, **probes, **{count_name: count}))
-            except ValueError as exc:  # e.g. a training resample left holding one class
-                row = {"control": name, "status": "failed", "notes": f"control failed: {exc}"}
-        for w in caught:
-            if not issubclass(w.category, ConvergenceWarning):
-                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-        unconverged = sum(issubclass(w.category, ConvergenceWarning) for w in caught)
-        if unconverged:
-            row["notes"] = f"{unconverged} refit(s) did not converge within the iteration cap"
+    for name, control, kwargs in calls:
+        row = _run_control(name, control, paired, kwargs)
         result.controls.append(row)
         if name == "tactile_permutation" and row.get("status", "ok") == "ok":
             main["delta_ctrl"] = row["delta"]
-    main["notes"] = chosen
-    if math.isnan(main["delta_ctrl"]):
-        main["notes"] = "no tactile-permutation control (probes.permutations = 0, or it failed)"
-    else:
-        main["criterion_met"] = paper_criterion(
-            main["delta"], main["ci_low"], main["delta_ctrl"], settings.min_delta
-        )
+    _judge(main, chosen, settings)
     return result
 
 

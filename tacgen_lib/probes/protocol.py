@@ -64,9 +64,9 @@ from dataclasses import dataclass, replace
 import numpy as np
 import pandas as pd
 
-from tacgen_lib.probes.compare import compare, confusion_counts
+from tacgen_lib.probes.compare import Comparison, compare, confusion_counts
 from tacgen_lib.probes.fit import FittedProbe, fit_probe
-from tacgen_lib.probes.plan import headline_plan, plan_comparisons, row_id
+from tacgen_lib.probes.plan import ComparisonSpec, headline_plan, plan_comparisons, row_id
 from tacgen_lib.probes.rows import (
     FamilyRows,
     baseline_score,
@@ -91,6 +91,204 @@ class FamilyResult:
     rows: pd.DataFrame
     sweep: pd.DataFrame
     confusion: pd.DataFrame
+
+
+@dataclass(frozen=True)
+class _Family:
+    """What every comparison of one family and probe seed shares: the family's name, rows and
+    probe settings, the heads' variant, the constant columns of its result rows (`_family_base`)
+    and the class order of its confusion counts (logistic only)."""
+
+    name: str
+    rows: FamilyRows
+    settings: ProbeSettings
+    heads_variant: str
+    base: dict
+    classes: list
+
+
+def _family_plan(
+    family: str,
+    *,
+    vision: tuple[np.ndarray, np.ndarray],
+    tactile: Mapping[str, tuple[np.ndarray, np.ndarray]],
+    aligned: Mapping[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]],
+    fusions: Sequence[str],
+    heads_variant: str,
+    settings: ProbeSettings,
+    headline_only: bool,
+    controls: bool,
+) -> list[ComparisonSpec]:
+    """The family's comparisons (`plan_comparisons`), narrowed to the headline ones or stripped
+    of their controls where asked (`run_family`)."""
+    if heads_variant not in tactile:
+        raise ValueError(
+            f"family {family!r}: no raw tactile features for the heads' variant {heads_variant!r}"
+        )
+    plan = plan_comparisons(
+        fusions,
+        heads_variant=heads_variant,
+        variants=list(tactile),
+        align_seeds=sorted(aligned),
+        dim_v_raw=vision[0].shape[1],
+        dim_t_raw=tactile[heads_variant][0].shape[1],
+        control_align_seeds=None if settings.kind == "ridge" else LOGISTIC_CONTROL_ALIGN_SEEDS,
+    )
+    if headline_only:
+        plan = headline_plan(plan, heads_variant, controls=controls)
+    elif not controls:
+        plan = [replace(s, controls=False) for s in plan]
+    return plan
+
+
+def _family_base(
+    family: str,
+    rows: FamilyRows,
+    settings: ProbeSettings,
+    heads_variant: str,
+    labels: Mapping[str, object] | None,
+) -> dict:
+    """The columns every result row of the family carries, its baselines included
+    (`baseline_score`, `visible_score`)."""
+    return {
+        "family": family,
+        "corpus": rows.corpus,
+        "target": rows.target,
+        "kind": settings.kind,
+        "metric": settings.metric,
+        "reg_name": settings.reg_name,
+        "probe_seed": settings.seed,
+        "protocol": settings.protocol,
+        "heads_variant": heads_variant,
+        "n_train": rows.n_train,
+        "n_test": rows.n_test,
+        "n_unlabelled": rows.n_unlabelled,
+        "bootstrap_strata": rows.strata_note,
+        "baseline_score": baseline_score(rows.y_train, rows.y_test, settings.metric),
+        "visible_score": visible_score(rows, settings),
+        **(labels or {}),
+    }
+
+
+def _ident(spec: ComparisonSpec) -> dict:
+    """The columns that name a comparison in each of the family's tables."""
+    return {
+        "input": spec.input,
+        "t_variant": spec.t_variant,
+        "fusion": spec.fusion,
+        "align_seed": spec.align_seed,
+    }
+
+
+def _status_row(fam: _Family, key: str, ident: dict, status: str, notes: str) -> dict:
+    """The one row of a comparison that gave no result (``skipped`` or ``failed``)."""
+    return {
+        "row_id": key,
+        **fam.base,
+        **ident,
+        "control": "none",
+        "status": status,
+        "controls": "not run",
+        "notes": notes,
+    }
+
+
+def _compare_spec(
+    fam: _Family,
+    spec: ComparisonSpec,
+    inputs: tuple[tuple, np.ndarray, np.ndarray, np.ndarray, np.ndarray],
+    v_cache: dict[tuple, FittedProbe],
+) -> Comparison:
+    """`compare` of one planned comparison on its inputs (cache key, V train, V test, T train,
+    T test), the V probe fitted once per input (raw, or an alignment seed) and cached."""
+    cache_key, vv_tr, vv_te, tt_tr, tt_te = inputs
+    rows, settings = fam.rows, fam.settings
+    if cache_key not in v_cache:
+        v_cache[cache_key] = fit_probe(
+            vv_tr,
+            rows.y_train,
+            vv_te,
+            settings,
+            train_ids=rows.train_ids,
+            test_ids=rows.test_ids,
+        )
+    return compare(
+        vv_tr,
+        vv_te,
+        tt_tr,
+        tt_te,
+        rows,
+        spec.fusion,
+        settings,
+        controls=spec.controls,
+        v_probe=v_cache[cache_key],
+    )
+
+
+def _result_rows(
+    fam: _Family, spec: ComparisonSpec, key: str, ident: dict, res: Comparison
+) -> list[dict]:
+    """A comparison's result row and one row per control run on it."""
+    settings = fam.settings
+    out = [{"row_id": key, **fam.base, **ident, **res.main}]
+    for c in res.controls:
+        out.append(
+            {
+                "row_id": row_id(fam.name, spec, settings.seed, c["control"], settings.protocol),
+                **fam.base,
+                **ident,
+                "controls": "run",
+                **c,
+            }
+        )
+    return out
+
+
+def _sweep_rows(fam: _Family, key: str, ident: dict, res: Comparison) -> list[dict]:
+    """A comparison's lambda/C sweep, one row per regulariser value (`SWEEP_COLUMNS`)."""
+    settings, rows = fam.settings, fam.rows
+    return [
+        {
+            "row_id": f"{key}|{settings.reg_name}={s['reg']:g}",
+            "comparison": key,
+            "family": fam.name,
+            "corpus": rows.corpus,
+            "target": rows.target,
+            "metric": settings.metric,
+            **ident,
+            "probe_seed": settings.seed,
+            "protocol": settings.protocol,
+            "heads_variant": fam.heads_variant,
+            "reg_name": settings.reg_name,
+            **s,
+        }
+        for s in res.sweep
+    ]
+
+
+def _confusion_rows(fam: _Family, key: str, ident: dict, res: Comparison) -> list[dict]:
+    """A logistic comparison's confusion counts of V and V+T on the test rows
+    (`CONFUSION_COLUMNS`)."""
+    settings, rows = fam.settings, fam.rows
+    return [
+        {
+            "row_id": f"{key}|{model}|{a}|{b}",
+            "comparison": key,
+            "family": fam.name,
+            "corpus": rows.corpus,
+            "target": rows.target,
+            **ident,
+            "probe_seed": settings.seed,
+            "protocol": settings.protocol,
+            "heads_variant": fam.heads_variant,
+            "model": model,
+            "true": a,
+            "pred": b,
+            "count": n,
+        }
+        for model, pred in (("V", res.pred_v), ("V+T", res.pred_vt))
+        for a, b, n in confusion_counts(rows.y_test, pred, fam.classes)
+    ]
 
 
 def run_family(
@@ -121,156 +319,51 @@ def run_family(
     ``failed`` row with the error as its note; a planned skip is a ``skipped`` row.
     """
     say = progress or (lambda _msg: None)
-    if heads_variant not in tactile:
-        raise ValueError(
-            f"family {family!r}: no raw tactile features for the heads' variant {heads_variant!r}"
-        )
-    v_tr, v_te = vision
-    plan = plan_comparisons(
-        fusions,
+    plan = _family_plan(
+        family,
+        vision=vision,
+        tactile=tactile,
+        aligned=aligned,
+        fusions=fusions,
         heads_variant=heads_variant,
-        variants=list(tactile),
-        align_seeds=sorted(aligned),
-        dim_v_raw=v_tr.shape[1],
-        dim_t_raw=tactile[heads_variant][0].shape[1],
-        control_align_seeds=None if settings.kind == "ridge" else LOGISTIC_CONTROL_ALIGN_SEEDS,
+        settings=settings,
+        headline_only=headline_only,
+        controls=controls,
     )
-    if headline_only:
-        plan = headline_plan(plan, heads_variant, controls=controls)
-    elif not controls:
-        plan = [replace(s, controls=False) for s in plan]
-    base = {
-        "family": family,
-        "corpus": rows.corpus,
-        "target": rows.target,
-        "kind": settings.kind,
-        "metric": settings.metric,
-        "reg_name": settings.reg_name,
-        "probe_seed": settings.seed,
-        "protocol": settings.protocol,
-        "heads_variant": heads_variant,
-        "n_train": rows.n_train,
-        "n_test": rows.n_test,
-        "n_unlabelled": rows.n_unlabelled,
-        "bootstrap_strata": rows.strata_note,
-        "baseline_score": baseline_score(rows.y_train, rows.y_test, settings.metric),
-        "visible_score": visible_score(rows, settings),
-        **(labels or {}),
-    }
-    classes = class_order([*rows.y_train, *rows.y_test]) if settings.kind == "logistic" else []
+    v_tr, v_te = vision
+    fam = _Family(
+        name=family,
+        rows=rows,
+        settings=settings,
+        heads_variant=heads_variant,
+        base=_family_base(family, rows, settings, heads_variant, labels),
+        classes=(class_order([*rows.y_train, *rows.y_test]) if settings.kind == "logistic" else []),
+    )
     out_rows, sweep_rows, conf_rows = [], [], []
     v_cache: dict[tuple, FittedProbe] = {}
     for i, spec in enumerate(plan):
-        ident = {
-            "input": spec.input,
-            "t_variant": spec.t_variant,
-            "fusion": spec.fusion,
-            "align_seed": spec.align_seed,
-        }
+        ident = _ident(spec)
         key = row_id(family, spec, settings.seed, protocol=settings.protocol)
         if spec.skip_reason is not None:
-            out_rows.append(
-                {
-                    "row_id": key,
-                    **base,
-                    **ident,
-                    "control": "none",
-                    "status": "skipped",
-                    "controls": "not run",
-                    "notes": spec.skip_reason,
-                }
-            )
+            out_rows.append(_status_row(fam, key, ident, "skipped", spec.skip_reason))
             continue
         if spec.input == "raw":
-            vv_tr, vv_te = v_tr, v_te
             tt_tr, tt_te = tactile[spec.t_variant]
-            cache_key = ("raw",)
+            inputs = (("raw",), v_tr, v_te, tt_tr, tt_te)
         else:
             vv_tr, vv_te, tt_tr, tt_te = aligned[spec.align_seed]
-            cache_key = ("aligned", spec.align_seed)
+            inputs = (("aligned", spec.align_seed), vv_tr, vv_te, tt_tr, tt_te)
         try:
-            if cache_key not in v_cache:
-                v_cache[cache_key] = fit_probe(
-                    vv_tr,
-                    rows.y_train,
-                    vv_te,
-                    settings,
-                    train_ids=rows.train_ids,
-                    test_ids=rows.test_ids,
-                )
-            res = compare(
-                vv_tr,
-                vv_te,
-                tt_tr,
-                tt_te,
-                rows,
-                spec.fusion,
-                settings,
-                controls=spec.controls,
-                v_probe=v_cache[cache_key],
-            )
+            res = _compare_spec(fam, spec, inputs, v_cache)
         except ValueError as exc:
-            out_rows.append(
-                {
-                    "row_id": key,
-                    **base,
-                    **ident,
-                    "control": "none",
-                    "status": "failed",
-                    "controls": "not run",
-                    "notes": f"probe could not be fitted: {exc}",
-                }
-            )
+            notes = f"probe could not be fitted: {exc}"
+            out_rows.append(_status_row(fam, key, ident, "failed", notes))
             say(f"[{i + 1}/{len(plan)}] {key}: failed ({exc})")
             continue
-        out_rows.append({"row_id": key, **base, **ident, **res.main})
-        for c in res.controls:
-            out_rows.append(
-                {
-                    "row_id": row_id(family, spec, settings.seed, c["control"], settings.protocol),
-                    **base,
-                    **ident,
-                    "controls": "run",
-                    **c,
-                }
-            )
-        for s in res.sweep:
-            sweep_rows.append(
-                {
-                    "row_id": f"{key}|{settings.reg_name}={s['reg']:g}",
-                    "comparison": key,
-                    "family": family,
-                    "corpus": rows.corpus,
-                    "target": rows.target,
-                    "metric": settings.metric,
-                    **ident,
-                    "probe_seed": settings.seed,
-                    "protocol": settings.protocol,
-                    "heads_variant": heads_variant,
-                    "reg_name": settings.reg_name,
-                    **s,
-                }
-            )
+        out_rows += _result_rows(fam, spec, key, ident, res)
+        sweep_rows += _sweep_rows(fam, key, ident, res)
         if settings.kind == "logistic":
-            for model, pred in (("V", res.pred_v), ("V+T", res.pred_vt)):
-                for a, b, n in confusion_counts(rows.y_test, pred, classes):
-                    conf_rows.append(
-                        {
-                            "row_id": f"{key}|{model}|{a}|{b}",
-                            "comparison": key,
-                            "family": family,
-                            "corpus": rows.corpus,
-                            "target": rows.target,
-                            **ident,
-                            "probe_seed": settings.seed,
-                            "protocol": settings.protocol,
-                            "heads_variant": heads_variant,
-                            "model": model,
-                            "true": a,
-                            "pred": b,
-                            "count": n,
-                        }
-                    )
+            conf_rows += _confusion_rows(fam, key, ident, res)
         say(
             f"[{i + 1}/{len(plan)}] {key}: V {res.main['v_score']:.3f} V+T "
             f"{res.main['vt_score']:.3f} delta {res.main['delta']:+.3f} "

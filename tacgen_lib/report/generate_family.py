@@ -4,10 +4,10 @@ Per corpus and target the page compares many rows of generated touch against V: 
 its shuffled control in every sampling cell, and the ridge V->T generator's two arms, for every
 generator seed (`generate.sampling_cells.family_size`). Read one by one at 95 %, about one in twenty of
 them lies above 0 by chance where nothing is to be found (a null corpus); read together, by
-their family-wise intervals (`generate.evaluate.family_interval`: Bonferroni over the family,
-Holm's first step), a row above 0 is a gain of the family. `family_table` counts both readings
-per corpus and target and says whether the corpora where generated touch must not help (the
-null corpus; density on the appearance-controlled corpus) show none.
+their family-wise intervals (`generate.evaluate_probes.family_interval`: Bonferroni over the
+family, Holm's first step), a row above 0 is a gain of the family. `family_table` counts both
+readings per corpus and target and says whether the corpora where generated touch must not help
+(the null corpus; density on the appearance-controlled corpus) show none.
 """
 
 from __future__ import annotations

@@ -1,6 +1,7 @@
-"""The Generation page's family-wise reading (tacgen_lib.generate.evaluate.family_interval,
-tacgen_lib.report.generate_family): Bonferroni intervals over the generated-touch rows of one
-corpus and target, and the table that counts them."""
+"""The Generation page's family-wise reading
+(tacgen_lib.generate.evaluate_probes.family_interval, tacgen_lib.report.generate_family):
+Bonferroni intervals over the generated-touch rows of one corpus and target, and the table that
+counts them."""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from tacgen_lib.generate.evaluate import FAMILY_ALPHA, family_interval
+from tacgen_lib.generate.evaluate_probes import FAMILY_ALPHA, family_interval
 from tacgen_lib.generate.sampling_cells import family_size
 from tacgen_lib.probes.bootstrap import percentile_interval
 from tacgen_lib.report.generate_family import family_rows, family_table
