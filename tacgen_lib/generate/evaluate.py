@@ -60,7 +60,6 @@ import pandas as pd
 
 from tacgen_lib.generate.baselines import BASELINE_INPUTS, Baselines, TargetSpec
 from tacgen_lib.generate.blocks import feature_block
-from tacgen_lib.generate.sampling_cells import RIDGE_INPUTS
 from tacgen_lib.generate.evaluate_probes import (
     REG_CV,
     TargetProbes,
@@ -74,6 +73,7 @@ from tacgen_lib.generate.evaluate_rows import (
 )
 from tacgen_lib.generate.fidelity import centred_gaps, fidelity, gap_interval
 from tacgen_lib.generate.ridge_generator import RIDGE_ALPHAS, ridge_generate
+from tacgen_lib.generate.sampling_cells import RIDGE_INPUTS
 from tacgen_lib.probes.rows import baseline_score
 
 #: What is added to V in a summary row.
