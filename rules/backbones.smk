@@ -25,14 +25,14 @@ rule family_backbone:
         curve="results/features/families/{family}/{modality}_curve.parquet",
         features=[
             f"results/features/families/{{family}}/{c}/{{modality}}.parquet"
-            for c in FAMILY_CORPORA
+            for c in PLANS.families.corpora
         ],
     log:
         "results/logs/family_backbone/{family}/{modality}.log",
     benchmark:
         "results/benchmarks/family_backbone/{family}/{modality}.tsv"
     wildcard_constraints:
-        family=one_of(OWN_FAMILIES or ["-"]),
+        family=one_of(PLANS.families.own or ["-"]),
         modality="vision|tactile",
     conda:
         "../envs/features.yaml"
@@ -42,25 +42,28 @@ rule family_backbone:
         runtime=60,
     params:
         device=DEVICE,  # config device (tacgen_lib.runtime.device)
-        backbone=lambda w: FAMILIES.families[w.family][w.modality].__dict__,
+        backbone=lambda w: PLANS.families.settings.families[w.family][
+            w.modality
+        ].__dict__,
         pretrain=PRETRAIN,
         corpora=PRETRAIN_CORPORA,  # whose train frames DINO, MAE and SimCLR pretrain on
         mae=lambda w: (
-            FEAT["mae"]
+            FEATURES["mae"]
             if PLANS.families.spec(w.family, w.modality).objective == "mae"
             else {}
         ),
         # SimCLR's settings only where a backbone is SimCLR-pretrained
         simclr=lambda w: (
-            FEAT["simclr"]
+            FEATURES["simclr"]
             if PLANS.families.spec(w.family, w.modality).objective == "simclr"
             else {}
         ),
         image_size=lambda w: backbone_image_size(
-            FEAT, FAMILIES.families[w.family][w.modality].__dict__
+            FEATURES, PLANS.families.settings.families[w.family][w.modality].__dict__
         ),
-        batch_size=FEAT["batch_size"],
-        pool=lambda w: PLANS.families.spec(w.family, w.modality).pool or FEAT["pool"],
+        batch_size=FEATURES["batch_size"],
+        pool=lambda w: PLANS.families.spec(w.family, w.modality).pool
+        or FEATURES["pool"],
     script:
         "../workflow/scripts/pretrain_backbone.py"
 
@@ -71,11 +74,12 @@ rule family_probe:
         manifest="results/corpus/manifest.parquet",
         splits="results/corpus/splits.parquet",
         vision=lambda w: [
-            PLANS.families.features_edge(w.family, c, "vision") for c in FAMILY_CORPORA
+            PLANS.families.features_edge(w.family, c, "vision")
+            for c in PLANS.families.corpora
         ],
         tactile=lambda w: [
             PLANS.families.features_edge(w.family, c, "tactile")
-            for c in FAMILY_CORPORA
+            for c in PLANS.families.corpora
         ],
         code=imports_of("family_probe"),
     output:
@@ -85,7 +89,7 @@ rule family_probe:
     benchmark:
         "results/benchmarks/family_probe/{family}.tsv"
     wildcard_constraints:
-        family=one_of(COMPUTED_FAMILIES or ["-"]),
+        family=one_of(PLANS.families.computed or ["-"]),
     conda:
         "../envs/probes.yaml"
     threads: 1
@@ -93,10 +97,10 @@ rule family_probe:
         mem_mb=2000,
         runtime=30,
     params:
-        probes={p: PROBES["families"][p] for p in FAMILIES.probes},
-        corpora={c: CORPORA[c] for c in FAMILY_CORPORA},
+        probes={p: PROBES["families"][p] for p in PLANS.families.settings.probes},
+        corpora={c: CORPORA[c] for c in PLANS.families.corpora},
         settings=PROBE_SETTINGS,
-        protocols=FAMILIES.protocols,
+        protocols=PLANS.families.settings.protocols,
         seed=PROBES["seeds"][0],
         labels=lambda w: PLANS.families.labels(w.family),
     script:
@@ -106,11 +110,13 @@ rule family_probe:
 rule aggregate_backbones:
     """Every family's probes; the report page Backbone families."""
     input:
-        rows=[FAMILY_PROBE.format(family=f) for f in COMPUTED_FAMILIES],
+        rows=[FAMILY_PROBE.format(family=f) for f in PLANS.families.computed],
         main=[
-            f"{PROBE_DIR}/seed~{_PROBE_SEED}.parquet".format(family=p, protocol=q)
-            for f in MAIN_FROM_PROBES
-            for p, q in FAMILY_JOBS
+            f"{PROBE_DIR}/seed~{PROBES['seeds'][0]}.parquet".format(
+                family=p, protocol=q
+            )
+            for f in PLANS.families.main_from_probes
+            for p, q in PLANS.families.jobs
         ],
         code=imports_of("aggregate_backbones"),
     output:
@@ -132,9 +138,9 @@ rule aggregate_backbones:
         mem_mb=1000,
         runtime=5,
     params:
-        order=list(FAMILIES.run),
-        main={f: PLANS.families.labels(f) for f in MAIN_FROM_PROBES},
-        main_jobs=FAMILY_JOBS,
-        heads_variant=FAMILY_VARIANT,
+        order=list(PLANS.families.settings.run),
+        main={f: PLANS.families.labels(f) for f in PLANS.families.main_from_probes},
+        main_jobs=PLANS.families.jobs,
+        heads_variant=PLANS.families.variant,
     script:
         "../workflow/scripts/aggregate_backbones.py"

@@ -3,8 +3,8 @@
 from tacgen_lib.features.settings import backbone_image_size
 from tacgen_lib.plan.features import MODALITIES, VISIBILITY_EDGE, VISIBILITY_ITEMS
 
-FEAT = config["features"]
-PRETRAIN = FEAT["pretrain"]
+FEATURES = config["features"]
+PRETRAIN = FEATURES["pretrain"]
 PRETRAIN_CORPORA = PLANS.features.pretraining_corpora
 
 _FEATURE_EDGES = PLANS.features.corpus_feature_edges(config)
@@ -41,20 +41,24 @@ rule pretrain_backbone:
         runtime=120,
     params:
         device=DEVICE,  # config device (tacgen_lib.runtime.device)
-        backbone=lambda w: FEAT["backbones"][w.modality],
+        backbone=lambda w: FEATURES["backbones"][w.modality],
         pretrain=PRETRAIN,
         corpora=PRETRAIN_CORPORA,  # whose train frames DINO, MAE and SimCLR pretrain on
         # MAE's settings only where a backbone is MAE-pretrained: a change reruns only those
         mae=lambda w: (
-            FEAT["mae"] if FEAT["backbones"][w.modality]["objective"] == "mae" else {}
+            FEATURES["mae"]
+            if FEATURES["backbones"][w.modality]["objective"] == "mae"
+            else {}
         ),
         # SimCLR's settings only where a backbone is SimCLR-pretrained
         simclr=lambda w: (
-            FEAT["simclr"]
-            if FEAT["backbones"][w.modality]["objective"] == "simclr"
+            FEATURES["simclr"]
+            if FEATURES["backbones"][w.modality]["objective"] == "simclr"
             else {}
         ),
-        image_size=lambda w: backbone_image_size(FEAT, FEAT["backbones"][w.modality]),
+        image_size=lambda w: backbone_image_size(
+            FEATURES, FEATURES["backbones"][w.modality]
+        ),
     script:
         "../workflow/scripts/pretrain_backbone.py"
 
@@ -83,7 +87,7 @@ rule extract_vision_features:
         runtime=30,
     params:
         device=DEVICE,  # config device (tacgen_lib.runtime.device)
-        features=FEAT,
+        features=FEATURES,
         column="rgb",
     script:
         "../workflow/scripts/extract_features.py"
@@ -114,7 +118,7 @@ rule extract_tactile_features:
         runtime=30,
     params:
         device=DEVICE,  # config device (tacgen_lib.runtime.device)
-        features=FEAT,
+        features=FEATURES,
         column="tactile_proc",
     script:
         "../workflow/scripts/extract_features.py"
@@ -177,13 +181,15 @@ rule share_natural_vision:
 rule pretrained_vs_random:
     """Linear probes on pretrained vs random-init backbone features, with a bootstrap CI."""
     input:
-        vision=corpus_edge(FEAT["pretrained_vs_random"]["corpus"]),
+        vision=corpus_edge(FEATURES["pretrained_vs_random"]["corpus"]),
         tactile=PLANS.features.backbone_frames(
-            "tactile", FEAT["pretrained_vs_random"]["corpus"]
+            "tactile", FEATURES["pretrained_vs_random"]["corpus"]
         ),
-        pretrained_vision=feature_edge(FEAT["pretrained_vs_random"]["corpus"], "vision"),
+        pretrained_vision=feature_edge(
+            FEATURES["pretrained_vs_random"]["corpus"], "vision"
+        ),
         pretrained_tactile=feature_edge(
-            FEAT["pretrained_vs_random"]["corpus"], "tactile", PRETRAIN["variant"]
+            FEATURES["pretrained_vs_random"]["corpus"], "tactile", PRETRAIN["variant"]
         ),
         manifest="results/corpus/manifest.parquet",
         splits="results/corpus/splits.parquet",
@@ -202,16 +208,16 @@ rule pretrained_vs_random:
         "results/benchmarks/pretrained_vs_random.tsv"
     conda:
         "../envs/features.yaml"
-    threads: FEAT["threads"]  # extracts random-init backbone features
+    threads: FEATURES["threads"]  # extracts random-init backbone features
     resources:
         mem_mb=4000,
         runtime=30,
     params:
         device=DEVICE,  # config device (tacgen_lib.runtime.device)
-        features=FEAT,
+        features=FEATURES,
         pretrain=PRETRAIN,
-        check=FEAT["pretrained_vs_random"],
-        archs={m: FEAT["backbones"][m]["arch"] for m in ("vision", "tactile")},
+        check=FEATURES["pretrained_vs_random"],
+        archs={m: FEATURES["backbones"][m]["arch"] for m in ("vision", "tactile")},
         C=[0.1, 1.0, 10.0],
     script:
         "../workflow/scripts/pretrained_vs_random.py"
@@ -219,7 +225,7 @@ rule pretrained_vs_random:
 
 # what V sees (tacgen_lib.generate.visibility): every simulated corpus's visible factors
 # decoded from its vision features; the report page What vision sees and the regime's gate
-VISIBILITY = FEAT["visibility"]  # the schema fills its defaults
+VISIBILITY = FEATURES["visibility"]  # the schema fills its defaults
 # every simulated corpus, and of the regime's rho grid its first corpus only: at every rho
 # the appearance class is uniform and a frame depends on its look (colour, texture, shape,
 # size, jitter, pose), never on the material (tacgen_lib.corpus.sim.samples), so each corpus of

@@ -87,8 +87,8 @@ rule pretrain_curve:
         mem_mb=1000,
         runtime=5,
     params:
-        arch=lambda w: FEAT["backbones"][w.modality]["arch"],
-        objective=lambda w: FEAT["backbones"][w.modality].get("objective", "dino"),
+        arch=lambda w: FEATURES["backbones"][w.modality]["arch"],
+        objective=lambda w: FEATURES["backbones"][w.modality].get("objective", "dino"),
     script:
         "../workflow/scripts/pretrain_curve.py"
 
@@ -168,7 +168,7 @@ rule findings:
         transfer=bool(TRANSFER_CORPUS),
         pixel=bool(PIXEL_CORPORA),
         backbones=(
-            {"main": PLANS.families.main, "order": list(FAMILIES.run)}
+            {"main": PLANS.families.main, "order": list(PLANS.families.settings.run)}
             if PLANS.families.on_findings
             else {}
         ),
