@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 from snakemake.io import expand
@@ -39,7 +40,7 @@ class AlignPlan:
         extra = [transfer] if transfer and transfer not in align["corpora"] else []
         return cls(align, align["corpora"] + extra, config["probes"]["heads"])
 
-    @property
+    @cached_property
     def corpora(self) -> list[str]:
         return self.settings["corpora"]
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 from tacgen_lib.cost.knobs import (
@@ -51,11 +52,11 @@ class CostPlan:
         )
         return cls(config, stages, runs)
 
-    @property
+    @cached_property
     def settings(self) -> Mapping[str, Any]:
         return self.config.get("cost") or {}
 
-    @property
+    @cached_property
     def knob_config(self) -> Mapping[str, Any]:
         return self.settings.get("knobs") or {}
 
@@ -63,11 +64,11 @@ class CostPlan:
         """A swept knob's setting runs (none for a free knob)."""
         return [r for r in self.runs if r.knob == knob]
 
-    @property
+    @cached_property
     def swept(self) -> list[str]:
         return [k for k in self.knob_config if self.knob_runs(k)]
 
-    @property
+    @cached_property
     def free(self) -> list[str]:
         """The free knobs whose stage runs (the backbone-family knob compares the families
         the run makes: more than one)."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 from tacgen_lib.features.families import (
@@ -58,38 +59,38 @@ class FamiliesPlan:
         corpora = sorted({probes["families"][p]["corpus"] for p in families.probes})
         return cls(families, features, probes["heads"]["variant"], corpora, probe_jobs)
 
-    @property
+    @cached_property
     def own(self) -> list[str]:
         """The families run with their own backbones (not the main DAG's)."""
         return self.settings.own(self.features.settings)
 
-    @property
+    @cached_property
     def main(self) -> list[str]:
         """The main DAG's family, where it is run (at most one)."""
         return [f for f in self.settings.run if f not in self.own]
 
-    @property
+    @cached_property
     def jobs(self) -> list[tuple[str, str]]:
         """The (probe family, protocol) jobs a family is judged on."""
         return [(p, q) for p in self.settings.probes for q in self.settings.protocols]
 
-    @property
+    @cached_property
     def main_from_probes(self) -> list[str]:
         """The main family where its rows are the probes stage's own headline rows (that stage
         probes every job asked here: nothing is computed twice)."""
         return [f for f in self.main if all(j in self.probe_jobs for j in self.jobs)]
 
-    @property
+    @cached_property
     def computed(self) -> list[str]:
         """The families whose probe rows family_probe computes."""
         return [f for f in self.settings.run if f not in self.main_from_probes]
 
-    @property
+    @cached_property
     def on(self) -> bool:
         """Whether the stage runs: families to compare and probe families to judge them on."""
         return bool(self.settings.run and self.settings.probes)
 
-    @property
+    @cached_property
     def on_findings(self) -> bool:
         """Whether the findings page has backbone rows: some family is not the main one."""
         return bool(self.settings.probes) and bool(self.own)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 from tacgen_lib.features.families import BackboneSpec
@@ -33,11 +34,11 @@ class FeaturesPlan:
     def from_config(cls, config: Mapping[str, Any]) -> FeaturesPlan:
         return cls(config["features"], list(regime_corpora(config.get("regime"))))
 
-    @property
+    @cached_property
     def pretrain(self) -> Mapping[str, Any]:
         return self.settings["pretrain"]
 
-    @property
+    @cached_property
     def pretraining_corpora(self) -> list[str]:
         return list(pretraining_corpora(self.pretrain))
 

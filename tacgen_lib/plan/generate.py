@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Any
 
 from tacgen_lib.generate.sampling_cells import SAMPLE_CELL, guidance_text, sample_cells
@@ -49,22 +50,22 @@ class GeneratePlan:
                 )
         return cls(generate, (config.get("pixel") or {}).get("corpora") or {})
 
-    @property
+    @cached_property
     def corpora(self) -> list[str]:
         """The generators' corpora in config order: the first feeds the PCA figure."""
         return list(self.settings["corpora"])
 
-    @property
+    @cached_property
     def grids(self) -> dict[str, Any]:
         """The C and lambda grids of every probe that judges generated touch."""
         return generate_grids(self.settings)
 
-    @property
+    @cached_property
     def cells(self) -> list[tuple[str, str, str]]:
         """Every sampling cell (sampler, guidance text, steps text) of one generator."""
         return sample_cells(self.settings["guidance"], self.settings["samplers"])
 
-    @property
+    @cached_property
     def baseline_targets(self) -> dict[str, dict[str, Any]]:
         """Per corpus, the targets of the probes no generator changes (fit_generator_baselines):
         the latent generator's corpora and the pixel generators' judged ones."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 from tacgen_lib.generate.pixel.utility import GENERATORS, ddpm_arm
@@ -69,41 +70,41 @@ class PixelPlan:
             )
         return plan
 
-    @property
+    @cached_property
     def corpora(self) -> list[str]:
         """The corpora whose utility is judged."""
         return list(self.settings["corpora"])
 
-    @property
+    @cached_property
     def curve(self) -> Mapping[str, Any]:
         return self.settings["curve"]
 
-    @property
+    @cached_property
     def curve_corpora(self) -> list[str]:
         return list(self.curve["corpora"])
 
-    @property
+    @cached_property
     def train_corpora(self) -> list[str]:
         """Every corpus a pixel generator is trained on: the judged ones, then the curve's."""
         return self.corpora + [c for c in self.curve_corpora if c not in self.corpora]
 
-    @property
+    @cached_property
     def ddpm_arms(self) -> list[str]:
         """The DDIM cells of the pixel DDPM, as arm names (ddpm_w<w>_s<steps>)."""
         cells = self.settings.get("ddpm_cells") or {"guidance": []}
         return [ddpm_arm(w, s) for w in cells["guidance"] for s in cells["steps"]]
 
-    @property
+    @cached_property
     def judged_arms(self) -> list[str]:
         return ["pix2pix"] + self.ddpm_arms
 
-    @property
+    @cached_property
     def curve_arm(self) -> str:
         """The curve's generator: pix2pix, or the pixel DDPM's first cell."""
         generator = self.curve.get("generator", "pix2pix")  # absent where no pixel section
         return "pix2pix" if generator == "pix2pix" else self.ddpm_arms[0]
 
-    @property
+    @cached_property
     def on(self) -> bool:
         """Whether the stage runs: a corpus to train on and a seed."""
         return bool(self.train_corpora and self.seeds())

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 from tacgen_lib.align.cell_names import cell_name as align_cell_name
@@ -45,12 +46,12 @@ class PolicyPlan:
             )
         return cls(s, align["seeds"], on)
 
-    @property
+    @cached_property
     def cells(self) -> list[str]:
         """Every cell's name (condition x hidden x epochs x seed)."""
         return [policy_cell_name(c) for c in all_cells(self.settings)]
 
-    @property
+    @cached_property
     def shards(self) -> dict[str, int]:
         """Per episode set, its shards."""
         return {

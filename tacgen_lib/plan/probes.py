@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 from tacgen_lib.plan.align import AlignPlan
@@ -42,11 +43,11 @@ class ProbesPlan:
         check_families(config["probes"]["families"])
         return cls(config["probes"], config["preprocess"]["variants"], align)
 
-    @property
+    @cached_property
     def families(self) -> list[str]:
         return sorted(self.settings["families"])
 
-    @property
+    @cached_property
     def robustness(self) -> RobustnessSettings:
         """Every family under raw, the robustness families under each other protocol variant
         (not where it equals raw)."""
@@ -54,7 +55,7 @@ class ProbesPlan:
             self.settings["robustness"], self.settings["families"]
         )
 
-    @property
+    @cached_property
     def jobs(self) -> list[tuple[str, str]]:
         """The (family, protocol) jobs."""
         return self.robustness.jobs(self.settings["families"])

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 from tacgen_lib.corpus.splits import split_size
@@ -51,16 +52,16 @@ class RegimePlan:
             )
         return plan
 
-    @property
+    @cached_property
     def corpora(self) -> list[str]:
         """Its natural corpora, one per rho (joined to the corpora by validate_config)."""
         return list(regime_corpora(self.settings))
 
-    @property
+    @cached_property
     def seeds(self) -> list[Any]:
         return self.settings["seeds"] if self.settings else []
 
-    @property
+    @cached_property
     def generator_cells(self) -> list[tuple[int, str]]:
         """Every (pool size, pairing) generator of a corpus x seed, in the order of its
         outputs."""

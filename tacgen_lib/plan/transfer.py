@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 from tacgen_lib.plan.align import AlignPlan
@@ -44,7 +45,7 @@ class TransferPlan:
         views = {"source": transfer["source"], "target": corpus, "floor": transfer["floor"]}
         return cls(transfer, views, align)
 
-    @property
+    @cached_property
     def corpus(self) -> str | None:
         """The second sensor's corpus, None for no stage."""
         return self.settings.get("corpus")
