@@ -123,6 +123,7 @@ def time_fit(in_dim: int, steps: int) -> float:
         settings=AlignSettings(
             budget="steps", steps=steps, batch_size=BATCH, patience=0, eval_every=50
         ),
+        device="cpu",
     )
     return res.seconds / steps
 

@@ -74,7 +74,7 @@ def throughput(args: argparse.Namespace) -> None:
     rng = np.random.default_rng(0)
     frames = rng.integers(0, 256, (args.n, 240, 320, 3), dtype=np.uint8)  # DIGIT-sized frames
     t0 = time.perf_counter()
-    pixel_features(frames)
+    pixel_features(frames, size=(16, 16))
     ref = args.n / (time.perf_counter() - t0)
     print(f"\n[1] extract_features throughput, {args.n} frames 240x320 -> {args.image_size} px")
     print(f"{'backbone':<11}{'dim':>6}{'images/s':>12}{'vs pixel-V':>12}")
@@ -82,9 +82,18 @@ def throughput(args: argparse.Namespace) -> None:
     for arch in ("vit_tiny", "vit_small", "vit_base"):
         torch.manual_seed(0)
         model = build_vit(arch, img_size=args.image_size)
-        extract_features(model, frames[:2], image_size=args.image_size, batch_size=2)  # warm-up
+        extract_features(
+            model, frames[:2], image_size=args.image_size, batch_size=2, device="cpu", pool="cls"
+        )  # warm-up
         t0 = time.perf_counter()
-        extract_features(model, frames, image_size=args.image_size, batch_size=args.batch_size)
+        extract_features(
+            model,
+            frames,
+            image_size=args.image_size,
+            batch_size=args.batch_size,
+            device="cpu",
+            pool="cls",
+        )
         ips = args.n / (time.perf_counter() - t0)
         print(f"{arch:<11}{model.embed_dim:>6}{ips:>12.1f}{ips / ref:>12.4f}")
 
@@ -96,6 +105,7 @@ def dino_cost(args: argparse.Namespace) -> None:
         DinoSettings(epochs=2, batch_size=64, lr=1e-3, seed=0),
         arch=args.dino_arch,
         image_size=args.image_size,
+        device="cpu",
     )
     secs = [r["seconds"] for r in res.curve]
     print(f"\n[2] DINO pretraining, {args.dino_arch}, {args.dino_n} frames, {args.image_size} px")
@@ -120,6 +130,7 @@ def probe(args: argparse.Namespace) -> None:
         arch=args.dino_arch,
         image_size=size,
         progress=lambda m: print("   ", m),
+        device="cpu",
     )
     print(f"    pretraining took {time.perf_counter() - t0:.0f} s")
     torch.manual_seed(0)
@@ -127,10 +138,12 @@ def probe(args: argparse.Namespace) -> None:
     print(f"{'features':<24}{'test acc':>10}")
     for pool in ("cls", "mean_patch"):
         for name, model in backbones.items():
-            f = extract_features(model, frames, image_size=size, batch_size=128, pool=pool)
+            f = extract_features(
+                model, frames, image_size=size, batch_size=128, pool=pool, device="cpu"
+            )
             acc = probe_accuracy(f[tr], labels[tr], f[te], labels[te])
             print(f"{name + ' ' + pool:<24}{acc:>10.3f}")
-    pv = pixel_features(frames)
+    pv = pixel_features(frames, size=(16, 16))
     print(f"{'pixel-V':<24}{probe_accuracy(pv[tr], labels[tr], pv[te], labels[te]):>10.3f}")
 
 

@@ -175,6 +175,7 @@ def main() -> None:
     arrays = ema.arrays()
     rows = np.random.default_rng(0).standard_normal((args.rows, args.dim)).astype(np.float32)
     kw = {"sampler": "ddim", "steps": 50, "guidance": 2.0, "seed": 0, "prediction": "v"}
+    kw |= {"eta": s.eta, "batch": s.batch}
     with threadpool_limits(args.threads):
         np_w, np_c = numpy_gemm_rate()
         sw, sc = best_of(lambda: sample(arrays, sch, rows, **kw), max(1, args.rounds // 2))

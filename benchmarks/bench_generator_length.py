@@ -83,7 +83,9 @@ def main() -> None:
     for text in args.settings:
         settings = parse_setting(text, base)
         t0 = time.perf_counter()
-        fit = fit_generator(T["train"], V["train"], T["val"], V["val"], settings, seed=args.seed)
+        fit = fit_generator(
+            T["train"], V["train"], T["val"], V["val"], settings, seed=args.seed, device="cpu"
+        )
         seconds = time.perf_counter() - t0
         cosines = []
         for guidance in (1.0, 3.0):
@@ -94,6 +96,8 @@ def main() -> None:
                 steps=25,
                 guidance=guidance,
                 seed=1,
+                eta=settings.eta,
+                batch=settings.batch,
             )
             cosines.append(cosine_pairing(gen - centre, T["test"] - centre)[0])
         print(

@@ -45,7 +45,7 @@ from tacgen_lib.generate.pixel.pix2pix import (
     make_pix2pix_optimisers,
     pix2pix_step,
 )
-from tacgen_lib.generate.pixel.settings import Pix2PixSettings, PixelDDPMSettings
+from tacgen_lib.generate.pixel.settings import Pix2PixSettings, PixelDDPMSettings, PixelSettings
 from tacgen_lib.generate.schedules import make_schedule
 from tacgen_lib.generate.train import make_optimiser, training_step
 
@@ -159,6 +159,7 @@ def sampling_bench(rounds: int, rows: int) -> tuple[float, float]:
         "guidance": 1.0,
         "eta": 0.0,
         "seed": 0,
+        "batch": PixelSettings.batch,
     }
 
     def run() -> None:

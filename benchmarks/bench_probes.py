@@ -142,11 +142,15 @@ def logistic_cv() -> tuple:
     n = LOGISTIC_ROWS
     v, t, y = hardness_like(n)
     x, grid = np.hstack([v, t]), [0.1, 1.0, 10.0]
-    ours, batched = best_of(lambda: fit_logistic(x, y, grid, seed=42), 1, "logistic cv")
+    ours, batched = best_of(
+        lambda: fit_logistic(x, y, grid, seed=42, n_folds=5, repeats=1), 1, "logistic cv"
+    )
     batches = logistic.cv_batches
     logistic.cv_batches = lambda shape, folds: False
     try:
-        ref, loop = best_of(lambda: fit_logistic(x, y, grid, seed=42), 1, "ref cv")
+        ref, loop = best_of(
+            lambda: fit_logistic(x, y, grid, seed=42, n_folds=5, repeats=1), 1, "ref cv"
+        )
     finally:
         logistic.cv_batches = batches
     rows = np.abs(batched.cv_scores - loop.cv_scores) * n  # held-out rows, over the 5 folds
@@ -221,8 +225,8 @@ def main() -> None:
     seed = 0
 
     def whole_probe():
-        pv = fit_ridge_probe(v[tr], y[tr], lambdas, n_folds=5, seed=seed)
-        pvt = fit_ridge_probe(vt[tr], y[tr], lambdas, n_folds=5, seed=seed)
+        pv = fit_ridge_probe(v[tr], y[tr], lambdas, n_folds=5, seed=seed, repeats=1)
+        pvt = fit_ridge_probe(vt[tr], y[tr], lambdas, n_folds=5, seed=seed, repeats=1)
         boot = fixed_test_bootstrap(
             y[te], pv.predict(v[te]), pvt.predict(vt[te]), "r2", args.resamples, seed
         )
@@ -243,8 +247,8 @@ def main() -> None:
     # pieces, each timed on its own
     t_cv, (pv, pvt) = best_of(
         lambda: (
-            fit_ridge_probe(v[tr], y[tr], lambdas, n_folds=5, seed=seed),
-            fit_ridge_probe(vt[tr], y[tr], lambdas, n_folds=5, seed=seed),
+            fit_ridge_probe(v[tr], y[tr], lambdas, n_folds=5, seed=seed, repeats=1),
+            fit_ridge_probe(vt[tr], y[tr], lambdas, n_folds=5, seed=seed, repeats=1),
         ),
         args.repeats,
         "cv",

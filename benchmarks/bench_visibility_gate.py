@@ -94,6 +94,7 @@ def cell(config: dict, results: Path, seed: int, threads: int) -> dict:
         mae=mae,
         frames=train_frames,
         simclr=simclr,
+        device="cpu",
     )
     made = time.perf_counter() - t0
     gated = list(regime_corpora(config.get("regime")))
@@ -102,7 +103,9 @@ def cell(config: dict, results: Path, seed: int, threads: int) -> dict:
     gate_corpus = gated[0]  # the rho grid's first corpus, as rule visibility_check gates it
     samples = edges.read(results / f"corpus/{gate_corpus}/samples.parquet").frame
     t0 = time.perf_counter()
-    vec = extract_with(model, frames(gate_corpus), FeatureSettings.for_backbone(feat, "vision"))
+    vec = extract_with(
+        model, frames(gate_corpus), FeatureSettings.for_backbone(feat, "vision"), device="cpu"
+    )
     extracted = time.perf_counter() - t0
     split = splits.loc[splits["corpus"] == gate_corpus].set_index("sample_id")["split"]
     ids = samples["sample_id"].astype(str).tolist()

@@ -124,7 +124,9 @@ def main() -> None:
 
     def extracted(model: torch.nn.Module, pool: str) -> tuple[np.ndarray, float]:
         t0 = time.perf_counter()
-        vec = extract_features(model, frames, image_size=size, batch_size=128, pool=pool)
+        vec = extract_features(
+            model, frames, image_size=size, batch_size=128, pool=pool, device="cpu"
+        )
         return vec, time.perf_counter() - t0
 
     for pool in args.pools:
@@ -140,7 +142,7 @@ def main() -> None:
         for pool in args.pools:  # the projection reads what the features read (simclr)
             t0 = time.perf_counter()
             result = pretrain_simclr(
-                train_frames, settings, arch="resnet_tiny", image_size=size, pool=pool
+                train_frames, settings, arch="resnet_tiny", image_size=size, pool=pool, device="cpu"
             )
             made = time.perf_counter() - t0
             vec, ext = extracted(result.backbone(), pool)

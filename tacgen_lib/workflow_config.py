@@ -26,11 +26,12 @@ def _well_formed(regime: object) -> bool:
         return True
     if not isinstance(regime, dict):
         return False
-    rhos, corpus = regime.get("rhos", []), regime.get("corpus", {})
+    # read before the schema fills or checks anything: a missing key is the schema's to name
+    rhos, corpus = regime.get("rhos"), regime.get("corpus")
     return (
-        isinstance(rhos, list)
-        and all(isinstance(r, (int, float)) and not isinstance(r, bool) for r in rhos)
-        and isinstance(corpus, dict)
+        (rhos is None or isinstance(rhos, list))
+        and all(isinstance(r, (int, float)) and not isinstance(r, bool) for r in rhos or ())
+        and (corpus is None or isinstance(corpus, dict))
     )
 
 
@@ -99,7 +100,7 @@ def _check_simulated_corpora(config: dict, joined: dict, source: str) -> None:
 def _check_corpus_references(config: dict, source: str) -> None:
     """Every key that names a corpus names a declared one; every probe family's heads come
     from a corpus the alignment trains on."""
-    for name in config["splits"].get("by_scale", {}):
+    for name in config["splits"]["by_scale"]:
         if name not in config["corpora"]:
             raise ConfigError(
                 f"{source}: splits.by_scale.{name}: unknown corpus {name!r} "

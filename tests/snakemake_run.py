@@ -105,6 +105,18 @@ def validated(overlay: str | None = None) -> dict:
     return validate_config(cfg, ROOT / "config" / "config.schema.yaml")
 
 
+def hand_config(corpora: dict | None = None, **sections: dict) -> dict:
+    """A config as the estimate reads it: config/test.yaml's, validated (`validated`: the
+    schema's defaults filled in), with each corpus of `corpora` a copy of its sim_paired with
+    the keys given, and each of `sections` updated with the keys given."""
+    cfg = validated("test.yaml")
+    for name, keys in (corpora or {}).items():
+        cfg["corpora"][name] = {**cfg["corpora"]["sim_paired"], **keys}
+    for name, keys in sections.items():
+        cfg[name] = {**cfg[name], **keys}
+    return cfg
+
+
 def report_page(path: Path) -> str:
     """A report page's HTML as its reader's text runs: without the line-break opportunities
     (``<wbr>``) that `tacgen_lib.report.tables.cell_html` puts inside long identifiers."""

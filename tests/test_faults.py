@@ -467,11 +467,15 @@ def _dotted(path: tuple) -> str:
 
 
 def _base_config() -> dict:
+    """The test config as a user writes it, every key the schema defaults written out (the
+    schema's defaults, the regime's corpora not yet joined): each is a key to fuzz."""
     from snakemake_run import merged_config
+
+    from tacgen_lib.io.config import validate_schema
 
     cfg = merged_config()
     cfg["scenes_file"] = str(ROOT / cfg["scenes_file"])
-    return cfg
+    return validate_schema(cfg, ROOT / "config/config.schema.yaml")
 
 
 _BASE = _base_config()

@@ -255,20 +255,20 @@ def test_estimate_prices_paper_before_the_checkpoints_are_downloaded(tmp_path):
     import shutil
 
     from tacgen_lib.estimate.command import (
-        merged_config,
         missing_checkpoints,
         stand_in_checkpoints,
+        validated_config,
     )
 
     (tmp_path / "config").mkdir()
     for name in ("config.yaml", "paper.yaml"):
         shutil.copy(ROOT / "config" / name, tmp_path / "config" / name)
-    config = merged_config(["config/paper.yaml"], tmp_path)
+    config = validated_config(["config/paper.yaml"], tmp_path)
     missing = missing_checkpoints(config, tmp_path)
     assert set(missing) == {".".join(p) for p in CHECKPOINT_KEYS}
     assert missing["backbones.families.mae.vision"] == "models/mae_pretrain_vit_base.pth"
     override = stand_in_checkpoints(missing, config, tmp_path / "stand-ins")
-    config = merged_config(["config/paper.yaml", str(override)], tmp_path)
+    config = validated_config(["config/paper.yaml", str(override)], tmp_path)
     assert missing_checkpoints(config, tmp_path) == {}
     assert Path(config["features"]["backbones"]["vision"]["checkpoint"]).name == (
         "dinov2_vits14_pretrain.pth"

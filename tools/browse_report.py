@@ -224,11 +224,12 @@ def _open_subcategory(driver, uri: str, cat: str, sub: str, subcats: list[str]) 
     _wait(lambda: driver.find_elements("css selector", "a[iconname=eye]"))
 
 
-def browse(report: Path, shots: Path | None = None, size: tuple[int, int] = (1600, 1000)):
+def browse(report: Path, shots: Path | None = None, viewport: tuple[int, int] = (1600, 1000)):
     """Every category, subcategory and result of `report` as a reader meets them.
 
+    `viewport`: the browser's (width, height) in CSS px.
     Returns (categories in menu order, visits, problems of the report as a whole)."""
-    width, height = size
+    width, height = viewport
     visits: list[Visit] = []
     report_problems: list[str] = []
     uri = report.resolve().as_uri()

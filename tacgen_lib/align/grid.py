@@ -100,7 +100,7 @@ def fit_cell(
     settings: AlignSettings,
     rule: str = "train_heads",
     progress: Callable[[str], Any] | None = None,
-    device: Any = "cpu",
+    device: Any,
 ) -> CellFit:
     """Train one alignment cell and evaluate it on held-out pairs (paper eq. 1, retrieval).
 

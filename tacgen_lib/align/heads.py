@@ -128,7 +128,7 @@ def project(
     t: np.ndarray | Tensor,
     *,
     chunk: int = 4096,
-    device: torch.device | str = "cpu",
+    device: torch.device | str,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Aligned projections (float32, (N, 128), l2-normalised rows) of vision and touch features,
     computed on `device` (`tacgen_lib.runtime.device`; the module is moved there and back)."""

@@ -309,7 +309,7 @@ def fit_heads(
     seed: int,
     settings: AlignSettings,
     progress: Callable[[str], Any] | None = None,
-    device: torch.device | str = "cpu",
+    device: torch.device | str,
 ) -> AlignResult:
     """Train the two projection heads with symmetric InfoNCE (paper eq. 1).
 

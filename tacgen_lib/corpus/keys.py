@@ -12,11 +12,12 @@ __all__ = ["corpus_key_errors", "corpus_labels"]
 
 
 def corpus_key_errors(corpus: Mapping[str, Any]) -> list[tuple[str, str]]:
-    """(key, message) for each cross-key rule `corpus` (one `corpora.<name>` mapping, defaults
-    filled or not) breaks: rho belongs to design natural, contacts > 1 to design paired, and
-    n must be a whole number of objects of `contacts` contacts each."""
-    design = corpus.get("design")
-    rho, contacts, n = corpus.get("rho", 0.0), int(corpus.get("contacts", 1)), int(corpus["n"])
+    """(key, message) for each cross-key rule `corpus` (one simulated `corpora.<name>` mapping,
+    its defaults filled: `workflow_config.validate_config`) breaks: rho belongs to design
+    natural, contacts > 1 to design paired, and n must be a whole number of objects of
+    `contacts` contacts each."""
+    design = corpus["design"]
+    rho, contacts, n = corpus["rho"], int(corpus["contacts"]), int(corpus["n"])
     out = []
     if rho and design != "natural":
         out.append(("rho", f"key 'rho' belongs to design 'natural', not {design!r}"))
@@ -33,5 +34,6 @@ def corpus_labels(corpus: Mapping[str, Any]) -> dict[str, Any]:
     carries no information about its frames)."""
     return {
         "design": corpus.get("design", corpus["kind"]),
-        "null_corpus": bool(corpus.get("null", False)),
+        # a real corpus has no key null: its touch is its own
+        "null_corpus": corpus["kind"] == "simulated" and bool(corpus["null"]),
     }

@@ -19,7 +19,7 @@ allowed for training (held-out `test` rows always; `val` unless the caller allow
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -58,8 +58,8 @@ def _stratified_split(
     out = np.empty(n, dtype=object)
     if n == 0:
         return out
-    test_frac = float(fractions.get("test", 0.0))
-    val_frac = float(fractions.get("val", 0.0))
+    test_frac = float(fractions["test"])
+    val_frac = float(fractions["val"])
     strata = pd.Series(strata).fillna("none").astype(str).to_numpy()
 
     def pooled(labels: np.ndarray, n_parts: int) -> np.ndarray | None:
@@ -93,33 +93,27 @@ def _stratified_split(
     return out
 
 
-def make_splits(
-    manifest: pd.DataFrame,
-    *,
-    seed: int = 42,
-    fractions: Mapping[str, float] | None = None,
-    by_scale: Mapping[str, Mapping[str, Sequence[float]]] | None = None,
-    by_object: Mapping[str, Mapping[str, float]] | None = None,
-) -> pd.DataFrame:
-    """The split edge for a fused manifest.
+def make_splits(manifest: pd.DataFrame, settings: SplitSettings) -> pd.DataFrame:
+    """The split edge for a fused manifest, made as `settings` (config ``splits``) says.
 
     manifest: one row per sample with `sample_id`, `corpus`, `stratum` (and `scale` for corpora
         split by scale).
-    fractions: {"train", "val", "test"} shares for stratified corpora (default 0.7/0.1/0.2).
-    by_scale: corpus -> {"train": [scales], "test": [scales]}; for those corpora rows are split
-        by scale, and `fractions["val"]` of the train-scale rows become validation rows.
-    by_object: corpus -> {"train", "val", "test"} shares of its objects (rows grouped by
-        `appearance_id`, which the manifest must then hold with `mass`), stratified on the
-        objects' mass-quantile classes ("classes" of them, default 3); each class needs at
+    settings.fractions: {"train", "val", "test"} shares for stratified corpora.
+    settings.by_scale: corpus -> {"train": [scales], "test": [scales]}; for those corpora rows
+        are split by scale, and `fractions["val"]` of the train-scale rows become validation
+        rows.
+    settings.by_object: corpus -> {"train", "val", "test"} shares of its objects and the
+        "classes" they are stratified on (rows grouped by `appearance_id`, which the manifest
+        must then hold with `mass`; the objects' mass-quantile classes); each class needs at
         least 2 objects.
-    Returns `sample_id`, `corpus`, `split`, sorted by `sample_id`. Deterministic in `seed`.
+    Returns `sample_id`, `corpus`, `split`, sorted by `sample_id`. Deterministic in
+    ``settings.seed``.
     """
-    fractions = dict(fractions or {"train": 0.7, "val": 0.1, "test": 0.2})
+    seed, fractions = settings.seed, dict(settings.fractions)
     total = sum(fractions.values())
     if any(v < 0 for v in fractions.values()) or not np.isclose(total, 1.0):
         raise ValueError(f"split fractions must be non-negative and sum to 1, got {fractions}")
-    by_scale = dict(by_scale or {})
-    by_object = dict(by_object or {})
+    by_scale, by_object = dict(settings.by_scale), dict(settings.by_object)
     for col in ("sample_id", "corpus", "stratum"):
         if col not in manifest.columns:
             raise ValueError(f"make_splits: the manifest has no column {col!r}")
@@ -144,7 +138,7 @@ def make_splits(
             split = np.full(len(ids), "excluded", dtype=object)
             split[test_s] = "test"
             inner = _stratified_split(
-                ids[train_s], strata[train_s], {"val": fractions.get("val", 0.0), "test": 0.0}, seed
+                ids[train_s], strata[train_s], {"val": fractions["val"], "test": 0.0}, seed
             )
             split[train_s] = inner
         elif corpus in by_object:
@@ -164,8 +158,8 @@ def _object_split(
     from tacgen_lib.corpus.objects import mass_quantile_classes, object_masses
 
     where = f"make_splits: corpus {corpus!r} (split by object)"
-    n_classes = int(rule.get("classes", 3))
-    fractions = {k: float(rule.get(k, 0.0)) for k in SPLITS}
+    n_classes = int(rule["classes"])
+    fractions = {k: float(rule[k]) for k in SPLITS}
     total = sum(float(v) for v in fractions.values())
     if not np.isclose(total, 1.0):
         raise ValueError(f"{where}: object shares must sum to 1, got {dict(fractions)}")

@@ -7,7 +7,9 @@ cores or on a SLURM cluster of K nodes, before running it.
         --slurm-nodes 8 --cores-per-node 32
 
 Checkpoints a config names but that are not downloaded yet are priced as if they were
-(`stand_in_checkpoints`); the run itself still stops on them.
+(`stand_in_checkpoints`); the run itself still stops on them. Every setting is read from the
+validated config (`validated_config`; the DAG's from the workflow, which validates it in
+rules/common.smk), whose defaults are the schema's: the estimate supplies none of its own.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ __all__ = [
     "profile_threads",
     "profile_jobs",
     "merged_config",
+    "validated_config",
     "missing_checkpoints",
     "stand_in_checkpoints",
     "checkpoint_override",
@@ -77,18 +80,35 @@ def merged_config(
     return config
 
 
+def validated_config(
+    configfiles: Sequence[str | os.PathLike[str]], workdir: str | os.PathLike[str] = "."
+) -> dict[str, Any]:
+    """`merged_config` held to this repository's schema and given its defaults
+    (`io.config.validate_schema`, the ground floor of the workflow's validation): a bad value
+    is refused naming its key. The cross-references (corpora, scenes, variants) are checked
+    when the workflow builds the DAG (`dag_jobs`; rules/common.smk runs
+    `tacgen_lib.workflow_config.validate_config`)."""
+    from tacgen_lib.io.config import validate_schema
+    from tacgen_lib.io.schema import SCHEMA_PATH
+
+    config = merged_config(configfiles, workdir)
+    sources = " + ".join(["config/config.yaml", *map(str, configfiles)])
+    return validate_schema(config, SCHEMA_PATH, source=sources)
+
+
 def missing_checkpoints(
     config: Mapping[str, Any], workdir: str | os.PathLike[str] = "."
 ) -> dict[str, str]:
-    """Config key of every backbone (main features, families run) whose checkpoint file is not
-    here (the run would stop on it: `families.check_checkpoint_file`) -> its checkpoint."""
+    """Config key of every backbone (main features, families run) of a validated `config`
+    (`validated_config`) whose checkpoint file is not here (the run would stop on it:
+    `families.check_checkpoint_file`) -> its checkpoint."""
     from tacgen_lib.features.families import BackboneSpec, check_checkpoint_file
     from tacgen_lib.io.config import ConfigError
 
     specs = {f"features.backbones.{m}": s for m, s in config["features"]["backbones"].items()}
-    families = (config.get("backbones") or {}).get("families") or {}
-    for name in (config.get("backbones") or {}).get("run") or ():
-        for m, spec in (families.get(name) or {}).items():
+    families = config["backbones"]["families"]
+    for name in config["backbones"]["run"]:
+        for m, spec in families.get(name, {}).items():  # an unknown name is the workflow's
             specs[f"backbones.families.{name}.{m}"] = spec
     missing = {}
     for key, spec in specs.items():
@@ -315,10 +335,10 @@ def main(argv: Sequence[str] | None = None) -> Estimate:
         args.max_jobs = profile_jobs(Path(args.workdir) / args.profile)
     machine, label, cap, set_threads = _machine(args)
     # official checkpoints not downloaded yet: priced as if they were (a run stops on them)
-    merged = merged_config(args.configfile, args.workdir)
-    missing = missing_checkpoints(merged, args.workdir)
+    validated = validated_config(args.configfile, args.workdir)
+    missing = missing_checkpoints(validated, args.workdir)
     with tempfile.TemporaryDirectory(prefix="tacgen-estimate-") as tmp:
-        extra = [str(stand_in_checkpoints(missing, merged, tmp))] if missing else []
+        extra = [str(stand_in_checkpoints(missing, validated, tmp))] if missing else []
         jobs, config = dag_jobs(
             [*args.configfile, *extra], workdir=args.workdir, cores=cap, set_threads=set_threads
         )

@@ -2,6 +2,9 @@
 and pixels, training rows and optimiser steps, pretraining epochs, grid cells, probe fits,
 policy episodes, read from the merged config and a job's wildcards. The lines of
 `tacgen_lib.estimate.units.UNITS` multiply these into each rule's units of work.
+
+The config is the validated one (`tacgen_lib.workflow_config.validate_config`: the schema's
+defaults filled), as the workflow reads it: a setting is read, never given a default here.
 """
 
 from __future__ import annotations
@@ -42,13 +45,12 @@ def scene_effects(scenes_file: str) -> dict[str, tuple[str, ...]]:
 
 
 def presses(c: Config, name: str) -> float:
-    """Presses a simulated sample costs: its jittered presses (`presses`, default 8) where its
-    scene declares press_jitter, else the one nominal press."""
+    """Presses a simulated sample costs: its jittered presses (`presses`) where its scene
+    declares press_jitter, else the one nominal press. A scenes file not found from here (the
+    estimate run from another folder than the workflow's) prices the jittered presses."""
     corpus = corpus_of(c, name)
-    effects = scene_effects(str(c.get("scenes_file", "config/scenes.yaml"))).get(
-        str(corpus.get("scene")), ("press_jitter",)
-    )
-    return float(corpus.get("presses", 8)) if "press_jitter" in effects else 1.0
+    effects = scene_effects(str(c["scenes_file"])).get(str(corpus["scene"]), ("press_jitter",))
+    return float(corpus["presses"]) if "press_jitter" in effects else 1.0
 
 
 def natural_grid_units(c: Config) -> float:
@@ -56,7 +58,7 @@ def natural_grid_units(c: Config) -> float:
     tactile pixels, once for the grid + one render per corpus of the grid)."""
     grid = regime_corpora(c.get("regime"))
     first = next(iter(grid))
-    c = {**c, "corpora": {**(c.get("corpora") or {}), **grid}}  # the DAG joins them too
+    c = {**c, "corpora": {**c["corpora"], **grid}}  # the DAG joins them too
     per_sample = presses(c, first) * tactile_pixels(c, first) + len(grid)
     return samples(c, first) / int(corpus_of(c, first)["shards"]) * per_sample
 
@@ -66,14 +68,17 @@ def samples(c: Config, name: str) -> float:
     split CSVs list (`tacgen_lib.corpus.ingest.listed_rows`, counted on disk without opening
     an image), 1 where its folder is not there."""
     corpus = corpus_of(c, name)
-    if corpus.get("kind") in ("ssvtp", "hct"):
+    if corpus["kind"] in ("ssvtp", "hct"):
         return float(listed_rows(str(corpus["kind"]), str(corpus["root"])) or 1)
-    return float(corpus.get("n", 1))
+    return float(corpus["n"])
 
 
 def tactile_pixels(c: Config, name: str) -> float:
     """Tactile pixels of a simulated corpus's frames relative to 120 × 160 (1 for a real one)."""
-    h, w = corpus_of(c, name).get("tactile_size", (120, 160))
+    corpus = corpus_of(c, name)
+    if corpus["kind"] != "simulated":
+        return 1.0
+    h, w = corpus["tactile_size"]
     return float(h) * float(w) / (120.0 * 160.0)
 
 
@@ -85,13 +90,13 @@ def pretraining(c: Config, spec: Mapping[str, Any]) -> tuple[str, int]:
     """(how a backbone is made, its pretraining epochs): "checkpoint" and "random" train
     nothing; "dino" runs features.pretrain.epochs, "mae" features.mae.epochs, "simclr"
     features.simclr.epochs."""
-    if spec.get("checkpoint"):
+    if spec["checkpoint"]:
         return "checkpoint", 0
-    objective = spec.get("objective", "dino")
+    objective = spec["objective"]
     if objective == "mae":
-        return objective, MaeSettings.from_config(c["features"].get("mae")).epochs
+        return objective, MaeSettings.from_config(c["features"]["mae"]).epochs
     if objective == "simclr":
-        return objective, SimclrSettings.from_config(c["features"].get("simclr")).epochs
+        return objective, SimclrSettings.from_config(c["features"]["simclr"]).epochs
     if objective == "dino":
         return objective, int(c["features"]["pretrain"]["epochs"])
     return objective, 0
@@ -131,7 +136,7 @@ def simulated_rows(c: Mapping[str, Any]) -> float:
     the first corpus of the regime's rho grid (rules/features.smk, VISIBILITY_CORPORA)."""
     grid = list(regime_corpora(c.get("regime")).items())[:1]
     corpora = {**c["corpora"], **dict(grid)}
-    return float(sum(int(v.get("n", 0)) for v in corpora.values() if v.get("kind") == "simulated"))
+    return float(sum(int(v["n"]) for v in corpora.values() if v["kind"] == "simulated"))
 
 
 def family_backbone(c: Config, w: Wildcards) -> tuple[str, float]:
@@ -174,7 +179,7 @@ def align_steps(c: Config, w: Wildcards) -> float:
 def baseline_targets(c: Config, corpus: str) -> set[str]:
     """The targets of a corpus's generator baselines: the latent generator's and the pixel
     generators' (tacgen_lib.plan.generate.GeneratePlan.baseline_targets)."""
-    pixel = ((c.get("pixel") or {}).get("corpora") or {}).get(corpus, {})
+    pixel = c["pixel"]["corpora"].get(corpus, {}) if "pixel" in c else {}  # an optional stage
     return set(c["generate"]["corpora"].get(corpus, {})) | set(pixel)
 
 
@@ -216,11 +221,11 @@ def probe_work(c: Config, w: Wildcards) -> tuple[str, float]:
     re-scores, it does not refit). Class: solver kind / protocol variant."""
     p = c["probes"]
     fam = p["families"][w["family"]]
-    rob = p.get("robustness", {})
+    rob = p["robustness"]
     protocol = w["protocol"]
     raw = protocol == "raw"
-    aligned = len(c["align"]["seeds"]) if fam.get("vision", "vit") == "vit" else 0
-    if raw or rob.get("comparisons", "headline") == "all":
+    aligned = len(c["align"]["seeds"]) if fam["vision"] == "vit" else 0
+    if raw or rob["comparisons"] == "all":
         inputs = 1 + len(p["fusions"]) * (1 + aligned) + len(c["preprocess"]["variants"])
     else:
         inputs = 2
@@ -229,7 +234,7 @@ def probe_work(c: Config, w: Wildcards) -> tuple[str, float]:
         grid = len(mlp["widths"]) * len(mlp["weight_decays"]) * int(mlp["folds"])
     else:
         grid = len(p["lambdas"] if fam["kind"] == "ridge" else p["C"]) * int(p["folds"])
-    controls = raw or bool(rob.get("controls", False))
+    controls = raw or bool(rob["controls"])
     refits = (
         int(p["permutations"]) + int(p["label_permutations"]) + int(p["random_draws"])
         if controls
@@ -241,24 +246,20 @@ def probe_work(c: Config, w: Wildcards) -> tuple[str, float]:
 
 def probe_jobs(c: Config) -> float:
     p = c["probes"]
-    rob = p.get("robustness", {})
-    other = len([x for x in rob.get("protocols", []) if x != "raw"])
-    return float(len(p["seeds"]) * (len(p["families"]) + other * len(rob.get("families", []))))
+    rob = p["robustness"]
+    other = len([x for x in rob["protocols"] if x != "raw"])
+    return float(len(p["seeds"]) * (len(p["families"]) + other * len(rob["families"])))
 
 
 def policy_of(c: Config) -> Mapping[str, Any]:
-    return c.get("policy", {})
+    return c["policy"]
 
 
 def episodes(c: Config, episode_set: str) -> float:
     pol = policy_of(c)
-    return float(pol.get("n_demos" if episode_set == "demos" else "n_heldout", 0))
+    return float(pol["n_demos" if episode_set == "demos" else "n_heldout"])
 
 
 def policy_cells(c: Config) -> float:
     pol = policy_of(c)
-    return float(
-        len(pol.get("seeds", [1])) * 4
-        + len(pol.get("sweep_hidden", [])) * len(pol.get("sweep_epochs", []))
-        + 2
-    )
+    return float(len(pol["seeds"]) * 4 + len(pol["sweep_hidden"]) * len(pol["sweep_epochs"]) + 2)

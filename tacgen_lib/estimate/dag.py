@@ -61,7 +61,8 @@ def dag_jobs(
     set_threads: Mapping[str, int] | None = None,
 ) -> tuple[list[DagJob], dict[str, Any]]:
     """Every job of the workflow's DAG for `configfiles` (relative to `workdir`; merged over the
-    Snakefile's `configfile:` as `--configfile` does), with `--forceall`, and the merged config.
+    Snakefile's `configfile:` as `--configfile` does), with `--forceall`, and the merged config
+    as the workflow validated it (rules/common.smk: `workflow_config.validate_config`).
 
     `cores` caps each job's threads as `--cores` does; `set_threads` (rule -> threads)
     overrides rules' threads as `--set-threads` (or a profile's `set-threads:`) does. `targets` default to the default target

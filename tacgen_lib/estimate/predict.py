@@ -194,6 +194,10 @@ def estimate_run(
 ) -> Estimate:
     """Predict the run of `jobs` (a DAG from `dag_jobs`) on `machine` from `calibration`.
 
+    `config`: the run's validated config, the schema's defaults filled in (`dag_jobs` returns
+    the one the workflow validated in rules/common.smk; a job of a cost setting counts its
+    own, `DagJob.config_of`), whose settings the unit lines read (`estimate.counts`).
+
     The calibration's lines give seconds on idle cores (`calibration.unshared_seconds`);
     `speed` multiplies every second (jobs and workflow overhead) into this machine's wall: its
     load factor (1 on idle cores; `calibration.load_factors`) times its CPU's slowness against

@@ -366,7 +366,7 @@ UNITS: dict[str, UnitRule] = {
         "episode in the shard",
         lambda c, w: (
             "",
-            episodes(c, w["episode_set"]) / int(policy_of(c).get("collect_shards", 1)),
+            episodes(c, w["episode_set"]) / int(policy_of(c)["collect_shards"]),
         ),
     ),
     "palpate": UnitRule(
@@ -386,7 +386,7 @@ UNITS: dict[str, UnitRule] = {
         "held-out episode in the shard",
         lambda c, w: (
             "",
-            episodes(c, "heldout") / int(policy_of(c).get("rollout_shards", 1)),
+            episodes(c, "heldout") / int(policy_of(c)["rollout_shards"]),
         ),
     ),
     "policy_regression": UnitRule(
@@ -394,7 +394,7 @@ UNITS: dict[str, UnitRule] = {
     ),
     "aggregate_policy": UnitRule(
         "policy cell × bootstrap resample / 1000",
-        lambda c, w: ("", policy_cells(c) * int(policy_of(c).get("bootstrap", 1000)) / 1000),
+        lambda c, w: ("", policy_cells(c) * int(policy_of(c)["bootstrap"]) / 1000),
     ),
     # report
     "corpus_examples": UnitRule(

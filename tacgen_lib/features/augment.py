@@ -62,9 +62,9 @@ def multi_crop(
     global_size: int,
     local_size: int,
     n_local: int,
+    jitter: float,
     global_scale: tuple[float, float] = (0.4, 1.0),
     local_scale: tuple[float, float] = (0.05, 0.4),
-    jitter: float = 0.4,
 ) -> list[Tensor]:
     """DINO multi-crop of a batch (B, 3, H, W) in [0, 1]: 2 global then n_local local views.
 

@@ -54,7 +54,7 @@ def make_backbone(
     frames: Callable[[], np.ndarray],
     simclr: SimclrSettings | None = None,
     progress: Callable[[str], None] | None = None,
-    device: torch.device | str = "cpu",
+    device: torch.device | str,
 ) -> tuple[nn.Module, list[dict[str, float]], str]:
     """The frozen backbone of `spec` (eval mode), its pretraining curve (one dict per epoch;
     empty without pretraining) and a sentence saying how it was made.

@@ -258,7 +258,7 @@ def pretrain_dino(
     arch: str,
     image_size: int,
     progress: Callable[[str], None] | None = None,
-    device: torch.device | str = "cpu",
+    device: torch.device | str,
 ) -> PretrainResult:
     """Pretrain a backbone of `arch` on uint8 frames (N, H, W, 3) with DINO; see module doc.
 

@@ -91,7 +91,7 @@ def centre_and_sharpen(teacher_out: Tensor, center: Tensor, teacher_temp: float)
     return F.softmax((teacher_out - center.reshape(1, 1, k)) / teacher_temp, dim=-1)
 
 
-def sinkhorn_knopp(teacher_out: Tensor, teacher_temp: float, n_iterations: int = 3) -> Tensor:
+def sinkhorn_knopp(teacher_out: Tensor, teacher_temp: float, n_iterations: int) -> Tensor:
     """Sinkhorn-Knopp centring of teacher logits (SwAV; DINOv2's replacement for the centre).
 
     teacher_out: (..., K) logits; all leading axes together are the N rows of one batch (DINOv2

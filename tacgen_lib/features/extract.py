@@ -81,9 +81,9 @@ def extract_features(
     images: np.ndarray,
     *,
     image_size: int,
-    batch_size: int = 64,
-    pool: Literal["cls", "mean_patch", "stages"] = "cls",
-    device: torch.device | str = "cpu",
+    batch_size: int,
+    pool: Literal["cls", "mean_patch", "stages"],
+    device: torch.device | str,
 ) -> np.ndarray:
     """Frozen backbone features, one float32 row per frame: (N, `feature_width(model, pool)`).
 
@@ -154,7 +154,7 @@ def extract_with(
     images: np.ndarray,
     settings: FeatureSettings,
     *,
-    device: torch.device | str = "cpu",
+    device: torch.device | str,
 ) -> np.ndarray:
     """`extract_features` at the config's image size, batch and pool (config ``features``)."""
     return extract_features(
@@ -167,9 +167,10 @@ def extract_with(
     )
 
 
-def pixel_features(images: np.ndarray, size: tuple[int, int] = (16, 16)) -> np.ndarray:
-    """ "pixel-V" baseline: frames downsampled to size = (height, width) with area interpolation,
-    scaled to [0, 1] and flattened (row-major H, W, RGB): float32 (N, height * width * 3)."""
+def pixel_features(images: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """ "pixel-V" baseline: frames downsampled to size = (height, width) (config
+    ``features.pixel_size``) with area interpolation, scaled to [0, 1] and flattened (row-major
+    H, W, RGB): float32 (N, height * width * 3)."""
     _check_images(images, "pixel_features")
     h, w = size
     if h < 1 or w < 1:

@@ -82,7 +82,7 @@ def check_backbone(
     where: str,
     dino_epochs: int,
     mae_epochs: int,
-    features_pool: str = "cls",
+    features_pool: str,
 ) -> None:
     """Refuse a backbone the workflow cannot make or read. Objectives: "dino" (a ViT; DINO with
     features.pretrain, whose 0 epochs mean the seeded random init), "mae" (a ViT; features.mae,
@@ -173,13 +173,13 @@ class FamilySettings(SchemaSettings):
     def from_config(cls, config: Mapping[str, Any]) -> FamilySettings:
         """The families of the whole config's ``backbones`` (the probe families it names are
         checked against ``probes.families``)."""
-        cfg = dict(config.get("backbones") or {})
+        cfg = dict(config["backbones"])
         families = {
             name: {
                 m: BackboneSpec.from_config(spec[m], f"backbones.families.{name}.{m}")
                 for m in MODALITIES
             }
-            for name, spec in (cfg.pop("families", None) or {}).items()
+            for name, spec in cfg.pop("families").items()
         }
         settings = settings_from(cls, cfg, where="backbones", families=families)
         unknown = [f for f in settings.run if f not in families]
@@ -208,8 +208,8 @@ class FamilySettings(SchemaSettings):
                     families[name][m],
                     where=f"backbones.families.{name}.{m}",
                     dino_epochs=int(feats["pretrain"]["epochs"]),
-                    mae_epochs=MaeSettings.from_config(feats.get("mae")).epochs,
-                    features_pool=feats.get("pool", "cls"),
+                    mae_epochs=MaeSettings.from_config(feats["mae"]).epochs,
+                    features_pool=feats["pool"],
                 )
         return settings
 

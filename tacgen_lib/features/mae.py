@@ -170,7 +170,7 @@ def pretrain_mae(
     arch: str,
     image_size: int,
     progress: Callable[[str], None] | None = None,
-    device: torch.device | str = "cpu",
+    device: torch.device | str,
 ) -> MaePretrainResult:
     """Pretrain a ViT of `arch` on uint8 frames (N, H, W, 3) with the MAE objective.
 

@@ -31,16 +31,16 @@ def pretrained_vs_random(
     train: np.ndarray,
     test: np.ndarray,
     *,
-    C_grid: Sequence[float] = (0.1, 1.0, 10.0),
-    seed: int = 0,
-    n_resamples: int = 2000,
+    C_grid: Sequence[float],
+    seed: int,
+    n_resamples: int,
     n_folds: int = 3,
     sample_ids: np.ndarray | None = None,
 ) -> dict:
     """Accuracy of a logistic probe on each feature set and Δ = pretrained − random with a CI.
 
     pretrained, random_init: (N, d) features of the same N frames; labels: (N,) classes;
-    train, test: row positions; C by `n_folds`-fold CV on the train rows.
+    train, test: row positions; C by `n_folds`-fold CV on the train rows (one draw of the folds).
     Returns random_accuracy, pretrained_accuracy (each with its bootstrap CI `*_ci_low`,
     `*_ci_high` on the resamples of Delta's), delta, ci_low, ci_high, p_gt0, the test chance
     level (majority class) and the chosen C of each probe.
@@ -51,7 +51,7 @@ def pretrained_vs_random(
     preds = {}
     for name, feats in (("random", random_init), ("pretrained", pretrained)):
         probe = fit_logistic(
-            feats[train], labels[train], C_grid, seed, n_folds=n_folds, sample_ids=ids_tr
+            feats[train], labels[train], C_grid, seed, n_folds=n_folds, repeats=1, sample_ids=ids_tr
         )
         fits[name] = probe
         preds[name] = probe.predict(feats[test], sample_ids=ids_te)

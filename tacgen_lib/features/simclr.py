@@ -83,9 +83,9 @@ def pretrain_simclr(
     *,
     arch: str,
     image_size: int,
-    pool: str = "cls",
+    pool: str,
     progress: Callable[[str], None] | None = None,
-    device: torch.device | str = "cpu",
+    device: torch.device | str,
 ) -> SimclrResult:
     """Pretrain a ResNet of `arch` on uint8 frames (N, H, W, 3) with SimCLR; see module doc.
 

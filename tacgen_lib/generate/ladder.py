@@ -33,7 +33,6 @@ import pandas as pd
 
 __all__ = [
     "LADDER",
-    "KNN_KS",
     "KnnGeneration",
     "LadderRungs",
     "LookOracle",
@@ -45,8 +44,8 @@ __all__ = [
 #: The rungs, top (the oracle) to bottom (today's one-sample arm).
 LADDER: tuple[str, ...] = ("look_oracle", "knn", "ridge", "gen_mean", "v_tgen")
 
-#: The k the kNN rung chooses among (capped by the pool's CV training folds).
-KNN_KS: tuple[int, ...] = (1, 2, 4, 8, 16, 32, 64)
+#: The CV folds the kNN rung chooses its k by (`knn_generate`).
+KNN_FOLDS = 5
 
 
 def _rows(source: Mapping[str, np.ndarray], ids: Sequence[str], what: str) -> np.ndarray:
@@ -78,7 +77,7 @@ def look_oracle(
     pool: Sequence[str],
     rows: Sequence[str],
     *,
-    min_rows: int = 1,
+    min_rows: int,
 ) -> LookOracle:
     """A0: each row's T_gen is the mean real T of the pool rows that share its look.
 
@@ -139,16 +138,16 @@ def knn_generate(
     pool: Sequence[str],
     rows: Sequence[str],
     *,
-    ks: Sequence[int] = KNN_KS,
-    folds: int = 5,
-    seed: int = 0,
+    ks: Sequence[int],
+    seed: int,
+    n_folds: int = KNN_FOLDS,
 ) -> KnnGeneration:
     """A1: the mean real T of the k nearest pool rows in V (Euclidean distance on V
     standardised by the pool's mean and sd; scikit-learn's KNeighborsRegressor, uniform
-    weights), k chosen among `ks` by `folds`-fold CV (seeded shuffle) of the mean squared
-    error of the T prediction on the pool.
+    weights), k chosen among `ks` (config ``regime.knn_ks``) by `n_folds`-fold CV (seeded
+    shuffle) of the mean squared error of the T prediction on the pool.
 
-    A k larger than a CV training fold is not tried; with fewer than `folds` pool rows, or
+    A k larger than a CV training fold is not tried; with fewer than `n_folds` pool rows, or
     none of `ks` small enough, k is the smallest of `ks` capped at the pool size (no CV:
     ``cv_mse`` NaN). k = pool size gives every row the pool mean.
     """
@@ -165,14 +164,14 @@ def knn_generate(
         raise ValueError(f"knn_generate: ks must be integers >= 1, got {list(ks)!r}")
     v_pool, t_pool = _rows(vision, pool, "knn_generate"), _rows(t_real, pool, "knn_generate")
     n = len(pool)
-    fold_train = n - -(-n // folds) if n >= folds else 0  # the smallest CV training fold
+    fold_train = n - -(-n // n_folds) if n >= n_folds else 0  # the smallest CV training fold
     grid = sorted({int(k) for k in ks if int(k) <= fold_train})
-    if n >= folds >= 2 and grid:
+    if n >= n_folds >= 2 and grid:
         search = GridSearchCV(
             make_pipeline(StandardScaler(), KNeighborsRegressor()),
             {"kneighborsregressor__n_neighbors": grid},
             scoring="neg_mean_squared_error",
-            cv=KFold(folds, shuffle=True, random_state=int(seed)),
+            cv=KFold(n_folds, shuffle=True, random_state=int(seed)),
         ).fit(v_pool, t_pool)
         k = int(search.best_params_["kneighborsregressor__n_neighbors"])
         cv_mse = float(-search.best_score_)
@@ -210,14 +209,15 @@ def ladder_rungs(
     rows: Sequence[str],
     gen_mean: Mapping[str, np.ndarray],
     *,
-    ks: Sequence[int] = KNN_KS,
-    look_min_rows: int = 1,
-    seed: int = 0,
+    ks: Sequence[int],
+    look_min_rows: int,
+    seed: int,
 ) -> LadderRungs:
     """Every rung of `LADDER` but the one-sample ``v_tgen`` for `rows`, each learnt from the
     pool only: `look_oracle`, `knn_generate`, ridge (`generate.ridge_generator.ridge_generate`, its
     conditional mean) and ``gen_mean`` (given: the mean of the diffusion generator's samples,
-    `regime_generators.pool_generators`)."""
+    `regime_generators.pool_generators`). `ks` and `look_min_rows`: config ``regime.knn_ks`` and
+    ``regime.look_min_rows`` (`regime_sets.RegimeSettings`)."""
     from tacgen_lib.generate.ridge_generator import ridge_generate
 
     pool = [str(i) for i in pool]

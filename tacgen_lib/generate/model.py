@@ -56,7 +56,7 @@ class ResidualBlock(nn.Module):
 class Denoiser(nn.Module):
     """eps- (or v-) prediction residual MLP conditioned on the vision feature and the timestep."""
 
-    def __init__(self, dim_t: int, dim_v: int, hidden: int, blocks: int, time_dim: int = 128):
+    def __init__(self, dim_t: int, dim_v: int, hidden: int, blocks: int, time_dim: int):
         super().__init__()
         self.dims = {
             "dim_t": dim_t,

@@ -52,7 +52,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import pandas as pd
@@ -89,6 +89,9 @@ from tacgen_lib.probes.bootstrap import (
 )
 from tacgen_lib.probes.rows import baseline_score
 from tacgen_lib.runtime.workers import fork_map
+
+if TYPE_CHECKING:
+    from tacgen_lib.generate.visibility import VisibilitySettings
 
 __all__ = [
     "ARMS",
@@ -128,27 +131,26 @@ class _CellFeatures:
 def evaluate_regime(
     targets: Sequence[RegimeTarget],
     sets: RegimeSets,
+    regime: RegimeSettings,
+    ceiling: VisibilitySettings,
     *,
     corpus: str,
     rho: float,
     seed: int,
-    n_labelled: Sequence[int],
-    n_pool: Sequence[int],
     vision: Mapping[str, np.ndarray],
     t_real: Mapping[str, np.ndarray],
     t_gen: Mapping[tuple[int, str], Mapping[str, np.ndarray]],
     ladder: Mapping[int, Mapping[str, Mapping[str, np.ndarray]]],
     gammas: Sequence[float],
-    bootstrap: int,
     n_classes: int,
-    ceiling_gammas: Sequence[float],
-    ceiling_C: Sequence[float],
-    label_draws: int,
     progress: Any = None,
     workers: int = 1,
 ) -> pd.DataFrame:
     """Every arm (`ARMS`) of every (labelled draw, N_L, N_P) cell of one corpus x seed, per
-    target.
+    target: ``regime.label_draws`` draws x ``regime.n_labelled`` x ``regime.n_pool``, each
+    score with its fixed-test bootstrap CI (``regime.bootstrap`` resamples; config
+    ``regime``). `gammas`: the nonlinear arms' RBF gamma multiples (config
+    ``generate.nonlinear_gammas``).
 
     t_gen: (n_pool, "real" | "shuffled") -> sample_id -> one generated tactile sample (the
     ``v_tgen`` rung and the shuffled-pool arm); ladder: n_pool -> rung -> sample_id -> T_gen
@@ -156,24 +158,24 @@ def evaluate_regime(
     labelled rows of every draw and the test rows. The (target, draw, N_L) cells are
     independent: `workers` forked processes compute them (`runtime.workers.fork_map`, the same
     rows for any number of workers), the costliest (logistic targets, large N_L) first.
-    ceiling_gammas x ceiling_C: the grid of the V ceiling's kernel probe (config
+    ``ceiling.gammas`` x ``ceiling.C``: the grid of the V ceiling's kernel probe (config
     ``features.visibility``: the visibility check's nonlinear probe).
     Returns rows with `SUMMARY_COLUMNS`, ordered by target, draw, N_L and N_P.
     """
     say = progress or (lambda _m: None)
     base = {"corpus": corpus, "rho": float(rho), "seed": int(seed)}
-    features = _CellFeatures(vision, t_real, t_gen, ladder, tuple(gammas), int(bootstrap))
+    features = _CellFeatures(vision, t_real, t_gen, ladder, tuple(gammas), int(regime.bootstrap))
     # the ceilings of each target (fitted on every non-test row), then the cells
     ceilings = fork_map(
-        lambda tgt: _ceilings(tgt, vision, n_classes, gammas=ceiling_gammas, C=ceiling_C),
+        lambda tgt: _ceilings(tgt, vision, n_classes, gammas=ceiling.gammas, C=ceiling.C),
         targets,
         workers,
     )
     cells = [
         (t, d, int(n_l))
         for t in range(len(targets))
-        for d in range(int(label_draws))
-        for n_l in sorted(map(int, n_labelled))
+        for d in range(int(regime.label_draws))
+        for n_l in sorted(map(int, regime.n_labelled))
     ]
 
     def one_cell(cell: tuple[int, int, int]) -> list[dict]:
@@ -184,7 +186,7 @@ def evaluate_regime(
             sets,
             draw,
             n_l,
-            sorted(int(n) for n in n_pool),
+            sorted(int(n) for n in regime.n_pool),
             features,
             base=base,
         )

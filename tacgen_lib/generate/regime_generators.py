@@ -88,7 +88,7 @@ def train_pool_generator(
     pairing: str,
     seed: int,
     progress: Callable[[str], Any] | None = None,
-    device: Any = "cpu",
+    device: Any,
 ) -> GeneratorFit:
     """`fit_generator` on the pool's pairs (`pool_pairs`), seeded by `seed`, on `device`."""
     train, val = pool_pairs(pool, val_fraction=val_fraction, pairing=pairing, seed=seed)
@@ -157,7 +157,7 @@ def pool_generators(
     seed: int,
     progress: Callable[[str], Any] | None = None,
     workers: int = 1,
-    device: Any = "cpu",
+    device: Any,
 ) -> list[PoolGenerator]:
     """The generator of every (pool size, pairing) cell (`train_pool_generator` on the pool
     of that size), each sampled ``regime.gen_mean_samples`` times for `rows` (`sample_regime`,

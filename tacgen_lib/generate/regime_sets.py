@@ -120,8 +120,8 @@ class RegimeSets:
     labelled: np.ndarray
     pool: np.ndarray
     test: np.ndarray
+    seed: int
     spare: np.ndarray = field(default_factory=lambda: np.empty(0, dtype=object))
-    seed: int = 0
 
     def labelled_ids(self, n: int, draw: int = 0) -> np.ndarray:
         return self.labelled_draw(draw)[: int(n)]

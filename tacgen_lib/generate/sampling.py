@@ -145,16 +145,16 @@ def ddim_timesteps(n_train: int, steps: int) -> np.ndarray:
 
 
 def sampling_plan(
-    schedule: Schedule, sampler: str, steps: int, prediction: str | None = None
+    schedule: Schedule, sampler: str, steps: int, prediction: str
 ) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """What every sampler of the latent generator (`sample`, `sampling_torch.sample_torch`)
-    runs on, after checking `sampler` (and `prediction`, where given) and `steps`: the
+    runs on, after checking `sampler`, `prediction` and `steps`: the
     schedule's float32 coefficients (`Schedule.arrays`), abar_t (float64), sqrt(abar_t) and
     sqrt(1 - abar_t) (float32), and the timesteps, T-1 down to 0 for ``ddpm`` (which runs all
     T) or `ddim_timesteps(T, steps)` for ``ddim``."""
     if sampler not in ("ddpm", "ddim"):
         raise ValueError(f"sampler must be 'ddpm' or 'ddim', got {sampler!r}")
-    if prediction is not None and prediction not in ("eps", "v"):
+    if prediction not in ("eps", "v"):
         raise ValueError(f"prediction must be 'eps' or 'v', got {prediction!r}")
     T = schedule.n_steps
     if sampler == "ddpm" and steps != T:
@@ -176,9 +176,9 @@ def sample(
     steps: int,
     guidance: float,
     seed: int,
-    prediction: str = "eps",
-    eta: float = 0.0,
-    batch: int = 2048,
+    prediction: str,
+    eta: float,
+    batch: int,
 ) -> np.ndarray:
     """Standardised tactile features for each condition row (n, d_v) -> (n, d_t) float64.
 
@@ -187,7 +187,7 @@ def sample(
     vectors (bit for bit on one machine). ``ddpm`` runs all T steps (`steps` must equal T);
     ``ddim`` runs `ddim_timesteps(T, steps)`.
     """
-    coef, abar64, sqrt_abar, sqrt_1m, ts = sampling_plan(schedule, sampler, steps)
+    coef, abar64, sqrt_abar, sqrt_1m, ts = sampling_plan(schedule, sampler, steps, prediction)
     rng = np.random.default_rng(int(seed))
     cond32 = np.ascontiguousarray(cond, dtype=np.float32)
     d_t = model.dims["dim_t"]

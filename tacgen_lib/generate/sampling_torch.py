@@ -27,7 +27,7 @@ from tacgen_lib.generate.schedules import Schedule
 __all__ = ["denoiser_module", "generate_torch", "guided_output_torch", "sample_torch"]
 
 
-def denoiser_module(weights: GeneratorWeights, device: torch.device | str = "cpu") -> Denoiser:
+def denoiser_module(weights: GeneratorWeights, device: torch.device | str) -> Denoiser:
     """The trained denoiser of `weights` as a torch module in eval mode on `device`."""
     d = weights.denoiser.dims
     model = Denoiser(d["dim_t"], d["dim_v"], d["hidden"], d["blocks"], d["time_dim"])
@@ -63,9 +63,9 @@ def sample_torch(
     steps: int,
     guidance: float,
     seed: int,
-    prediction: str = "eps",
-    eta: float = 0.0,
-    batch: int = 2048,
+    prediction: str,
+    eta: float,
+    batch: int,
 ) -> np.ndarray:
     """`sampling.sample` with a torch denoiser on its own device: standardised tactile features
     (n, d_t) float64 for condition rows (n, d_v).

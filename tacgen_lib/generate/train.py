@@ -330,7 +330,7 @@ def fit_generator(
     *,
     seed: int,
     progress: Callable[[str], Any] | None = None,
-    device: torch.device | str = "cpu",
+    device: torch.device | str,
 ) -> GeneratorFit:
     """Train the eps- (or v-) prediction denoiser on train pairs, early-stopped on val pairs.
 

@@ -104,9 +104,10 @@ def commit_file(tmp: str | os.PathLike, path: str | os.PathLike, **fields) -> st
     return digest
 
 
-def record_file(path: str | os.PathLike, *, producer: str = "", kind: str = "weights") -> str:
-    """Hash a non-Parquet output (model weights, a table file) into its sidecar manifest, so it
-    is verified by `verify` and listed in the report like an edge. Returns the SHA-256."""
+def record_file(path: str | os.PathLike, *, producer: str = "", kind: str) -> str:
+    """Hash a non-Parquet output (model weights, a table file: `kind`) into its sidecar
+    manifest, so it is verified by `verify` and listed in the report like an edge. Returns the
+    SHA-256."""
     path = Path(path)
     digest = sha256_file(path)
     fields = {

@@ -264,7 +264,9 @@ def language_evidence(
         for inp in INPUTS:
             pred = chosen[inp][attr]
             lo, hi = score_interval("accuracy", y, pred, idx)
-            vs = fixed_test_bootstrap(y, shuffled, pred, "accuracy", indices=idx)
+            vs = fixed_test_bootstrap(
+                y, shuffled, pred, "accuracy", int(bootstrap), int(seed), indices=idx
+            )
             rows.append(
                 {
                     "row_id": f"{corpus}|{attr}|{inp}",

@@ -104,7 +104,7 @@ def fit_bc(
     weight_decay: float,
     batch_size: int,
     seed: int,
-    device: torch.device | str = "cpu",
+    device: torch.device | str,
 ) -> tuple[BCPolicy, list[float]]:
     """Fit the MLP (AdamW, MSE on standardised log force); returns the policy (on the CPU)
     and the per-epoch training loss. Bit-for-bit reproducible for the same inputs, seed and

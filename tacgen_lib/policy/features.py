@@ -53,7 +53,7 @@ def palpation_features(
     *,
     variant: str,
     reads: Mapping[str, FeatureSettings],
-    device: Any = "cpu",
+    device: Any,
 ) -> dict[str, np.ndarray]:
     """V (N, d_v), T raw (N, moments x d_t) and T aligned per heads key (N, moments x 128).
 

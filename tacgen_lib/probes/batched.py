@@ -40,6 +40,9 @@ __all__ = [
 ]
 
 _EPS = np.finfo(np.float64).eps
+#: The seed of `top_eigenpairs`' Gaussian sketch in the permuted ridge's preconditioner
+#: (`pcg_permuted`): it sets the iteration count, never the solution.
+_SKETCH_SEED = 0
 
 
 # --------------------------------------------------------------------------- logistic
@@ -260,7 +263,7 @@ def fit_logistic_batch(
 # --------------------------------------------------------------------------- ridge
 
 
-def top_eigenpairs(x: np.ndarray, k: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray, float]:
+def top_eigenpairs(x: np.ndarray, k: int, seed: int) -> tuple[np.ndarray, np.ndarray, float]:
     """Approximate top-k eigenpairs of the centred Gram x @ x.T (x: n x p), and its trace.
 
     Randomised subspace iteration (two power steps, 16 extra columns, seeded Gaussian sketch)
@@ -313,8 +316,8 @@ def pcg_permuted(
     residual <= tol within max_iter.
     """
     n, b = yc.size, perm.shape[0]
-    e_v, u_v, tr_v = top_eigenpairs(vc, deflate)
-    e_t, u_t, tr_t = top_eigenpairs(tc, deflate)
+    e_v, u_v, tr_v = top_eigenpairs(vc, deflate, _SKETCH_SEED)
+    e_t, u_t, tr_t = top_eigenpairs(tc, deflate, _SKETCH_SEED)
     c0 = lam + max(tr_v - e_v.sum() + tr_t - e_t.sum(), 0.0) / max(n - 1, 1)
     rows = n * np.arange(b)[:, None]
     fwd = perm + rows  # flat gather indices: np.take is several times faster than

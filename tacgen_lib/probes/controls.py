@@ -126,8 +126,8 @@ def train_resample_diagnostic(
     probe_v: FixedProbe,
     probe_vt: FixedProbe,
     metric: Metric,
-    n_resamples: int = 200,
-    seed: int = 0,
+    n_resamples: int,
+    seed: int,
 ) -> dict:
     """Refit both probes on bootstrap resamples of the TRAINING rows; score on the full test.
 
@@ -158,8 +158,8 @@ def tactile_permutation_control(
     *,
     probe: FixedProbe,
     metric: Metric,
-    n_permutations: int = 200,
-    seed: int = 0,
+    n_permutations: int,
+    seed: int,
     probe_v: FixedProbe | None = None,
 ) -> dict:
     """Delta when the V+T probe is refitted on permuted TRAINING T (the paper's control).
@@ -194,8 +194,8 @@ def label_permutation_control(
     probe_v: FixedProbe,
     probe_vt: FixedProbe,
     metric: Metric,
-    n_permutations: int = 200,
-    seed: int = 0,
+    n_permutations: int,
+    seed: int,
 ) -> dict:
     """Scores and Delta when y is permuted within the training rows (X-y link broken).
 
@@ -228,8 +228,8 @@ def random_feature_control(
     *,
     probe: FixedProbe,
     metric: Metric,
-    n_draws: int = 20,
-    seed: int = 0,
+    n_draws: int,
+    seed: int,
     probe_v: FixedProbe | None = None,
 ) -> dict:
     """Delta when T is replaced by Gaussian features of the same dimension (seeded).

@@ -122,12 +122,12 @@ def fit_logistic(
     C_grid: Sequence[float],
     seed: int,
     *,
-    n_folds: int = 5,
+    n_folds: int,
+    repeats: int,
     max_iter: int = 12800,
     max_iter_cap: int = 12800,
     tol: float = 1e-6,
     sample_ids: Sequence | np.ndarray | None = None,
-    repeats: int = 1,
     batched: bool = True,
 ) -> LogisticProbe:
     """Logistic probe (density, hardness): C by stratified K-fold CV on the training rows
@@ -161,7 +161,9 @@ def fit_logistic(
         )
     folds = make_folds(X.shape[0], k, seed, labels=y, repeats=repeats)
     if batched and cv_batches(X.shape, folds):
-        scores, all_conv, worst = _cv_scores_batched(X, y, folds, C, max_iter, max_iter_cap, tol)
+        scores, all_conv, worst = _cv_scores_batched(
+            X, y, folds, C, max_iter, max_iter_cap, tol, CV_BATCH_BUDGET
+        )
     else:
         scores = np.zeros((len(folds), C.size))
         all_conv = True
@@ -210,7 +212,7 @@ def _cv_scores_batched(
     max_iter: int,
     max_iter_cap: int,
     tol: float,
-    budget: int = CV_BATCH_BUDGET,
+    budget: int,
 ) -> tuple[np.ndarray, bool, int]:
     """(folds x C held-out accuracies, every fit converged, most iterations) of the CV, the
     K folds of each C solved together by `batched.fit_logistic_batch`.

@@ -152,7 +152,7 @@ class FixedMLP:
     width: int
     weight_decay: float
     seed: int
-    max_iter: int = 200
+    max_iter: int
 
     def fit_predict(self, X_train: np.ndarray, y_train: np.ndarray, X_test: np.ndarray):
         model = mlp_model(self.kind, self.width, self.weight_decay, self.seed, self.max_iter)

@@ -83,7 +83,7 @@ def row_id(
 
 
 def headline_plan(
-    plan: Sequence[ComparisonSpec], heads_variant: str, *, controls: bool = True
+    plan: Sequence[ComparisonSpec], heads_variant: str, *, controls: bool
 ) -> list[ComparisonSpec]:
     """The headline comparisons of a plan: ``concat`` with the heads' tactile variant (raw,
     and aligned per alignment seed), with controls only if `controls`."""

@@ -304,7 +304,7 @@ def run_family(
     labels: Mapping[str, object] | None = None,
     progress: Callable[[str], None] | None = None,
     headline_only: bool = False,
-    controls: bool = True,
+    controls: bool,
 ) -> FamilyResult:
     """Run every planned comparison of one family and probe seed.
 

@@ -188,10 +188,10 @@ def fit_ridge_probe(
     y_train: np.ndarray,
     lambdas: Sequence[float] | np.ndarray,
     *,
-    n_folds: int = 5,
-    seed: int = 0,
+    n_folds: int,
+    seed: int,
+    repeats: int,
     sample_ids: Sequence | np.ndarray | None = None,
-    repeats: int = 1,
 ) -> RidgeProbe:
     """Select lambda by CV on the training rows, then refit on all of them (mass, force).
 

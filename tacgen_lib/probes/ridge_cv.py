@@ -203,11 +203,11 @@ def select_lambda_cv(
     y: np.ndarray,
     lambdas: Sequence[float] | np.ndarray,
     *,
-    n_folds: int = 5,
-    seed: int = 0,
+    n_folds: int,
+    seed: int,
+    repeats: int,
     folds: list[np.ndarray] | None = None,
     sample_ids: Sequence | np.ndarray | None = None,
-    repeats: int = 1,
 ) -> LambdaSelection:
     """Choose lambda by K-fold CV on the training rows (mean held-out R^2, first best in grid).
 

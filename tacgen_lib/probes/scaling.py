@@ -62,10 +62,10 @@ def fit_standardised_ridge(
     y_train: np.ndarray,
     lambdas: Sequence[float] | np.ndarray,
     *,
-    n_folds: int = 5,
-    seed: int = 0,
+    n_folds: int,
+    seed: int,
+    repeats: int,
     sample_ids: Sequence | np.ndarray | None = None,
-    repeats: int = 1,
 ) -> StandardisedRidgeProbe:
     """StandardScaler + ridge, lambda by K-fold CV on the training rows (pass only those).
 

@@ -111,8 +111,9 @@ class RobustnessSettings:
         check_settings(self)
 
     @classmethod
-    def from_config(cls, cfg: Mapping, families: Mapping[str, Mapping] | None = None):
-        """From ``probes.robustness``; `families` (``probes.families``) checks the names."""
+    def from_config(cls, cfg: Mapping, declared_families: Mapping[str, Mapping] | None = None):
+        """From ``probes.robustness``; `declared_families` (``probes.families``), where given,
+        checks the names."""
         # the two nested sections are read as dotted keys (the fields' `setting` keys)
         nested = ("training_size", "within_scale")
         flat = {k: v for k, v in cfg.items() if k not in ("mlp", *nested)}
@@ -120,17 +121,17 @@ class RobustnessSettings:
         out = settings_from(
             cls, flat, where="probes.robustness", mlp=MLPGrid.from_config(cfg.get("mlp"))
         )
-        if families is not None:
+        if declared_families is not None:
             for key, names in (
                 ("families", out.families),
                 ("training_size.families", out.size_families),
                 ("within_scale.families", out.within_families),
             ):
-                unknown = [n for n in names if n not in families]
+                unknown = [n for n in names if n not in declared_families]
                 if unknown:
                     raise ValueError(
                         f"probes.robustness.{key}: {unknown} not in probes.families "
-                        f"({', '.join(sorted(families))})"
+                        f"({', '.join(sorted(declared_families))})"
                     )
         return out
 

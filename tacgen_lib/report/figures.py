@@ -17,10 +17,12 @@ from tacgen_lib.report.write import panel_grid
 __all__ = ["corpus_example_grid"]
 
 
-def _pick_examples(
-    samples: pd.DataFrame, splits: pd.DataFrame, n: int, seed: int = 0
-) -> pd.DataFrame:
-    """Up to n samples, spread over splits and strata, chosen at a fixed seed."""
+#: The seed the example grid picks its samples at (`corpus_example_grid`).
+EXAMPLES_SEED = 0
+
+
+def _pick_examples(samples: pd.DataFrame, splits: pd.DataFrame, n: int, seed: int) -> pd.DataFrame:
+    """Up to n samples, spread over splits and strata, chosen at `seed`."""
     merged = samples.merge(splits[["sample_id", "split"]], on="sample_id", how="left")
     rng = np.random.default_rng(seed)
     order = rng.permutation(len(merged))
@@ -43,7 +45,7 @@ def corpus_example_grid(
     for the two."""
     from tacgen_lib.preprocess.background import tactile_proc
 
-    picks = _pick_examples(samples, splits, n)
+    picks = _pick_examples(samples, splits, n, EXAMPLES_SEED)
     backgrounds = {
         r.sensor_id: decode_png(r.background, where=f"sensor {r.sensor_id}")
         for r in sensors.itertuples()

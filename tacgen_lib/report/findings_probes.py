@@ -22,7 +22,7 @@ from tacgen_lib.report_pages import FINDINGS_COLUMNS, category
 __all__ = ["generation_findings", "probe_findings"]
 
 
-def _input_label(r: Mapping, seeds: Sequence[int] = ()) -> str:
+def _input_label(r: Mapping, seeds: Sequence[int]) -> str:
     if r["input"] == "aligned":
         which = ", ".join(str(int(x)) for x in seeds) or str(int(r["align_seed"]))
         return f"aligned heads (seed{'s' if len(seeds) > 1 else ''} {which})"

@@ -65,14 +65,14 @@ def _ladder_decisions(view: pd.DataFrame) -> list[dict]:
 
 
 def regime_findings(
-    summary: pd.DataFrame, gate: str = "", gate_passed: bool = True
+    summary: pd.DataFrame, gate_sentence: str = "", gate_passed: bool = True
 ) -> FindingsPart:
     """Per regime target, where generated touch should help most: the largest rho, the fewest
     labels, the largest pool. V + T_gen (linear probe) against linear V, with the controls
     that could explain a gain away beside it: the shuffled-pool generator, nonlinear V,
     generalised distillation (the pool used without generating), the same cell at the smallest
     rho; the positive control (the look oracle against nonlinear V) and the ladder's verdict
-    (`report.regime.ladder_verdict`) with the visibility gate's sentence `gate`. Every figure
+    (`report.regime.ladder_verdict`) with the visibility gate's sentence `gate_sentence`. Every figure
     is the mean over the cell's replicates (seed × labelled draw) with how many replicates'
     CIs lie above or below 0, and each decision reads every replicate (`replicates_decision`):
     one draw of the labelled rows decides nothing."""
@@ -121,7 +121,7 @@ def regime_findings(
                 f"{replicate_words(shuf, 'linear_v')}; distillation (V only) − linear V "
                 f"{replicate_words(gd, 'linear_v')}; V + T_gen at ρ = {rho_lo:g} − linear V "
                 f"{replicate_words(gen_lo, 'linear_v')}",
-                "verdict": " ".join([gate, *ladder]).strip()
+                "verdict": " ".join([gate_sentence, *ladder]).strip()
                 + f" Over the replicates, V + T_gen − linear V: {reading}.",
                 "page": category("Where generated touch helps"),
             }

@@ -264,10 +264,10 @@ def fidelity_table(summary: pd.DataFrame) -> pd.DataFrame:
     )
 
 
-def _panels(n: int, ncols: int = 3, size: tuple[float, float] = (3.1, 3.0)):
+def _panels(n: int, ncols: int = 3, panel_size: tuple[float, float] = (3.1, 3.0)):
     import matplotlib.pyplot as plt
 
-    nrows, ncols, figsize = panel_grid(n, size, max_cols=ncols)
+    nrows, ncols, figsize = panel_grid(n, panel_size, max_cols=ncols)
     fig, axes = plt.subplots(nrows, ncols, figsize=figsize, squeeze=False)
     for ax in axes.ravel()[n:]:
         ax.set_visible(False)
@@ -295,7 +295,7 @@ def guidance_seed_figure(summary: pd.DataFrame, sampler: str, steps: int) -> plt
         & (summary["steps"] == int(steps))
     ]
     groups = list(s.groupby(["corpus", "target"], sort=True))
-    fig, axes = _panels(len(groups), size=(3.0, 3.0))
+    fig, axes = _panels(len(groups), panel_size=(3.0, 3.0))
     # one colour scale for every panel, symmetric about 0, with its colour bar
     finite = s["delta"].to_numpy(float)
     finite = finite[np.isfinite(finite)]

@@ -242,7 +242,7 @@ def saved_bytes(result) -> bytes:
 def test_fit_heads_is_bit_reproducible_and_seeded(tmp_path):
     v, t = synthetic_pairs(300, 16, 12, noise=0.5, seed=1)
     tr, va = np.arange(240), np.arange(240, 300)
-    kw = dict(tau=0.07, settings=AlignSettings.tiny(steps=30, eval_every=10))
+    kw = dict(tau=0.07, settings=AlignSettings.tiny(steps=30, eval_every=10), device="cpu")
     before = torch.get_rng_state()
     r1 = fit_heads(v, t, tr, va, seed=11, **kw)
     assert torch.equal(before, torch.get_rng_state())  # global RNG untouched
@@ -274,9 +274,10 @@ def test_fit_heads_reaches_clearly_above_chance_on_noisy_linear_pairs():
         tau=0.07,
         seed=0,
         settings=AlignSettings.tiny(budget="epochs", epochs=30, eval_every=100, batch_size=128),
+        device="cpu",
     )
     assert res.total_steps == 30 * (600 // 128) == res.steps_run
-    z_v, z_t = project(res, v[va], t[va])
+    z_v, z_t = project(res, v[va], t[va], device="cpu")
     m = paired_retrieval(z_v, z_t)
     n = m["n"]
     hits = round(m["top1_v2t"] * n)
@@ -307,6 +308,7 @@ def test_early_stopping_keeps_best_weights():
         tau=0.07,
         seed=0,
         settings=AlignSettings.tiny(steps=400, patience=patience, eval_every=every, batch_size=100),
+        device="cpu",
     )
     assert res.stopped_early and res.steps_run < res.total_steps == 400
     losses = [c["val_loss"] for c in res.curve]
@@ -315,7 +317,7 @@ def test_early_stopping_keeps_best_weights():
     assert res.steps_run == res.best_step + patience * every
     assert len(res.curve) == best + patience + 1
     # the kept weights reproduce the best validation loss (one chunk: n_val == batch_size)
-    z_v, z_t = project(res, v[va], t[va])
+    z_v, z_t = project(res, v[va], t[va], device="cpu")
     kept = info_nce(torch.from_numpy(z_v), torch.from_numpy(z_t), 0.07).item()
     assert kept == pytest.approx(res.best_val_loss, rel=1e-5)
     assert abs(kept - losses[-1]) > 1e-3
@@ -326,7 +328,9 @@ def test_progress_gets_one_line_per_evaluation():
     lines: list[str] = []
     settings = AlignSettings.tiny(steps=12, eval_every=5)
     split = np.arange(100), np.arange(100, 120)
-    res = fit_heads(v, t, *split, tau=0.1, seed=0, settings=settings, progress=lines.append)
+    res = fit_heads(
+        v, t, *split, tau=0.1, seed=0, settings=settings, progress=lines.append, device="cpu"
+    )
     assert [c["step"] for c in res.curve] == [0, 5, 10, 12]
     assert len(lines) == 4 and "val_loss" in lines[-1] and "step 12/12" in lines[-1]
 
@@ -334,7 +338,9 @@ def test_progress_gets_one_line_per_evaluation():
 def test_save_load_project_round_trip(tmp_path):
     v, t = synthetic_pairs(150, 10, 6, noise=0.5, seed=4)
     settings = AlignSettings.tiny(steps=8, eval_every=4)
-    res = fit_heads(v, t, np.arange(120), np.arange(120, 150), tau=0.1, seed=3, settings=settings)
+    res = fit_heads(
+        v, t, np.arange(120), np.arange(120, 150), tau=0.1, seed=3, settings=settings, device="cpu"
+    )
     path = tmp_path / "sub" / "heads.pt"
     save_heads(res, path)
     loaded = load_heads(path)
@@ -343,8 +349,8 @@ def test_save_load_project_round_trip(tmp_path):
     assert state.keys() == back.keys()
     for k, w in state.items():  # the file gives back every weight bit for bit
         assert torch.equal(back[k], w), k
-    a_v, a_t = project(res, v, t)
-    b_v, b_t = project(loaded, v, t)
+    a_v, a_t = project(res, v, t, device="cpu")
+    b_v, b_t = project(loaded, v, t, device="cpu")
     assert a_v.dtype == np.float32 and a_v.shape == (150, 128) and a_t.shape == (150, 128)
     # the loaded heads are another computation (their kernels may be others): within rounding
     # of a head (Linear, LayerNorm, Linear, l2 norm: five chained sums of <= HIDDEN_DIM terms)
@@ -359,7 +365,7 @@ def test_save_load_project_round_trip(tmp_path):
 
 def test_fit_heads_refuses_overlap_and_misaligned_rows():
     v, t = synthetic_pairs(50, 4, 4, noise=0.5, seed=5)
-    kw = dict(tau=0.1, seed=0, settings=AlignSettings.tiny(steps=2, eval_every=1))
+    kw = dict(tau=0.1, seed=0, settings=AlignSettings.tiny(steps=2, eval_every=1), device="cpu")
     with pytest.raises(ValueError, match="both train_idx and val_idx"):
         fit_heads(v, t, np.arange(30), np.arange(25, 50), **kw)
     with pytest.raises(ValueError, match="rows"):

@@ -139,28 +139,43 @@ def test_split_guard_refuses_a_poisoned_split():
     test_id = ids["test"][0]
     poisoned = {**ids, "train": np.append(ids["train"], test_id)}
     with pytest.raises(LeakageError, match=f"train_heads.*{test_id}.*'test'"):
-        align_grid.fit_cell(vision, tactile, splits, poisoned, tau=0.1, seed=0, settings=TRAIN)
+        align_grid.fit_cell(
+            vision, tactile, splits, poisoned, tau=0.1, seed=0, settings=TRAIN, device="cpu"
+        )
     # validation rows only steer early stopping: a train row among them is refused too
     val_poisoned = {**ids, "val": np.append(ids["val"], ids["train"][0])}
     with pytest.raises(LeakageError, match=str(ids["train"][0])):
-        align_grid.fit_cell(vision, tactile, splits, val_poisoned, tau=0.1, seed=0, settings=TRAIN)
+        align_grid.fit_cell(
+            vision, tactile, splits, val_poisoned, tau=0.1, seed=0, settings=TRAIN, device="cpu"
+        )
     # and a split edge that calls a test row "train" is caught by the train/test overlap check
     relabelled = splits.copy()
     relabelled.loc[relabelled["sample_id"] == test_id, "split"] = "train"
     with pytest.raises(ValueError, match=f"{test_id}.*both a test row and a training row"):
-        align_grid.fit_cell(vision, tactile, relabelled, poisoned, tau=0.1, seed=0, settings=TRAIN)
+        align_grid.fit_cell(
+            vision, tactile, relabelled, poisoned, tau=0.1, seed=0, settings=TRAIN, device="cpu"
+        )
 
 
 def test_fit_cell_evaluates_on_test_rows_only():
     vision, tactile, splits = _edges_in_memory()
     ids = align_grid.cell_ids(splits, corpus="c", n_train=16, seed=1)
-    fit = align_grid.fit_cell(vision, tactile, splits, ids, tau=0.1, seed=1, settings=TRAIN)
+    fit = align_grid.fit_cell(
+        vision, tactile, splits, ids, tau=0.1, seed=1, settings=TRAIN, device="cpu"
+    )
     assert fit.metrics["n_test"] == 8 and fit.metrics["n_train_rows"] == 16
     assert fit.metrics["chance_top1"] == 1 / 8 and fit.metrics["steps_run"] == 4
     assert list(fit.curve["eval"]) == ["step~0", "step~2", "step~4"]
     with pytest.raises(edges.EdgeError, match="no vector column 'pixel'"):
         align_grid.fit_cell(
-            vision, tactile, splits, ids, tau=0.1, seed=1, settings=replace(TRAIN, feature="pixel")
+            vision,
+            tactile,
+            splits,
+            ids,
+            tau=0.1,
+            seed=1,
+            settings=replace(TRAIN, feature="pixel"),
+            device="cpu",
         )
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import pytest
+from snakemake_run import hand_config
 
 from tacgen_lib.estimate.calibration import (
     CALIBRATION_COLUMNS,
@@ -198,7 +199,7 @@ def test_rule_whose_config_cannot_be_counted_is_named():
 
 
 def test_rule_without_calibration_is_named():
-    cfg = {"corpora": {"c": {"n": 10}}}
+    cfg = hand_config({"c": {"n": 10}})
     jobs = [DagJob(0, "merge_corpus", {"corpus": "c"})]
     lines = fit_costs(points([("background_subtract", 1, 1.0), ("background_subtract", 2, 2.0)]))
     with pytest.raises(MissingCalibrationError, match="rule 'merge_corpus'"):
@@ -223,7 +224,7 @@ def test_every_rule_of_the_workflow_has_a_unit_line():
 
 
 def test_estimate_of_a_hand_dag_from_a_calibration(tmp_path):
-    cfg = {"corpora": {"c": {"n": 100, "shards": 2, "presses": 3}}, "splits": {}}
+    cfg = hand_config({"c": {"n": 100, "shards": 2, "presses": 3}})
     jobs = [
         DagJob(0, "simulate_corpus", {"corpus": "c", "shard": "0"}),
         DagJob(1, "simulate_corpus", {"corpus": "c", "shard": "1"}),
@@ -328,10 +329,10 @@ def test_critical_chain_is_the_longest_dependent_path():
 
 
 def sampling_config(guidance, samplers, n=100):
-    return {
-        "corpora": {"c": {"n": n}},
-        "generate": {"guidance": guidance, "samplers": samplers, "hidden": 64, "blocks": 1},
-    }
+    return hand_config(
+        {"c": {"n": n}},
+        generate={"guidance": guidance, "samplers": samplers, "hidden": 64, "blocks": 1},
+    )
 
 
 def test_a_generators_sampling_job_runs_its_cells_on_its_threads():

@@ -9,6 +9,7 @@ from types import SimpleNamespace
 import pytest
 from snakemake.iocontainers import Wildcards
 from snakemake.resources import Resources
+from snakemake_run import hand_config
 
 from tacgen_lib.estimate.calibration import MissingCalibrationError
 from tacgen_lib.estimate.resources import (
@@ -38,23 +39,15 @@ def test_requested_runtime_headroom_floor_and_attempt():
 
 
 def test_estimated_runtime_prices_a_job_and_falls_back_where_it_cannot():
-    config = {"corpora": {"c": {"n": 1200}}}
+    config = hand_config({"c": {"n": 1200}})
     runtime = estimated_runtime("merge_corpus", config, fallback=7)
     w = Wildcards(fromdict={"corpus": "c"})
     seconds = predicted_seconds("merge_corpus", config, {"corpus": "c"}, 1)
     assert runtime(w, 1, 1) == requested_runtime(seconds)
     assert runtime(w, 1, 2) == requested_runtime(seconds, 2)
     # a cost class without calibration points: the rule's own runtime x attempt
-    family = {
-        "backbones": {
-            "probes": [],
-            "families": {"f": {"vision": {"arch": "vit_tiny", "objective": "x"}}},
-        },
-        "features": {"image_size": 56, "pretrain": {"epochs": 0, "corpus": "c"}},
-        "probes": {"families": {}},
-        "corpora": {"c": {"n": 10}},
-        "splits": {"fractions": {"train": 0.7}},
-    }
+    vision = {"arch": "vit_tiny", "objective": "x", "checkpoint": None, "image_size": None}
+    family = hand_config(backbones={"probes": [], "families": {"f": {"vision": vision}}})
     wf = {"family": "f", "modality": "vision"}
     guarded = estimated_runtime("family_backbone", family, fallback=30)
     assert guarded(Wildcards(fromdict=wf), 1, 2) == 60
@@ -72,7 +65,7 @@ def fake_rule(name, config, *, norun=False, runtime=30):
 
 
 def test_attach_gives_every_priced_rule_the_estimate_and_keeps_a_set_runtime():
-    cfg = {"corpora": {"c": {"n": 100}}}
+    cfg = hand_config({"c": {"n": 100}})
     setting = {**cfg, "cost": {"setting": {"module": "cost_presses_2"}}}
     rules = [
         fake_rule("merge_corpus", cfg),

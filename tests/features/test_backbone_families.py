@@ -11,7 +11,7 @@ import torch
 from pretrain_checks import assert_loss_falls, assert_same_backbone
 from probe_worlds import synthetic_family_rows
 from rounding import reordered_sum_atol
-from snakemake_run import ROOT
+from snakemake_run import validated
 
 from tacgen_lib.features.archs import ARCHS, RESNET_ARCHS, arch_family, feature_dim
 from tacgen_lib.features.backbones import make_backbone, read_backbone
@@ -40,7 +40,7 @@ from tacgen_lib.features.settings import (
 )
 from tacgen_lib.features.vit import build_vit
 from tacgen_lib.features.vit_checkpoint import save_backbone
-from tacgen_lib.io.config import ConfigError, load_yaml
+from tacgen_lib.io.config import ConfigError
 from tacgen_lib.probes.backbone_families import (
     FAMILY_COLUMNS,
     backbone_family_rows,
@@ -101,8 +101,10 @@ def test_resnet18_has_torchvision_parameter_count_and_names():
 def test_resnet_pools_agree_and_give_the_last_stage_width():
     model = random_resnet("resnet_tiny", seed=0)
     images = np.random.default_rng(0).integers(0, 256, (5, 40, 48, 3), dtype=np.uint8)
-    cls = extract_features(model, images, image_size=56, pool="cls")
-    mean = extract_features(model, images, image_size=56, pool="mean_patch")
+    cls = extract_features(model, images, image_size=56, pool="cls", device="cpu", batch_size=64)
+    mean = extract_features(
+        model, images, image_size=56, pool="mean_patch", device="cpu", batch_size=64
+    )
     assert (
         cls.shape == (5, feature_dim("resnet_tiny")) == (5, RESNET_ARCHS["resnet_tiny"].widths[-1])
     )
@@ -132,7 +134,9 @@ def _stage_statistics_float64(model, x: torch.Tensor) -> np.ndarray:
 def test_stages_pool_is_every_stage_mean_and_std_against_float64(size):
     model = random_resnet("resnet_tiny", seed=1)
     images = np.random.default_rng(size).integers(0, 256, (6, 40, 48, 3), dtype=np.uint8)
-    got = extract_features(model, images, image_size=size, batch_size=4, pool="stages")
+    got = extract_features(
+        model, images, image_size=size, batch_size=4, pool="stages", device="cpu"
+    )
     assert got.shape == (6, sum(RESNET_ARCHS["resnet_tiny"].widths)) and got.dtype == np.float32
     x = imagenet_normalise(to_unit_tensor(images, size))
     np.testing.assert_allclose(got, _stage_statistics_float64(model, x), rtol=1e-4, atol=1e-5)
@@ -140,12 +144,13 @@ def test_stages_pool_is_every_stage_mean_and_std_against_float64(size):
     last = sum(RESNET_ARCHS["resnet_tiny"].widths[:3])
     np.testing.assert_allclose(
         got[:, last:],
-        extract_features(model, images, image_size=size, pool="cls"),
+        extract_features(model, images, image_size=size, pool="cls", device="cpu", batch_size=64),
         rtol=1e-5,
         atol=1e-6,
     )
     np.testing.assert_array_equal(
-        got, extract_features(model, images, image_size=size, batch_size=4, pool="stages")
+        got,
+        extract_features(model, images, image_size=size, batch_size=4, pool="stages", device="cpu"),
     )
 
 
@@ -153,9 +158,9 @@ def test_stages_pool_refuses_a_vit_and_an_unknown_pool():
     images = np.zeros((2, 28, 28, 3), dtype=np.uint8)
     vit = build_vit("vit_tiny", img_size=28)
     with pytest.raises(ValueError, match="pool 'stages' needs a ResNet, got DinoVisionTransformer"):
-        extract_features(vit, images, image_size=28, pool="stages")
+        extract_features(vit, images, image_size=28, pool="stages", device="cpu", batch_size=64)
     with pytest.raises(ValueError, match="pool must be one of"):
-        extract_features(vit, images, image_size=28, pool="max")
+        extract_features(vit, images, image_size=28, pool="max", device="cpu", batch_size=64)
 
 
 def test_resnet_checkpoint_drops_fc_and_names_missing_and_extra_keys():
@@ -275,8 +280,8 @@ def test_pretrain_mae_is_bit_identical_when_run_twice_and_its_loss_falls():
     frames = _textures()
     settings = MaeSettings.tiny(epochs=6, batch_size=8, lr=3e-3)
     torch.set_num_threads(1)
-    one = pretrain_mae(frames, settings, arch="vit_tiny", image_size=28)
-    two = pretrain_mae(frames, settings, arch="vit_tiny", image_size=28)
+    one = pretrain_mae(frames, settings, arch="vit_tiny", image_size=28, device="cpu")
+    two = pretrain_mae(frames, settings, arch="vit_tiny", image_size=28, device="cpu")
     assert_same_backbone(one, two)
     assert_loss_falls(one.curve, epochs=6)
     assert set(one.backbone_state) == set(build_vit("vit_tiny", img_size=28).state_dict())
@@ -361,6 +366,7 @@ def test_made_backbone_round_trips_through_its_saved_weights(spec, tmp_path):
         mae=MaeSettings.tiny(epochs=1),
         frames=train_frames,
         simclr=SimclrSettings.tiny(),
+        device="cpu",
     )
     pretrained = spec.objective in ("mae", "simclr")
     assert bool(calls) == pretrained  # frames are read only to pretrain
@@ -373,10 +379,15 @@ def test_made_backbone_round_trips_through_its_saved_weights(spec, tmp_path):
     for k, v in model.state_dict().items():  # the file gives back every weight bit for bit
         assert torch.equal(back.state_dict()[k], v), k
     x = frames[:3]
-    want = extract_features(model, x, image_size=28)
+    want = extract_features(model, x, image_size=28, device="cpu", batch_size=64, pool="cls")
     # the read network is another computation (its kernels may be others): within rounding
     atol = vit_tiny_atol(want) if spec.arch == "vit_tiny" else resnet_tiny_atol(want)
-    np.testing.assert_allclose(extract_features(back, x, image_size=28), want, rtol=0, atol=atol)
+    np.testing.assert_allclose(
+        extract_features(back, x, image_size=28, device="cpu", batch_size=64, pool="cls"),
+        want,
+        rtol=0,
+        atol=atol,
+    )
 
 
 def test_read_backbone_refuses_a_foreign_state_dict(tmp_path):
@@ -399,6 +410,7 @@ def _config(**backbones):
     }
     return {
         "features": {
+            "pool": "cls",
             "backbones": {"vision": {"arch": "vit_tiny"}, "tactile": {"arch": "vit_tiny"}},
             "pretrain": {"epochs": 0},
             "mae": {"epochs": 1},
@@ -441,7 +453,13 @@ def test_backbones_the_workflow_cannot_make_are_refused(spec, needle):
     ):
         BackboneSpec("vit_tiny", objective="byol")
     with pytest.raises(ConfigError, match=needle):
-        check_backbone(spec, where="backbones.families.x.vision", dino_epochs=0, mae_epochs=0)
+        check_backbone(
+            spec,
+            where="backbones.families.x.vision",
+            dino_epochs=0,
+            mae_epochs=0,
+            features_pool="cls",
+        )
     check_backbone(
         BackboneSpec(
             spec.arch, checkpoint="w.pth", objective="mae" if spec.network == "vit" else "dino"
@@ -449,18 +467,21 @@ def test_backbones_the_workflow_cannot_make_are_refused(spec, needle):
         where="x",
         dino_epochs=0,
         mae_epochs=0,
+        features_pool="cls",
     )  # a checkpoint needs no pretraining
 
 
 def test_the_stages_pool_is_refused_for_a_vit_from_either_key():
     kw = dict(where="features.backbones.tactile", dino_epochs=0, mae_epochs=0)
     with pytest.raises(ConfigError, match="tactile: pool stages .* the ViT vit_tiny"):
-        check_backbone(BackboneSpec("vit_tiny", pool="stages"), **kw)
+        check_backbone(BackboneSpec("vit_tiny", pool="stages"), features_pool="cls", **kw)
     with pytest.raises(ConfigError, match="tactile: features.pool stages"):
         check_backbone(BackboneSpec("vit_tiny"), features_pool="stages", **kw)
     # a ViT's own pool overrides features.pool; a ResNet reads stages either way
     check_backbone(BackboneSpec("vit_tiny", pool="cls"), features_pool="stages", **kw)
-    check_backbone(BackboneSpec("resnet_tiny", objective="random", pool="stages"), **kw)
+    check_backbone(
+        BackboneSpec("resnet_tiny", objective="random", pool="stages"), features_pool="cls", **kw
+    )
     check_backbone(BackboneSpec("resnet_tiny", objective="random"), features_pool="stages", **kw)
 
 
@@ -486,7 +507,7 @@ def test_pretraining_corpora_are_one_name_or_a_list_in_order():
 
 
 def test_feature_settings_take_each_backbones_own_pool():
-    features = load_yaml(ROOT / "config" / "config.yaml")["features"]
+    features = validated()["features"]
     features = {
         **features,
         "pool": "cls",
@@ -521,11 +542,9 @@ def _world(kind, carries, n_train=90, n_test=60, seed=0):
 
 
 #: the embedded default's probe settings (what rule family_probe passes on), at fewer resamples
-PROBES_CFG = {
-    k: v
-    for k, v in load_yaml(ROOT / "config" / "config.yaml")["probes"].items()
-    if k not in ("families", "seeds")
-} | {"bootstrap": 300}
+PROBES_CFG = {k: v for k, v in validated()["probes"].items() if k not in ("families", "seeds")} | {
+    "bootstrap": 300
+}
 
 
 @pytest.mark.parametrize("kind", ["ridge", "logistic"])

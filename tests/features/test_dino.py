@@ -113,9 +113,15 @@ def test_dino_head_outputs_cosines_to_prototypes():
 
 def test_multi_crop_shapes_are_seeded():
     x = torch.rand(3, 3, 56, 56, generator=torch.Generator().manual_seed(4))
-    a = multi_crop(x, torch.Generator().manual_seed(5), global_size=56, local_size=28, n_local=3)
-    b = multi_crop(x, torch.Generator().manual_seed(5), global_size=56, local_size=28, n_local=3)
-    c = multi_crop(x, torch.Generator().manual_seed(6), global_size=56, local_size=28, n_local=3)
+    a = multi_crop(
+        x, torch.Generator().manual_seed(5), global_size=56, local_size=28, n_local=3, jitter=0.4
+    )
+    b = multi_crop(
+        x, torch.Generator().manual_seed(5), global_size=56, local_size=28, n_local=3, jitter=0.4
+    )
+    c = multi_crop(
+        x, torch.Generator().manual_seed(6), global_size=56, local_size=28, n_local=3, jitter=0.4
+    )
     assert [tuple(v.shape) for v in a] == [(3, 3, 56, 56)] * 2 + [(3, 3, 28, 28)] * 3
     assert all(torch.equal(u, v) for u, v in zip(a, b, strict=True))
     assert not torch.equal(a[0], c[0])
@@ -147,7 +153,9 @@ def pretrain(images, *, arch="vit_tiny", image_size=28, progress=None, **changes
     """`pretrain_dino` of a ViT-tiny on 28-pixel frames with `DinoSettings.tiny` (14-pixel
     local crops), `changes` overriding its fields."""
     settings = DinoSettings.tiny(local_size=14, **changes)
-    return pretrain_dino(images, settings, arch=arch, image_size=image_size, progress=progress)
+    return pretrain_dino(
+        images, settings, arch=arch, image_size=image_size, progress=progress, device="cpu"
+    )
 
 
 def _tiny_images(n: int, seed: int) -> np.ndarray:
@@ -405,8 +413,8 @@ def test_pretraining_imports_neither_dynamo_nor_inductor():
         from tacgen_lib.features.settings import DinoSettings, MaeSettings
 
         frames = np.random.default_rng(0).integers(0, 256, (8, 28, 28, 3), dtype=np.uint8)
-        pretrain_dino(frames, DinoSettings.tiny(epochs=1, batch_size=8), arch="vit_tiny", image_size=28)
-        pretrain_mae(frames, MaeSettings.tiny(epochs=1, batch_size=8), arch="vit_tiny", image_size=28)
+        pretrain_dino(frames, DinoSettings.tiny(epochs=1, batch_size=8), arch="vit_tiny", image_size=28, device="cpu")
+        pretrain_mae(frames, MaeSettings.tiny(epochs=1, batch_size=8), arch="vit_tiny", image_size=28, device="cpu")
         print(sorted(m for m in ("torch._dynamo", "torch._inductor") if m in sys.modules))
         """
     )

@@ -49,7 +49,7 @@ def test_to_unit_tensor_scales_and_resizes():
 @pytest.mark.parametrize("pool", ["cls", "mean_patch"])
 def test_extract_features_matches_manual_forward(model, pool):
     imgs = _images(5)
-    got = extract_features(model, imgs, image_size=56, batch_size=2, pool=pool)
+    got = extract_features(model, imgs, image_size=56, batch_size=2, pool=pool, device="cpu")
     assert got.dtype == np.float32 and got.shape == (5, model.embed_dim)
     with torch.inference_mode():
         out = model.eval().forward_features(imagenet_normalise(to_unit_tensor(imgs, 56)))
@@ -64,31 +64,42 @@ def test_extract_features_matches_manual_forward(model, pool):
 def test_extract_features_is_bytewise_deterministic_and_restores_mode(model):
     imgs = _images(7, seed=1)
     model.train()
-    a = extract_features(model, imgs, image_size=56, batch_size=3, pool="cls")
+    a = extract_features(model, imgs, image_size=56, batch_size=3, pool="cls", device="cpu")
     assert model.training
-    b = extract_features(model, imgs, image_size=56, batch_size=3, pool="cls")
+    b = extract_features(model, imgs, image_size=56, batch_size=3, pool="cls", device="cpu")
     assert a.tobytes() == b.tobytes()
     # other batch sizes agree numerically (GEMM blocking may differ in the last bits): as in
     # test_extract_features_matches_manual_forward, ~1e-5 of the O(1) features; rtol 1e-4
     # for the CLS token's larger entries (up to 3.3)
-    c = extract_features(model, imgs, image_size=56, batch_size=7, pool="cls")
+    c = extract_features(model, imgs, image_size=56, batch_size=7, pool="cls", device="cpu")
     np.testing.assert_allclose(a, c, rtol=1e-4, atol=1e-5)
 
 
 def test_extract_features_other_image_sizes_interpolate_pos_embed(model):
-    feats = extract_features(model, _images(2), image_size=112, batch_size=2, pool="mean_patch")
+    feats = extract_features(
+        model, _images(2), image_size=112, batch_size=2, pool="mean_patch", device="cpu"
+    )
     assert feats.shape == (2, model.embed_dim) and np.isfinite(feats).all()
 
 
 def test_extract_features_errors(model):
     with pytest.raises(TypeError, match="uint8"):
-        extract_features(model, _images(2).astype(np.float32), image_size=56)
+        extract_features(
+            model,
+            _images(2).astype(np.float32),
+            image_size=56,
+            device="cpu",
+            batch_size=64,
+            pool="cls",
+        )
     with pytest.raises(ValueError, match=r"\(N, H, W, 3\)"):
-        extract_features(model, _images(2)[..., 0], image_size=56)
+        extract_features(
+            model, _images(2)[..., 0], image_size=56, device="cpu", batch_size=64, pool="cls"
+        )
     with pytest.raises(ValueError, match="pool must be"):
-        extract_features(model, _images(2), image_size=56, pool="max")  # type: ignore[arg-type]
+        extract_features(model, _images(2), image_size=56, pool="max", device="cpu", batch_size=64)  # type: ignore[arg-type]
     with pytest.raises(ValueError, match="not a multiple of the patch size"):
-        extract_features(model, _images(2), image_size=50)
+        extract_features(model, _images(2), image_size=50, device="cpu", batch_size=64, pool="cls")
 
 
 def test_pixel_features_are_area_means_in_unit_range():
@@ -103,7 +114,7 @@ def test_pixel_features_are_area_means_in_unit_range():
 
 def test_pixel_features_matches_cv2_for_non_integer_factor():
     imgs = _images(2, 37, 53, seed=3)
-    got = pixel_features(imgs)
+    got = pixel_features(imgs, size=(16, 16))
     for i in range(2):
         ref = cv2.resize(imgs[i], (16, 16), interpolation=cv2.INTER_AREA).astype(np.float32) / 255
         np.testing.assert_array_equal(got[i], ref.reshape(-1))

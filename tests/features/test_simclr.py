@@ -32,22 +32,37 @@ def test_pretrain_simclr_is_bit_identical_when_run_twice_and_its_loss_falls():
     frames = _frames()
     settings = SimclrSettings.tiny(epochs=6, batch_size=16, lr=3e-3)
     torch.set_num_threads(1)
-    one = pretrain_simclr(frames, settings, arch="resnet_tiny", image_size=32)
-    two = pretrain_simclr(frames, settings, arch="resnet_tiny", image_size=32)
+    one = pretrain_simclr(
+        frames, settings, arch="resnet_tiny", image_size=32, device="cpu", pool="cls"
+    )
+    two = pretrain_simclr(
+        frames, settings, arch="resnet_tiny", image_size=32, device="cpu", pool="cls"
+    )
     assert_same_backbone(one, two)
     assert_loss_falls(one.curve, epochs=6)
     model = one.backbone()
     random = random_resnet("resnet_tiny", seed=settings.seed)
     x = frames[:4]
-    learnt = extract_features(model, x, image_size=32)
+    learnt = extract_features(model, x, image_size=32, device="cpu", batch_size=64, pool="cls")
     assert learnt.shape == (4, 128) and np.isfinite(learnt).all()
-    assert not np.array_equal(learnt, extract_features(random, x, image_size=32))
+    assert not np.array_equal(
+        learnt, extract_features(random, x, image_size=32, device="cpu", batch_size=64, pool="cls")
+    )
 
 
 def test_another_seed_gives_another_backbone():
     frames = _frames(n=16)
-    a = pretrain_simclr(frames, SimclrSettings.tiny(), arch="resnet_tiny", image_size=32)
-    b = pretrain_simclr(frames, SimclrSettings.tiny(seed=1), arch="resnet_tiny", image_size=32)
+    a = pretrain_simclr(
+        frames, SimclrSettings.tiny(), arch="resnet_tiny", image_size=32, device="cpu", pool="cls"
+    )
+    b = pretrain_simclr(
+        frames,
+        SimclrSettings.tiny(seed=1),
+        arch="resnet_tiny",
+        image_size=32,
+        device="cpu",
+        pool="cls",
+    )
     assert not torch.equal(a.backbone_state["conv1.weight"], b.backbone_state["conv1.weight"])
 
 
@@ -68,13 +83,27 @@ def test_grey_views_equal_a_float64_reference(p):
 def test_pretrain_simclr_refuses_a_vit_foreign_frames_and_a_single_frame():
     frames = _frames(n=4)
     with pytest.raises(ValueError, match="'vit_tiny' is not a ResNet"):
-        pretrain_simclr(frames, SimclrSettings.tiny(), arch="vit_tiny", image_size=28)
+        pretrain_simclr(
+            frames, SimclrSettings.tiny(), arch="vit_tiny", image_size=28, device="cpu", pool="cls"
+        )
     with pytest.raises(ValueError, match="expected uint8 frames"):
         pretrain_simclr(
-            frames.astype(np.float32), SimclrSettings.tiny(), arch="resnet_tiny", image_size=32
+            frames.astype(np.float32),
+            SimclrSettings.tiny(),
+            arch="resnet_tiny",
+            image_size=32,
+            device="cpu",
+            pool="cls",
         )
     with pytest.raises(ValueError, match="at least 2 frames"):
-        pretrain_simclr(frames[:1], SimclrSettings.tiny(), arch="resnet_tiny", image_size=32)
+        pretrain_simclr(
+            frames[:1],
+            SimclrSettings.tiny(),
+            arch="resnet_tiny",
+            image_size=32,
+            device="cpu",
+            pool="cls",
+        )
 
 
 def test_settings_are_the_schema_s_and_the_estimate_prices_their_epochs():
@@ -83,7 +112,8 @@ def test_settings_are_the_schema_s_and_the_estimate_prices_their_epochs():
     with pytest.raises(ValueError, match="grey"):
         SimclrSettings(grey=1.5)
     config = {"features": {"simclr": {"epochs": 7}, "pretrain": {"epochs": 0}}}
-    assert pretraining(config, {"arch": "resnet_tiny", "objective": "simclr"}) == ("simclr", 7)
+    spec = {"arch": "resnet_tiny", "objective": "simclr", "checkpoint": None}
+    assert pretraining(config, spec) == ("simclr", 7)
 
 
 def test_the_projection_reads_the_stage_statistics_for_the_stages_pool(monkeypatch):
@@ -102,9 +132,13 @@ def test_the_projection_reads_the_stage_statistics_for_the_stages_pool(monkeypat
     monkeypatch.setattr(ResNet, "stage_statistics", counted)
     frames = np.random.default_rng(0).integers(0, 256, size=(16, 40, 40, 3), dtype=np.uint8)
     settings = SimclrSettings.tiny()
-    cls = pretrain_simclr(frames, settings, arch="resnet_tiny", image_size=32)
+    cls = pretrain_simclr(
+        frames, settings, arch="resnet_tiny", image_size=32, device="cpu", pool="cls"
+    )
     assert calls == []
-    stages = pretrain_simclr(frames, settings, arch="resnet_tiny", image_size=32, pool="stages")
+    stages = pretrain_simclr(
+        frames, settings, arch="resnet_tiny", image_size=32, pool="stages", device="cpu"
+    )
     steps = 16 // settings.batch_size
     assert calls == [settings.batch_size] * (2 * steps * settings.epochs)  # both views, each step
     assert any(

@@ -221,6 +221,8 @@ def test_ddim_matches_float64_reference(prediction, steps):
         guidance=1.5,
         seed=3,
         prediction=prediction,
+        eta=0.0,
+        batch=2048,
     )
     ref = ddim_reference(model, sch, cond, initial_noise(7, 6, 3), steps, 1.5, prediction)
     assert np.isfinite(got).all()
@@ -294,14 +296,25 @@ def test_guidance_extremes_stay_finite_and_w0_is_unconditional(guidance):
         )[4:]
         np.testing.assert_array_equal(out, half)
     sch = make_schedule("cosine", 1000)
-    z = sample(model, sch, c, sampler="ddim", steps=10, guidance=guidance, seed=0, prediction="v")
+    z = sample(
+        model,
+        sch,
+        c,
+        sampler="ddim",
+        steps=10,
+        guidance=guidance,
+        seed=0,
+        prediction="v",
+        eta=0.0,
+        batch=2048,
+    )
     assert np.isfinite(z).all()
 
 
 def test_batch_of_one_and_identical_conditions():
     model = random_denoiser().arrays()
     sch = make_schedule("linear", 100)
-    kw = dict(sampler="ddpm", steps=100, guidance=2.0, seed=0, prediction="v")
+    kw = dict(sampler="ddpm", steps=100, guidance=2.0, seed=0, prediction="v", eta=0.0, batch=2048)
     one = sample(model, sch, np.ones((1, 5), np.float32), **kw)
     assert one.shape == (1, 6) and np.isfinite(one).all()
     same = sample(model, sch, np.ones((32, 5), np.float32), **kw)
@@ -410,6 +423,7 @@ def test_sampling_is_identical_given_the_same_seed():
     sch = make_schedule("cosine", 1000)
     cond = np.random.default_rng(0).normal(size=(9, 5)).astype(np.float32)
     kw = {"sampler": "ddim", "steps": 7, "guidance": 2.0, "prediction": "v", "eta": 0.5}
+    kw["batch"] = 2048
     a = sample(model, sch, cond, seed=11, **kw)
     b = sample(model, sch, cond, seed=11, **kw)
     c = sample(model, sch, cond, seed=12, **kw)
@@ -433,6 +447,9 @@ def test_ddim_timesteps_and_sampler_checks():
             steps=10,
             guidance=1.0,
             seed=0,
+            eta=0.0,
+            batch=2048,
+            prediction="eps",
         )
     with pytest.raises(ValueError, match="generate.samplers.ddpm"):
         check_grid({"ddpm": [50]}, 1000)
@@ -467,12 +484,14 @@ def test_training_with_a_constant_dimension_is_finite_and_bit_reproducible(tmp_p
     v, t = linear_pairs()
     t[:, 1] = 7.0
     s = GenerateSettings.tiny()
-    a = fit_generator(t[:120], v[:120], t[120:], v[120:], s, seed=4)
-    b = fit_generator(t[:120], v[:120], t[120:], v[120:], s, seed=4)
+    a = fit_generator(t[:120], v[:120], t[120:], v[120:], s, seed=4, device="cpu")
+    b = fit_generator(t[:120], v[:120], t[120:], v[120:], s, seed=4, device="cpu")
     for k, val in a.model.state_dict().items():
         assert torch.equal(val, b.model.state_dict()[k]), k
     assert all(np.isfinite(c["val_loss"]) for c in a.curve)
-    gen = generate(a.weights(), v[120:], sampler="ddim", steps=5, guidance=1.0, seed=0)
+    gen = generate(
+        a.weights(), v[120:], sampler="ddim", steps=5, guidance=1.0, seed=0, eta=0.0, batch=2048
+    )
     assert np.isfinite(gen).all()
     h1 = save_generator(a, tmp_path / "a.arrow")
     h2 = save_generator(b, tmp_path / "b.arrow")
@@ -491,7 +510,9 @@ def test_training_with_a_constant_dimension_is_finite_and_bit_reproducible(tmp_p
     # sampling with the read arrays is another computation than with the fit's (a reloaded
     # model): within rounding of its 5 DDIM steps, each one denoiser pass (the input layer,
     # per block its norm, embedding and two layers, the head's norm and output layer)
-    again = generate(read, v[120:], sampler="ddim", steps=5, guidance=1.0, seed=0)
+    again = generate(
+        read, v[120:], sampler="ddim", steps=5, guidance=1.0, seed=0, eta=0.0, batch=2048
+    )
     atol = reordered_sum_atol(gen, terms=s.hidden, depth=5 * (3 + 4 * s.blocks))
     np.testing.assert_allclose(again, gen, rtol=0, atol=atol)
     (tmp_path / "a.arrow").write_bytes((tmp_path / "a.arrow").read_bytes() + b"x")
@@ -508,8 +529,10 @@ def test_v_prediction_generator_learns_a_linear_map():
     s = GenerateSettings.tiny(
         steps=600, hidden=64, blocks=2, lr=2e-3, prediction="v", train_steps=1000, time_dim=32
     )
-    fit = fit_generator(t[:300], v[:300], t[300:350], v[300:350], s, seed=0)
-    gen = generate(fit.weights(), v[350:], sampler="ddim", steps=20, guidance=1.0, seed=0)
+    fit = fit_generator(t[:300], v[:300], t[300:350], v[300:350], s, seed=0, device="cpu")
+    gen = generate(
+        fit.weights(), v[350:], sampler="ddim", steps=20, guidance=1.0, seed=0, eta=0.0, batch=2048
+    )
     r = np.corrcoef(gen.ravel(), t[350:].ravel())[0, 1]
     assert r > 0.8, r
 
@@ -570,8 +593,12 @@ def test_evaluation_real_touch_helps_where_generated_touch_cannot():
         permutations=100,
     )
     val = (splits["split"] == "val").to_numpy()
-    fit = fit_generator(t[train.to_numpy()], v[train.to_numpy()], t[val], v[val], s, seed=0)
-    gen = generate(fit.weights(), v, sampler="ddim", steps=10, guidance=1.0, seed=0)
+    fit = fit_generator(
+        t[train.to_numpy()], v[train.to_numpy()], t[val], v[val], s, seed=0, device="cpu"
+    )
+    gen = generate(
+        fit.weights(), v, sampler="ddim", steps=10, guidance=1.0, seed=0, eta=0.0, batch=2048
+    )
     rows = family_rows(manifest, splits, corpus="toy", target="force_p50", kind="ridge")
     ps = small_probes("ridge", [0.1, 1, 10], [1], bootstrap=500)
     spec = TargetSpec("force_p50", rows, ps)

@@ -31,7 +31,7 @@ def test_look_oracle_is_the_float64_mean_of_the_pool_rows_of_each_look(n, k_look
     ids, _, t, rng = _world(n, seed=seed)
     looks = pd.Series({i: f"look{int(rng.integers(k_looks))}" for i in ids})
     pool, rows = ids[: max(1, n // 2)], ids
-    got = look_oracle(t, looks, pool, rows)
+    got = look_oracle(t, looks, pool, rows, min_rows=1)
     for i in rows:
         same = [j for j in pool if looks[j] == looks[i]]
         want = (
@@ -45,7 +45,7 @@ def test_look_oracle_is_the_float64_mean_of_the_pool_rows_of_each_look(n, k_look
 def test_a_look_with_one_pool_row_gives_that_rows_touch_exactly():
     ids, _, t, _ = _world(6)
     looks = {i: "a" for i in ids} | {ids[0]: "single", ids[5]: "single"}
-    got = look_oracle(t, looks, ids[:4], [ids[5]])
+    got = look_oracle(t, looks, ids[:4], [ids[5]], min_rows=1)
     np.testing.assert_array_equal(got.t_gen[ids[5]], t[ids[0]])
     assert got.n_fallback == 0
 
@@ -53,7 +53,7 @@ def test_a_look_with_one_pool_row_gives_that_rows_touch_exactly():
 def test_a_look_absent_from_the_pool_falls_back_to_the_pool_mean_and_is_counted():
     ids, _, t, _ = _world(8)
     looks = {i: "a" for i in ids} | {ids[7]: "never seen"}
-    got = look_oracle(t, looks, ids[:5], ids[5:])
+    got = look_oracle(t, looks, ids[:5], ids[5:], min_rows=1)
     np.testing.assert_allclose(got.t_gen[ids[7]], np.mean([t[i] for i in ids[:5]], axis=0))
     assert got.n_fallback == 1
 
@@ -82,9 +82,9 @@ def test_a_rare_look_backs_off_to_a_coarser_one_before_the_pool_mean():
 def test_look_oracle_refuses_an_empty_pool_and_a_row_without_a_look():
     ids, _, t, _ = _world(4)
     with pytest.raises(ValueError, match="pool is empty"):
-        look_oracle(t, {i: "a" for i in ids}, [], ids)
+        look_oracle(t, {i: "a" for i in ids}, [], ids, min_rows=1)
     with pytest.raises(ValueError, match="'s-0003' has no look"):
-        look_oracle(t, {i: "a" for i in ids[:3]}, ids[:2], ids)
+        look_oracle(t, {i: "a" for i in ids[:3]}, ids[:2], ids, min_rows=1)
 
 
 def test_knn_equals_scikit_learns_regressor_at_the_k_cv_chose():
@@ -104,7 +104,7 @@ def test_knn_equals_scikit_learns_regressor_at_the_k_cv_chose():
 def test_k_larger_than_the_pool_gives_every_row_the_pool_mean():
     ids, v, t, _ = _world(12)
     pool, rows = ids[:4], ids[4:]
-    got = knn_generate(v, t, pool, rows, ks=(500,))
+    got = knn_generate(v, t, pool, rows, ks=(500,), seed=0)
     assert got.k == 4 and np.isnan(got.cv_mse)  # no k fits a CV training fold: capped, no CV
     mean = np.mean([t[i] for i in pool], axis=0)
     for i in rows:
@@ -117,9 +117,9 @@ def test_ladder_rungs_learn_from_the_pool_only():
     looks = {i: f"l{k % 3}" for k, i in enumerate(ids)}
     pool, rows = ids[:25], ids[25:]
     gen_mean = {i: np.zeros(5) for i in rows}
-    a = ladder_rungs(v, t, looks, pool, rows, gen_mean, ks=(1, 2, 4), seed=0)
+    a = ladder_rungs(v, t, looks, pool, rows, gen_mean, ks=(1, 2, 4), seed=0, look_min_rows=1)
     t2 = dict(t) | {i: t[i] + 100.0 for i in rows}
-    b = ladder_rungs(v, t2, looks, pool, rows, gen_mean, ks=(1, 2, 4), seed=0)
+    b = ladder_rungs(v, t2, looks, pool, rows, gen_mean, ks=(1, 2, 4), seed=0, look_min_rows=1)
     for rung in ("look_oracle", "knn", "ridge", "gen_mean"):
         for i in rows:
             np.testing.assert_array_equal(a.t_gen[rung][i], b.t_gen[rung][i])

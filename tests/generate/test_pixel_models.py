@@ -69,7 +69,9 @@ def data() -> dict[str, np.ndarray]:
 
 
 def _fit(fit_fn, settings, data, seed=0):
-    return fit_fn(data["rgb_tr"], data["tac_tr"], data["rgb_va"], data["tac_va"], settings, seed)
+    return fit_fn(
+        data["rgb_tr"], data["tac_tr"], data["rgb_va"], data["tac_va"], settings, seed, device="cpu"
+    )
 
 
 @pytest.fixture(scope="module")
@@ -110,6 +112,7 @@ def sample_kw(fit, **changes):
         "guidance": 1.0,
         "eta": 0.0,
         "seed": 7,
+        "batch": 256,
     }
     return {**kw, **changes}
 
@@ -146,11 +149,11 @@ def test_frames_refused_with_the_reason():
 
 def test_batch_of_one_keeps_shapes(p2p, ddpm, data):
     one = data["rgb_va"][:1]
-    out = translate(p2p.model, one)
+    out = translate(p2p.model, one, batch=256)
     assert out.shape == (1, 3, *SIZE) and out.dtype == np.float32
     frames = sample_pixel_ddpm(ddpm.model, one, **sample_kw(ddpm, guidance=2.0, eta=1.0))
     assert frames.shape == (1, 3, *SIZE) and frames.dtype == np.float32
-    assert translate(p2p.model, data["rgb_va"][:0]).shape == (0, 3, *SIZE)
+    assert translate(p2p.model, data["rgb_va"][:0], batch=256).shape == (0, 3, *SIZE)
 
 
 def test_all_background_target_trains_finite(data):
@@ -158,11 +161,15 @@ def test_all_background_target_trains_finite(data):
     zeros = np.zeros_like(data["tac_tr"])
     zeros_va = np.zeros_like(data["tac_va"])
     rgb, rgb_va = data["rgb_tr"], data["rgb_va"]
-    p = fit_pix2pix(rgb, zeros, rgb_va, zeros_va, Pix2PixSettings.tiny(steps=20), seed=1)
-    d = fit_pixel_ddpm(rgb, zeros, rgb_va, zeros_va, PixelDDPMSettings.tiny(steps=20), seed=1)
+    p = fit_pix2pix(
+        rgb, zeros, rgb_va, zeros_va, Pix2PixSettings.tiny(steps=20), seed=1, device="cpu"
+    )
+    d = fit_pixel_ddpm(
+        rgb, zeros, rgb_va, zeros_va, PixelDDPMSettings.tiny(steps=20), seed=1, device="cpu"
+    )
     for fit in (p, d):
         assert np.isfinite(fit.curve.iloc[1:].to_numpy()).all()
-    assert np.isfinite(translate(p.model, rgb_va)).all()
+    assert np.isfinite(translate(p.model, rgb_va, batch=256)).all()
     assert np.isfinite(sample_pixel_ddpm(d.model, rgb_va[:4], **sample_kw(d, eta=1.0))).all()
 
 
@@ -171,7 +178,7 @@ def test_outputs_are_never_clipped(p2p, ddpm, data):
     g = copy.deepcopy(p2p.model)
     with torch.no_grad():
         g.out.bias += 4.0
-    assert translate(g, data["rgb_va"]).mean() > 3.0
+    assert translate(g, data["rgb_va"], batch=256).mean() > 3.0
     u = copy.deepcopy(ddpm.model)
     with torch.no_grad():
         u.conv_out.bias += 4.0  # v + 4: x0 = sqrt(abar) x_t - sqrt(1 - abar) (v + 4)
@@ -232,7 +239,9 @@ def test_extreme_guidance_is_finite(ddpm, data, w):
 
 def test_same_seed_same_frames_bit_for_bit(p2p, ddpm, data):
     rgb = data["rgb_va"][:6]
-    np.testing.assert_array_equal(translate(p2p.model, rgb), translate(p2p.model, rgb))
+    np.testing.assert_array_equal(
+        translate(p2p.model, rgb, batch=256), translate(p2p.model, rgb, batch=256)
+    )
     kw = sample_kw(ddpm, guidance=2.0, eta=0.5)
     a = sample_pixel_ddpm(ddpm.model, rgb, **kw)
     np.testing.assert_array_equal(a, sample_pixel_ddpm(ddpm.model, rgb, **kw))
@@ -246,8 +255,8 @@ def test_batch_one_vs_batch_n_within_float32_rounding(p2p, ddpm, data, w, eta):
     rgb = data["rgb_va"][:8]
     steps = 5
     kw = sample_kw(ddpm, steps=steps, guidance=w, eta=eta)
-    one = sample_pixel_ddpm(ddpm.model, rgb, batch=1, **kw)
-    many = sample_pixel_ddpm(ddpm.model, rgb, batch=8, **kw)
+    one = sample_pixel_ddpm(ddpm.model, rgb, **{**kw, "batch": 1})
+    many = sample_pixel_ddpm(ddpm.model, rgb, **{**kw, "batch": 8})
     np.testing.assert_allclose(one, many, rtol=0, atol=rounding_atol(many, steps))
     g1, g8 = translate(p2p.model, rgb, batch=1), translate(p2p.model, rgb, batch=8)
     np.testing.assert_allclose(g1, g8, rtol=0, atol=rounding_atol(g8))
@@ -262,7 +271,7 @@ def test_pix2pix_learns_the_toy_map(p2p, data):
     init = p2p.curve.loc[p2p.curve.step == 0, "val_l1"].item()
     assert init == pytest.approx(float(np.abs(data["tac_va"]).mean()), rel=0.2)
     assert p2p.best_val < 0.5 * init and p2p.best_step > 0
-    again = np.mean(np.abs(translate(p2p.model, data["rgb_va"]) - data["tac_va"]))
+    again = np.mean(np.abs(translate(p2p.model, data["rgb_va"], batch=256) - data["tac_va"]))
     assert again == pytest.approx(p2p.best_val, rel=1e-6)  # the kept G is the best one
 
 
@@ -318,7 +327,7 @@ def test_weights_round_trip_and_same_bytes(kind, p2p, ddpm, data, tmp_path):
     # the two models' frames agree within rounding (`rounding_atol`), not bit for bit
     rgb = data["rgb_va"][:5]
     if kind == "pix2pix":
-        got, want = translate(back.model, rgb), translate(fit.model, rgb)
+        got, want = translate(back.model, rgb, batch=256), translate(fit.model, rgb, batch=256)
         np.testing.assert_allclose(got, want, rtol=0, atol=rounding_atol(want))
     else:
         kw = sample_kw(fit, guidance=2.0, eta=1.0)

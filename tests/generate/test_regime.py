@@ -43,6 +43,7 @@ from tacgen_lib.generate.regime_sets import (
     regime_corpora,
 )
 from tacgen_lib.generate.settings import GenerateSettings
+from tacgen_lib.generate.visibility import VisibilitySettings
 from tacgen_lib.probes.bootstrap import fixed_test_bootstrap, resample_indices, score_interval
 from tacgen_lib.probes.rows import family_rows
 from tacgen_lib.probes.settings import ProbeSettings
@@ -140,7 +141,7 @@ def test_a_job_draws_the_largest_sets_and_refuses_overlapping_ones(monkeypatch):
     want = draw_regime_sets(splits, "nat", n_labelled=40, n_pool=100, seed=3)
     assert list(got.labelled) == list(want.labelled) and list(got.pool) == list(want.pool)
     # a draw whose pool took a test row is refused, naming the rule
-    bad = RegimeSets(want.labelled, np.concatenate([want.pool, want.test[:1]]), want.test)
+    bad = RegimeSets(want.labelled, np.concatenate([want.pool, want.test[:1]]), want.test, seed=0)
     monkeypatch.setattr(regime_sets, "draw_regime_sets", lambda *a, **k: bad)
     with pytest.raises(LeakageError, match="rule regime_evaluate"):
         job_regime_sets(splits, "nat", regime, 3, rule="regime_evaluate")
@@ -158,10 +159,10 @@ def test_sizes_that_cannot_be_drawn_disjointly_are_refused_naming_the_corpus():
 def test_overlapping_or_held_out_rows_are_refused():
     _, splits, _, _ = world(rho=1.0)
     s = draw_regime_sets(splits, "nat", n_labelled=10, n_pool=20, seed=0)
-    overlap = RegimeSets(s.labelled, np.concatenate([s.pool, s.labelled[:1]]), s.test)
+    overlap = RegimeSets(s.labelled, np.concatenate([s.pool, s.labelled[:1]]), s.test, seed=0)
     with pytest.raises(LeakageError, match=f"labelled and pool .*{s.labelled[0]}"):
         assert_regime_disjoint(overlap, splits, rule="regime_generators")
-    test_in_pool = RegimeSets(s.labelled, np.concatenate([s.pool, s.test[:1]]), s.test[1:])
+    test_in_pool = RegimeSets(s.labelled, np.concatenate([s.pool, s.test[:1]]), s.test[1:], seed=0)
     with pytest.raises(LeakageError, match="regime_generators.*'test'"):
         assert_regime_disjoint(test_in_pool, splits, rule="regime_generators")
 
@@ -200,7 +201,16 @@ def test_pool_generators_in_workers_sample_what_one_process_samples():
 
     def run(workers: int):
         return pool_generators(
-            vision, tactile, sets, cells, settings, regime, rows=rows, seed=3, workers=workers
+            vision,
+            tactile,
+            sets,
+            cells,
+            settings,
+            regime,
+            rows=rows,
+            seed=3,
+            workers=workers,
+            device="cpu",
         )
 
     threads = torch.get_num_threads()
@@ -232,7 +242,7 @@ def test_the_mean_of_one_sample_is_that_sample():
     )
     rows = sorted(str(i) for i in sets.test)
     (fit,) = pool_generators(
-        vision, tactile, sets, [(60, "real")], settings, regime, rows=rows, seed=1
+        vision, tactile, sets, [(60, "real")], settings, regime, rows=rows, seed=1, device="cpu"
     )
     np.testing.assert_array_equal(fit.t_gen_mean, fit.t_gen)
 
@@ -359,7 +369,9 @@ def test_cell_rows_are_the_pairwise_fixed_test_bootstrap(metric):
             (("v", "nonlinear"), "nonlinear_v"),
             (gd, "distilled"),
         ):
-            want = fixed_test_bootstrap(y, fits[ref].pred, fits[k].pred, metric, indices=idx)
+            want = fixed_test_bootstrap(
+                y, fits[ref].pred, fits[k].pred, metric, len(idx), 0, indices=idx
+            )
             assert r[f"delta_vs_{col}"] == want["delta"]
             assert r["score"] == want["vt_score"]
             got = (r[f"ci_low_vs_{col}"], r[f"ci_high_vs_{col}"])
@@ -419,25 +431,31 @@ def _evaluate(rho: float, *, n_labelled=(6, 40), t_gen_from_real: bool = False, 
     # the world's look is its appearance class (the oracle's key)
     looks = manifest.set_index("sample_id")["appearance_id"].astype(str)
     rows = sorted(str(i) for i in [*sets.labelled_union(draws), *sets.test])
-    rungs = ladder_rungs(vision, tactile, looks, sets.pool_ids(100), rows, noisy, seed=0)
+    rungs = ladder_rungs(
+        vision,
+        tactile,
+        looks,
+        sets.pool_ids(100),
+        rows,
+        noisy,
+        seed=0,
+        look_min_rows=1,
+        ks=(1, 2, 4, 8, 16, 32, 64),
+    )
     return evaluate_regime(
         targets,
         sets,
+        RegimeSettings(n_labelled=n_labelled, n_pool=(100,), bootstrap=200, label_draws=draws),
+        VisibilitySettings(gammas=(0.5, 2.0), C=(1.0, 100.0)),
         corpus="nat",
         rho=rho,
         seed=0,
-        n_labelled=n_labelled,
-        n_pool=[100],
         vision=vision,
         t_real=tactile,
         t_gen=t_gen,
         ladder={100: rungs.t_gen},
         gammas=[0.5, 2.0],
-        bootstrap=200,
         n_classes=6,
-        ceiling_gammas=[0.5, 2.0],
-        ceiling_C=[1.0, 100.0],
-        label_draws=draws,
         workers=workers,
     )
 

@@ -27,7 +27,7 @@ def weights(request):
     """A tiny trained generator (not zero weights: the output layer starts at zero)."""
     t, v = _pairs()
     s = GenerateSettings.tiny(prediction=request.param)
-    return fit_generator(t[:150], v[:150], t[150:], v[150:], s, seed=3).weights()
+    return fit_generator(t[:150], v[:150], t[150:], v[150:], s, seed=3, device="cpu").weights()
 
 
 @pytest.mark.parametrize(
@@ -55,7 +55,7 @@ def test_the_torch_sampler_equals_the_numpy_one_on_the_cpu(weights, sampler, ste
 
 
 def test_the_torch_denoiser_is_the_trained_one(weights):
-    model = denoiser_module(weights)
+    model = denoiser_module(weights, device="cpu")
     assert not model.training and next(model.parameters()).device.type == "cpu"
     x = torch.randn(3, 4, generator=torch.Generator().manual_seed(0))
     c = torch.randn(3, 5, generator=torch.Generator().manual_seed(1))
@@ -68,6 +68,26 @@ def test_the_torch_denoiser_is_the_trained_one(weights):
 def test_the_torch_sampler_refuses_what_the_numpy_one_refuses(weights):
     cond = np.zeros((2, 5))
     with pytest.raises(ValueError, match="sampler"):
-        generate_torch(weights, cond, device="cpu", sampler="euler", steps=5, guidance=1, seed=0)
+        generate_torch(
+            weights,
+            cond,
+            device="cpu",
+            sampler="euler",
+            steps=5,
+            guidance=1,
+            seed=0,
+            eta=0.0,
+            batch=2048,
+        )
     with pytest.raises(ValueError, match="all T"):
-        generate_torch(weights, cond, device="cpu", sampler="ddpm", steps=5, guidance=1, seed=0)
+        generate_torch(
+            weights,
+            cond,
+            device="cpu",
+            sampler="ddpm",
+            steps=5,
+            guidance=1,
+            seed=0,
+            eta=0.0,
+            batch=2048,
+        )

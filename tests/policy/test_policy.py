@@ -66,6 +66,7 @@ def test_bc_fit_is_reproducible_and_learns():
     x = rng.normal(size=(64, 5))
     force = np.exp(0.8 * x[:, 0])
     kw = dict(hidden=32, layers=3, epochs=150, lr=3e-3, weight_decay=0.0, batch_size=16, seed=1)
+    kw["device"] = "cpu"
     a, la = bc.fit_bc(x, force, **kw)
     b, lb = bc.fit_bc(x, force, **kw)
     assert la == lb

@@ -78,6 +78,7 @@ def run(kind, *, carries, seed=42, **kw):
         heads_variant="clip128",
         settings=settings(kind, seed=seed),
         labels={"design": "paired", "null_corpus": not carries, "vision": "vit"},
+        controls=True,
     )
 
 
@@ -401,6 +402,7 @@ def test_unfittable_logistic_comparison_is_a_failed_row_not_a_crash():
         fusions=["concat"],
         heads_variant="clip128",
         settings=settings("logistic"),
+        controls=True,
     )
     assert set(res.rows["status"]) == {"failed"}
     assert res.rows["notes"].str.contains("has 1 training row").all()

@@ -69,7 +69,7 @@ def test_standardised_ridge_equals_sklearn_pipeline_gridsearch():
         cv=cv,
         scoring="r2",
     ).fit(X, y)
-    got = fit_standardised_ridge(X, y, LAMBDAS, n_folds=4, seed=3)
+    got = fit_standardised_ridge(X, y, LAMBDAS, n_folds=4, seed=3, repeats=1)
     assert got.lam == ref.best_params_["ridge__alpha"]
     np.testing.assert_allclose(got.cv_scores, ref.cv_results_["mean_test_score"], rtol=1e-9)
     np.testing.assert_allclose(got.predict(Xt), ref.predict(Xt), rtol=1e-8, atol=1e-10)
@@ -82,7 +82,7 @@ def test_standardised_ridge_equals_sklearn_pipeline_gridsearch():
 
 def test_standardisation_is_fitted_on_training_rows_only():
     X, y, Xt, _ = regression_data()
-    probe = fit_standardised_ridge(X, y, LAMBDAS, n_folds=4, seed=3)
+    probe = fit_standardised_ridge(X, y, LAMBDAS, n_folds=4, seed=3, repeats=1)
     np.testing.assert_allclose(probe.scaler.mean_, X.mean(axis=0))
     np.testing.assert_allclose(probe.scaler.scale_, X.std(axis=0))
     # Test rows cannot move it: predictions of the same test rows are the same whatever

@@ -128,7 +128,7 @@ def test_select_lambda_cv_equals_gridsearchcv(n, p, lams, dup, expected):
     X, y = regression_data(n, p, seed=5)
     if dup:
         X[1::4] = X[0::4]  # rows 4k+1 duplicate rows 4k, with other targets
-    sel = select_lambda_cv(X, y, lams, n_folds=5, seed=11)
+    sel = select_lambda_cv(X, y, lams, n_folds=5, seed=11, repeats=1)
     cv = [(np.setdiff1d(np.arange(n), f), f) for f in sel.folds]
     gs = GridSearchCV(Ridge(solver="svd"), {"alpha": lams}, cv=cv).fit(X, y)
     assert sel.lam == gs.best_params_["alpha"]
@@ -149,7 +149,7 @@ def test_folds_are_deterministic_partitions():
 
 def test_fit_ridge_probe_refit_equals_sklearn():
     X, y = regression_data(90, 20, seed=2)
-    probe = fit_ridge_probe(X[:70], y[:70], LAMBDAS, seed=1)
+    probe = fit_ridge_probe(X[:70], y[:70], LAMBDAS, seed=1, repeats=1, n_folds=5)
     ref = Ridge(alpha=probe.lam).fit(X[:70], y[:70])
     np.testing.assert_allclose(probe.predict(X[70:]), ref.predict(X[70:]), rtol=1e-9)
     fixed = FixedRidge(probe.lam).fit_predict(X[:70], y[:70], X[70:])
@@ -188,9 +188,9 @@ def test_non_finite_feature_names_the_sample(bad):
     with pytest.raises(ValueError, match=r"sample_id 'p-0007'.*column 2"):
         ridge_path(X, y, [1.0], sample_ids=ids)
     with pytest.raises(ValueError, match=r"sample_id 'p-0007'"):
-        select_lambda_cv(X, y, [1.0], sample_ids=ids)
+        select_lambda_cv(X, y, [1.0], sample_ids=ids, repeats=1, seed=0, n_folds=5)
     with pytest.raises(ValueError, match=r"sample_id 'p-0007'"):
-        fit_logistic(X, (y > 0).astype(int), [1.0], seed=0, sample_ids=ids)
+        fit_logistic(X, (y > 0).astype(int), [1.0], seed=0, sample_ids=ids, n_folds=5, repeats=1)
 
 
 def test_shape_mismatches_are_named():
@@ -245,7 +245,7 @@ def test_logistic_separable_converges_without_warnings_and_matches_reference():
     X, y = separable_three_class()
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # any swallowed-then-leaked warning fails the test
-        probe = fit_logistic(X, y, [0.1, 1.0, 10.0], seed=0)
+        probe = fit_logistic(X, y, [0.1, 1.0, 10.0], seed=0, n_folds=5, repeats=1)
     assert probe.converged and probe.cv_converged
     assert 0 < probe.n_iter < probe.fit.max_iter
     assert accuracy(y, probe.predict(X)) == 1.0
@@ -257,10 +257,12 @@ def test_logistic_raises_max_iter_instead_of_swallowing():
     X, y = separable_three_class(seed=1)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        probe = fit_logistic(X, y, [10.0], seed=0, max_iter=2)
+        probe = fit_logistic(X, y, [10.0], seed=0, max_iter=2, n_folds=5, repeats=1)
     assert probe.converged and probe.fit.max_iter > 2
     with pytest.warns(ConvergenceWarning, match="did not converge within max_iter=2"):
-        capped = fit_logistic(X, y, [10.0], seed=0, max_iter=1, max_iter_cap=2)
+        capped = fit_logistic(
+            X, y, [10.0], seed=0, max_iter=1, max_iter_cap=2, n_folds=5, repeats=1
+        )
     assert not capped.converged and not capped.cv_converged
 
 
@@ -269,7 +271,7 @@ def test_logistic_C_selection_equals_gridsearchcv_on_same_folds():
     X = rng.standard_normal((120, 6))
     y = np.digitize(X[:, 0] + X[:, 1] + 0.8 * rng.standard_normal(120), [-0.7, 0.7])
     grid = [1e-3, 1e-2, 0.1, 1.0]
-    probe = fit_logistic(X, y, grid, seed=3)
+    probe = fit_logistic(X, y, grid, seed=3, n_folds=5, repeats=1)
     folds = make_folds(120, 5, 3, labels=y)
     cv = [(np.setdiff1d(np.arange(120), f), f) for f in folds]
     pipe = Pipeline([("s", StandardScaler()), ("m", LogisticRegression(max_iter=10000, tol=1e-6))])
@@ -309,9 +311,9 @@ def test_batched_cv_gives_the_scikit_learn_loops_scores(n, p, classes, grid, mon
     labels = np.array(["hard", "medium", "soft"], dtype=object)[y]  # labels as the probes see them
     folds = make_folds(n, 5, 7, labels=labels)
     assert logistic.cv_batches(X.shape, folds)
-    batched = fit_logistic(X, labels, grid, seed=7)
+    batched = fit_logistic(X, labels, grid, seed=7, n_folds=5, repeats=1)
     monkeypatch.setattr(logistic, "cv_batches", lambda shape, folds: False)
-    loop = fit_logistic(X, labels, grid, seed=7)
+    loop = fit_logistic(X, labels, grid, seed=7, n_folds=5, repeats=1)
     assert batched.cv_converged and loop.cv_converged
     # two solvers stopped at tol 1e-6 (their decisions differ by up to ~3e-2 here, on
     # held-out rows as close as ~1e-3 to the boundary): the loop's own fold fits, the same
@@ -336,7 +338,7 @@ def test_folds_the_batched_solve_leaves_unfinished_are_refitted_by_scikit_learn(
     C = np.array([0.1, 1.0, 10.0])
     scores, converged, _ = logistic._cv_scores_batched(X, y, folds, C, 12800, 12800, 1e-6, budget=1)
     monkeypatch.setattr(logistic, "cv_batches", lambda shape, folds: False)
-    loop = fit_logistic(X, y, list(C), seed=1)
+    loop = fit_logistic(X, y, list(C), seed=1, n_folds=5, repeats=1)
     np.testing.assert_array_equal(scores.mean(axis=0), loop.cv_scores)
     assert converged
 
@@ -353,9 +355,9 @@ def test_batched_false_is_the_scikit_learn_loop(monkeypatch):
         raise AssertionError("the batched solver ran")
 
     monkeypatch.setattr(logistic, "fit_logistic_batch", refuse)
-    unbatched = fit_logistic(X, y, [0.1, 1.0, 10.0], seed=3, batched=False)
+    unbatched = fit_logistic(X, y, [0.1, 1.0, 10.0], seed=3, batched=False, n_folds=5, repeats=1)
     monkeypatch.setattr(logistic, "cv_batches", lambda shape, folds: False)
-    loop = fit_logistic(X, y, [0.1, 1.0, 10.0], seed=3)
+    loop = fit_logistic(X, y, [0.1, 1.0, 10.0], seed=3, n_folds=5, repeats=1)
     np.testing.assert_array_equal(unbatched.cv_scores, loop.cv_scores)
     assert unbatched.C == loop.C
     np.testing.assert_array_equal(unbatched.predict_proba(X), loop.predict_proba(X))
@@ -392,7 +394,7 @@ def test_cv_with_fewer_rows_than_features_per_fold_is_not_batched():
 @pytest.mark.parametrize("n,p", [(60, 12), (25, 70)])  # primal and dual deletion paths
 def test_ridge_probe_grid_refit_equals_sklearn_at_every_lambda(n, p):
     X, y = regression_data(n + 15, p, seed=9)
-    probe = fit_ridge_probe(X[:n], y[:n], LAMBDAS, seed=2)
+    probe = fit_ridge_probe(X[:n], y[:n], LAMBDAS, seed=2, repeats=1, n_folds=5)
     assert set(probe.selection.solver) == {"deletion"}
     grid = probe.predict_grid(X[n:])
     for i, lam in enumerate(LAMBDAS):

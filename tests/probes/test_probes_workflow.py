@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 import pytest
-from snakemake_run import copy_tree, merged_config, report_page, smk
+from snakemake_run import copy_tree, merged_config, report_page, smk, validated
 
 from tacgen_lib.io import edges  # noqa: E402
 from tacgen_lib.probes.compare import CONTROLS  # noqa: E402
@@ -160,6 +160,12 @@ def cfg() -> dict:
 
 
 @pytest.fixture(scope="module")
+def robustness() -> dict:
+    """config probes.robustness as the run reads it: validated, the schema's defaults filled."""
+    return validated("test.yaml")["probes"]["robustness"]
+
+
+@pytest.fixture(scope="module")
 def probes_run(tmp_path_factory, cfg) -> Path:
     work = copy_tree(tmp_path_factory.mktemp("probes") / "wf")
     write_upstream(work, cfg)
@@ -272,8 +278,10 @@ def test_second_run_has_nothing_to_do(probes_run):
 # ------------------------------------------------------------------------ robustness
 
 
-def test_protocol_variants_run_the_headline_families_with_a_protocol_column(full_summary, cfg):
-    rob = cfg["probes"]["robustness"]
+def test_protocol_variants_run_the_headline_families_with_a_protocol_column(
+    full_summary, cfg, robustness
+):
+    rob = robustness
     main = full_summary.loc[full_summary["control"] == "none"]
     assert set(main["protocol"]) == set(rob["protocols"])
     for protocol in set(rob["protocols"]) - {"raw"}:
@@ -300,8 +308,8 @@ def test_protocol_variants_run_the_headline_families_with_a_protocol_column(full
     assert ok.loc[adj, "criterion_met"].astype(bool).all()
 
 
-def test_robustness_outputs(probes_run, cfg):
-    rob = cfg["probes"]["robustness"]
+def test_robustness_outputs(probes_run, robustness):
+    rob = robustness
     long = edges.read(probes_run / "results/probes/robustness.parquet").frame
     assert set(long["protocol"]) == set(rob["protocols"])
     hard_std = long.loc[(long["family"] == "hardness") & (long["protocol"] == "standardised")]

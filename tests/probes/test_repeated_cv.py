@@ -51,7 +51,10 @@ def test_repeated_ridge_cv_is_gridsearchcv_on_all_folds_and_the_mean_of_the_draw
     gs = GridSearchCV(Ridge(), {"alpha": lambdas}, cv=cv, scoring="r2").fit(X, y)
     np.testing.assert_allclose(sel.cv_scores, gs.cv_results_["mean_test_score"], rtol=1e-9)
     per_draw = [
-        select_lambda_cv(X, y, lambdas, folds=folds[4 * r : 4 * r + 4]).cv_scores for r in range(3)
+        select_lambda_cv(
+            X, y, lambdas, folds=folds[4 * r : 4 * r + 4], repeats=1, seed=0, n_folds=5
+        ).cv_scores
+        for r in range(3)
     ]
     np.testing.assert_allclose(sel.cv_scores, np.mean(per_draw, axis=0), rtol=1e-12)
     assert sel.lam == lambdas[int(np.argmax(gs.cv_results_["mean_test_score"]))]
@@ -74,7 +77,7 @@ def test_repeated_logistic_cv_is_the_mean_of_its_draws():
             acc = []
             for ho in draw:
                 tr = np.setdiff1d(np.arange(90), ho)
-                fit = fit_logistic(X[tr], y[tr], [c], seed=0, n_folds=2)
+                fit = fit_logistic(X[tr], y[tr], [c], seed=0, n_folds=2, repeats=1)
                 acc.append(np.mean(fit.predict(X[ho]) == y[ho]))
             scores.append(np.mean(acc))
         seeds.append(scores)
@@ -95,9 +98,9 @@ def test_one_draw_is_the_probe_of_before_and_more_draws_pass_through_fit_probe(k
     assert ps.cv_repeats == 1
     one = fit_probe(X[:45], y[:45], X[45:], ps)
     if kind == "ridge":
-        direct = select_lambda_cv(X[:45], y[:45], cfg["lambdas"], n_folds=3, seed=0)
+        direct = select_lambda_cv(X[:45], y[:45], cfg["lambdas"], n_folds=3, seed=0, repeats=1)
     else:
-        direct = fit_logistic(X[:45], y[:45], cfg["C"], 0, n_folds=3)
+        direct = fit_logistic(X[:45], y[:45], cfg["C"], 0, n_folds=3, repeats=1)
     np.testing.assert_array_equal(one.cv_scores, direct.cv_scores)
     five = fit_probe(X[:45], y[:45], X[45:], dataclasses.replace(ps, cv_repeats=5))
     if kind == "ridge":

@@ -112,7 +112,7 @@ def test_constant_target_resample_is_defined_and_finite():
     pv = np.array([2.0, 2.0, 2.0, 4.0, 8.0])  # exact on the constant rows
     pvt = np.array([2.5, 2.0, 1.0, 5.0, 7.0])
     idx = np.array([[0, 1, 2, 0, 1], [0, 0, 0, 0, 0], [1, 2, 3, 4, 0], [3, 3, 3, 3, 3]])
-    got = fixed_test_bootstrap(y, pv, pvt, "r2", indices=idx, return_distribution=True)
+    got = fixed_test_bootstrap(y, pv, pvt, "r2", len(idx), 0, indices=idx, return_distribution=True)
     # Resamples 0 and 1 are constant (y = 2): V exact -> R2 := 1, V+T off on row 0 -> 0.
     # Resample 3 is constant (y = 5): V off -> 0, V+T exact -> 1. Resample 2 is ordinary.
     ref = [0.0 - 1.0, 0.0 - 1.0, r2(y[idx[2]], pvt[idx[2]]) - r2(y[idx[2]], pv[idx[2]]), 1.0]
@@ -126,7 +126,9 @@ def test_single_class_resample_accuracy():
     y = np.array([0, 0, 1, 2])
     pv, pvt = np.array([0, 1, 1, 2]), np.array([0, 0, 2, 2])
     idx = np.array([[0, 1, 0, 1], [0, 1, 2, 3]])
-    got = fixed_test_bootstrap(y, pv, pvt, "accuracy", indices=idx, return_distribution=True)
+    got = fixed_test_bootstrap(
+        y, pv, pvt, "accuracy", len(idx), 0, indices=idx, return_distribution=True
+    )
     np.testing.assert_allclose(got["deltas"], [1.0 - 0.5, 0.75 - 0.75])
 
 
@@ -338,12 +340,12 @@ def test_criterion_and_bootstrap_refuse_non_finite():
     y, pv, pvt = make_preds(10)
     pv[3] = np.inf
     with pytest.raises(ValueError, match="pred_v is non-finite at test row 3"):
-        fixed_test_bootstrap(y, pv, pvt, "r2", 10)
+        fixed_test_bootstrap(y, pv, pvt, "r2", 10, seed=0)
     ids = [f"t-{i}" for i in range(10)]
     with pytest.raises(ValueError, match="pred_v is non-finite at test sample_id 't-3'"):
-        fixed_test_bootstrap(y, pv, pvt, "r2", 10, sample_ids=ids)
+        fixed_test_bootstrap(y, pv, pvt, "r2", 10, sample_ids=ids, seed=0)
     with pytest.raises(ValueError, match="metric must be"):
-        fixed_test_bootstrap(y, pvt, pvt, "mse", 10)
+        fixed_test_bootstrap(y, pvt, pvt, "mse", 10, seed=0)
 
 
 # ------------------------------------------------------------------ batched logistic controls

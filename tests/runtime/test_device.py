@@ -119,7 +119,7 @@ def test_gpu_numbers_agree_with_the_cpus_within_tolerance():
     kw = dict(image_size=56, batch_size=4, pool="cls")
     np.testing.assert_allclose(
         extract_features(model, images, device=gpu, **kw),
-        extract_features(model, images, **kw),
+        extract_features(model, images, device="cpu", **kw),
         rtol=1e-3,
         atol=1e-3,
     )
@@ -127,11 +127,13 @@ def test_gpu_numbers_agree_with_the_cpus_within_tolerance():
     settings = AlignSettings.tiny()
     tr, va = np.arange(48), np.arange(48, 64)
     a = fit_heads(v, t, tr, va, tau=0.1, seed=1, settings=settings, device=gpu)
-    b = fit_heads(v, t, tr, va, tau=0.1, seed=1, settings=settings)
+    b = fit_heads(v, t, tr, va, tau=0.1, seed=1, settings=settings, device="cpu")
     assert a.best_val_loss == pytest.approx(b.best_val_loss, rel=1e-3, abs=1e-4)
     vv = rng.normal(size=(120, 5))
     tt = vv @ rng.normal(size=(5, 4))
-    fit = fit_generator(tt[:100], vv[:100], tt[100:], vv[100:], GenerateSettings.tiny(), seed=2)
+    fit = fit_generator(
+        tt[:100], vv[:100], tt[100:], vv[100:], GenerateSettings.tiny(), seed=2, device="cpu"
+    )
     cond = vv[:20]
     cell = dict(sampler="ddim", steps=10, guidance=1.5, seed=3, eta=0.0, batch=8)
     np.testing.assert_allclose(

@@ -12,13 +12,7 @@ settings = SplitSettings.from_config(snakemake.params.splits)
 # corpora split by object group their rows by appearance_id and stratify on mass
 columns = ["corpus", "stratum", "scale"] + (["appearance_id", "mass"] if settings.by_object else [])
 manifest = edges.read(snakemake.input.manifest, columns=columns).frame
-splits = make_splits(
-    manifest,
-    seed=settings.seed,
-    fractions=settings.fractions,
-    by_scale=settings.by_scale,
-    by_object=settings.by_object,
-)
+splits = make_splits(manifest, settings)
 edges.write(snakemake.output[0], splits, producer=snakemake.rule)
 for (corpus, split), n in splits.groupby(["corpus", "split"]).size().items():
     logger.info("%s %s: %d", corpus, split, n)

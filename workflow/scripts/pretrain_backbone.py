@@ -64,7 +64,7 @@ curve.insert(
     0, "epoch_id", pd.Series([f"{modality}-{int(e):04d}" for e in curve["epoch"]], dtype=object)
 )
 save_backbone(model, snakemake.output.weights)
-digest = hashed.record_file(snakemake.output.weights, producer=snakemake.rule)
+digest = hashed.record_file(snakemake.output.weights, producer=snakemake.rule, kind="weights")
 edges.write(snakemake.output.curve, curve, key="epoch_id", producer=snakemake.rule)
 logger.info("saved %s backbone, sha256 %s", modality, digest)
 # family_backbone: the backbone's features of each probe corpus, column "vit" as in every

@@ -19,6 +19,7 @@ from tacgen_lib.generate.regime import (
     regime_probe_settings,
     regime_test_rows,
 )
+from tacgen_lib.generate.visibility import VisibilitySettings
 from tacgen_lib.io import edges, log
 from tacgen_lib.probes.rows import family_rows
 from tacgen_lib.probes.settings import ProbeSettings
@@ -76,21 +77,17 @@ with threadpool_limits(1):
     rows = evaluate_regime(
         targets,
         sets,
+        regime,
+        VisibilitySettings.from_config(params.ceiling),
         corpus=w.corpus,
         rho=float(params.rho),
         seed=seed,
-        n_labelled=regime.n_labelled,
-        n_pool=regime.n_pool,
         vision=vision,
         t_real=t_real,
         t_gen=t_gen,
         ladder=ladder,
         gammas=params.gammas,
-        bootstrap=regime.bootstrap,
         n_classes=n_classes,
-        ceiling_gammas=params.ceiling["gammas"],
-        ceiling_C=params.ceiling["C"],
-        label_draws=regime.label_draws,
         progress=logger.info,
         workers=snakemake.threads,
     )

@@ -178,7 +178,8 @@ def fit_pixel_ddpm(
     settings: PixelDDPMSettings,
     seed: int,
     progress: Callable[[str], Any] | None = None,
-    device: torch.device | str = "cpu",
+    *,
+    device: torch.device | str,
 ) -> PixelDDPMFit:
     """Train the eps- (or v-) prediction U-Net on train pairs, early-stopped on val pairs.
 
@@ -275,7 +276,7 @@ def sample_pixel_ddpm(
     guidance: float,
     eta: float,
     seed: int,
-    batch: int = 256,
+    batch: int,
     scale: float = 1.0,
 ) -> np.ndarray:
     """Tactile frames (N, 3, H, W) float32 for RGB frames (N, 3, H, W): DDIM (Song et al.

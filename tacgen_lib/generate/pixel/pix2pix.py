@@ -52,6 +52,9 @@ __all__ = [
 CURVE_COLUMNS = ("step", "g_loss", "d_loss", "l1_train", "val_l1")
 #: Decoder layers with dropout, innermost first (the paper's first three).
 _DROPOUT_LAYERS = 3
+#: Frames per batch of the val L1's translations while G trains (`fit_pix2pix`); the sampling
+#: job's batch is config ``pixel.batch``.
+_VAL_BATCH = 256
 
 
 def gan_init(module: nn.Module) -> None:
@@ -164,7 +167,7 @@ class Pix2PixFit(PixelFit):
     """
 
 
-def translate(model: UNetTranslator, rgb: np.ndarray, batch: int = 256) -> np.ndarray:
+def translate(model: UNetTranslator, rgb: np.ndarray, batch: int) -> np.ndarray:
     """Tactile frames (N, 3, H, W) float32 for RGB frames (N, 3, H, W), never clipped.
 
     G runs in eval mode (dropout off, BatchNorm on running statistics), so the result is
@@ -264,7 +267,8 @@ def fit_pix2pix(
     settings: Pix2PixSettings,
     seed: int,
     progress: Callable[[str], Any] | None = None,
-    device: torch.device | str = "cpu",
+    *,
+    device: torch.device | str,
 ) -> Pix2PixFit:
     """Train G and D on train pairs (paper eq. 4), keep the G with the lowest val L1.
 
@@ -296,7 +300,7 @@ def fit_pix2pix(
     def val_l1(g: UNetTranslator) -> float:
         if x_va.shape[0] == 0:
             return float("nan")
-        pred = translate(g, x_va.numpy())
+        pred = translate(g, x_va.numpy(), _VAL_BATCH)
         return float(np.mean(np.abs(pred - y_va_np), dtype=np.float64))
 
     with torch.random.fork_rng(devices=[]):
