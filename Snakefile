@@ -61,7 +61,7 @@ rule all:
 # job asks for a GPU, locally --resources gpu=N bounds them (by default one per visible GPU).
 # Snakemake gives a cluster executor's run its --jobs as nodes, a local run none. With
 # --sdm conda such a run's environments name conda-forge's GPU torch (runtime/conda_envs.py).
-if not (config.get("cost") or {}).get("setting"):
+if not config["cost"].get("setting"):
     attach_estimated_runtime(
         workflow.rules, keep=workflow.resource_settings.overwrite_resources
     )

@@ -49,7 +49,7 @@ PROBE_SETTINGS = {
     k: v for k, v in config["probes"].items() if k not in ("families", "seeds")
 }
 #: config transfer (tacgen_lib.probes.transfer): the second sensor's corpus, None for no stage
-TRANSFER = config.get("transfer") or {}
+TRANSFER = config["transfer"]
 TRANSFER_CORPUS = TRANSFER.get("corpus")
 SIM_CORPORA = sorted(n for n, c in CORPORA.items() if c["kind"] == "simulated")
 REAL_CORPORA = sorted(n for n, c in CORPORA.items() if c["kind"] != "simulated")

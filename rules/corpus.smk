@@ -2,12 +2,12 @@
 
 from tacgen_lib.generate.regime_sets import natural_grid_ends
 
-for _c in config["splits"].get("by_object") or {}:
+for _c in config["splits"]["by_object"]:
     if _c not in CORPORA:
         raise ValueError(
             f"config splits.by_object: {_c!r} is not a corpus (have {sorted(CORPORA)})"
         )
-    if CORPORA[_c].get("contacts", 1) < 2:
+    if CORPORA[_c]["kind"] != "simulated" or CORPORA[_c]["contacts"] < 2:
         raise ValueError(
             f"config splits.by_object: corpus {_c!r} has one contact per object "
             f"(corpora.{_c}.contacts); split it by fractions instead"

@@ -2,8 +2,8 @@
 from ground truth, an offline text encoder and a tactile adapter fitted on train rows, and
 forced choices of real, generated and shuffled generated touch on the test rows."""
 
-LANGUAGE = config.get("language") or {}
-LANGUAGE_CORPORA = GENERATE_CORPORA if LANGUAGE.get("enabled", True) else []
+LANGUAGE = config["language"]
+LANGUAGE_CORPORA = GENERATE_CORPORA if LANGUAGE["enabled"] else []
 LANGUAGE_EDGE = "results/language/{corpus}/evidence.parquet"
 _REF = (
     PLANS.generate.reference_cell()

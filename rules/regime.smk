@@ -73,7 +73,7 @@ rule regime_evaluate:
     params:
         regime=REGIME,
         targets=REGIME["targets"],
-        rho=lambda w: float(CORPORA[w.corpus].get("rho", 0.0)),
+        rho=lambda w: float(CORPORA[w.corpus]["rho"]),
         probes=PROBE_SETTINGS,
         probe_seed=config["probes"]["seeds"][0],
         gammas=GENERATE["nonlinear_gammas"],

@@ -88,7 +88,7 @@ rule pretrain_curve:
         runtime=5,
     params:
         arch=lambda w: FEATURES["backbones"][w.modality]["arch"],
-        objective=lambda w: FEATURES["backbones"][w.modality].get("objective", "dino"),
+        objective=lambda w: FEATURES["backbones"][w.modality]["objective"],
     script:
         "../workflow/scripts/pretrain_curve.py"
 

@@ -11,6 +11,6 @@ PRETRAINED = backbones_pretrained(config["features"])
 
 #: this run is one setting of a cost knob (a module of this Snakefile, rules/cost_common.smk):
 #: its outputs feed the cost page, never the report's own pages
-COST_SETTING_RUN = bool((config.get("cost") or {}).get("setting"))
+COST_SETTING_RUN = bool(config["cost"].get("setting"))
 #: whether the Features page shows the pretraining items
 FEATURES_SHOWN = PRETRAINED and not COST_SETTING_RUN

@@ -216,12 +216,40 @@ def _code() -> list[Path]:
     return sorted(p for d in SCANNED for p in (ROOT / d).rglob("*.py"))
 
 
+def rule_file_python(path: Path) -> tuple[str, dict[int, int]]:
+    """A Snakefile or rules/*.smk file as the Python Snakemake compiles it to (its own parser),
+    with the map from the compiled lines back to the file's."""
+    import tempfile
+    from types import SimpleNamespace
+
+    import snakemake.api  # noqa: F401 - the parser's imports need the API loaded first
+    from snakemake.parser import parse
+    from snakemake.sourcecache import SourceCache, infer_source_file
+
+    with tempfile.TemporaryDirectory() as cache:
+        workflow = SimpleNamespace(sourcecache=SourceCache(Path(cache)), linemaps={})
+        linemap: dict[int, int] = {}
+        code, _ = parse(infer_source_file(str(path)), workflow, linemap)
+    return code, linemap
+
+
+def _rule_files() -> list[Path]:
+    return [ROOT / "Snakefile", *sorted((ROOT / "rules").glob("*.smk"))]
+
+
 def _findings() -> list[tuple[str, int, str, str]]:
-    return [
+    found = [
         (str(path.relative_to(ROOT)), line, key, what)
         for path in _code()
         for line, key, what in restated_defaults(path.read_text())
     ]
+    for path in _rule_files():
+        code, linemap = rule_file_python(path)
+        found += [
+            (str(path.relative_to(ROOT)), linemap.get(line, line), key, what)
+            for line, key, what in restated_defaults(code)
+        ]
+    return found
 
 
 def test_no_code_restates_a_schema_default():
@@ -339,3 +367,18 @@ def test_every_key_stated_on_purpose_is_stated():
 )
 def test_the_config_scan_finds_a_value_equal_to_the_default(config, want):
     assert list(stated_defaults(config)) == want
+
+
+def test_the_scan_reads_the_rule_files_as_snakemake_compiles_them(tmp_path):
+    smk = tmp_path / "a.smk"
+    smk.write_text(
+        'LANGUAGE = config["language"]\n\n\n'
+        "rule r:\n"
+        "    params:\n"
+        '        draws=config["regime"].get("label_draws", 1),\n'
+        '    shell:\n        "true"\n'
+    )
+    code, linemap = rule_file_python(smk)
+    found = [(linemap.get(line, line), key) for line, key, _ in restated_defaults(code)]
+    assert found == [(6, "label_draws")]
+    assert len(_rule_files()) > 20, "the Snakefile and every rules/*.smk are scanned"

@@ -36,7 +36,7 @@ class AlignPlan:
                     f"config align.corpora: {corpus!r} is not a corpus "
                     f"(have {sorted(config['corpora'])})"
                 )
-        transfer = (config.get("transfer") or {}).get("corpus")
+        transfer = config["transfer"].get("corpus")
         extra = [transfer] if transfer and transfer not in align["corpora"] else []
         return cls(align, align["corpora"] + extra, config["probes"]["heads"])
 
@@ -72,11 +72,15 @@ class AlignPlan:
         cell = cell_name(heads_from, variant, seed, tau, n_train)
         return f"results/align/{cell}/aligned~{target}.parquet"
 
-    def heads_cell_edge(self, heads_from: str, target: str, seed: Any, n_train: Any = None) -> str:
-        """`aligned_edge` at the probes' heads cell (config probes.heads; its N unless given)."""
+    def heads_cell_edge(self, heads_from: str, target: str, seed: Any) -> str:
+        """`aligned_edge` at the probes' heads cell (config probes.heads)."""
+        return self.heads_cell_edge_at(heads_from, target, seed, self.probes_heads["n_train"])
+
+    def heads_cell_edge_at(self, heads_from: str, target: str, seed: Any, n_train: Any) -> str:
+        """`aligned_edge` at the probes' heads variant and τ, with heads trained on `n_train`
+        rows."""
         heads = self.probes_heads
-        n = heads["n_train"] if n_train is None else n_train
-        return self.aligned_edge(heads_from, target, heads["variant"], seed, heads["tau"], n)
+        return self.aligned_edge(heads_from, target, heads["variant"], seed, heads["tau"], n_train)
 
     def reference_n(self) -> str:
         """Training size of the τ table and the curve figure: 'all' if in the grid, else the

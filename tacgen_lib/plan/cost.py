@@ -42,7 +42,7 @@ class CostPlan:
 
     @classmethod
     def from_config(cls, config: Mapping[str, Any], stages: StagePlans) -> CostPlan:
-        knobs = (config.get("cost") or {}).get("knobs") or {}
+        knobs = config["cost"]["knobs"]
         runs = shared_runs(
             [
                 run
@@ -54,11 +54,11 @@ class CostPlan:
 
     @cached_property
     def settings(self) -> Mapping[str, Any]:
-        return self.config.get("cost") or {}
+        return self.config["cost"]
 
     @cached_property
     def knob_config(self) -> Mapping[str, Any]:
-        return self.settings.get("knobs") or {}
+        return self.settings["knobs"]
 
     def knob_runs(self, knob: str) -> list[Any]:
         """A swept knob's setting runs (none for a free knob)."""
@@ -83,7 +83,7 @@ class CostPlan:
             for k, knob in KNOBS.items()
             if knob.free
             and stage_runs[knob.stage]
-            and (k in self.knob_config or self.settings.get("grid_knobs", True))
+            and (k in self.knob_config or self.settings["grid_knobs"])
         ]
 
     def modules(self) -> dict[str, tuple[Any, list[str]]]:

@@ -87,7 +87,7 @@ class FeaturesPlan:
             - {self.settings["pretrained_vs_random"]["corpus"]}
         )
         one_variant = {c: config["generate"]["variant"] for c in regime_only}
-        transfer = (config.get("transfer") or {}).get("corpus")
+        transfer = config["transfer"].get("corpus")
         if transfer:
             one_variant[transfer] = config["probes"]["heads"]["variant"]
         edges = []

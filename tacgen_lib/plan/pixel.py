@@ -26,7 +26,7 @@ PIXEL_ITEMS = {
     **{f"filmstrip_{g}": "png" for g in GENERATORS},
 }
 #: a config without the section (one given with --replace-workflow-config) runs no pixel stage
-NO_PIXEL = {"corpora": {}, "curve": {"corpora": {}}}
+NO_PIXEL = {"corpora": {}, "curve": {"corpora": {}}, "seeds": []}
 
 
 def arm_generator_name(arm: str) -> str:
@@ -53,7 +53,7 @@ class PixelPlan:
                 raise ValueError(
                     f"config pixel: {corpus!r} is not a corpus (have {sorted(config['corpora'])})"
                 )
-            if corpus in (config["splits"].get("by_object") or {}):
+            if corpus in config["splits"]["by_object"]:
                 raise ValueError(
                     f"config pixel: corpus {corpus!r} is split by object; the pixel generators "
                     "need the random train/val/test split"
@@ -99,10 +99,11 @@ class PixelPlan:
         return ["pix2pix"] + self.ddpm_arms
 
     @cached_property
-    def curve_arm(self) -> str:
-        """The curve's generator: pix2pix, or the pixel DDPM's first cell."""
-        generator = self.curve.get("generator", "pix2pix")  # absent where no pixel section
-        return "pix2pix" if generator == "pix2pix" else self.ddpm_arms[0]
+    def curve_arm(self) -> str | None:
+        """The curve's generator: pix2pix, or the pixel DDPM's first cell (None: no curve)."""
+        if not self.curve_corpora:
+            return None
+        return "pix2pix" if self.curve["generator"] == "pix2pix" else self.ddpm_arms[0]
 
     @cached_property
     def on(self) -> bool:
@@ -118,7 +119,7 @@ class PixelPlan:
         return sorted({arm_generator_name(a) for a in self.arms(corpus)})
 
     def seeds(self) -> list[str]:
-        return [str(s) for s in self.settings.get("seeds", [])]
+        return [str(s) for s in self.settings["seeds"]]
 
     def arm_edge(self, corpus: str, arm: str, seed: str) -> str:
         return PIXEL_ARM.format(corpus=corpus, arm=arm, seed=seed)

@@ -34,7 +34,7 @@ class RegimePlan:
     @classmethod
     def from_config(cls, config: Mapping[str, Any]) -> RegimePlan:
         plan = cls(config.get("regime"))
-        by_scale = config["splits"].get("by_scale", {})
+        by_scale = config["splits"]["by_scale"]
         for corpus in plan.corpora:
             if corpus in by_scale:
                 raise ValueError(

@@ -24,14 +24,14 @@ class TransferPlan:
 
     @classmethod
     def from_config(cls, config: Mapping[str, Any], align: AlignPlan) -> TransferPlan:
-        transfer = config.get("transfer") or {}
+        transfer = config["transfer"]
         corpus = transfer.get("corpus")
         if not corpus:
             return cls(transfer, {}, align)
         where = f"config transfer.corpus = {corpus!r}"
         if corpus not in config["corpora"]:
             raise ValueError(f"{where}: not a corpus (have {sorted(config['corpora'])})")
-        if corpus not in (config["splits"].get("by_object") or {}):
+        if corpus not in config["splits"]["by_object"]:
             raise ValueError(
                 f"{where}: the corpus must be split by object (config splits.by_object), so no "
                 "object is both fitted and tested"
@@ -55,5 +55,6 @@ class TransferPlan:
         cell, alignment seed `seed`; the transfer corpus's own heads on all of its train
         rows)."""
         heads_from = self.views[view]
-        n_train = "all" if heads_from == self.corpus else None
-        return self.align.heads_cell_edge(heads_from, self.corpus, seed, n_train)
+        if heads_from == self.corpus:
+            return self.align.heads_cell_edge_at(heads_from, self.corpus, seed, "all")
+        return self.align.heads_cell_edge(heads_from, self.corpus, seed)
