@@ -21,30 +21,8 @@ configfile: "config/config.yaml"
 report: "workflow/report/workflow.rst"
 
 
-include: "rules/common.smk"
+include: "rules/stages.smk"
 include: "rules/preload.smk"
-include: "rules/report_common.smk"
-
-
-wildcard_constraints:
-    corpus="[a-z][a-z0-9_]*",
-    shard=r"\d+",
-
-
-include: "rules/corpus.smk"
-include: "rules/preprocess.smk"
-include: "rules/features.smk"
-include: "rules/align.smk"
-include: "rules/generate.smk"
-include: "rules/regime.smk"
-include: "rules/pixel.smk"
-include: "rules/language.smk"
-include: "rules/probes.smk"
-include: "rules/backbones.smk"
-include: "rules/transfer.smk"
-include: "rules/policy.smk"
-include: "rules/cost.smk"
-include: "rules/report.smk"
 
 
 rule all:
@@ -55,28 +33,26 @@ rule all:
 
 # Every job's runtime (its SLURM time limit) from its run-time estimate, with headroom and the
 # attempt factor (tacgen_lib/estimate/resources.py); a runtime given with --set-resources wins.
-# Attached once, by the main workflow, to its rules and the cost settings' alike.
+# Attached once, by the main workflow, to its rules and the cost settings' alike (a setting's
+# module loads rules/stages.smk, not this file).
 # Torch jobs hold a GPU where the run's device computes on one (tacgen_lib/runtime/gpus.py):
 # gpu=1 on every rule whose params carry the device, never on a CPU rule; on SLURM each such
 # job asks for a GPU, locally --resources gpu=N bounds them (by default one per visible GPU).
 # Snakemake gives a cluster executor's run its --jobs as nodes, a local run none. With
 # --sdm conda such a run's environments name conda-forge's GPU torch (runtime/conda_envs.py).
-if not config["cost"].get("setting"):
-    attach_estimated_runtime(
+attach_estimated_runtime(
+    workflow.rules, keep=workflow.resource_settings.overwrite_resources
+)
+GPU_PLAN = gpu_plan(
+    config["device"],
+    cluster=workflow.resource_settings.nodes is not None,
+    given=workflow.resource_settings.resources or {},
+)
+if GPU_PLAN.jobs_hold_gpu:
+    attach_gpu_resource(
         workflow.rules, keep=workflow.resource_settings.overwrite_resources
     )
-    GPU_PLAN = gpu_plan(
-        config["device"],
-        cluster=workflow.resource_settings.nodes is not None,
-        given=workflow.resource_settings.resources or {},
-    )
-    if GPU_PLAN.jobs_hold_gpu:
-        attach_gpu_resource(
-            workflow.rules, keep=workflow.resource_settings.overwrite_resources
-        )
-        if any(
-            m.name == "CONDA" for m in workflow.deployment_settings.deployment_method
-        ):
-            use_gpu_envs(workflow.rules, Path.cwd())
-    if GPU_PLAN.local_limit is not None:
-        workflow.register_resource("gpu", GPU_PLAN.local_limit)
+    if any(m.name == "CONDA" for m in workflow.deployment_settings.deployment_method):
+        use_gpu_envs(workflow.rules, Path.cwd())
+if GPU_PLAN.local_limit is not None:
+    workflow.register_resource("gpu", GPU_PLAN.local_limit)

@@ -1,7 +1,7 @@
 """Cost of accuracy (docs/cost.md): the knobs of config `cost.knobs` (tacgen_lib.plan.cost),
-each setting a module of this workflow; included by cost.smk.
+each setting a module of the stages' rules; included by cost.smk.
 
-For a swept knob every setting (and replicate) becomes a Snakemake module of this Snakefile
+For a swept knob every setting (and replicate) becomes a Snakemake module of rules/stages.smk
 with the knob's config keys set; the module's copies of the main rules the knob reruns write
 under `results/cost/{knob}/{setting}/` (`replace_prefix`), and read the main run's edges for
 everything else. Free knobs rerun nothing. Both kinds go through rule cost_knob_points with a
@@ -15,13 +15,13 @@ TARGETS += ["results/report/cost_of_accuracy.html"]
 
 COST_PLAN = CostPlan.from_config(config, PLANS)
 
-# One module per setting: this Snakefile with the setting's config, its rerun rules renamed
+# One module per setting: the stages' rules with the setting's config, its rerun rules renamed
 # `<module>_<rule>`. (`use rule` takes its rule list literally; the list comes from KNOBS, so
 # the statement's own call is made here.)
 for _module, (_run, _rules) in COST_PLAN.modules().items():
     workflow.module(
         _module,
-        snakefile=str(WORKFLOW_ROOT / "Snakefile"),
+        snakefile=str(WORKFLOW_ROOT / "rules" / "stages.smk"),
         config=_run.config,
         replace_prefix=_run.replace_prefix,
     )

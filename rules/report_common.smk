@@ -9,7 +9,7 @@ from tacgen_lib.plan.report_items import features_report_item, findings_inputs
 PRETRAINED = backbones_pretrained(config["features"])
 
 
-#: this run is one setting of a cost knob (a module of this Snakefile, rules/cost_common.smk):
+#: this run is one setting of a cost knob (a module of rules/stages.smk, rules/cost_common.smk):
 #: its outputs feed the cost page, never the report's own pages
 COST_SETTING_RUN = bool(config["cost"].get("setting"))
 #: whether the Features page shows the pretraining items
