@@ -143,7 +143,7 @@ def kill_series(work: Path) -> dict:
     Each run is killed at the first job of a stage not yet killed that the scheduler starts,
     so the stages are killed in the order the scheduler reaches them, not `KILL_STAGES`'s:
     waiting for one stage's rule would let the run finish the stages the scheduler runs
-    before it (the priorities of rules/common.smk start the alignment heads and the generators
+    before it (the priorities of tacgen_lib/plan/priorities.py start the alignment heads and the generators
     before the backbone families, the policy before the probes), and each of them would then
     be forced again, with everything downstream of it (measured: 128 s against 99 s for the
     whole series). Only a run that ends before any stage left is reached is followed by one

@@ -483,7 +483,7 @@ _PATHS = [p for p in _leaf_paths(_BASE) if p and p != ("scenes_file",)]
 
 
 def _build_every_settings_object(cfg: dict) -> None:
-    """What the rules build from a validated config (rules/common.smk and the scripts)."""
+    """What the scripts build from a validated config (the rules build tacgen_lib.plan)."""
     from tacgen_lib.align.settings import AlignSettings
     from tacgen_lib.corpus.sim.samples import CorpusSettings
     from tacgen_lib.features.settings import DinoSettings
