@@ -24,6 +24,7 @@ from tacgen_lib.estimate.flops import (
 from tacgen_lib.features.settings import MaeSettings, SimclrSettings, pretraining_corpora
 from tacgen_lib.generate.regime_sets import regime_corpora
 from tacgen_lib.generate.sampling_cells import guidance_passes
+from tacgen_lib.generate.settings import baseline_targets as generate_baseline_targets
 from tacgen_lib.io.config import load_yaml
 
 Config = Mapping[str, Any]
@@ -177,10 +178,8 @@ def align_steps(c: Config, w: Wildcards) -> float:
 
 
 def baseline_targets(c: Config, corpus: str) -> set[str]:
-    """The targets of a corpus's generator baselines: the latent generator's and the pixel
-    generators' (tacgen_lib.plan.generate.GeneratePlan.baseline_targets)."""
-    pixel = c["pixel"]["corpora"].get(corpus, {}) if "pixel" in c else {}  # an optional stage
-    return set(c["generate"]["corpora"].get(corpus, {})) | set(pixel)
+    """The targets of a corpus's generator baselines (`generate.settings.baseline_targets`)."""
+    return set(generate_baseline_targets(c).get(corpus, {}))
 
 
 def pixel_steps(w: Wildcards) -> float:

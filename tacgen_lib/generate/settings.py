@@ -79,6 +79,17 @@ def check_grid(samplers: Mapping[str, Any], train_steps: int) -> None:
                 )
 
 
+def baseline_targets(config: Mapping[str, Any]) -> dict[str, dict[str, Any]]:
+    """Per corpus, the targets (target -> probe kind) of the probes no generator changes
+    (rule fit_generator_baselines): the latent generator's corpora (config ``generate``) and
+    the pixel generators' judged ones (config ``pixel``, an optional section), merged."""
+    targets = {c: dict(t) for c, t in config["generate"]["corpora"].items()}
+    pixel = config["pixel"]["corpora"] if "pixel" in config else {}
+    for corpus, more in pixel.items():
+        targets[corpus] = {**targets.get(corpus, {}), **more}
+    return targets
+
+
 def generate_grids(generate: Any) -> dict[str, list[float]]:
     """The C and lambda grids of the probes that judge generated touch, from config
     ``generate`` (a mapping with the schema's defaults filled): rules pass them as param

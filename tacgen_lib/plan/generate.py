@@ -4,12 +4,12 @@ reference cell, and the probes no generator changes (rules/generate.smk)."""
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
 
 from tacgen_lib.generate.sampling_cells import SAMPLE_CELL, guidance_text, sample_cells
-from tacgen_lib.generate.settings import check_grid, generate_grids
+from tacgen_lib.generate.settings import baseline_targets, check_grid, generate_grids
 from tacgen_lib.plan.paths import benchmark_file, feature_edge
 
 GENERATE_REPORT = "results/report/generate"
@@ -32,11 +32,13 @@ SAMPLE_SECONDS = benchmark_file("sample_generator", "{corpus}/{seed}_{sampler}_{
 
 @dataclass(frozen=True)
 class GeneratePlan:
-    """config generate, checked against the corpora, with the pixel generators' judged
-    corpora (whose baselines the same rule fits)."""
+    """config generate, checked against the corpora, with the targets of the probes no
+    generator changes (rule fit_generator_baselines)."""
 
     settings: Mapping[str, Any]
-    pixel_corpora: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    #: per corpus, the targets of the probes no generator changes: the latent generator's
+    #: corpora and the pixel generators' judged ones (`generate.settings.baseline_targets`)
+    baseline_targets: dict[str, dict[str, Any]]
 
     @classmethod
     def from_config(cls, config: Mapping[str, Any]) -> GeneratePlan:
@@ -48,7 +50,7 @@ class GeneratePlan:
                     f"config generate.corpora: {corpus!r} is not a corpus "
                     f"(have {sorted(config['corpora'])})"
                 )
-        return cls(generate, (config.get("pixel") or {}).get("corpora") or {})
+        return cls(generate, baseline_targets(config))
 
     @cached_property
     def corpora(self) -> list[str]:
@@ -64,15 +66,6 @@ class GeneratePlan:
     def cells(self) -> list[tuple[str, str, str]]:
         """Every sampling cell (sampler, guidance text, steps text) of one generator."""
         return sample_cells(self.settings["guidance"], self.settings["samplers"])
-
-    @cached_property
-    def baseline_targets(self) -> dict[str, dict[str, Any]]:
-        """Per corpus, the targets of the probes no generator changes (fit_generator_baselines):
-        the latent generator's corpora and the pixel generators' judged ones."""
-        targets = {c: dict(t) for c, t in self.settings["corpora"].items()}
-        for corpus, more in self.pixel_corpora.items():
-            targets[corpus] = {**targets.get(corpus, {}), **more}
-        return targets
 
     def reference(self) -> dict[str, Any]:
         """The report's reference cell: first sampler, its most steps, w = 1 if in the grid."""
