@@ -30,12 +30,6 @@ class AlignPlan:
     @classmethod
     def from_config(cls, config: Mapping[str, Any]) -> AlignPlan:
         align = config["align"]
-        for corpus in align["corpora"]:
-            if corpus not in config["corpora"]:
-                raise ValueError(
-                    f"config align.corpora: {corpus!r} is not a corpus "
-                    f"(have {sorted(config['corpora'])})"
-                )
         transfer = config["transfer"].get("corpus")
         extra = [transfer] if transfer and transfer not in align["corpora"] else []
         return cls(align, align["corpora"] + extra, config["probes"]["heads"])

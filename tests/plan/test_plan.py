@@ -16,7 +16,8 @@ from tacgen_lib.plan.pixel import PixelPlan
 from tacgen_lib.plan.report_items import findings_inputs
 from tacgen_lib.plan.stages import StagePlans
 from tacgen_lib.plan.transfer import TransferPlan
-from tests.snakemake_run import validated
+from tacgen_lib.workflow_config import ConfigError, validate_config
+from tests.snakemake_run import ROOT, merged_config, validated
 
 
 @pytest.fixture(scope="module")
@@ -66,11 +67,14 @@ def test_aligned_edge_refuses_heads_that_are_not_trained(tiny):
         plan.aligned_edge("no_such_corpus", "sim_paired", "clip128", 0, 0.07, "all")
 
 
-def test_a_grid_corpus_that_is_not_a_corpus_stops_the_plan(tiny):
-    cfg = copy.deepcopy(tiny)
+def test_a_grid_corpus_that_is_not_a_corpus_stops_before_the_plan():
+    """The validation the rules run before the plan (`workflow_config.validate_config`) names
+    it: the plan builds only from a config whose corpus references resolve."""
+    cfg = merged_config()
+    cfg["scenes_file"] = str(ROOT / cfg["scenes_file"])
     cfg["align"]["corpora"] = [*cfg["align"]["corpora"], "sim_missing"]
-    with pytest.raises(ValueError, match="config align.corpora: 'sim_missing' is not a corpus"):
-        StagePlans.from_config(cfg)
+    with pytest.raises(ConfigError, match=r"align\.corpora\[\d+\]: unknown corpus 'sim_missing'"):
+        validate_config(cfg, ROOT / "config" / "config.schema.yaml")
 
 
 def test_every_stage_plan_builds_from_each_shipped_config(default, tiny):
