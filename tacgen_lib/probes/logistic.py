@@ -6,9 +6,11 @@ This module owns:
   for more than two classes; each fit solved by `lbfgs.fit_lbfgs_logistic`, scikit-learn's
   objective and scipy call without its per-iteration overhead) on standardised features, C
   chosen by stratified K-fold CV on the training rows (the K folds of each C solved together
-  by `batched.fit_logistic_batch` where `cv_batches` allows it: the same objective and
-  stopping rule, so the CV scores agree with scikit-learn's loop up to held-out rows whose
-  decision is within the solvers' tolerance of 0). Convergence is never silently assumed:
+  by `batched.fit_logistic_batch` where `cv_batches` allows it, else one fold at a time: on
+  two classes the fold's whole C grid as one Newton path, `newton.newton_logistic_path`; on
+  more, one lbfgs fit per C. The same objective and stopping rule throughout, so the CV
+  scores agree with scikit-learn's loop up to held-out rows whose decision is within the
+  solvers' tolerance of 0). Convergence is never silently assumed:
   lbfgs runs up to ``max_iter`` (by default the cap itself, one run: lbfgs's iterates do not
   depend on its iteration budget, so a first run at 200 that is doubled until it converges
   returns the same coefficients bit for bit after about twice the work); an unconverged run (where scikit-learn would
@@ -37,6 +39,7 @@ from tacgen_lib.probes.folds import make_folds
 from tacgen_lib.probes.input_checks import check_features, check_target
 from tacgen_lib.probes.lbfgs import fit_lbfgs_logistic
 from tacgen_lib.probes.metrics import accuracy
+from tacgen_lib.probes.newton import newton_logistic_path
 from tacgen_lib.probes.objective import standardise_block
 from tacgen_lib.probes.refits import Refits, Refitted
 
@@ -169,6 +172,11 @@ def fit_logistic(
         all_conv = True
         worst = 0
         for f, ho in enumerate(folds):
+            if classes.size == 2:  # the fold's C path by Newton's method (`newton`)
+                scores[f], conv, n_iter = _fold_path_scores(X, y, ho, C, tol)
+                all_conv &= conv
+                worst = max(worst, n_iter)
+                continue
             for c, cval in enumerate(C):
                 scores[f, c], conv, n_iter = _fold_score(
                     X, y, ho, float(cval), max_iter, max_iter_cap, tol
@@ -276,6 +284,28 @@ def _fold_score(
     tr = np.setdiff1d(np.arange(X.shape[0]), ho, assume_unique=True)
     fit = fit_logistic_once(X[tr], y[tr], C, max_iter, max_iter_cap, tol)
     return accuracy(y[ho], fit.model.predict(X[ho])), fit.converged, fit.n_iter
+
+
+def _fold_path_scores(
+    X: np.ndarray, y: np.ndarray, ho: np.ndarray, C: np.ndarray, tol: float
+) -> tuple[np.ndarray, bool, int]:
+    """(held-out accuracy per C, every fit converged, most Newton steps) of one fold of the
+    CV's loop on two classes: the fold's training rows standardised as `fit_logistic_once`
+    does (``StandardScaler`` on them), its C grid solved as one path from the strongest penalty
+    to the weakest by `newton.newton_logistic_path` (the same objective and stopping rule as
+    lbfgs's), the held-out rows labelled as scikit-learn's ``predict`` does (the second class
+    where the decision is > 0)."""
+    tr = np.setdiff1d(np.arange(X.shape[0]), ho, assume_unique=True)
+    scaler = StandardScaler().fit(X[tr])
+    classes = np.unique(y[tr])
+    order = np.argsort(C, kind="stable")
+    with single_blas_thread():  # as lbfgs's fits: the same bits for any thread count
+        path = newton_logistic_path(scaler.transform(X[tr]), y[tr] == classes[1], C[order], tol=tol)
+    held_out = scaler.transform(X[ho])
+    scores = np.zeros(C.size)
+    for c, fit in zip(order, path, strict=True):
+        scores[c] = accuracy(y[ho], classes[(fit.decision(held_out) > 0).astype(int)])
+    return scores, all(fit.converged for fit in path), max(fit.n_iter for fit in path)
 
 
 @dataclass(frozen=True)
