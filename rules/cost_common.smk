@@ -9,22 +9,20 @@ plan of setting runs.
 """
 
 from tacgen_lib.cost.knobs import KNOBS
-from tacgen_lib.plan.cost import COST_POINTS, CostPlan
+from tacgen_lib.plan.cost import COST_MODULES_DIR, COST_POINTS, CostPlan, write_source
 
 TARGETS += ["results/report/cost_of_accuracy.html"]
 
 COST_PLAN = CostPlan.from_config(config, PLANS)
 
-# One module per setting: the stages' rules with the setting's config, its rerun rules renamed
-# `<module>_<rule>`. (`use rule` takes its rule list literally; the list comes from KNOBS, so
-# the statement's own call is made here.)
-for _module, (_run, _rules) in COST_PLAN.modules().items():
-    workflow.module(
-        _module,
-        snakefile=str(WORKFLOW_ROOT / "rules" / "stages.smk"),
-        config=_run.config,
-        replace_prefix=_run.replace_prefix,
+# One module per setting, in Snakemake's own statements: `module <name>:` with the setting's
+# config and replace_prefix, then `use rule <the rules it reruns> from <name> as <name>_*`.
+# The names come from config cost.knobs, so the plan writes the statements when the workflow is
+# parsed (CostPlan.modules_source), to a file of the run's .snakemake/ folder (write_source),
+# and they are included here. A setting's own module sweeps nothing and includes nothing.
+if COST_PLAN.modules():
+    COST_MODULES = COST_PLAN.modules_source(
+        "COST_PLAN", 'str(WORKFLOW_ROOT / "rules" / "stages.smk")'
     )
-    workflow.userule(rules=_rules, from_module=_module, name_modifier=f"{_module}_*")(
-        None
-    )
+
+    include: write_source(COST_MODULES_DIR, COST_MODULES)

@@ -2,7 +2,8 @@
 
 A swept knob is the main workflow run again with config keys changed. Each setting of a knob
 (and each replicate of a setting, where the knob measures a Monte Carlo error) becomes a
-Snakemake `module` of this workflow's own Snakefile (rules/cost.smk): its config is the run's
+Snakemake `module` of the stages' rules (rules/stages.smk; rules/cost_common.smk includes the
+statements `tacgen_lib.plan.cost.CostPlan.modules_source` writes): its config is the run's
 merged config with the knob's keys set, and `replace_prefix` moves the outputs of the main
 rules it runs again (`Knob.reruns`) from the folders in `Knob.moves` to
 `results/cost/{knob}/{setting}/`. Every other input (splits, backbones, features the knob does

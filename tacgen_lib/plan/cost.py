@@ -7,13 +7,21 @@ rules the knob reruns write under `results/cost/{knob}/{setting}/` (`replace_pre
 knobs (the backbone families, the generator's steps and samplers, the policy sweep) are the
 stages' own grids and rerun nothing: a setting run is a cell of the grid (per seed), read from
 the stage's summary.
+
+The settings' modules are Snakemake source: `CostPlan.modules_source` writes one `module`
+statement and one `use rule ... from ... as ...` statement per setting run, and
+rules/cost_common.smk includes that text from the file `write_source` keeps for it.
 """
 
 from __future__ import annotations
 
+import hashlib
+import os
+import uuid
 from collections.abc import Mapping
 from dataclasses import dataclass
 from functools import cached_property
+from pathlib import Path
 from typing import Any
 
 from tacgen_lib.cost.knobs import (
@@ -29,6 +37,9 @@ from tacgen_lib.plan.cost_files import FREE_PLANS, SETTING_FILES, generate_subje
 from tacgen_lib.plan.stages import StagePlans
 
 COST_POINTS = "results/cost/points/{knob}.parquet"
+#: where the settings' modules are written, under the run's working directory: Snakemake's own
+#: state folder (git-ignored, outside `results/`, remade by any parse that needs it)
+COST_MODULES_DIR = ".snakemake/cost_modules"
 
 
 @dataclass(frozen=True)
@@ -93,6 +104,40 @@ class CostPlan:
             modules.setdefault(run.module, (run, set()))[1].update(KNOBS[run.knob].reruns)
         return {m: (run, sorted(rules)) for m, (run, rules) in modules.items()}
 
+    def module_config(self, module: str) -> Mapping[str, Any]:
+        """The config of a setting's module (its run's: the knob's keys set)."""
+        return self.modules()[module][0].config
+
+    def modules_source(self, plan: str, snakefile: str) -> str:
+        """The settings' modules as Snakemake source, one block per setting run: a `module`
+        statement loading `snakefile` with the run's config and its literal `replace_prefix`,
+        then `use rule <the main rules its knobs rerun> from <module> as <module>_*`.
+
+        `plan` is the name the including rule file gives this plan (its `module_config` gives
+        each module's config); `snakefile` the Python expression there for the file each
+        module loads (rules/stages.smk). Only a header comment when nothing is swept."""
+        out = [
+            "# Generated from config cost.knobs by tacgen_lib.plan.cost.CostPlan.modules_source",
+            "# and included by rules/cost_common.smk: the cost sweep's setting runs, a module",
+            "# each (docs/cost.md). Not to be edited: another sweep is another file.",
+        ]
+        for module, (run, rules) in self.modules().items():
+            prefixes = "".join(
+                f"\n            {old!r}: {new!r}," for old, new in run.replace_prefix.items()
+            )
+            out += [
+                "",
+                "",
+                f"module {module}:",
+                f"    snakefile:\n        {snakefile}",
+                f"    config:\n        {plan}.module_config({module!r})",
+                f"    replace_prefix:\n        {{{prefixes}\n        }}",
+                "",
+                "",
+                f"use rule {', '.join(rules)} from {module} as {module}_*",
+            ]
+        return "\n".join(out) + "\n"
+
     def knobs(self) -> list[str]:
         """The knobs the page shows: the swept ones, then the free ones."""
         return self.swept + [k for k in self.free if k not in self.swept]
@@ -156,3 +201,16 @@ class CostPlan:
             "edges": list(dict.fromkeys(files)),
             "benchmarks": list(dict.fromkeys(b for run in plan for b in run["benchmarks"])),
         }
+
+
+def write_source(folder: str | os.PathLike[str], text: str) -> str:
+    """The absolute path of a file in `folder` holding `text`, named by its content's hash:
+    written (whole, by a rename) only where no such file is, so an unchanged text keeps its
+    file and mtime, and runs parsing other texts in the same folder never overwrite it."""
+    target = Path(folder).absolute() / f"{hashlib.sha256(text.encode()).hexdigest()[:16]}.smk"
+    if not target.exists():
+        target.parent.mkdir(parents=True, exist_ok=True)
+        tmp = target.with_name(f"{target.name}.{uuid.uuid4().hex}.tmp")
+        tmp.write_text(text)
+        os.replace(tmp, target)
+    return str(target)

@@ -4,13 +4,15 @@ validated config; the rule files only name it (tests/test_architecture.py)."""
 from __future__ import annotations
 
 import copy
+import os
 import re
+from pathlib import Path
 from types import SimpleNamespace
 
 import pytest
 
 from tacgen_lib.plan.align import AlignPlan
-from tacgen_lib.plan.cost import CostPlan
+from tacgen_lib.plan.cost import CostPlan, write_source
 from tacgen_lib.plan.paths import MATCHES_NOTHING, benchmark_file, none_of, one_of
 from tacgen_lib.plan.pixel import PixelPlan
 from tacgen_lib.plan.report_items import findings_inputs
@@ -18,6 +20,7 @@ from tacgen_lib.plan.stages import StagePlans
 from tacgen_lib.plan.transfer import TransferPlan
 from tacgen_lib.workflow_config import ConfigError, validate_config
 from tests.snakemake_run import ROOT, merged_config, validated
+from tests.test_config_defaults import rule_file_python
 
 
 @pytest.fixture(scope="module")
@@ -152,3 +155,53 @@ def test_the_cost_plan_reads_each_knobs_benchmarks_once():
         assert all(b.startswith("results/") and b.endswith(".tsv") for b in inputs["benchmarks"])
         for run in plan.setting_plan(knob):
             assert set(run["benchmarks"]) <= set(inputs["benchmarks"])
+
+
+def test_the_cost_modules_are_snakemake_statements_the_parser_compiles(tmp_path):
+    cfg = validated("cost_tiny.yaml")
+    plan = CostPlan.from_config(cfg, StagePlans.from_config(cfg))
+    modules = plan.modules()
+    assert len(modules) > 1, "config/cost_tiny.yaml sweeps several settings"
+    source = plan.modules_source("PLAN", "STAGES")
+    assert source.startswith("# Generated from config cost.knobs by tacgen_lib.plan.cost.")
+    for module, (_, rules) in modules.items():
+        assert f"\nmodule {module}:\n" in source
+        assert f"\n        PLAN.module_config({module!r})\n" in source
+        assert f"\nuse rule {', '.join(rules)} from {module} as {module}_*\n" in source
+    # Snakemake's parser compiles the text to the workflow's module and use-rule calls: the
+    # settings' modules, configs, prefixes and renamed rules, in the plan's order
+    smk = tmp_path / "modules.smk"
+    smk.write_text(source)
+    code, _ = rule_file_python(smk)
+    calls: list[tuple[str, dict]] = []
+    workflow = SimpleNamespace(
+        module=lambda **kw: calls.append(("module", kw)),
+        userule=lambda **kw: calls.append(("use rule", kw)) or (lambda rule: None),
+    )
+    exec(compile(code, str(smk), "exec"), {"workflow": workflow, "PLAN": plan, "STAGES": "s"})
+    assert [kind for kind, _ in calls] == ["module", "use rule"] * len(modules)
+    for (module, (run, rules)), (_, mod), (_, use) in zip(
+        modules.items(), calls[::2], calls[1::2], strict=True
+    ):
+        assert mod["name"] == module and mod["snakefile"] == "s" and mod["config"] is run.config
+        assert mod["replace_prefix"] == run.replace_prefix
+        assert use["rules"] == rules and use["from_module"] == module
+        assert use["name_modifier"] == f"{module}_*" and use["exclude_rules"] == []
+    # a run that sweeps nothing has no module to write
+    default = validated()
+    empty = CostPlan.from_config(default, StagePlans.from_config(default))
+    assert not empty.modules()
+    assert all(line.startswith("#") for line in empty.modules_source("P", "S").splitlines())
+
+
+def test_the_cost_modules_file_is_named_by_its_text_and_written_once(tmp_path):
+    path = write_source(tmp_path / "cost_modules", "a\n")
+    assert Path(path).is_absolute() and Path(path).read_text() == "a\n"
+    os.utime(path, (0, 0))
+    assert write_source(tmp_path / "cost_modules", "a\n") == path  # the same text: untouched
+    assert Path(path).stat().st_mtime == 0
+    other = write_source(tmp_path / "cost_modules", "b\n")
+    assert other != path and Path(path).read_text() == "a\n"  # another text: another file
+    assert sorted(p.name for p in (tmp_path / "cost_modules").iterdir()) == sorted(
+        Path(p).name for p in (path, other)
+    )  # no temporary file left
