@@ -10,8 +10,11 @@ by `probes.fit_logistic_batch`, against the per-refit loop (one lbfgs fit at a t
 `lbfgs.fit_lbfgs_logistic` solves it; timed on
 ``--logistic-ref`` refits of each control and compared per refit). And the logistic probe's
 C selection on that probe's V+T (5 folds x C in {0.1, 1, 10}, tol 1e-6 as the workflow's
-probes): folds solved together (`logistic.cv_batches`) against the one-fit-at-a-time loop, with
-the CV scores compared. And single lbfgs fits at the workflow's sizes (32 to 1,408 rows,
+probes): folds solved together (`logistic.cv_batches`) against the one-fold-at-a-time loop,
+with the CV scores compared. And the generator evaluation's nonlinear V baseline's C selection
+(binary, 384 rows of V and its RBF Nystroem map, 5 folds x its C grid of 5, folds with fewer
+rows than columns, so never batched): the loop's Newton paths (`newton.newton_logistic_path`)
+against one lbfgs fit per fold and C, with the CV scores compared. And single lbfgs fits at the workflow's sizes (32 to 1,408 rows,
 two and six classes): the probes' solver (`lbfgs.fit_lbfgs_logistic`) against scikit-learn's
 LogisticRegression on the same rows, with iterations and probabilities compared.
 
@@ -159,7 +162,46 @@ def logistic_cv() -> tuple:
         f", iterations {batched.cv_max_n_iter} vs {loop.cv_max_n_iter}"
     )
     name = f"logistic CV 5 folds x 3 C, {n} x {x.shape[1]}"
-    return name, ours, "one-fit lbfgs loop", ref, same
+    return name, ours, "one-fold-at-a-time loop", ref, same
+
+
+#: rows, V width and RBF map width of the nonlinear baseline's CV (N_L = 384 labelled rows)
+NONLINEAR_CV = sized((384, 240, 192), (40, 30, 20))
+
+
+def nonlinear_cv() -> tuple:
+    """(name, ours, reference name, reference, how they differ) of the nonlinear V baseline's
+    C selection (`generate.baselines.nonlinear_baseline`'s design, [V, phi(V)]): the CV loop's
+    Newton paths against one lbfgs fit per fold and C (`logistic._fold_score`)."""
+    from sklearn.kernel_approximation import Nystroem
+
+    n, d, k = NONLINEAR_CV
+    v, _, y = hardness_like(n, d)
+    z = StandardScaler().fit_transform(v)
+    phi = Nystroem(gamma=1.0 / d, n_components=k, random_state=0).fit_transform(z)
+    x, grid = np.hstack([v, phi]), np.array([1e-4, 0.01, 0.1, 1.0, 10.0])
+    folds = make_folds(n, 5, 42, labels=y)
+    assert not logistic.cv_batches(x.shape, folds)
+    ours, probe = best_of(
+        lambda: fit_logistic(x, y, grid, seed=42, n_folds=5, repeats=1), 1, "nonlinear cv"
+    )
+
+    def lbfgs_loop() -> np.ndarray:
+        return np.array(
+            [
+                [logistic._fold_score(x, y, ho, c, 12800, 12800, 1e-6)[0] for c in grid]
+                for ho in folds
+            ]
+        ).mean(axis=0)
+
+    ref, scores = best_of(lbfgs_loop, 1, "ref nonlinear cv")
+    rows = np.abs(probe.cv_scores - scores) * n  # held-out rows, over the 5 folds
+    same = (
+        f"C {probe.C:g} vs {grid[int(np.argmax(scores))]:g}; CV scores differ by "
+        f"{rows.max():.0f} held-out row(s); Newton steps at most {probe.cv_max_n_iter}"
+    )
+    name = f"nonlinear-V CV 5 folds x 5 C, {n} x {x.shape[1]}"
+    return name, ours, "one lbfgs fit per fold x C", ref, same
 
 
 def logistic_fits(repeats: int) -> list[tuple]:
@@ -329,7 +371,11 @@ def main() -> None:
     if args.logistic_perms > 0:
         for name, ours, ref_name, ref in logistic_controls(args):
             print(f"{name:46s} {ours:9.4f} {'':8s} {ref_name:>24s} {ref:8.4f} {ref / ours:8.1f}")
-        for name, ours, ref_name, ref, same in [logistic_cv(), *logistic_fits(args.repeats)]:
+        for name, ours, ref_name, ref, same in [
+            logistic_cv(),
+            nonlinear_cv(),
+            *logistic_fits(args.repeats),
+        ]:
             print(
                 f"{name:46s} {ours:9.4f} {'':8s} {ref_name:>24s} {ref:8.4f} {ref / ours:8.1f}"
                 f"  ({same})"
