@@ -32,10 +32,10 @@ import numpy as np
 import scipy.linalg
 import scipy.special
 
-__all__ = ["NEWTON_MAX_ITER", "NewtonFit", "newton_logistic_path"]
+__all__ = ["NEWTON_MAX_STEPS", "NewtonFit", "newton_logistic_path"]
 
 #: Newton steps a fit may take before it is reported unconverged (about ten are needed).
-NEWTON_MAX_ITER = 100
+NEWTON_MAX_STEPS = 100
 #: Armijo's sufficient-decrease fraction and the step halvings of the line search.
 _ARMIJO, _HALVINGS = 1e-4, 50
 
@@ -63,7 +63,7 @@ def newton_logistic_path(
     C_path: Sequence[float],
     *,
     tol: float,
-    max_iter: int = NEWTON_MAX_ITER,
+    max_steps: int = NEWTON_MAX_STEPS,
 ) -> list[NewtonFit]:
     """Minimisers of the L2 binary logistic objective (module docstring) at each C of
     ``C_path`` in the order given, each fit started from the previous one (the first from zero).
@@ -82,7 +82,7 @@ def newton_logistic_path(
     for C in C_path:
         if not C > 0:
             raise ValueError(f"newton_logistic_path: C must be > 0, got {C}")
-        w, b, n_iter, converged = _newton(X, t, 1.0 / float(C), w, b, gram, tol, max_iter)
+        w, b, n_iter, converged = _newton(X, t, 1.0 / float(C), w, b, gram, tol, max_steps)
         fits.append(NewtonFit(float(C), w.copy(), float(b), n_iter, converged))
     return fits
 
@@ -101,19 +101,19 @@ def _newton(
     b: float,
     gram: np.ndarray | None,
     tol: float,
-    max_iter: int,
+    max_steps: int,
 ) -> tuple[np.ndarray, float, int, bool]:
     """Damped Newton from (w, b) at penalty lam = 1 / C: (w, b, steps, converged)."""
     n = X.shape[0]
     f, z = _objective(X, t, lam, w, b)
-    for step in range(max_iter + 1):
+    for step in range(max_steps + 1):
         prob = scipy.special.expit(z)
         r = prob - t
         g_w = X.T @ r + lam * w
         g_b = float(r.sum())
         if max(float(np.abs(g_w).max(initial=0.0)), abs(g_b)) <= tol * n:
             return w, b, step, True
-        if step == max_iter:
+        if step == max_steps:
             break
         d_w, d_b = _newton_direction(X, prob * (1.0 - prob), lam, g_w, g_b, gram)
         decrease = float(g_w @ d_w) + g_b * d_b

@@ -78,7 +78,7 @@ def test_a_path_gives_each_C_what_a_fit_from_zero_gives():
 
 def test_an_exhausted_step_budget_is_reported_unconverged():
     X, positive = binary_problem(5, 80, 40, 0.3)
-    (fit,) = newton_logistic_path(X, positive, [100.0], tol=1e-10, max_iter=1)
+    (fit,) = newton_logistic_path(X, positive, [100.0], tol=1e-10, max_steps=1)
     assert not fit.converged and fit.n_iter == 1
 
 
