@@ -101,7 +101,7 @@ class LogisticProbe:
     cv_scores: np.ndarray  # (len(C_grid),) mean held-out accuracy
     fit: LogisticFit
     cv_converged: bool  # every fold fit converged
-    cv_max_n_iter: int
+    cv_max_n_iter: int  # most lbfgs iterations of a CV fit, or Newton steps of a fold's path
 
     @property
     def n_iter(self) -> int:
