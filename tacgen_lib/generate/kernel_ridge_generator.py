@@ -29,11 +29,15 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from tacgen_lib.generate.baselines import median_sq_distance
 from tacgen_lib.generate.regime_sets import RegimeSettings
+
+if TYPE_CHECKING:
+    from sklearn.compose import TransformedTargetRegressor
 
 __all__ = [
     "KERNEL_RIDGE_FOLDS",
@@ -65,7 +69,9 @@ class KernelRidgeGeneration:
         return f"gamma = {self.gamma_multiple:g} x median heuristic, lambda = {self.lam:g}, {how}"
 
 
-def kernel_ridge_model(gamma: float, lam: float, *, nystroem_rank: int, seed: int):
+def kernel_ridge_model(
+    gamma: float, lam: float, *, nystroem_rank: int, seed: int
+) -> TransformedTargetRegressor:
     """The unfitted model of one (gamma, lambda): StandardScaler on V then exact RBF kernel
     ridge (``nystroem_rank`` 0) or ridge on that many RBF Nystroem features (landmarks drawn
     with `seed`), T centred by its training mean (scikit-learn's TransformedTargetRegressor)."""
@@ -125,7 +131,7 @@ def kernel_ridge_generate(
 
     Raises ValueError when a row asked for is in the pool (the pool is unlabelled and the rows
     a probe reads are labelled or test rows: one in both would fit T_gen on its own touch), on
-    an empty pool, or on a row without a vector.
+    a pool of fewer than 2 rows, or on a row without a vector.
     """
     from sklearn.model_selection import KFold
 
@@ -142,10 +148,10 @@ def kernel_ridge_generate(
     v_pool, t_pool = _rows(vision, pool), _rows(t_real, pool)
     multiples = [float(g) for g in regime.kernel_ridge_gammas]
     lambdas = [float(v) for v in regime.kernel_ridge_lambdas]
-    rank = int(regime.nystroem_rank) if len(pool) > int(regime.nystroem_above) else 0
+    n = len(pool)
+    rank = min(int(regime.nystroem_rank), n) if n > int(regime.nystroem_above) else 0
     sd = v_pool.std(axis=0)
     med = median_sq_distance((v_pool - v_pool.mean(axis=0)) / np.where(sd > 0, sd, 1.0))
-    n = len(pool)
     if n >= n_folds >= 2:
         folds = list(KFold(n_folds, shuffle=True, random_state=int(seed)).split(v_pool))
         best = (-np.inf, multiples[0], lambdas[0])
@@ -159,11 +165,12 @@ def kernel_ridge_generate(
                 if cv > best[0]:  # the first of equal scores: the grids' order
                     best = (cv, mult, lam)
         cv_r2, mult, lam = best
+        cv_r2 = cv_r2 if np.isfinite(cv_r2) else float("nan")  # no fold scored (constant T)
     else:
         mult = sorted(multiples)[(len(multiples) - 1) // 2]
         lam = sorted(lambdas)[(len(lambdas) - 1) // 2]
         cv_r2 = float("nan")
-    model = kernel_ridge_model(mult / med, lam, nystroem_rank=min(rank, n), seed=seed)
+    model = kernel_ridge_model(mult / med, lam, nystroem_rank=rank, seed=seed)
     pred = model.fit(v_pool, t_pool).predict(_rows(vision, rows))
     return KernelRidgeGeneration(
         dict(zip(rows, np.asarray(pred, np.float64), strict=True)),
