@@ -22,7 +22,7 @@ from tacgen_lib.estimate.flops import (
     spec_flops,
 )
 from tacgen_lib.features.settings import MaeSettings, SimclrSettings, pretraining_corpora
-from tacgen_lib.generate.regime_sets import regime_corpora
+from tacgen_lib.generate.regime_sets import RegimeSettings, pool_steps, regime_corpora
 from tacgen_lib.generate.sampling_cells import guidance_passes
 from tacgen_lib.generate.settings import baseline_targets as generate_baseline_targets
 from tacgen_lib.io.config import load_yaml
@@ -62,6 +62,13 @@ def natural_grid_units(c: Config) -> float:
     c = {**c, "corpora": {**c["corpora"], **grid}}  # the DAG joins them too
     per_sample = presses(c, first) * tactile_pixels(c, first) + len(grid)
     return samples(c, first) / int(corpus_of(c, first)["shards"]) * per_sample
+
+
+def regime_pool_steps(c: Config) -> float:
+    """The step caps of a regime seed's generators, one per pool size of config ``regime``
+    (`regime_sets.pool_steps`: larger pools train longer), summed over the pool sizes."""
+    regime = RegimeSettings.from_config(c["regime"])
+    return float(sum(pool_steps(regime.steps, int(n), regime) for n in regime.n_pool))
 
 
 def samples(c: Config, name: str) -> float:

@@ -41,6 +41,7 @@ from tacgen_lib.estimate.counts import (
     pretraining_units,
     probe_jobs,
     probe_work,
+    regime_pool_steps,
     sample_cells,
     samples,
     simulated_rows,
@@ -215,15 +216,10 @@ UNITS: dict[str, UnitRule] = {
     ),
     # regime (where generated touch helps)
     "regime_generators": UnitRule(
-        "optimiser step × pool size × pairing (at most; + MLP FLOPs)",
-        lambda c, w: ("", float(c["regime"]["steps"]) * 2 * len(c["regime"]["n_pool"])),
+        "optimiser step (each pool size's cap) × pairing (at most; + MLP FLOPs)",
+        lambda c, w: ("", regime_pool_steps(c) * 2),
         lambda c, w: (
-            3.0
-            * int(c["regime"]["steps"])
-            * int(c["regime"]["batch_size"])
-            * 2
-            * len(c["regime"]["n_pool"])
-            * generator_mlp_flops(c)
+            3.0 * regime_pool_steps(c) * int(c["regime"]["batch_size"]) * 2 * generator_mlp_flops(c)
         ),
     ),
     "regime_evaluate": UnitRule(

@@ -15,12 +15,17 @@ same test rows. Reading the rungs from the top tells where a gain is lost:
   neighbourhoods;
 - ``ridge``: multi-output ridge T ~ V on the pool (`generate.ridge_generator.ridge_generate`), the
   simplest generator;
+- ``kernel_ridge``: multi-output RBF kernel ridge T ~ V on the pool, gamma and lambda chosen by
+  K-fold CV on the pool, Nystroem features above a pool size
+  (`generate.kernel_ridge_generator.kernel_ridge_generate`): a nonlinear regression;
 - ``gen_mean`` (A2): the mean of K samples of the diffusion generator (its conditional mean);
 - ``v_tgen`` (A3): one sample of it, the paper's arm.
 
 A0 without a gain says the probe or the evaluation is broken; A0 gains and A1 not, V does not
-see what the look shows; A1 gains and A2 not, the generator loses it; A2 gains and A3 not,
-sampling noise or the probe does.
+see what the look shows; A1 gains and ridge not, a linear map from V does not carry it; ridge
+loses it and kernel ridge keeps it, the map is nonlinear (and the generator should learn it);
+the regressions gain and A2 not, the generator loses it; A2 gains and A3 not, sampling noise or
+the probe does.
 """
 
 from __future__ import annotations
@@ -30,6 +35,8 @@ from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
+
+from tacgen_lib.generate.regime_sets import RegimeSettings
 
 __all__ = [
     "LADDER",
@@ -42,7 +49,7 @@ __all__ = [
 ]
 
 #: The rungs, top (the oracle) to bottom (today's one-sample arm).
-LADDER: tuple[str, ...] = ("look_oracle", "knn", "ridge", "gen_mean", "v_tgen")
+LADDER: tuple[str, ...] = ("look_oracle", "knn", "ridge", "kernel_ridge", "gen_mean", "v_tgen")
 
 #: The CV folds the kNN rung chooses its k by (`knn_generate`).
 KNN_FOLDS = 5
@@ -192,12 +199,13 @@ class LadderRungs:
     n_looks: int
     knn_k: int
     ridge_alpha: float
+    kernel_ridge: str  # the kernel ridge rung's fit in words (`KernelRidgeGeneration.describe`)
 
     def describe(self) -> str:
         return (
             f"look oracle: {self.n_looks} looks in the pool, rows per look level (finest "
             f"first, then the pool mean) {list(self.look_levels)}; kNN: k = {self.knn_k}; "
-            f"ridge: alpha = {self.ridge_alpha:g}"
+            f"ridge: alpha = {self.ridge_alpha:g}; kernel ridge: {self.kernel_ridge}"
         )
 
 
@@ -209,32 +217,47 @@ def ladder_rungs(
     rows: Sequence[str],
     gen_mean: Mapping[str, np.ndarray],
     *,
-    ks: Sequence[int],
-    look_min_rows: int,
+    regime: RegimeSettings,
     seed: int,
 ) -> LadderRungs:
     """Every rung of `LADDER` but the one-sample ``v_tgen`` for `rows`, each learnt from the
     pool only: `look_oracle`, `knn_generate`, ridge (`generate.ridge_generator.ridge_generate`, its
-    conditional mean) and ``gen_mean`` (given: the mean of the diffusion generator's samples,
-    `regime_generators.pool_generators`). `ks` and `look_min_rows`: config ``regime.knn_ks`` and
-    ``regime.look_min_rows`` (`regime_sets.RegimeSettings`)."""
+    conditional mean), kernel ridge (`generate.kernel_ridge_generator.kernel_ridge_generate`) and
+    ``gen_mean`` (given: the mean of the diffusion generator's samples,
+    `regime_generators.pool_generators`). `regime`: the settings the rungs read (``knn_ks``,
+    ``look_min_rows``, the kernel ridge rung's grids and Nystroem threshold and rank).
+
+    Raises ValueError when a row asked for is in the pool: the pool is unlabelled, the rows a
+    probe reads are labelled or test rows, and a rung learnt from a row's own touch would hand
+    it back."""
+    from tacgen_lib.generate.kernel_ridge_generator import kernel_ridge_generate
     from tacgen_lib.generate.ridge_generator import ridge_generate
 
     pool = [str(i) for i in pool]
     rows = [str(i) for i in rows]
+    shared = sorted(set(pool) & set(rows))
+    if shared:
+        raise ValueError(
+            f"ladder_rungs: row {shared[0]!r} is in the pool ({len(shared)} such): a labelled "
+            "or test row's T_gen is learnt from pool rows only"
+        )
+    ks, look_min_rows = regime.knn_ks, regime.look_min_rows
     oracle = look_oracle(t_real, looks, pool, rows, min_rows=look_min_rows)
     knn = knn_generate(vision, t_real, pool, rows, ks=ks, seed=seed)
     needed = {i: vision[i] for i in (*pool, *rows)}
     ridge = ridge_generate(needed, t_real, pool, seed=seed)
+    kernel = kernel_ridge_generate(vision, t_real, pool, rows, regime=regime, seed=seed)
     return LadderRungs(
         t_gen={
             "look_oracle": oracle.t_gen,
             "knn": knn.t_gen,
             "ridge": {i: ridge.mean[i] for i in rows},
+            "kernel_ridge": kernel.t_gen,
             "gen_mean": {i: np.asarray(gen_mean[i], np.float64) for i in rows},
         },
         look_levels=oracle.levels,
         n_looks=oracle.n_looks,
         knn_k=knn.k,
         ridge_alpha=ridge.alpha,
+        kernel_ridge=kernel.describe(),
     )

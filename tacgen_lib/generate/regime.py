@@ -14,8 +14,9 @@ arm on the same test rows:
   nonlinear: V + RBF Nystroem features of V (`fit_small_nonlinear`);
 - the generator ladder (`generate.ladder`), each rung V + its T_gen with the linear and the
   nonlinear probe: ``look_oracle`` (A0, the positive control: the mean real T of the pool
-  rows with the row's look), ``knn`` (A1), ``ridge``, ``gen_mean`` (A2, the mean of K
-  diffusion samples) and ``v_tgen`` (A3, one sample: the paper's arm);
+  rows with the row's look), ``knn`` (A1), ``ridge``, ``kernel_ridge`` (RBF kernel ridge,
+  nonlinear), ``gen_mean`` (A2, the mean of K diffusion samples) and ``v_tgen`` (A3, one
+  sample: the paper's arm);
 - ``v_tgen_shuffled`` / linear: V + T_gen of a generator trained on the pool with its pairs
   broken (a Sattolo cycle of the pool rows): what generation adds without the V-T link;
 - ``distilled`` / linear and nonlinear: generalised distillation (Lopez-Paz et al. 2016), a
@@ -35,7 +36,8 @@ arm on the same test rows:
 Every score carries a fixed-test bootstrap CI; the Deltas against linear and nonlinear V are
 paired on the same resamples (drawn once per target and shared by every arm). ``gap_closed`` =
 (arm - nonlinear V) / (real - nonlinear V); ``headroom_captured`` = (arm - nonlinear V) / (V
-ceiling - nonlinear V), the V ceiling being the nonlinear one; ``majority`` is the score of
+ceiling - nonlinear V), the V ceiling being the nonlinear one, NaN where that headroom's paired
+CI does not lie above 0 (`regime_arms.headroom_captured`: within its noise); ``majority`` is the score of
 predicting the labelled rows' majority class (their mean, for ridge) on the test rows, and
 ``below_majority`` flags an arm that scores less. ``delta_vs_distilled`` = arm - generalised
 distillation with the same probe (linear for the oracle and real arms).
@@ -154,7 +156,7 @@ def evaluate_regime(
 
     t_gen: (n_pool, "real" | "shuffled") -> sample_id -> one generated tactile sample (the
     ``v_tgen`` rung and the shuffled-pool arm); ladder: n_pool -> rung -> sample_id -> T_gen
-    of the other rungs of `LADDER` (look_oracle, knn, ridge, gen_mean). Both hold at least the
+    of the other rungs of `LADDER` (look_oracle, knn, ridge, kernel_ridge, gen_mean). Both hold at least the
     labelled rows of every draw and the test rows. The (target, draw, N_L) cells are
     independent: `workers` forked processes compute them (`runtime.workers.fork_map`, the same
     rows for any number of workers), the costliest (logistic targets, large N_L) first.

@@ -29,6 +29,7 @@ __all__ = [
     "cell_rows",
     "distillation_rows",
     "gap_closed",
+    "headroom_captured",
     "regime_probe_settings",
     "regime_test_rows",
 ]
@@ -161,6 +162,18 @@ def gap_closed(arm: float, nonlinear_v: float, real: float) -> float:
     return (arm - nonlinear_v) / gap
 
 
+def headroom_captured(arm: float, nonlinear_v: float, ceiling: float, headroom_low: float) -> float:
+    """(arm - nonlinear V) / (V ceiling - nonlinear V), the share of the headroom above
+    nonlinear V (up to the nonlinear V ceiling) that an arm captures, only where that headroom
+    exceeds its own noise: `headroom_low`, the lower bound of the paired fixed-test bootstrap
+    CI of V ceiling - nonlinear V (the ceiling row's ``ci_low_vs_nonlinear_v``), lies above 0.
+    NaN otherwise: a ratio over a headroom the test rows cannot tell from 0 reads as anything
+    (a headroom near 0 makes an arm as far above nonlinear V capture all of it)."""
+    if not (np.isfinite(headroom_low) and headroom_low > 0):
+        return math.nan
+    return gap_closed(arm, nonlinear_v, ceiling)
+
+
 @dataclass(frozen=True)
 class RegimeTarget:
     """One target of the regime: its rows (train = every non-test row, test = the test
@@ -210,6 +223,8 @@ def cell_rows(
 
     real, nl = full[("v_treal", "linear")], full[("v", "nonlinear")]
     ceiling = full[("v_ceiling", "nonlinear")]
+    # the headroom's own noise: its paired CI (V ceiling - nonlinear V) must lie above 0
+    _, headroom_low, _ = versus(("v", "nonlinear"), ("v_ceiling", "nonlinear"))
     key = (
         f"{base['corpus']}|{base['n_labelled']}|{base['n_pool']}|{base['seed']}|"
         f"d{base['draw']}|{base['target']}"
@@ -239,8 +254,9 @@ def cell_rows(
                 "ci_low_vs_nonlinear_v": lo_nl,
                 "ci_high_vs_nonlinear_v": hi_nl,
                 "gap_closed": gap_closed(full[k], nl, real),
-                # the share of the headroom above nonlinear V (up to the V ceiling) captured
-                "headroom_captured": gap_closed(full[k], nl, ceiling),
+                # the share of the headroom above nonlinear V (up to the V ceiling) captured,
+                # where that headroom exceeds its noise (NaN otherwise: `headroom_captured`)
+                "headroom_captured": headroom_captured(full[k], nl, ceiling, headroom_low),
                 "delta_vs_distilled": d_gd,
                 "ci_low_vs_distilled": lo_gd,
                 "ci_high_vs_distilled": hi_gd,

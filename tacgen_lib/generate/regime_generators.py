@@ -19,7 +19,7 @@ import numpy as np
 
 from tacgen_lib.corpus.derangement import sattolo_cycle
 from tacgen_lib.generate.blocks import feature_block
-from tacgen_lib.generate.regime_sets import PAIRINGS, RegimeSets, RegimeSettings
+from tacgen_lib.generate.regime_sets import PAIRINGS, RegimeSets, RegimeSettings, pool_steps
 from tacgen_lib.generate.sampling import generate
 from tacgen_lib.generate.settings import GenerateSettings
 from tacgen_lib.generate.train import GeneratorFit, fit_generator
@@ -30,6 +30,7 @@ __all__ = [
     "PoolGenerator",
     "pool_generators",
     "pool_pairs",
+    "pool_steps",
     "regime_generator_settings",
     "sample_regime",
     "sample_seed",
@@ -46,7 +47,9 @@ def sample_seed(seed: int, n_pool: int, k: int) -> int:
 def regime_generator_settings(
     generate_cfg: GenerateSettings, regime: RegimeSettings
 ) -> GenerateSettings:
-    """The diffusion generator of config ``generate`` with the regime's step cap and batch."""
+    """The diffusion generator of config ``generate`` with the regime's step cap and batch: the
+    cap of a pool of at most ``regime.steps_reference_pool`` rows; `pool_generators` gives each
+    pool its own (`regime_sets.pool_steps`)."""
     return replace(generate_cfg, steps=int(regime.steps), batch_size=int(regime.batch_size))
 
 
@@ -160,9 +163,10 @@ def pool_generators(
     device: Any,
 ) -> list[PoolGenerator]:
     """The generator of every (pool size, pairing) cell (`train_pool_generator` on the pool
-    of that size), each sampled ``regime.gen_mean_samples`` times for `rows` (`sample_regime`,
-    noise seeded by `sample_seed`): the first sample is the ``v_tgen`` arm's T_gen, the mean
-    of all the ``gen_mean`` rung's; in the order of `cells`.
+    of that size, `settings` with its ``steps`` grown to the pool's cap,
+    `regime_sets.pool_steps`), each sampled ``regime.gen_mean_samples`` times for `rows`
+    (`sample_regime`, noise seeded by `sample_seed`): the first sample is the ``v_tgen`` arm's
+    T_gen, the mean of all the ``gen_mean`` rung's; in the order of `cells`.
 
     The cells are independent (each seeds its own training and sampling): `workers` forked
     processes train them (`runtime.workers.fork_map`, the same samples for any number of
@@ -178,7 +182,7 @@ def pool_generators(
             vision,
             tactile,
             pool,
-            settings,
+            replace(settings, steps=pool_steps(settings.steps, n_pool, regime)),
             val_fraction=regime.pool_val_fraction,
             pairing=pairing,
             seed=seed,

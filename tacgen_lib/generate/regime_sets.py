@@ -32,6 +32,7 @@ __all__ = [
     "check_regime_sizes",
     "draw_regime_sets",
     "job_regime_sets",
+    "pool_steps",
 ]
 
 #: The name of the regime's natural corpus at rho: this prefix and rho's digits.
@@ -96,15 +97,39 @@ class RegimeSettings(SchemaSettings):
     generators (`RegimeSets.labelled_draw`); ``targets``: target -> ridge | logistic;
     ``pool_val_fraction``: the share of the pool that only steers the generator's early
     stopping; ``steps``, ``batch_size``: the regime generators' step cap and batch (the rest of
-    the model is config ``generate``'s); ``sampling_steps``, ``guidance``: the DDIM cell they
+    the model is config ``generate``'s), the cap growing with pools of more than
+    ``steps_reference_pool`` rows at ``steps_pool_exponent`` (`pool_steps`); ``sampling_steps``, ``guidance``: the DDIM cell they
     are sampled with; ``gen_mean_samples``: the samples the ladder's ``gen_mean`` rung
     averages (`generate.ladder`); ``knn_ks``: the k its ``knn`` rung chooses among;
+    ``kernel_ridge_gammas`` / ``kernel_ridge_lambdas``: the gamma multiples and penalties its
+    ``kernel_ridge`` rung chooses among, on Nystroem features of rank ``nystroem_rank`` for
+    pools of more than ``nystroem_above`` rows (`generate.kernel_ridge_generator`);
     ``look_min_rows``: the pool rows a look needs before its ``look_oracle`` rung averages
     them (else it backs off to a coarser look);
     ``bootstrap``: fixed-test resamples; ``C`` / ``lambdas``: the regime's probe grids, which
     reach penalties strong enough for a probe to fall back to the majority class or the mean
     (the probes stage keeps the paper's, config ``probes``).
     """
+
+
+def pool_steps(steps: int, n_pool: int, regime: RegimeSettings) -> int:
+    """The step cap of a regime generator trained on a pool of `n_pool` rows, `steps` being
+    the cap of a pool of the reference size (config ``regime.steps``,
+    `regime_generators.regime_generator_settings`):
+
+        steps x max(1, N_P / steps_reference_pool) ^ steps_pool_exponent,
+
+    rounded to the nearest integer (config ``regime.steps_reference_pool``,
+    ``steps_pool_exponent``). A pool of at most ``steps_reference_pool`` rows takes `steps`
+    exactly; with exponent 1 a larger pool takes as many passes over its rows (epochs, at the
+    same batch) as the reference pool does, so a pool four times larger is not cut off after
+    a quarter of the passes. Early stopping still ends training before the cap where the
+    pool's validation loss stops improving.
+    """
+    ratio = max(1.0, int(n_pool) / int(regime.steps_reference_pool))
+    if ratio == 1.0:
+        return int(steps)
+    return int(round(int(steps) * ratio ** float(regime.steps_pool_exponent)))
 
 
 @dataclass(frozen=True)

@@ -19,6 +19,7 @@ RUNG_LABELS = {
     "look_oracle": "A0 look oracle",
     "knn": "A1 kNN in V",
     "ridge": "ridge V→T",
+    "kernel_ridge": "kernel ridge V→T",
     "gen_mean": "A2 diffusion mean",
     "v_tgen": "A3 one diffusion sample",
 }

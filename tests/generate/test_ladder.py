@@ -15,6 +15,10 @@ from sklearn.preprocessing import StandardScaler
 
 from tacgen_lib.corpus.looks import look_keys, visible_factors
 from tacgen_lib.generate.ladder import knn_generate, ladder_rungs, look_oracle
+from tacgen_lib.generate.regime_sets import RegimeSettings
+
+#: the ladder's settings in these tests: every look averaged, a small kNN grid
+_REGIME = RegimeSettings(look_min_rows=1, knn_ks=(1, 2, 4))
 
 
 def _world(n: int, d: int = 5, seed: int = 0):
@@ -117,13 +121,22 @@ def test_ladder_rungs_learn_from_the_pool_only():
     looks = {i: f"l{k % 3}" for k, i in enumerate(ids)}
     pool, rows = ids[:25], ids[25:]
     gen_mean = {i: np.zeros(5) for i in rows}
-    a = ladder_rungs(v, t, looks, pool, rows, gen_mean, ks=(1, 2, 4), seed=0, look_min_rows=1)
+    a = ladder_rungs(v, t, looks, pool, rows, gen_mean, regime=_REGIME, seed=0)
     t2 = dict(t) | {i: t[i] + 100.0 for i in rows}
-    b = ladder_rungs(v, t2, looks, pool, rows, gen_mean, ks=(1, 2, 4), seed=0, look_min_rows=1)
-    for rung in ("look_oracle", "knn", "ridge", "gen_mean"):
+    b = ladder_rungs(v, t2, looks, pool, rows, gen_mean, regime=_REGIME, seed=0)
+    for rung in ("look_oracle", "knn", "ridge", "kernel_ridge", "gen_mean"):
         for i in rows:
             np.testing.assert_array_equal(a.t_gen[rung][i], b.t_gen[rung][i])
     assert "look oracle: 3 looks" in a.describe()
+    assert "kernel ridge: gamma = " in a.describe() and "exact kernel" in a.describe()
+
+
+def test_ladder_rungs_refuse_a_row_asked_for_that_is_in_the_pool():
+    ids, v, t, _ = _world(30)
+    looks = {i: "a" for i in ids}
+    gen_mean = {i: np.zeros(5) for i in ids}
+    with pytest.raises(ValueError, match="'s-0019' is in the pool"):
+        ladder_rungs(v, t, looks, ids[:20], ids[19:], gen_mean, regime=_REGIME, seed=0)
 
 
 def test_visible_factors_read_the_captions_vocabulary_and_name_a_bad_sample():

@@ -7,6 +7,7 @@ rho = 1 exactly, and every arm of every cell on a synthetic world."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pandas as pd
@@ -17,7 +18,7 @@ from sklearn.preprocessing import StandardScaler
 from threadpoolctl import threadpool_limits
 
 from tacgen_lib.corpus.splits import LeakageError
-from tacgen_lib.generate.ladder import ladder_rungs
+from tacgen_lib.generate.ladder import LADDER, ladder_rungs
 from tacgen_lib.generate.regime import (
     ARMS,
     SUMMARY_COLUMNS,
@@ -35,8 +36,8 @@ from tacgen_lib.generate.regime import (
     gap_closed,
     job_regime_sets,
 )
-from tacgen_lib.generate.regime_arms import cell_rows
-from tacgen_lib.generate.regime_generators import pool_generators, pool_pairs
+from tacgen_lib.generate.regime_arms import cell_rows, headroom_captured
+from tacgen_lib.generate.regime_generators import pool_generators, pool_pairs, pool_steps
 from tacgen_lib.generate.regime_sets import (
     natural_corpus_name,
     natural_grid_ends,
@@ -231,6 +232,48 @@ def test_pool_generators_in_workers_sample_what_one_process_samples():
     assert not np.array_equal(alone[0].t_gen_mean, alone[0].t_gen)
 
 
+def test_the_step_cap_grows_with_the_pool_above_the_reference_size():
+    """steps x max(1, N_P / reference) ^ exponent: today's cap up to the reference pool (the
+    default config's pool of 1024 rows keeps its 1000 steps), the same epochs above it at
+    exponent 1, the square root of the growth at 0.5, no growth at 0."""
+    regime = RegimeSettings()
+    assert (regime.steps, regime.steps_reference_pool) == (1000, 1024)
+    assert [pool_steps(1000, n, regime) for n in (24, 512, 1024)] == [1000] * 3
+    assert pool_steps(1000, 4096, regime) == 4000 and pool_steps(1000, 1536, regime) == 1500
+    assert pool_steps(1000, 4096, replace(regime, steps_pool_exponent=0.5)) == 2000
+    assert pool_steps(1000, 4096, replace(regime, steps_pool_exponent=0.0)) == 1000
+    assert pool_steps(40, 24, RegimeSettings(steps_reference_pool=12)) == 80
+
+
+def test_pool_generators_train_a_larger_pool_for_more_steps():
+    """Without early stopping each pool's generator runs its own cap (`pool_steps`)."""
+    _, splits, vision, tactile = world(rho=1.0, seed=11)
+    sets = draw_regime_sets(splits, "nat", n_labelled=20, n_pool=60, seed=0)
+    settings = GenerateSettings(
+        hidden=16, blocks=1, time_dim=8, steps=6, batch_size=16, eval_every=2, patience=0
+    )
+    regime = RegimeSettings(
+        n_labelled=(20,),
+        n_pool=(30, 60),
+        sampling_steps=2,
+        gen_mean_samples=1,
+        steps_reference_pool=30,
+    )
+    rows = sorted(str(i) for i in sets.test)
+    small, large = pool_generators(
+        vision,
+        tactile,
+        sets,
+        [(30, "real"), (60, "real")],
+        settings,
+        regime,
+        rows=rows,
+        seed=1,
+        device="cpu",
+    )
+    assert (small.steps_run, large.steps_run) == (6, 12)
+
+
 def test_the_mean_of_one_sample_is_that_sample():
     """K = 1: the ladder's gen_mean rung is the one-sample arm's T_gen, within float32
     rounding of a mean over one float64 copy."""
@@ -394,6 +437,47 @@ def test_gap_closed():
     assert math.isnan(gap_closed(0.7, 0.5, 0.5)) and math.isnan(gap_closed(0.7, 0.6, 0.5))
 
 
+def test_headroom_captured_only_where_the_headroom_exceeds_its_noise():
+    assert headroom_captured(0.7, 0.5, 0.9, 0.1) == pytest.approx(0.5)
+    # a headroom whose paired CI reaches 0 (or below) gives no ratio, however large the arm
+    assert math.isnan(headroom_captured(0.503, 0.5, 0.503, 0.0))
+    assert math.isnan(headroom_captured(0.503, 0.5, 0.503, -0.01))
+    assert math.isnan(headroom_captured(0.7, 0.5, 0.9, math.nan))
+
+
+@pytest.mark.parametrize("ceiling_gain", [0.0, 0.4])
+def test_cell_rows_give_headroom_captured_only_where_the_ceilings_ci_is_above_nonlinear_v(
+    ceiling_gain,
+):
+    """The V ceiling +0.000 over nonlinear V on the same rows (its CI holds 0): every arm's
+    headroom captured is NaN, even an arm above nonlinear V; a ceiling well above it: the
+    ratio, as `gap_closed` against the ceiling."""
+    rng = np.random.default_rng(4)
+    n = 120
+    y = rng.normal(size=n)
+    nl = y + rng.normal(size=n)
+    fits = {k: SmallFit(y + 0.8 * rng.normal(size=n), 1.0, "cv") for k in ARMS}
+    fits[("v", "nonlinear")] = SmallFit(nl, 1.0, "cv")
+    fits[("v_ceiling", "nonlinear")] = SmallFit(
+        nl if ceiling_gain == 0 else y + 0.3 * rng.normal(size=n), 1.0, "cv"
+    )
+    base = {"corpus": "c", "n_labelled": 32, "n_pool": 64, "seed": 0, "draw": 0, "target": "t"}
+    base["majority"] = 0.0
+    rows = {
+        (r["arm"], r["probe"]): r
+        for r in cell_rows(fits, y, resample_indices(n, 300, 1), "r2", base=base)
+    }
+    ceiling = rows[("v_ceiling", "nonlinear")]
+    arm = rows[("kernel_ridge", "linear")]
+    if ceiling_gain == 0:
+        assert ceiling["ci_low_vs_nonlinear_v"] <= 0
+        assert all(math.isnan(r["headroom_captured"]) for r in rows.values())
+    else:
+        assert ceiling["ci_low_vs_nonlinear_v"] > 0
+        want = gap_closed(arm["score"], rows[("v", "nonlinear")]["score"], ceiling["score"])
+        assert arm["headroom_captured"] == pytest.approx(want, rel=1e-12)
+
+
 # --------------------------------------------------------------------------- ceiling + arms
 
 
@@ -438,9 +522,8 @@ def _evaluate(rho: float, *, n_labelled=(6, 40), t_gen_from_real: bool = False, 
         sets.pool_ids(100),
         rows,
         noisy,
+        regime=RegimeSettings(look_min_rows=1, knn_ks=(1, 2, 4, 8, 16, 32, 64)),
         seed=0,
-        look_min_rows=1,
-        ks=(1, 2, 4, 8, 16, 32, 64),
     )
     return evaluate_regime(
         targets,
@@ -629,7 +712,7 @@ def test_ladder_verdict_reads_the_control_then_the_rung_that_loses_the_gain():
     assert words[1].startswith("Positive control works (hardness, ρ = 1, N_L = 8, N_P = 100)")
     assert "lost at A1 kNN in V" in words[2] and "vision" in words[2]
 
-    keep = {(1.0, r): True for r in ("look_oracle", "knn", "ridge", "gen_mean", "v_tgen")}
+    keep = {(1.0, r): True for r in LADDER}
     assert (
         "every rung down to one diffusion sample"
         in ladder_verdict(seed_view(_ladder_summary(keep)))[-1]
@@ -642,6 +725,27 @@ def test_ladder_verdict_reads_the_control_then_the_rung_that_loses_the_gain():
     for above in ({}, {(1.0, "look_oracle"): True, (0.0, "look_oracle"): True}):
         words = ladder_verdict(seed_view(_ladder_summary(above)))
         assert len(words) == 1 and words[0].startswith("Positive control fails")
+
+
+def test_the_page_gives_headroom_captured_only_where_the_ceilings_headroom_exceeds_its_noise():
+    """The ladder table and the table of every arm: the mean headroom captured where the V
+    ceiling's headroom over nonlinear V lies above 0 over the replicates, 'headroom within
+    noise' where it does not (rho = 0 here: the ceiling's CI holds 0 in every replicate)."""
+    from tacgen_lib.report.regime import WITHIN_NOISE, ladder_table, regime_table, seed_view
+
+    s = _ladder_summary({(1.0, "look_oracle"): True}).assign(headroom_captured=0.25)
+    ceiling = s[s["arm"] == "v"].assign(arm="v_ceiling", headroom_captured=np.nan)
+    up = ceiling["rho"] == 1.0
+    ceiling.loc[up, ["delta_vs_nonlinear_v", "ci_low_vs_nonlinear_v"]] = (0.1, 0.02)
+    ceiling.loc[up, "ci_high_vs_nonlinear_v"] = 0.2
+    ceiling.loc[~up, ["delta_vs_nonlinear_v", "ci_low_vs_nonlinear_v"]] = (0.003, -0.01)
+    view = seed_view(pd.concat([s, ceiling], ignore_index=True))
+    for table, col in ((ladder_table(view), "rung"), (regime_table(view), "arm")):
+        rung = table[table[col].str.contains("kernel ridge V→T")]
+        assert len(rung) == 4  # two rhos x two N_L
+        for rho, cells in rung.groupby("ρ"):
+            want = 0.25 if rho == "1" else WITHIN_NOISE
+            assert list(cells["headroom captured"]) == [want, want]
 
 
 def test_one_replicates_chance_gain_at_the_smallest_rho_does_not_undo_the_control():

@@ -1,7 +1,7 @@
 """Every arm of the regime for one corpus x seed: linear and nonlinear V, the generator ladder
-(look oracle, kNN, ridge, the diffusion generator's mean and one sample), the shuffled pool,
-generalised distillation, V + real T, the V ceiling and the vision ceiling, per labelled draw,
-labelled size and pool size (rule regime_evaluate)."""
+(look oracle, kNN, ridge, kernel ridge, the diffusion generator's mean and one sample), the
+shuffled pool, generalised distillation, V + real T, the V ceiling and the vision ceiling, per
+labelled draw, labelled size and pool size (rule regime_evaluate)."""
 
 from tacgen_lib.runtime.preload import run_in_preloaded_interpreter
 
@@ -66,8 +66,7 @@ with threadpool_limits(1):
             sets.pool_ids(int(n_pool)),
             needed,
             edges.read_vector_map(path, "t_gen_mean"),
-            ks=regime.knn_ks,
-            look_min_rows=regime.look_min_rows,
+            regime=regime,
             seed=seed,
         )
         ladder[int(n_pool)] = rungs.t_gen
