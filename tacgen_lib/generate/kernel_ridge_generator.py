@@ -33,7 +33,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from tacgen_lib.generate.baselines import median_sq_distance
+from tacgen_lib.generate.baselines import median_sq_distance, standardise
+from tacgen_lib.generate.blocks import feature_block
 from tacgen_lib.generate.regime_sets import RegimeSettings
 
 if TYPE_CHECKING:
@@ -102,15 +103,6 @@ def kernel_ridge_model(
     )
 
 
-def _rows(source: Mapping[str, np.ndarray], ids: Sequence[str]) -> np.ndarray:
-    missing = [i for i in ids if i not in source]
-    if missing:
-        raise ValueError(
-            f"kernel_ridge_generate: sample_id {missing[0]!r} has no vector ({len(missing)} such)"
-        )
-    return np.stack([np.asarray(source[i], np.float64) for i in ids])
-
-
 def kernel_ridge_generate(
     vision: Mapping[str, np.ndarray],
     t_real: Mapping[str, np.ndarray],
@@ -145,13 +137,13 @@ def kernel_ridge_generate(
             f"kernel_ridge_generate: row {shared[0]!r} is in the pool ({len(shared)} such): "
             "T_gen of a labelled or test row is learnt from pool rows only"
         )
-    v_pool, t_pool = _rows(vision, pool), _rows(t_real, pool)
+    what = "kernel_ridge_generate"
+    v_pool, t_pool = feature_block(vision, pool, what=what), feature_block(t_real, pool, what=what)
     multiples = [float(g) for g in regime.kernel_ridge_gammas]
     lambdas = [float(v) for v in regime.kernel_ridge_lambdas]
     n = len(pool)
     rank = min(int(regime.nystroem_rank), n) if n > int(regime.nystroem_above) else 0
-    sd = v_pool.std(axis=0)
-    med = median_sq_distance((v_pool - v_pool.mean(axis=0)) / np.where(sd > 0, sd, 1.0))
+    med = median_sq_distance(standardise(v_pool, v_pool[:0])[0])
     if n >= n_folds >= 2:
         folds = list(KFold(n_folds, shuffle=True, random_state=int(seed)).split(v_pool))
         best = (-np.inf, multiples[0], lambdas[0])
@@ -171,7 +163,7 @@ def kernel_ridge_generate(
         lam = sorted(lambdas)[(len(lambdas) - 1) // 2]
         cv_r2 = float("nan")
     model = kernel_ridge_model(mult / med, lam, nystroem_rank=rank, seed=seed)
-    pred = model.fit(v_pool, t_pool).predict(_rows(vision, rows))
+    pred = model.fit(v_pool, t_pool).predict(feature_block(vision, rows, what=what))
     return KernelRidgeGeneration(
         dict(zip(rows, np.asarray(pred, np.float64), strict=True)),
         gamma_multiple=mult,

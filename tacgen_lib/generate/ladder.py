@@ -36,6 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from tacgen_lib.generate.blocks import feature_block
 from tacgen_lib.generate.regime_sets import RegimeSettings
 
 __all__ = [
@@ -53,13 +54,6 @@ LADDER: tuple[str, ...] = ("look_oracle", "knn", "ridge", "kernel_ridge", "gen_m
 
 #: The CV folds the kNN rung chooses its k by (`knn_generate`).
 KNN_FOLDS = 5
-
-
-def _rows(source: Mapping[str, np.ndarray], ids: Sequence[str], what: str) -> np.ndarray:
-    missing = [i for i in ids if i not in source]
-    if missing:
-        raise ValueError(f"{what}: sample_id {missing[0]!r} has no vector ({len(missing)} such)")
-    return np.stack([np.asarray(source[i], np.float64) for i in ids])
 
 
 @dataclass(frozen=True)
@@ -107,7 +101,7 @@ def look_oracle(
         missing = [i for i in (*pool, *rows) if i not in look.index]
         if missing:
             raise ValueError(f"look_oracle: sample_id {missing[0]!r} has no look")
-    t_pool = _rows(t_real, pool, "look_oracle")
+    t_pool = feature_block(t_real, pool, what="look_oracle")
     frame = pd.DataFrame(t_pool)
     tables = []
     for look in levels:
@@ -169,7 +163,10 @@ def knn_generate(
         raise ValueError("knn_generate: the pool is empty")
     if not ks or min(int(k) for k in ks) < 1:
         raise ValueError(f"knn_generate: ks must be integers >= 1, got {list(ks)!r}")
-    v_pool, t_pool = _rows(vision, pool, "knn_generate"), _rows(t_real, pool, "knn_generate")
+    v_pool, t_pool = (
+        feature_block(vision, pool, what="knn_generate"),
+        feature_block(t_real, pool, what="knn_generate"),
+    )
     n = len(pool)
     fold_train = n - -(-n // n_folds) if n >= n_folds else 0  # the smallest CV training fold
     grid = sorted({int(k) for k in ks if int(k) <= fold_train})
@@ -185,7 +182,7 @@ def knn_generate(
     else:
         k, cv_mse = min(min(int(k) for k in ks), n), float("nan")
     model = make_pipeline(StandardScaler(), KNeighborsRegressor(n_neighbors=k)).fit(v_pool, t_pool)
-    pred = model.predict(_rows(vision, rows, "knn_generate"))
+    pred = model.predict(feature_block(vision, rows, what="knn_generate"))
     return KnnGeneration(dict(zip(rows, pred, strict=True)), k, cv_mse)
 
 
