@@ -168,7 +168,9 @@ def ladder_table(view: pd.DataFrame) -> pd.DataFrame:
             if r.empty:
                 continue
             r = r.iloc[0]
-            headroom = headroom_cells(r.to_frame().T, view)[0]
+            # a rung's share of the ceiling's headroom (the page's reading, `headroom_cells`)
+            rung = arm in RUNG_LABELS
+            headroom = headroom_cells(r.to_frame().T, view)[0] if rung else float("nan")
             out.append(
                 {
                     "target": target,
@@ -178,7 +180,7 @@ def ladder_table(view: pd.DataFrame) -> pd.DataFrame:
                     "score [mean 95% CI]": fmt.with_ci(r.score, r.ci_low, r.ci_high),
                     "Δ vs nonlinear V": r["delta_vs_nonlinear_v"],
                     "replicates' CI vs nonlinear V": _counts(r, "nonlinear_v"),
-                    "headroom captured": headroom if arm in RUNG_LABELS else float("nan"),
+                    "headroom captured": headroom,
                     "majority score": r["majority"],
                 }
             )
