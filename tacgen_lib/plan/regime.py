@@ -21,6 +21,8 @@ REGIME_ITEMS = {
     "ladder": "html",
     "heatmap": "png",
     "curves": "png",
+    "pool": "html",
+    "pool_curve": "png",
 }
 
 

@@ -64,6 +64,34 @@ def _ladder_decisions(view: pd.DataFrame) -> list[dict]:
     return out
 
 
+def _pool_decisions(view: pd.DataFrame) -> list[dict]:
+    """Per target, where two or more pool sizes ran: the smallest pool at which a learnt rung
+    and at which the diffusion model gain over nonlinear V in every replicate
+    (`report.regime_pool.first_gain`, at the largest rho and the smallest N_L)."""
+    from tacgen_lib.report.regime_pool import DIFFUSION_RUNGS, LEARNT_RUNGS, first_gain
+
+    pools = sorted(int(n) for n in view["n_pool"].unique())
+    if len(pools) < 2:
+        return []
+    rho, n_l = view["rho"].max(), int(view["n_labelled"].min())
+    out = []
+    for target in sorted(view["target"].unique()):
+        for kind, rungs in (("learnt", LEARNT_RUNGS), ("diffusion", DIFFUSION_RUNGS)):
+            found = first_gain(view, target, rho, n_l, rungs)
+            out.append(
+                decision(
+                    f"regime|{target}|pool_first_gain_{kind}",
+                    "regime",
+                    f"the smallest N_P at which a {kind} rung gains over nonlinear V in every "
+                    f"replicate ({target}, ρ = {rho:g}, N_L = {n_l}, N_P {pools[0]}–{pools[-1]})",
+                    f"none up to {pools[-1]}"
+                    if found is None
+                    else f"N_P = {found[0]} ({RUNG_LABELS[found[1]]})",
+                )
+            )
+    return out
+
+
 def regime_findings(
     summary: pd.DataFrame, gate_sentence: str = "", gate_passed: bool = True
 ) -> FindingsPart:
@@ -76,12 +104,18 @@ def regime_findings(
     is the mean over the cell's replicates (seed × labelled draw) with how many replicates'
     CIs lie above or below 0, and each decision reads every replicate (`replicates_decision`):
     one draw of the labelled rows decides nothing."""
-    from tacgen_lib.report.regime import ladder_verdict, replicate_words, seed_view
+    from tacgen_lib.report.regime import ladder_verdict, pool_verdict, replicate_words, seed_view
 
     rows, decided = [], []
     if summary.empty:
         return FindingsPart(pd.DataFrame(rows, columns=FINDINGS_COLUMNS), decided)
     view = seed_view(summary)
+
+    def pool_words(target: str) -> list[str]:  # the curve's verdict, where it has one
+        if view["n_pool"].nunique() < 2:
+            return []
+        return pool_verdict(view[view["target"] == target])
+
     rho_hi, rho_lo = view["rho"].max(), view["rho"].min()
     n_l, n_p = view["n_labelled"].min(), view["n_pool"].max()
     cell = view[(view["n_labelled"] == n_l) & (view["n_pool"] == n_p)]
@@ -121,12 +155,12 @@ def regime_findings(
                 f"{replicate_words(shuf, 'linear_v')}; distillation (V only) − linear V "
                 f"{replicate_words(gd, 'linear_v')}; V + T_gen at ρ = {rho_lo:g} − linear V "
                 f"{replicate_words(gen_lo, 'linear_v')}",
-                "verdict": " ".join([gate_sentence, *ladder]).strip()
+                "verdict": " ".join([gate_sentence, *ladder, *pool_words(target)]).strip()
                 + f" Over the replicates, V + T_gen − linear V: {reading}.",
                 "page": category("Where generated touch helps"),
             }
         )
-    decided += _ladder_decisions(view)
+    decided += _ladder_decisions(view) + _pool_decisions(view)
     return FindingsPart(pd.DataFrame(rows, columns=FINDINGS_COLUMNS), decided)
 
 

@@ -22,6 +22,7 @@ from tacgen_lib.report import format as fmt
 from tacgen_lib.report.regime_arms import ARM_LABELS, RUNG_LABELS, arm_rows
 from tacgen_lib.report.regime_figures import curves_figure, heatmap_figure
 from tacgen_lib.report.regime_hypotheses import hypothesis_sentences, replicate_words
+from tacgen_lib.report.regime_pool import pool_curve_figure, pool_table, pool_verdict
 
 __all__ = [
     "ARM_LABELS",
@@ -36,6 +37,9 @@ __all__ = [
     "heatmap_figure",
     "hypothesis_sentences",
     "panel_sentences",
+    "pool_curve_figure",
+    "pool_table",
+    "pool_verdict",
     "replicate_words",
     "regime_table",
     "seed_view",
@@ -345,9 +349,10 @@ def findings_notes(
     view: pd.DataFrame, gates: Sequence[str] = (), gate_passed: bool = True
 ) -> list[str]:
     """The page's sentences: the gate and the ladder's verdict (`ladder_verdict`), the
-    hypotheses, one per panel."""
+    verdict against the pool size (`pool_verdict`), the hypotheses, one per panel."""
     return [
         *ladder_verdict(view, gates, gate_passed),
+        *pool_verdict(view),
         *hypothesis_sentences(view),
         *panel_sentences(view),
     ]

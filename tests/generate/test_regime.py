@@ -6,6 +6,7 @@ rho = 1 exactly, and every arm of every cell on a synthetic world."""
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import replace
 
@@ -627,7 +628,9 @@ def test_findings_and_report_read_the_summary():
     assert any(n.startswith("Positive control") for n in notes)
     assert any(n.startswith("H1 (ρ = 0") for n in notes)
     assert any(n.startswith("H5") for n in notes)
-    for fig in (rep.heatmap_figure(view), rep.curves_figure(view)):
+    assert any(n.startswith("One pool size ran (N_P = 100): the curve against") for n in notes)
+    assert set(rep.pool_table(view)["N_L"]) == {6, 40}
+    for fig in (rep.heatmap_figure(view), rep.curves_figure(view), rep.pool_curve_figure(view)):
         assert fig.axes
 
 
@@ -658,48 +661,48 @@ def test_the_corpora_between_the_grids_ends_are_named_only_when_both_ends_are_in
     assert natural_grid_ends(None) == ([], [])
 
 
-def _ladder_summary(above: dict[tuple[float, str], bool]) -> pd.DataFrame:
+def _ladder_summary(above: dict[tuple, bool], pools: tuple[int, ...] = (100,)) -> pd.DataFrame:
     """A regime summary of one target whose rungs (linear probe) beat nonlinear V with the CI
-    above 0 in every replicate where `above[(rho, rung)]` says so, else include 0."""
+    above 0 in every replicate where `above[(rho, rung)]` (at every pool size) or
+    `above[(rho, rung, n_pool)]` says so, else include 0."""
     from tacgen_lib.generate.ladder import LADDER
 
     rows = []
-    for rho in (0.0, 1.0):
-        for n_l in (8, 64):
-            for draw in range(3):
-                for arm, probe in [("v", "nonlinear"), *((r, "linear") for r in LADDER)]:
-                    up = above.get((rho, arm), False) and n_l == 8
-                    d = 0.1 if up else 0.0
-                    rows.append(
-                        {
-                            "corpus": f"nat{rho:g}",
-                            "rho": rho,
-                            "n_labelled": n_l,
-                            "n_pool": 100,
-                            "seed": 0,
-                            "draw": draw,
-                            "target": "hardness",
-                            "metric": "accuracy",
-                            "arm": arm,
-                            "probe": probe,
-                            "score": 0.6 + d,
-                            "ci_low": 0.5,
-                            "ci_high": 0.8,
-                            "gap_closed": np.nan,
-                            "headroom_captured": np.nan,
-                            "majority": 0.5,
-                            "below_majority": False,
-                            **{
-                                f"{c}_vs_{w}": v
-                                for w in ("linear_v", "nonlinear_v", "distilled")
-                                for c, v in (
-                                    ("delta", d),
-                                    ("ci_low", 0.02 if up else -0.05),
-                                    ("ci_high", 0.2 if up else 0.05),
-                                )
-                            },
-                        }
-                    )
+    for rho, n_l, n_p, draw in itertools.product((0.0, 1.0), (8, 64), pools, range(3)):
+        for arm, probe in [("v", "nonlinear"), *((r, "linear") for r in LADDER)]:
+            wins = above.get((rho, arm), False) or above.get((rho, arm, n_p), False)
+            up = wins and n_l == 8
+            d = 0.1 if up else 0.0
+            rows.append(
+                {
+                    "corpus": f"nat{rho:g}",
+                    "rho": rho,
+                    "n_labelled": n_l,
+                    "n_pool": n_p,
+                    "seed": 0,
+                    "draw": draw,
+                    "target": "hardness",
+                    "metric": "accuracy",
+                    "arm": arm,
+                    "probe": probe,
+                    "score": 0.6 + d,
+                    "ci_low": 0.5,
+                    "ci_high": 0.8,
+                    "gap_closed": np.nan,
+                    "headroom_captured": np.nan,
+                    "majority": 0.5,
+                    "below_majority": False,
+                    **{
+                        f"{c}_vs_{w}": v
+                        for w in ("linear_v", "nonlinear_v", "distilled")
+                        for c, v in (
+                            ("delta", d),
+                            ("ci_low", 0.02 if up else -0.05),
+                            ("ci_high", 0.2 if up else 0.05),
+                        )
+                    },
+                }
+            )
     return pd.DataFrame(rows)
 
 
@@ -764,3 +767,83 @@ def test_one_replicates_chance_gain_at_the_smallest_rho_does_not_undo_the_contro
     every.loc[at_0, ["delta_vs_nonlinear_v", "ci_low_vs_nonlinear_v"]] = [0.1, 0.02]
     (failed,) = ladder_verdict(seed_view(every))
     assert failed.startswith("Positive control fails") and "too, where appearance" in failed
+
+
+def test_the_pool_verdict_names_the_smallest_pool_where_each_kind_of_rung_gains():
+    """Against the pool size: the smallest N_P at which a learnt rung and at which the
+    diffusion model gain over nonlinear V in every replicate, the look oracle as the
+    reference, and the smallest rho's curve as the flat control."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from tacgen_lib.report.regime import pool_curve_figure, pool_table, seed_view
+    from tacgen_lib.report.regime_pool import first_gain, pool_verdict
+
+    pools = (256, 1024, 4096)
+    above = {
+        (1.0, "look_oracle"): True,
+        (1.0, "kernel_ridge", 1024): True,
+        (1.0, "kernel_ridge", 4096): True,
+        (1.0, "ridge", 4096): True,
+    }
+    view = seed_view(_ladder_summary(above, pools))
+    # the highest rung on the ladder at the smallest pool where one gains
+    assert first_gain(view, "hardness", 1.0, 8, ("knn", "ridge", "kernel_ridge")) == (
+        1024,
+        "kernel_ridge",
+    )
+    assert first_gain(view, "hardness", 1.0, 8, ("gen_mean", "v_tgen")) is None
+    assert first_gain(view, "hardness", 1.0, 64, ("look_oracle",)) is None  # only N_L = 8 gains
+    curve, control = pool_verdict(view)
+    assert "a learnt rung first gains over nonlinear V in every replicate at N_P = 1024" in curve
+    assert "kernel ridge V→T: +0.100" in curve and "3 of 3 replicates" in curve
+    assert "no diffusion rung (A2 diffusion mean, A3 one diffusion sample)" in curve
+    assert "up to 4096" in curve and "the look oracle − nonlinear V at N_P = 4096: +0.100" in curve
+    assert "flat, no rung gains" in control
+    assert "The look oracle gains in every replicate at no pool size" not in curve
+    no_oracle = {k: v for k, v in above.items() if k[1] != "look_oracle"}
+    (void, _) = pool_verdict(seed_view(_ladder_summary(no_oracle, pools)))
+    assert void.endswith("so the curve cannot show what a generator would add.")
+    # a gain at the smallest rho, where the look says nothing of the material, is named
+    (_, spoiled) = pool_verdict(
+        seed_view(_ladder_summary({**above, (0.0, "v_tgen", 256): True}, pools))
+    )
+    assert "not flat: A3 one diffusion sample at N_P = 256 gain in every replicate" in spoiled
+    # one pool size: no curve, said once
+    (one,) = pool_verdict(seed_view(_ladder_summary(above, (100,))))
+    assert one.startswith("One pool size ran (N_P = 100)")
+    table = pool_table(view)
+    assert [c for c in table if c.startswith("N_P")] == ["N_P = 256", "N_P = 1024", "N_P = 4096"]
+    assert len(table) == 2 * 2 * 6  # rho x N_L x (the look oracle and five rungs)
+    row = table[(table["ρ"] == "1") & (table["N_L"] == 8) & (table["rung"] == "kernel ridge V→T")]
+    assert row["N_P = 256"].item().endswith("0/3 ↑, 0/3 ↓")
+    assert row["N_P = 1024"].item().startswith("+0.100 [") and "3/3 ↑" in row["N_P = 1024"].item()
+    fig = pool_curve_figure(view)
+    assert len(fig.axes) == 2  # one target x (largest rho, smallest rho)
+    assert sorted(fig.axes[0].get_xticks()) == list(pools)
+
+
+def test_the_findings_page_gives_the_pool_verdict_and_its_decisions_where_two_pools_ran():
+    from tacgen_lib.report.findings import regime_findings
+
+    one = pd.concat([_evaluate(0.0), _evaluate(1.0)], ignore_index=True)
+    found, decided = regime_findings(one)
+    assert not [d for d in decided if "pool_first_gain" in d["decision_id"]]
+    assert not found["verdict"].str.contains("Pool size", regex=False).any()
+    # the same rows again as a second pool size (the pool's rows do not enter the summary)
+    two = pd.concat([one, one.assign(n_pool=400)], ignore_index=True)
+    found, decided = regime_findings(two)
+    pools = {
+        d["decision_id"]: d["decision"] for d in decided if "pool_first_gain" in d["decision_id"]
+    }
+    assert set(pools) == {
+        f"regime|{t}|pool_first_gain_{k}"
+        for t in ("hardness", "log_mass")
+        for k in ("learnt", "diffusion")
+    }
+    assert all(v == "none up to 400" or v.startswith("N_P = 100 (") for v in pools.values())
+    assert (
+        found["verdict"]
+        .str.contains("Pool size (hardness, ρ = 1, N_L = 6, N_P 100–400)", regex=False)
+        .any()
+    )

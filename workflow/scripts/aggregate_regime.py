@@ -85,6 +85,19 @@ write_table(
         + ", ".join(f"{c} seed {s} N_P={n} {p}: {b}" for (c, s, n, p), b in best.items()),
     ],
 )
+write_table(
+    report.pool_table(view),
+    out.pool,
+    title="Each rung against the pool size N_P: Δ vs nonlinear V (linear probe)",
+    mono=(),
+    notes=[
+        "Mean Δ over the replicates (seed × labelled draw), the replicates' interval read as one "
+        "[low, high], and how many replicates' 95% CIs lie above (↑) or below (↓) 0; the same "
+        "labelled and test rows at every pool size. A0 (the look oracle) is the reference; the "
+        "smallest ρ is the control, where no rung may gain.",
+    ],
+)
+write_figure(report.pool_curve_figure(view), out.pool_curve)
 write_figure(report.heatmap_figure(view), out.heatmap)
 write_figure(report.curves_figure(view), out.curves)
 for note in notes:

@@ -1,0 +1,260 @@
+"""The regime against the size of its unlabelled pool N_P, for the report page *Where generated
+touch helps* (`tacgen_lib.report.regime`): each rung's Delta against nonlinear V as the pool
+grows, with the look oracle's as the reference and the smallest rho's as the control that must
+stay flat (there the look says nothing of the material, so no rung may gain); the verdict read
+from it (`pool_verdict`), the table (`pool_table`) and the figure (`pool_curve_figure`).
+
+A rung *gains* at a pool size where every replicate (seed x labelled draw) has the paired 95 %
+CI of its Delta against nonlinear V above 0 (``above_vs_nonlinear_v == n_seeds`` of
+`report.regime.seed_view`), the reading of the page's panel sentences; the table and the figure
+show beside it the replicates' interval read as one (``rep_low_vs_*``, ``rep_high_vs_*``), on
+which the ladder's verdict decides. The curve is read at the smallest labelled set, where
+generated touch should help most, with the linear probe every rung of the ladder uses.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import pandas as pd
+
+from tacgen_lib.report import format as fmt
+from tacgen_lib.report.regime_arms import RUNG_LABELS, arm_rows
+from tacgen_lib.report.regime_hypotheses import replicate_words
+
+if TYPE_CHECKING:  # pyplot is imported where a figure is drawn
+    import matplotlib.pyplot as plt
+
+__all__ = [
+    "CURVE_RUNGS",
+    "DIFFUSION_RUNGS",
+    "LEARNT_RUNGS",
+    "first_gain",
+    "pool_curve_figure",
+    "pool_table",
+    "pool_verdict",
+]
+
+#: Rungs that learn a V -> T map from the pool without diffusion (`generate.ladder.LADDER`).
+LEARNT_RUNGS = ("knn", "ridge", "kernel_ridge")
+#: The diffusion generator's rungs: its mean over samples and one sample.
+DIFFUSION_RUNGS = ("gen_mean", "v_tgen")
+#: The curve's lines, top of the ladder first: the look oracle is the reference.
+CURVE_RUNGS = ("look_oracle", *LEARNT_RUNGS, *DIFFUSION_RUNGS)
+#: A line's colour and style in `pool_curve_figure`.
+_STYLE = {
+    "look_oracle": ("#ff7f0e", "--"),
+    "knn": ("#9467bd", "-"),
+    "ridge": ("#1f77b4", "-"),
+    "kernel_ridge": ("#17becf", "-"),
+    "gen_mean": ("#8c564b", "-"),
+    "v_tgen": ("#d62728", "-"),
+}
+
+
+def _gains_everywhere(r: pd.Series) -> bool:
+    """Every replicate's CI of the Delta against nonlinear V lies above 0."""
+    n = int(r["n_seeds"])
+    return n > 0 and int(r["above_vs_nonlinear_v"]) == n
+
+
+def _curve(view: pd.DataFrame, target: str, rho: float, n_labelled: int, rung: str):
+    """One rung's `seed_view` rows (linear probe) at (target, rho, N_L), by pool size."""
+    sub = view[
+        (view["target"] == target) & (view["rho"] == rho) & (view["n_labelled"] == n_labelled)
+    ]
+    return arm_rows(sub, rung, "linear").sort_values("n_pool")
+
+
+def first_gain(
+    view: pd.DataFrame, target: str, rho: float, n_labelled: int, rungs: tuple[str, ...]
+) -> tuple[int, str] | None:
+    """The smallest pool size at which one of `rungs` gains over nonlinear V in every
+    replicate at (target, rho, N_L), and that rung (the highest on the ladder there); None
+    where none does at any pool size."""
+    for n_p in sorted(view["n_pool"].unique()):
+        for rung in rungs:
+            at = _curve(view, target, rho, n_labelled, rung)
+            at = at[at["n_pool"] == n_p]
+            if not at.empty and _gains_everywhere(at.iloc[0]):
+                return int(n_p), rung
+    return None
+
+
+def _row_at(view: pd.DataFrame, target: str, rho: float, n_l: int, rung: str, n_p: int):
+    at = _curve(view, target, rho, n_l, rung)
+    return at[at["n_pool"] == n_p].iloc[0]
+
+
+def _first_words(view, target, rho, n_l, rungs, what: str, largest: int) -> str:
+    found = first_gain(view, target, rho, n_l, rungs)
+    names = ", ".join(RUNG_LABELS[r] for r in rungs)
+    if found is None:
+        return f"no {what} ({names}) gains over nonlinear V in every replicate at any N_P up to {largest}"
+    n_p, rung = found
+    row = _row_at(view, target, rho, n_l, rung, n_p)
+    return (
+        f"a {what} first gains over nonlinear V in every replicate at N_P = {n_p} "
+        f"({RUNG_LABELS[rung]}: {replicate_words(row, 'nonlinear_v')})"
+    )
+
+
+def pool_verdict(view: pd.DataFrame) -> list[str]:
+    """The curve's verdict, per target at the largest rho and the smallest N_L: the smallest
+    pool at which a learnt rung (`LEARNT_RUNGS`) and at which the diffusion model
+    (`DIFFUSION_RUNGS`) gains in every replicate, or that none does up to the largest pool;
+    the look oracle's Delta at the largest pool as the reference (and that the curve cannot
+    show anything where the oracle gains at no pool size); and whether the smallest
+    rho's curve stays flat (no rung gains there in every replicate at any pool size). One
+    sentence saying so where the regime ran one pool size."""
+    pools = sorted(int(n) for n in view["n_pool"].unique())
+    if len(pools) < 2:
+        return [
+            f"One pool size ran (N_P = {pools[0]}): the curve against the pool size needs "
+            "two or more (regime.n_pool)."
+        ]
+    rhos = sorted(view["rho"].unique())
+    rho_hi, rho_lo, n_l = rhos[-1], rhos[0], int(view["n_labelled"].min())
+    out = []
+    for target in sorted(view["target"].unique()):
+        where = f"{target}, ρ = {rho_hi:g}, N_L = {n_l}, N_P {pools[0]}–{pools[-1]}"
+        oracle = _curve(view, target, rho_hi, n_l, "look_oracle")
+        reference = (
+            f"the look oracle − nonlinear V at N_P = {pools[-1]}: "
+            f"{replicate_words(oracle.iloc[-1], 'nonlinear_v')}"
+            if not oracle.empty
+            else "no look oracle ran"
+        )
+        learnt = _first_words(view, target, rho_hi, n_l, LEARNT_RUNGS, "learnt rung", pools[-1])
+        diffusion = _first_words(
+            view, target, rho_hi, n_l, DIFFUSION_RUNGS, "diffusion rung", pools[-1]
+        )
+        # the reference must itself gain somewhere, else no rung could show what it adds
+        void = (
+            ""
+            if any(_gains_everywhere(r) for _, r in oracle.iterrows())
+            else " The look oracle gains in every replicate at no pool size, so the curve "
+            "cannot show what a generator would add."
+        )
+        out.append(f"Pool size ({where}): {learnt}; {diffusion}; {reference}.{void}")
+        if rho_lo == rho_hi:
+            out.append(f"Pool size ({target}): one ρ ran, so the curve has no flat control.")
+            continue
+        control = [
+            f"{RUNG_LABELS[rung]} at N_P = {int(r.n_pool)}"
+            for rung in CURVE_RUNGS[1:]
+            for _, r in _curve(view, target, rho_lo, n_l, rung).iterrows()
+            if _gains_everywhere(r)
+        ]
+        out.append(
+            f"Pool-size control ({target}, ρ = {rho_lo:g}, where the look says nothing of the "
+            "material): "
+            + (
+                "flat, no rung gains over nonlinear V in every replicate at any N_P."
+                if not control
+                else "not flat: "
+                + "; ".join(control)
+                + " gain in every replicate, a gain that is not the look's: the curve above "
+                "does not show what generated touch adds."
+            )
+        )
+    return out
+
+
+def pool_table(view: pd.DataFrame) -> pd.DataFrame:
+    """Rung x pool size at the smallest and largest rho and N_L: each rung's (linear probe)
+    mean Delta against nonlinear V with the replicates' interval read as one and how many
+    replicates' CIs lie above / below 0, one column per pool size."""
+    rhos = sorted(view["rho"].unique())
+    ls = sorted(view["n_labelled"].unique())
+    pools = sorted(int(n) for n in view["n_pool"].unique())
+    out = []
+    for target in sorted(view["target"].unique()):
+        for rho in sorted({rhos[0], rhos[-1]}):
+            for n_l in sorted({ls[0], ls[-1]}):
+                for rung in CURVE_RUNGS:
+                    curve = _curve(view, target, rho, n_l, rung)
+                    if curve.empty:
+                        continue
+                    row = {"target": target, "ρ": f"{rho:g}", "N_L": int(n_l)}
+                    row["rung"] = RUNG_LABELS[rung]
+                    for n_p in pools:
+                        at = curve[curve["n_pool"] == n_p]
+                        row[f"N_P = {n_p}"] = _cell(at.iloc[0]) if len(at) else fmt.MISSING
+                    out.append(row)
+    return pd.DataFrame(out)
+
+
+def _cell(r: pd.Series) -> str:
+    n = int(r["n_seeds"])
+    up, down = int(r["above_vs_nonlinear_v"]), int(r["below_vs_nonlinear_v"])
+    interval = (
+        f"[{fmt.signed(r['rep_low_vs_nonlinear_v'])}, {fmt.signed(r['rep_high_vs_nonlinear_v'])}]"
+    )
+    return f"{fmt.signed(r['delta_vs_nonlinear_v'])} {interval} {up}/{n} ↑, {down}/{n} ↓"
+
+
+def pool_curve_figure(view: pd.DataFrame) -> plt.Figure:
+    """Delta against nonlinear V per rung against the pool size, at the smallest N_L, one
+    panel per target x (largest rho, smallest rho); bars: the replicates' interval read as
+    one; a filled marker: every replicate's CI above 0."""
+    import matplotlib.pyplot as plt
+
+    targets = sorted(view["target"].unique())
+    rhos = sorted(view["rho"].unique())
+    columns = [rhos[-1]] if rhos[0] == rhos[-1] else [rhos[-1], rhos[0]]
+    n_l = int(view["n_labelled"].min())
+    pools = sorted(int(n) for n in view["n_pool"].unique())
+    fig, axes = plt.subplots(
+        len(targets),
+        len(columns),
+        figsize=(4.2 * len(columns), 3.0 * len(targets) + 1.0),
+        squeeze=False,
+        constrained_layout=True,
+    )
+    for i, target in enumerate(targets):
+        for j, rho in enumerate(columns):
+            ax = axes[i][j]
+            ax.axhline(0.0, color="#444444", linewidth=0.8)
+            for k, rung in enumerate(CURVE_RUNGS):
+                curve = _curve(view, target, rho, n_l, rung)
+                if curve.empty:
+                    continue
+                colour, style = _STYLE[rung]
+                # a small shift per rung keeps the bars of one pool size apart
+                x = curve["n_pool"].to_numpy(dtype=float) * 2.0 ** (0.05 * (k - 2.5))
+                y = curve["delta_vs_nonlinear_v"].to_numpy(dtype=float)
+                low = y - curve["rep_low_vs_nonlinear_v"].to_numpy(dtype=float)
+                high = curve["rep_high_vs_nonlinear_v"].to_numpy(dtype=float) - y
+                ax.errorbar(
+                    x,
+                    y,
+                    yerr=[low, high],
+                    color=colour,
+                    linestyle=style,
+                    capsize=2,
+                    linewidth=1.2,
+                    label=RUNG_LABELS[rung],
+                )
+                full = [_gains_everywhere(r) for _, r in curve.iterrows()]
+                ax.scatter(
+                    x,
+                    y,
+                    s=22,
+                    zorder=3,
+                    edgecolors=colour,
+                    facecolors=[colour if f else "white" for f in full],
+                )
+            ax.set_xscale("log", base=2)
+            ax.set_xlim(pools[0] / 1.5, pools[-1] * 1.5)
+            ax.set_xticks(pools, [str(n) for n in pools])
+            ax.minorticks_off()
+            ax.set_xlabel("N_P unlabelled pool rows")
+            ax.set_ylabel("Δ vs nonlinear V")
+            ax.set_title(f"{target}, ρ = {rho:g}, N_L = {n_l}", fontsize=9)
+            ax.grid(alpha=0.3)
+    handles, labels = axes[0][0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=3, fontsize=9)
+    if len(pools) < 2:
+        fig.suptitle("one pool size ran: a curve needs two or more (regime.n_pool)", fontsize=9)
+    return fig
