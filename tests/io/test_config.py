@@ -34,8 +34,8 @@ def _merged(overlay: str) -> dict:
 
 @pytest.mark.parametrize(
     "cfg",
-    [_config(), _merged("test.yaml"), _merged("paper.yaml")],
-    ids=["default", "test", "paper"],
+    [_config(), _merged("test.yaml"), _merged("paper.yaml"), _merged("scaling.yaml")],
+    ids=["default", "test", "paper", "scaling"],
 )
 def test_shipped_configs_are_valid(cfg):
     validate_config(cfg, SCHEMA)
