@@ -17,7 +17,7 @@ from tacgen_lib.report.regime_arms import ARM_LABELS, arm_rows
 if TYPE_CHECKING:  # pyplot is imported where a figure is drawn
     import matplotlib.pyplot as plt
 
-__all__ = ["curves_figure", "heatmap_figure"]
+__all__ = ["curves_figure", "heatmap_figure", "panel_grid"]
 
 
 def _grid(view: pd.DataFrame, target: str, n_pool: int, col: str):
@@ -114,21 +114,29 @@ _CURVE_ARMS = tuple(
 )
 
 
+def panel_grid(rows: int, cols: int, panel: tuple[float, float], legend_height: float):
+    """A figure of rows x cols panels of `panel` (width, height) inches each, with
+    `legend_height` inches below them for the legend: (figure, axes[row][col])."""
+    import matplotlib.pyplot as plt
+
+    width, height = panel
+    return plt.subplots(
+        rows,
+        cols,
+        figsize=(width * cols, height * rows + legend_height),
+        squeeze=False,
+        constrained_layout=True,
+    )
+
+
 def curves_figure(view: pd.DataFrame) -> plt.Figure:
     """Score against N_L per arm at the largest pool, one panel per target x rho; bands: the
     mean over seeds of each arm's fixed-test 95% CI."""
-    import matplotlib.pyplot as plt
 
     targets = sorted(view["target"].unique())
     rhos = sorted(view["rho"].unique())
     n_p = view["n_pool"].max()
-    fig, axes = plt.subplots(
-        len(targets),
-        len(rhos),
-        figsize=(3.0 * len(rhos), 2.8 * len(targets) + 1.2),
-        squeeze=False,
-        constrained_layout=True,
-    )
+    fig, axes = panel_grid(len(targets), len(rhos), (3.0, 2.8), legend_height=1.2)
     for i, target in enumerate(targets):
         for j, rho in enumerate(rhos):
             ax = axes[i][j]

@@ -20,6 +20,7 @@ import pandas as pd
 
 from tacgen_lib.report import format as fmt
 from tacgen_lib.report.regime_arms import RUNG_LABELS, arm_rows
+from tacgen_lib.report.regime_figures import panel_grid
 from tacgen_lib.report.regime_hypotheses import replicate_words
 
 if TYPE_CHECKING:  # pyplot is imported where a figure is drawn
@@ -198,20 +199,13 @@ def pool_curve_figure(view: pd.DataFrame) -> plt.Figure:
     """Delta against nonlinear V per rung against the pool size, at the smallest N_L, one
     panel per target x (largest rho, smallest rho); bars: the replicates' interval read as
     one; a filled marker: every replicate's CI above 0."""
-    import matplotlib.pyplot as plt
 
     targets = sorted(view["target"].unique())
     rhos = sorted(view["rho"].unique())
     columns = [rhos[-1]] if rhos[0] == rhos[-1] else [rhos[-1], rhos[0]]
     n_l = int(view["n_labelled"].min())
     pools = sorted(int(n) for n in view["n_pool"].unique())
-    fig, axes = plt.subplots(
-        len(targets),
-        len(columns),
-        figsize=(4.2 * len(columns), 3.0 * len(targets) + 1.0),
-        squeeze=False,
-        constrained_layout=True,
-    )
+    fig, axes = panel_grid(len(targets), len(columns), (4.2, 3.0), legend_height=1.0)
     for i, target in enumerate(targets):
         for j, rho in enumerate(columns):
             ax = axes[i][j]
