@@ -17,7 +17,7 @@ from tacgen_lib.report.regime_arms import ARM_LABELS, arm_rows
 if TYPE_CHECKING:  # pyplot is imported where a figure is drawn
     import matplotlib.pyplot as plt
 
-__all__ = ["curves_figure", "heatmap_figure", "panel_grid"]
+__all__ = ["curves_figure", "heatmap_figure", "panel_axes"]
 
 
 def _grid(view: pd.DataFrame, target: str, n_pool: int, col: str):
@@ -42,12 +42,15 @@ def _grid(view: pd.DataFrame, target: str, n_pool: int, col: str):
 
 def heatmap_figure(view: pd.DataFrame) -> plt.Figure:
     """Delta of V + T_gen (linear probe) against linear V and against nonlinear V over
-    (rho, N_L): a row of panels per target x reference, a column per pool size; each cell:
-    the mean Delta over seeds and how many seeds' CIs lie above / below 0."""
+    (rho, N_L): a row of panels per target x reference, a column per pool size (the smallest
+    and the largest where more ran: two columns fit the report's viewer, and the figure
+    against the pool size, `regime_pool.pool_curve_figure`, shows every one); each cell: the
+    mean Delta over seeds and how many seeds' CIs lie above / below 0."""
     import matplotlib.pyplot as plt
 
     targets = sorted(view["target"].unique())
     pools = sorted(view["n_pool"].unique())
+    pools = pools if len(pools) <= 2 else [pools[0], pools[-1]]
     refs = (("delta_vs_linear_v", "linear V"), ("delta_vs_nonlinear_v", "nonlinear V"))
     rows = [(t, col, name) for t in targets for col, name in refs]
     fig, axes = plt.subplots(
@@ -114,7 +117,7 @@ _CURVE_ARMS = tuple(
 )
 
 
-def panel_grid(rows: int, cols: int, panel: tuple[float, float], legend_height: float):
+def panel_axes(rows: int, cols: int, panel: tuple[float, float], legend_height: float):
     """A figure of rows x cols panels of `panel` (width, height) inches each, with
     `legend_height` inches below them for the legend: (figure, axes[row][col])."""
     import matplotlib.pyplot as plt
@@ -136,7 +139,7 @@ def curves_figure(view: pd.DataFrame) -> plt.Figure:
     targets = sorted(view["target"].unique())
     rhos = sorted(view["rho"].unique())
     n_p = view["n_pool"].max()
-    fig, axes = panel_grid(len(targets), len(rhos), (3.0, 2.8), legend_height=1.2)
+    fig, axes = panel_axes(len(targets), len(rhos), (3.0, 2.8), legend_height=1.2)
     for i, target in enumerate(targets):
         for j, rho in enumerate(rhos):
             ax = axes[i][j]

@@ -20,7 +20,7 @@ import pandas as pd
 
 from tacgen_lib.report import format as fmt
 from tacgen_lib.report.regime_arms import RUNG_LABELS, arm_rows
-from tacgen_lib.report.regime_figures import panel_grid
+from tacgen_lib.report.regime_figures import panel_axes
 from tacgen_lib.report.regime_hypotheses import replicate_words
 
 if TYPE_CHECKING:  # pyplot is imported where a figure is drawn
@@ -205,7 +205,7 @@ def pool_curve_figure(view: pd.DataFrame) -> plt.Figure:
     columns = [rhos[-1]] if rhos[0] == rhos[-1] else [rhos[-1], rhos[0]]
     n_l = int(view["n_labelled"].min())
     pools = sorted(int(n) for n in view["n_pool"].unique())
-    fig, axes = panel_grid(len(targets), len(columns), (4.2, 3.0), legend_height=1.0)
+    fig, axes = panel_axes(len(targets), len(columns), (4.2, 3.0), legend_height=1.0)
     for i, target in enumerate(targets):
         for j, rho in enumerate(columns):
             ax = axes[i][j]

@@ -776,8 +776,9 @@ def test_the_pool_verdict_names_the_smallest_pool_where_each_kind_of_rung_gains(
     import matplotlib
 
     matplotlib.use("Agg")
-    from tacgen_lib.report.regime import pool_curve_figure, pool_table, seed_view
+    from tacgen_lib.report.regime import heatmap_figure, pool_curve_figure, pool_table, seed_view
     from tacgen_lib.report.regime_pool import first_gain, pool_verdict
+    from tacgen_lib.report.write import figure_problems
 
     pools = (256, 1024, 4096)
     above = {
@@ -821,6 +822,13 @@ def test_the_pool_verdict_names_the_smallest_pool_where_each_kind_of_rung_gains(
     fig = pool_curve_figure(view)
     assert len(fig.axes) == 2  # one target x (largest rho, smallest rho)
     assert sorted(fig.axes[0].get_xticks()) == list(pools)
+    # both figures fit the report's viewer whatever the number of pool sizes (the heatmap
+    # keeps the smallest and the largest pool, two columns)
+    wide = seed_view(_ladder_summary(above, (256, 1024, 4096, 16384)))
+    for fig in (pool_curve_figure(wide), heatmap_figure(wide)):
+        assert figure_problems(fig) == []
+    titles = [ax.get_title() for ax in heatmap_figure(wide).axes if ax.get_title()]
+    assert {t.split(":")[0] for t in titles} == {"hardness, N_P = 256", "hardness, N_P = 16384"}
 
 
 def test_the_findings_page_gives_the_pool_verdict_and_its_decisions_where_two_pools_ran():
