@@ -66,7 +66,7 @@ def _ladder_decisions(view: pd.DataFrame) -> list[dict]:
 
 def _pool_decisions(view: pd.DataFrame) -> list[dict]:
     """Per target, where two or more pool sizes ran: the smallest pool at which a learnt rung
-    and at which the diffusion model gain over nonlinear V in every replicate
+    and at which the diffusion model gain over nonlinear V over the replicates
     (`report.regime_pool.first_gain`, at the largest rho and the smallest N_L)."""
     from tacgen_lib.report.regime_pool import DIFFUSION_RUNGS, LEARNT_RUNGS, first_gain
 
@@ -82,8 +82,8 @@ def _pool_decisions(view: pd.DataFrame) -> list[dict]:
                 decision(
                     f"regime|{target}|pool_first_gain_{kind}",
                     "regime",
-                    f"the smallest N_P at which a {kind} rung gains over nonlinear V in every "
-                    f"replicate ({target}, ρ = {rho:g}, N_L = {n_l}, N_P {pools[0]}–{pools[-1]})",
+                    f"the smallest N_P at which a {kind} rung gains over nonlinear V over the "
+                    f"replicates ({target}, ρ = {rho:g}, N_L = {n_l}, N_P {pools[0]}–{pools[-1]})",
                     f"none up to {pools[-1]}"
                     if found is None
                     else f"N_P = {found[0]} ({RUNG_LABELS[found[1]]})",

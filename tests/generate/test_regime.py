@@ -794,14 +794,23 @@ def test_the_pool_verdict_names_the_smallest_pool_where_each_kind_of_rung_gains(
         "kernel_ridge",
     )
     assert first_gain(view, "hardness", 1.0, 8, ("gen_mean", "v_tgen")) is None
+    # every replicate's CI above 0 is not enough where the replicates' interval reaches 0
+    spread = view.copy()
+    at = (spread["arm"] == "kernel_ridge") & (spread["n_pool"] == 1024) & (spread["rho"] == 1.0)
+    spread.loc[at, "rep_low_vs_nonlinear_v"] = -0.01
+    assert int(spread.loc[at & (spread["n_labelled"] == 8), "above_vs_nonlinear_v"].iloc[0]) == 3
+    assert first_gain(spread, "hardness", 1.0, 8, ("knn", "ridge", "kernel_ridge")) == (
+        4096,
+        "ridge",
+    )
     assert first_gain(view, "hardness", 1.0, 64, ("look_oracle",)) is None  # only N_L = 8 gains
     curve, control = pool_verdict(view)
-    assert "a learnt rung first gains over nonlinear V in every replicate at N_P = 1024" in curve
+    assert "a learnt rung first gains over nonlinear V over the replicates at N_P = 1024" in curve
     assert "kernel ridge V→T: +0.100" in curve and "3 of 3 replicates" in curve
     assert "no diffusion rung (A2 diffusion mean, A3 one diffusion sample)" in curve
     assert "up to 4096" in curve and "the look oracle − nonlinear V at N_P = 4096: +0.100" in curve
     assert "flat, no rung gains" in control
-    assert "The look oracle gains in every replicate at no pool size" not in curve
+    assert "The look oracle gains over the replicates at no pool size" not in curve
     no_oracle = {k: v for k, v in above.items() if k[1] != "look_oracle"}
     (void, _) = pool_verdict(seed_view(_ladder_summary(no_oracle, pools)))
     assert void.endswith("so the curve cannot show what a generator would add.")
@@ -809,7 +818,7 @@ def test_the_pool_verdict_names_the_smallest_pool_where_each_kind_of_rung_gains(
     (_, spoiled) = pool_verdict(
         seed_view(_ladder_summary({**above, (0.0, "v_tgen", 256): True}, pools))
     )
-    assert "not flat: A3 one diffusion sample at N_P = 256 gain in every replicate" in spoiled
+    assert "not flat: A3 one diffusion sample at N_P = 256 gain over the replicates" in spoiled
     # one pool size: no curve, said once
     (one,) = pool_verdict(seed_view(_ladder_summary(above, (100,))))
     assert one.startswith("One pool size ran (N_P = 100)")
