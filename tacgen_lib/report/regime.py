@@ -19,7 +19,7 @@ import pandas as pd
 
 from tacgen_lib.report import claims
 from tacgen_lib.report import format as fmt
-from tacgen_lib.report.regime_arms import ARM_LABELS, RUNG_LABELS, arm_rows
+from tacgen_lib.report.regime_arms import ARM_LABELS, RUNG_LABELS, arm_rows, gains
 from tacgen_lib.report.regime_figures import curves_figure, heatmap_figure
 from tacgen_lib.report.regime_hypotheses import hypothesis_sentences, replicate_words
 from tacgen_lib.report.regime_pool import pool_curve_figure, pool_table, pool_verdict
@@ -89,7 +89,7 @@ WITHIN_NOISE = "headroom within noise"
 def headroom_cells(sub: pd.DataFrame, view: pd.DataFrame) -> list[object]:
     """The headroom captured of each `seed_view` row of `sub` as the page shows it: the mean
     over replicates where the cell's headroom (V ceiling − nonlinear V, the nonlinear V
-    ceiling's row of `view`) exceeds its noise over the replicates (`_gains`: their interval
+    ceiling's row of `view`) exceeds its noise over the replicates (`regime_arms.gains`: their interval
     read as one lies above 0) and some replicate's own CI did too (`regime_arms.
     headroom_captured`); `WITHIN_NOISE` otherwise, so the reader sees why no ratio is given."""
     keys = ["corpus", "rho", "n_labelled", "n_pool", "target"]
@@ -97,7 +97,7 @@ def headroom_cells(sub: pd.DataFrame, view: pd.DataFrame) -> list[object]:
     out: list[object] = []
     for _, r in sub.iterrows():
         key = tuple(r[k] for k in keys)
-        beyond = key in ceiling.index and _gains(ceiling.loc[key])
+        beyond = key in ceiling.index and gains(ceiling.loc[key])
         value = float(r["headroom_captured"])
         out.append(value if beyond and pd.notna(value) else WITHIN_NOISE)
     return out
@@ -191,12 +191,6 @@ def ladder_table(view: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame(out)
 
 
-def _gains(r: pd.Series) -> bool:
-    """A replicate-summarised row gains over nonlinear V: the replicates' interval read as one
-    (`seed_view`'s ``rep_low_vs_nonlinear_v``) lies above 0."""
-    return bool(r["rep_low_vs_nonlinear_v"] > 0)
-
-
 #: What each step down the ladder says where the gain is lost (generate.ladder).
 _LOSS = {
     "knn": "vision: V's neighbourhoods do not hold what the look shows",
@@ -215,7 +209,7 @@ class LadderReading:
     """The ladder of one target at the largest pool, the largest rho and the smallest N_L:
     the look oracle's rows there and at the smallest rho, whether the positive control works
     (the oracle gains over nonlinear V there, and does not at the smallest rho, a gain being
-    read over the replicates, `_gains`: one replicate's CI above 0 by chance at the smallest
+    read over the replicates, `regime_arms.gains`: one replicate's CI above 0 by chance at the smallest
     rho, about one in twenty, does not undo the control),
     and the first rung below the oracle that loses the gain (None: every rung keeps it)."""
 
@@ -242,9 +236,9 @@ def ladder_readings(view: pd.DataFrame) -> list[LadderReading]:
         if a0.empty or a0_low.empty:
             continue
         a0, a0_low = a0.iloc[0], a0_low.iloc[0]
-        control = _gains(a0) and not _gains(a0_low)
+        control = gains(a0) and not gains(a0_low)
         rungs = list(RUNG_LABELS)
-        lost = next((r for r in rungs[1:] if not _gains(arm_rows(top, r, "linear").iloc[0])), None)
+        lost = next((r for r in rungs[1:] if not gains(arm_rows(top, r, "linear").iloc[0])), None)
         where = f"{target}, ρ = {rhos[-1]:g}, N_L = {ls[0]}, N_P = {n_p}"
         out.append(LadderReading(str(target), where, top, a0, a0_low, control, lost))
     return out
@@ -257,7 +251,7 @@ def ladder_verdict(
 
     1. the visibility gate (`gates`: its sentences; `gate_passed`: whether V passed it);
     2. the positive control: the look oracle (A0) at the largest rho and the smallest N_L
-       gains over nonlinear V (`_gains`: over the replicates), and at the smallest rho does not;
+       gains over nonlinear V (`regime_arms.gains`: over the replicates), and at the smallest rho does not;
        without it, no claim about generated touch is made;
     3. only then, per target, how far down the ladder the gain survives and which rung
        loses it; where V failed the gate, that the regime cannot say whether generated touch
@@ -272,7 +266,7 @@ def ladder_verdict(
                 "A generator with perfect vision shows no gain the probes detect, so the regime "
                 "cannot say whether generated touch helps: the probe or the evaluation lacks "
                 "the power."
-                if not _gains(a0)
+                if not gains(a0)
                 else f"The look gains at ρ = {rho_lo:g} too, where appearance says nothing of "
                 "the material: the gain is not the look's, so the regime cannot say whether "
                 "generated touch helps."

@@ -12,6 +12,7 @@ __all__ = [
     "NOT_BUILT_ON_V",
     "RUNG_LABELS",
     "arm_rows",
+    "gains",
 ]
 
 #: The ladder's rungs in words, top to bottom (`generate.ladder.LADDER`).
@@ -50,3 +51,11 @@ NOT_BUILT_ON_V = ("look_oracle", "v_treal", "v_ceiling", "vision_ceiling")
 def arm_rows(frame: pd.DataFrame, arm: str, probe: str) -> pd.DataFrame:
     """The rows of one (arm, probe) of a regime summary or `seed_view`."""
     return frame[(frame["arm"] == arm) & (frame["probe"] == probe)]
+
+
+def gains(r: pd.Series) -> bool:
+    """A `report.regime.seed_view` row gains over nonlinear V: the replicates' interval of its
+    Delta, read as one (``rep_low_vs_nonlinear_v``, `claims.seeds_interval`: every replicate's
+    CI and, from three on, the mean's t-interval over them), lies above 0. The rule the ladder's
+    verdict and the curve against the pool size decide by."""
+    return bool(r["rep_low_vs_nonlinear_v"] > 0)

@@ -135,7 +135,6 @@ def panel_axes(rows: int, cols: int, panel: tuple[float, float], legend_height: 
 def curves_figure(view: pd.DataFrame) -> plt.Figure:
     """Score against N_L per arm at the largest pool, one panel per target x rho; bands: the
     mean over seeds of each arm's fixed-test 95% CI."""
-
     targets = sorted(view["target"].unique())
     rhos = sorted(view["rho"].unique())
     n_p = view["n_pool"].max()

@@ -15,7 +15,7 @@ __all__ = ["hypothesis_sentences", "replicate_words"]
 
 def replicate_words(r: pd.Series, what: str) -> str:
     """A `seed_view` row's mean Delta against `what` (linear_v | nonlinear_v | distilled) with
-    the replicates' interval read as one (what a gain is decided on, `_gains`) and how many
+    the replicates' interval read as one (what a gain is decided on, `regime_arms.gains`) and how many
     replicates' CIs lie above or below 0, in words."""
     d, n = r[f"delta_vs_{what}"], int(r["n_seeds"])
     rep = f"[{fmt.signed(r[f'rep_low_vs_{what}'])}, {fmt.signed(r[f'rep_high_vs_{what}'])}]"

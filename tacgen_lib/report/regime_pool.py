@@ -5,10 +5,8 @@ stay flat (there the look says nothing of the material, so no rung may gain); th
 from it (`pool_verdict`), the table (`pool_table`) and the figure (`pool_curve_figure`).
 
 A rung *gains* at a pool size where the replicates' (seed x labelled draw) interval of its
-Delta against nonlinear V, read as one, lies above 0 (``rep_low_vs_nonlinear_v`` of
-`report.regime.seed_view`, `claims.seeds_interval`: it holds every replicate's paired 95 % CI
-and, from three replicates on, the mean's t-interval over them), the rule the ladder's verdict
-decides by: so every replicate's CI lies above 0 and the replicates agree. Every replicate's CI
+Delta against nonlinear V, read as one, lies above 0 (`regime_arms.gains`, the rule the
+ladder's verdict decides by): so every replicate's CI lies above 0 and the replicates agree. Every replicate's CI
 above 0 alone is looser than it reads on an R² target, where a negligible Delta with tight
 paired CIs passes it at the smallest rho. The table shows both (the interval and how many
 replicates' CIs lie above / below 0). The curve is read at the smallest labelled set, where
@@ -22,7 +20,7 @@ from typing import TYPE_CHECKING
 import pandas as pd
 
 from tacgen_lib.report import format as fmt
-from tacgen_lib.report.regime_arms import RUNG_LABELS, arm_rows
+from tacgen_lib.report.regime_arms import RUNG_LABELS, arm_rows, gains
 from tacgen_lib.report.regime_figures import panel_axes
 from tacgen_lib.report.regime_hypotheses import replicate_words
 
@@ -56,12 +54,6 @@ _STYLE = {
 }
 
 
-def _gains_everywhere(r: pd.Series) -> bool:
-    """The replicates' interval of the Delta against nonlinear V, read as one, lies above 0
-    (so every replicate's CI does too)."""
-    return bool(r["rep_low_vs_nonlinear_v"] > 0)
-
-
 def _curve(view: pd.DataFrame, target: str, rho: float, n_labelled: int, rung: str):
     """One rung's `seed_view` rows (linear probe) at (target, rho, N_L), by pool size."""
     sub = view[
@@ -70,33 +62,38 @@ def _curve(view: pd.DataFrame, target: str, rho: float, n_labelled: int, rung: s
     return arm_rows(sub, rung, "linear").sort_values("n_pool")
 
 
-def first_gain(
+def _first_gain_row(
     view: pd.DataFrame, target: str, rho: float, n_labelled: int, rungs: tuple[str, ...]
-) -> tuple[int, str] | None:
-    """The smallest pool size at which one of `rungs` gains over nonlinear V in every
-    replicate at (target, rho, N_L), and that rung (the highest on the ladder there); None
-    where none does at any pool size."""
+) -> tuple[int, str, pd.Series] | None:
+    """`first_gain` with the rung's `seed_view` row there."""
+    curves = {rung: _curve(view, target, rho, n_labelled, rung) for rung in rungs}
     for n_p in sorted(view["n_pool"].unique()):
-        for rung in rungs:
-            at = _curve(view, target, rho, n_labelled, rung)
-            at = at[at["n_pool"] == n_p]
-            if not at.empty and _gains_everywhere(at.iloc[0]):
-                return int(n_p), rung
+        for rung, curve in curves.items():
+            at = curve[curve["n_pool"] == n_p]
+            if not at.empty and gains(at.iloc[0]):
+                return int(n_p), rung, at.iloc[0]
     return None
 
 
-def _row_at(view: pd.DataFrame, target: str, rho: float, n_l: int, rung: str, n_p: int):
-    at = _curve(view, target, rho, n_l, rung)
-    return at[at["n_pool"] == n_p].iloc[0]
+def first_gain(
+    view: pd.DataFrame, target: str, rho: float, n_labelled: int, rungs: tuple[str, ...]
+) -> tuple[int, str] | None:
+    """The smallest pool size at which one of `rungs` gains over nonlinear V over the
+    replicates (`regime_arms.gains`) at (target, rho, N_L), and that rung (the highest on the
+    ladder there); None where none does at any pool size."""
+    found = _first_gain_row(view, target, rho, n_labelled, rungs)
+    return None if found is None else found[:2]
 
 
 def _first_words(view, target, rho, n_l, rungs, what: str, largest: int) -> str:
-    found = first_gain(view, target, rho, n_l, rungs)
-    names = ", ".join(RUNG_LABELS[r] for r in rungs)
+    found = _first_gain_row(view, target, rho, n_l, rungs)
     if found is None:
-        return f"no {what} ({names}) gains over nonlinear V over the replicates at any N_P up to {largest}"
-    n_p, rung = found
-    row = _row_at(view, target, rho, n_l, rung, n_p)
+        names = ", ".join(RUNG_LABELS[r] for r in rungs)
+        return (
+            f"no {what} ({names}) gains over nonlinear V over the replicates at any N_P up to "
+            f"{largest}"
+        )
+    n_p, rung, row = found
     return (
         f"a {what} first gains over nonlinear V over the replicates at N_P = {n_p} "
         f"({RUNG_LABELS[rung]}: {replicate_words(row, 'nonlinear_v')})"
@@ -106,11 +103,11 @@ def _first_words(view, target, rho, n_l, rungs, what: str, largest: int) -> str:
 def pool_verdict(view: pd.DataFrame) -> list[str]:
     """The curve's verdict, per target at the largest rho and the smallest N_L: the smallest
     pool at which a learnt rung (`LEARNT_RUNGS`) and at which the diffusion model
-    (`DIFFUSION_RUNGS`) gains over the replicates (`_gains_everywhere`), or that none does up to the largest pool;
-    the look oracle's Delta at the largest pool as the reference (and that the curve cannot
-    show anything where the oracle gains at no pool size); and whether the smallest
-    rho's curve stays flat (no rung gains there at any pool size). One
-    sentence saying so where the regime ran one pool size."""
+    (`DIFFUSION_RUNGS`) gains over the replicates (`first_gain`), or that none does up to the
+    largest pool; the look oracle's Delta at the largest pool as the reference (and that the
+    curve cannot show anything where the oracle gains at no pool size); and whether the
+    smallest rho's curve stays flat (no rung gains there at any pool size). One sentence
+    saying so where the regime ran one pool size."""
     pools = sorted(int(n) for n in view["n_pool"].unique())
     if len(pools) < 2:
         return [
@@ -136,7 +133,7 @@ def pool_verdict(view: pd.DataFrame) -> list[str]:
         # the reference must itself gain somewhere, else no rung could show what it adds
         void = (
             ""
-            if any(_gains_everywhere(r) for _, r in oracle.iterrows())
+            if any(gains(r) for _, r in oracle.iterrows())
             else " The look oracle gains over the replicates at no pool size, so the curve "
             "cannot show what a generator would add."
         )
@@ -148,7 +145,7 @@ def pool_verdict(view: pd.DataFrame) -> list[str]:
             f"{RUNG_LABELS[rung]} at N_P = {int(r.n_pool)}"
             for rung in CURVE_RUNGS[1:]
             for _, r in _curve(view, target, rho_lo, n_l, rung).iterrows()
-            if _gains_everywhere(r)
+            if gains(r)
         ]
         out.append(
             f"Pool-size control ({target}, ρ = {rho_lo:g}, where the look says nothing of the "
@@ -202,7 +199,6 @@ def pool_curve_figure(view: pd.DataFrame) -> plt.Figure:
     """Delta against nonlinear V per rung against the pool size, at the smallest N_L, one
     panel per target x (largest rho, smallest rho); bars: the replicates' interval read as
     one; a filled marker: that interval above 0 (a gain)."""
-
     targets = sorted(view["target"].unique())
     rhos = sorted(view["rho"].unique())
     columns = [rhos[-1]] if rhos[0] == rhos[-1] else [rhos[-1], rhos[0]]
@@ -233,7 +229,7 @@ def pool_curve_figure(view: pd.DataFrame) -> plt.Figure:
                     linewidth=1.2,
                     label=RUNG_LABELS[rung],
                 )
-                full = [_gains_everywhere(r) for _, r in curve.iterrows()]
+                full = [gains(r) for _, r in curve.iterrows()]
                 ax.scatter(
                     x,
                     y,
