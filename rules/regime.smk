@@ -10,7 +10,7 @@ include: "regime_common.smk"
 if REGIME_CORPORA:
     TARGETS += [f"{REGIME_DIR}/summary.parquet"]
     TARGETS += [f"{REGIME_REPORT}/{n}.{e}" for n, e in REGIME_ITEMS.items()]
-    EDGES += [f"{REGIME_DIR}/evaluation.parquet"]
+    EDGES += [f"{REGIME_DIR}/evaluation.parquet", f"{REGIME_DIR}/look_control.parquet"]
     EDGES += [p for c, s in PLANS.regime.cells() for p in PLANS.regime.t_gen(c, s)]
 
 
@@ -79,6 +79,44 @@ rule regime_evaluate:
         gammas=GENERATE["nonlinear_gammas"],
         ceiling=VISIBILITY,  # the V ceiling's kernel probe is the visibility check's
         cells=REGIME_CELLS,
+        look_control_snr=None,  # real touch (regime_look_control: the positive control's)
+    script:
+        "../workflow/scripts/regime_evaluate.py"
+
+
+rule regime_look_control:
+    """The curve's positive control for one corpus x seed (tacgen_lib.generate.look_control): every arm but the diffusion generator's, on touch that is the look's mean real touch plus noise at config regime.look_control_snr."""
+    input:
+        manifest="results/corpus/manifest.parquet",
+        splits="results/corpus/splits.parquet",
+        v=lambda w: feature_edge(w.corpus, "vision"),
+        t=lambda w: PLANS.generate.tactile(w.corpus),
+        code=imports_of("regime_evaluate"),
+    output:
+        rows=REGIME_CONTROL,
+    log:
+        "results/logs/regime_look_control/{corpus}/{seed}.log",
+    benchmark:
+        "results/benchmarks/regime_look_control/{corpus}/{seed}.tsv"
+    wildcard_constraints:
+        corpus=one_of(REGIME_CONTROL_CORPORA),
+        seed=r"\d+",
+    conda:
+        "../envs/probes.yaml"
+    threads: 2  # its (target, N_L) cells in forked one-thread workers (runtime.workers)
+    resources:
+        mem_mb=3000,
+        runtime=30,
+    params:
+        regime=REGIME,
+        targets=REGIME["targets"],
+        rho=lambda w: float(CORPORA[w.corpus]["rho"]),
+        probes=PROBE_SETTINGS,
+        probe_seed=config["probes"]["seeds"][0],
+        gammas=GENERATE["nonlinear_gammas"],
+        ceiling=None,  # the V ceiling does not depend on touch: regime_evaluate's
+        cells=REGIME_CELLS,  # only their pool sizes: no generator is read
+        look_control_snr=REGIME["look_control_snr"],
     script:
         "../workflow/scripts/regime_evaluate.py"
 
@@ -89,6 +127,7 @@ rule aggregate_regime:
         rows=PLANS.regime.files(f"{REGIME_CELL}/evaluation.parquet"),
         visibility=VISIBILITY_EDGE,
         curves=PLANS.regime.files(f"{REGIME_CELL}/curves.parquet"),
+        control=PLANS.regime.control_files(REGIME_CONTROL),
         code=imports_of("aggregate_regime"),
     output:
         **{
@@ -103,6 +142,7 @@ rule aggregate_regime:
         },
         summary=f"{REGIME_DIR}/summary.parquet",
         evaluation=f"{REGIME_DIR}/evaluation.parquet",
+        control=f"{REGIME_DIR}/look_control.parquet",
     log:
         "results/logs/aggregate_regime.log",
     benchmark:
@@ -115,5 +155,6 @@ rule aggregate_regime:
         runtime=10,
     params:
         gate=VISIBILITY["gate"],  # the visibility gate of the regime's corpora
+        look_control_snr=REGIME["look_control_snr"],  # the positive control's, as it ran
     script:
         "../workflow/scripts/aggregate_regime.py"

@@ -163,6 +163,7 @@ rule findings:
         policy=POLICY_ON,
         regime=bool(REGIME_CORPORA),
         regime_corpora=REGIME_CORPORA,
+        look_control_snr=REGIME["look_control_snr"] if REGIME else None,
         visibility=bool(SIM_CORPORA),
         gate=VISIBILITY["gate"],
         transfer=bool(TRANSFER_CORPUS),

@@ -71,6 +71,19 @@ def regime_pool_steps(c: Config) -> float:
     return float(sum(pool_steps(regime.steps, int(n), regime) for n in regime.n_pool))
 
 
+def regime_cell_rows(c: Config) -> float:
+    """The rows a regime job's arms are fitted over, summed over its cells: per pool size, the
+    largest labelled set plus the pool (the ladder's rungs learn from the pool), times the
+    targets, labelled sizes and labelled draws of config ``regime``. A sum over the pool
+    sizes, not the largest pool times their number: a grid of pools from 256 to 16,384 rows
+    costs about its largest pool's cells, not four times them."""
+    regime = c["regime"]
+    per_pool = sum(max(regime["n_labelled"]) + int(n) for n in regime["n_pool"])
+    return float(
+        per_pool * len(regime["targets"]) * len(regime["n_labelled"]) * int(regime["label_draws"])
+    )
+
+
 def samples(c: Config, name: str) -> float:
     """Samples of a corpus: `n` of a simulated one; for a real one, the rows its dataset's
     split CSVs list (`tacgen_lib.corpus.ingest.listed_rows`, counted on disk without opening

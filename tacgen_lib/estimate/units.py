@@ -41,6 +41,7 @@ from tacgen_lib.estimate.counts import (
     pretraining_units,
     probe_jobs,
     probe_work,
+    regime_cell_rows,
     regime_pool_steps,
     sample_cells,
     samples,
@@ -224,14 +225,11 @@ UNITS: dict[str, UnitRule] = {
     ),
     "regime_evaluate": UnitRule(
         "(labelled + pool rows) × target × labelled size × pool size × labelled draw",
-        lambda c, w: (
-            "",
-            (max(c["regime"]["n_labelled"]) + max(c["regime"]["n_pool"]))
-            * len(c["regime"]["targets"])
-            * len(c["regime"]["n_labelled"])
-            * len(c["regime"]["n_pool"])
-            * int(c["regime"]["label_draws"]),
-        ),
+        lambda c, w: ("", regime_cell_rows(c)),
+    ),
+    "regime_look_control": UnitRule(
+        "(labelled + pool rows) × target × labelled size × pool size × labelled draw",
+        lambda c, w: ("", regime_cell_rows(c)),
     ),
     "visibility_check": UnitRule(
         "row of every simulated corpus (each factor's probes; the gate's factors' 2-layer probe)",

@@ -212,7 +212,7 @@ def ladder_rungs(
     looks: Mapping[str, str] | pd.Series | Sequence[Mapping[str, str] | pd.Series],
     pool: Sequence[str],
     rows: Sequence[str],
-    gen_mean: Mapping[str, np.ndarray],
+    gen_mean: Mapping[str, np.ndarray] | None,
     *,
     regime: RegimeSettings,
     seed: int,
@@ -221,7 +221,8 @@ def ladder_rungs(
     pool only: `look_oracle`, `knn_generate`, ridge (`generate.ridge_generator.ridge_generate`, its
     conditional mean), kernel ridge (`generate.kernel_ridge_generator.kernel_ridge_generate`) and
     ``gen_mean`` (given: the mean of the diffusion generator's samples,
-    `regime_generators.pool_generators`). `regime`: the settings the rungs read (``knn_ks``,
+    `regime_generators.pool_generators`; None: no ``gen_mean`` rung, as in the positive
+    control's, `generate.look_control`). `regime`: the settings the rungs read (``knn_ks``,
     ``look_min_rows``, the kernel ridge rung's grids and Nystroem threshold and rank).
 
     Raises ValueError when a row asked for is in the pool: the pool is unlabelled, the rows a
@@ -244,14 +245,16 @@ def ladder_rungs(
     needed = {i: vision[i] for i in (*pool, *rows)}
     ridge = ridge_generate(needed, t_real, pool, seed=seed)
     kernel = kernel_ridge_generate(vision, t_real, pool, rows, regime=regime, seed=seed)
+    t_gen = {
+        "look_oracle": oracle.t_gen,
+        "knn": knn.t_gen,
+        "ridge": {i: ridge.mean[i] for i in rows},
+        "kernel_ridge": kernel.t_gen,
+    }
+    if gen_mean is not None:
+        t_gen["gen_mean"] = {i: np.asarray(gen_mean[i], np.float64) for i in rows}
     return LadderRungs(
-        t_gen={
-            "look_oracle": oracle.t_gen,
-            "knn": knn.t_gen,
-            "ridge": {i: ridge.mean[i] for i in rows},
-            "kernel_ridge": kernel.t_gen,
-            "gen_mean": {i: np.asarray(gen_mean[i], np.float64) for i in rows},
-        },
+        t_gen=t_gen,
         look_levels=oracle.levels,
         n_looks=oracle.n_looks,
         knn_k=knn.k,

@@ -128,13 +128,14 @@ class _CellFeatures:
     ladder: Mapping[int, Mapping[str, Mapping[str, np.ndarray]]]
     gammas: Sequence[float]
     bootstrap: int
+    distil: bool
 
 
 def evaluate_regime(
     targets: Sequence[RegimeTarget],
     sets: RegimeSets,
     regime: RegimeSettings,
-    ceiling: VisibilitySettings,
+    ceiling: VisibilitySettings | None,
     *,
     corpus: str,
     rho: float,
@@ -147,6 +148,7 @@ def evaluate_regime(
     n_classes: int,
     progress: Any = None,
     workers: int = 1,
+    distil: bool = True,
 ) -> pd.DataFrame:
     """Every arm (`ARMS`) of every (labelled draw, N_L, N_P) cell of one corpus x seed, per
     target: ``regime.label_draws`` draws x ``regime.n_labelled`` x ``regime.n_pool``, each
@@ -162,16 +164,27 @@ def evaluate_regime(
     rows for any number of workers), the costliest (logistic targets, large N_L) first.
     ``ceiling.gammas`` x ``ceiling.C``: the grid of the V ceiling's kernel probe (config
     ``features.visibility``: the visibility check's nonlinear probe).
+
+    The positive control (`generate.look_control`) runs the same cells on its own touch:
+    `t_real` its T_control, `ladder` the rungs that need no diffusion, `t_gen` empty, and
+    ``ceiling=None``, ``distil=False``: a cell fits only the arms whose inputs it is given
+    (the V ceiling does not depend on touch; generalised distillation is left out).
     Returns rows with `SUMMARY_COLUMNS`, ordered by target, draw, N_L and N_P.
     """
     say = progress or (lambda _m: None)
     base = {"corpus": corpus, "rho": float(rho), "seed": int(seed)}
-    features = _CellFeatures(vision, t_real, t_gen, ladder, tuple(gammas), int(regime.bootstrap))
+    features = _CellFeatures(
+        vision, t_real, t_gen, ladder, tuple(gammas), int(regime.bootstrap), bool(distil)
+    )
     # the ceilings of each target (fitted on every non-test row), then the cells
-    ceilings = fork_map(
-        lambda tgt: _ceilings(tgt, vision, n_classes, gammas=ceiling.gammas, C=ceiling.C),
-        targets,
-        workers,
+    ceilings = (
+        fork_map(
+            lambda tgt: _ceilings(tgt, vision, n_classes, gammas=ceiling.gammas, C=ceiling.C),
+            targets,
+            workers,
+        )
+        if ceiling is not None
+        else [{} for _ in targets]
     )
     cells = [
         (t, d, int(n_l))
@@ -262,34 +275,38 @@ def _labelled_cell(
     out: list[dict] = []
     for n_p in n_pool:
         pool = sets.pool_ids(n_p)
-        v_pool, t_pool = feature_block(vision, pool), feature_block(t_real, pool)
         cell = dict(fits)
-        rungs = {**ladder[n_p], "v_tgen": t_gen[(n_p, "real")]}
+        rungs = dict(ladder[n_p])
+        if (n_p, "real") in t_gen:
+            rungs["v_tgen"] = t_gen[(n_p, "real")]
         # the nonlinear probes of the rungs and of the distillation student take the gamma
         # multiple (of their own input's median heuristic) that CV chose for nonlinear V on
         # these labels, as the student always did; all of `gammas` where that probe could not
         # run CV. One CV over gammas per cell instead of one per arm
         g_nl = fits[("v", "nonlinear")].gamma_multiple
         g_arms = [g_nl] if np.isfinite(g_nl) else gammas
-        for rung in LADDER:
+        for rung in (r for r in LADDER if r in rungs):
             x_lab = np.hstack([v_lab, feature_block(rungs[rung], lab)])
             x_te = np.hstack([v_te, feature_block(rungs[rung], test)])
             cell[(rung, "linear")] = fit_small_probe(x_lab, y_lab, x_te, ps)
             cell[(rung, "nonlinear")] = fit_small_nonlinear(
                 x_lab, y_lab, x_te, ps, gammas=g_arms, n_components=d_t
             )
-        shuf = t_gen[(n_p, "shuffled")]
-        cell[("v_tgen_shuffled", "linear")] = fit_small_probe(
-            np.hstack([v_lab, feature_block(shuf, lab)]),
-            y_lab,
-            np.hstack([v_te, feature_block(shuf, test)]),
-            ps,
-        )
-        x_gd, y_gd = distillation_rows(v_lab, t_lab, y_lab, v_pool, t_pool, ps)
-        cell[("distilled", "linear")] = fit_small_probe(x_gd, y_gd, v_te, ps)
-        cell[("distilled", "nonlinear")] = fit_small_nonlinear(
-            x_gd, y_gd, v_te, ps, gammas=g_arms, n_components=d_t
-        )
+        if (n_p, "shuffled") in t_gen:
+            shuf = t_gen[(n_p, "shuffled")]
+            cell[("v_tgen_shuffled", "linear")] = fit_small_probe(
+                np.hstack([v_lab, feature_block(shuf, lab)]),
+                y_lab,
+                np.hstack([v_te, feature_block(shuf, test)]),
+                ps,
+            )
+        if features.distil:
+            v_pool, t_pool = feature_block(vision, pool), feature_block(t_real, pool)
+            x_gd, y_gd = distillation_rows(v_lab, t_lab, y_lab, v_pool, t_pool, ps)
+            cell[("distilled", "linear")] = fit_small_probe(x_gd, y_gd, v_te, ps)
+            cell[("distilled", "nonlinear")] = fit_small_nonlinear(
+                x_gd, y_gd, v_te, ps, gammas=g_arms, n_components=d_t
+            )
         out += cell_rows(cell, y_test, idx, metric, base={**cell_base, "n_pool": n_p})
     return out
 

@@ -193,8 +193,11 @@ def cell_rows(
     *,
     base: dict,
 ) -> list[dict]:
-    """One summary row per arm of a cell: score with CI, Deltas vs linear and nonlinear V
-    and vs generalised distillation with the same probe (linear for the other arms).
+    """One summary row per arm of a cell (`ARMS` order) that `fits` holds: score with CI,
+    Deltas vs linear and nonlinear V and vs generalised distillation with the same probe
+    (linear for the other arms). V (linear and nonlinear) and V + real T must be fitted; a
+    cell without generalised distillation or the V ceiling (the positive control's,
+    `generate.look_control`) gets NaN for the Deltas against it and for the headroom.
 
     Every arm is scored on every fixed-test resample of `idx` at once (`score_resamples`:
     one count matrix for the cell); a CI is the percentile interval of an arm's resampled
@@ -218,11 +221,13 @@ def cell_rows(
     full = {k: score(metric, y_test, fits[k].pred) for k in keys}
 
     def versus(ref: tuple[str, str], k: tuple[str, str]) -> tuple[float, float, float]:
+        if ref not in full or k not in full:  # an arm the cell did not fit (the control's)
+            return math.nan, math.nan, math.nan
         lo, hi = percentile_interval(on_resamples[k] - on_resamples[ref])
         return full[k] - full[ref], lo, hi
 
     real, nl = full[("v_treal", "linear")], full[("v", "nonlinear")]
-    ceiling = full[("v_ceiling", "nonlinear")]
+    ceiling = full.get(("v_ceiling", "nonlinear"), math.nan)
     # the headroom's own noise: its paired CI (V ceiling - nonlinear V) must lie above 0
     _, headroom_low, _ = versus(("v", "nonlinear"), ("v_ceiling", "nonlinear"))
     key = (
@@ -230,7 +235,7 @@ def cell_rows(
         f"d{base['draw']}|{base['target']}"
     )
     rows = []
-    for arm, probe in ARMS:
+    for arm, probe in (k for k in ARMS if k in fits):
         k = (arm, probe)
         lo, hi = percentile_interval(on_resamples[k])
         d_lin, lo_lin, hi_lin = versus(("v", "linear"), k)

@@ -14,6 +14,8 @@ from tacgen_lib.generate.regime_sets import PAIRINGS, check_regime_sizes, regime
 REGIME_DIR = "results/generate/regime"
 REGIME_CELL = f"{REGIME_DIR}/{{corpus}}/seed~{{seed}}"
 REGIME_REPORT = "results/report/regime"
+#: the positive control's rows of one cell (rule regime_look_control, `generate.look_control`)
+REGIME_CONTROL = f"{REGIME_CELL}/look_control.parquet"
 #: the regime page's items and their kinds
 REGIME_ITEMS = {
     "findings": "html",
@@ -72,6 +74,22 @@ class RegimePlan:
             if self.settings
             else []
         )
+
+    @cached_property
+    def control_corpora(self) -> list[str]:
+        """The corpus the positive control of the curve against the pool size runs on
+        (`generate.look_control`): the largest rho's, where config regime.look_control_snr is
+        set, regime.n_pool has two or more sizes (a curve) and that rho is above 0 (its look
+        says something of the material); else none."""
+        s = self.settings
+        if not s or s.get("look_control_snr") is None or len(s["n_pool"]) < 2:
+            return []
+        rho, corpus = max((float(r), c) for c, r in zip(self.corpora, s["rhos"], strict=True))
+        return [corpus] if rho > 0 else []
+
+    def control_files(self, path: str) -> list[str]:
+        """`path` (with {corpus} and {seed}) of every positive-control cell."""
+        return [path.format(corpus=c, seed=s) for c in self.control_corpora for s in self.seeds]
 
     def cells(self) -> list[tuple[str, str]]:
         """Every (corpus, seed text) cell."""

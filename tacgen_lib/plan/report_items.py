@@ -72,6 +72,7 @@ def findings_inputs(
         }
     if regime:
         inputs["regime"] = f"{REGIME_DIR}/summary.parquet"
+        inputs["regime_control"] = f"{REGIME_DIR}/look_control.parquet"
     if visibility:
         inputs["visibility"] = VISIBILITY_EDGE
     if backbones:

@@ -64,10 +64,12 @@ def _ladder_decisions(view: pd.DataFrame) -> list[dict]:
     return out
 
 
-def _pool_decisions(view: pd.DataFrame) -> list[dict]:
+def _pool_decisions(view: pd.DataFrame, control: pd.DataFrame | None) -> list[dict]:
     """Per target, where two or more pool sizes ran: the smallest pool at which a learnt rung
     and at which the diffusion model gain over nonlinear V over the replicates
-    (`report.regime_pool.first_gain`, at the largest rho and the smallest N_L)."""
+    (`report.regime_pool.first_gain`, at the largest rho and the smallest N_L); and where
+    `control` (the positive control's `seed_view`) holds the target, the same for its learnt
+    rungs."""
     from tacgen_lib.report.regime_pool import DIFFUSION_RUNGS, LEARNT_RUNGS, first_gain
 
     pools = sorted(int(n) for n in view["n_pool"].unique())
@@ -75,15 +77,20 @@ def _pool_decisions(view: pd.DataFrame) -> list[dict]:
         return []
     rho, n_l = view["rho"].max(), int(view["n_labelled"].min())
     out = []
+    controlled = set(control["target"]) if control is not None else set()
     for target in sorted(view["target"].unique()):
-        for kind, rungs in (("learnt", LEARNT_RUNGS), ("diffusion", DIFFUSION_RUNGS)):
-            found = first_gain(view, target, rho, n_l, rungs)
+        curves = [("learnt", LEARNT_RUNGS, view, ""), ("diffusion", DIFFUSION_RUNGS, view, "")]
+        if target in controlled:
+            curves.append(("control_learnt", LEARNT_RUNGS, control, "; positive control"))
+        for kind, rungs, source, what in curves:
+            found = first_gain(source, target, rho, n_l, rungs)
             out.append(
                 decision(
                     f"regime|{target}|pool_first_gain_{kind}",
                     "regime",
-                    f"the smallest N_P at which a {kind} rung gains over nonlinear V over the "
-                    f"replicates ({target}, ρ = {rho:g}, N_L = {n_l}, N_P {pools[0]}–{pools[-1]})",
+                    f"the smallest N_P at which a {kind.removeprefix('control_')} rung gains "
+                    f"over nonlinear V over the replicates ({target}, ρ = {rho:g}, N_L = "
+                    f"{n_l}, N_P {pools[0]}–{pools[-1]}{what})",
                     f"none up to {pools[-1]}"
                     if found is None
                     else f"N_P = {found[0]} ({RUNG_LABELS[found[1]]})",
@@ -93,7 +100,12 @@ def _pool_decisions(view: pd.DataFrame) -> list[dict]:
 
 
 def regime_findings(
-    summary: pd.DataFrame, gate_sentence: str = "", gate_passed: bool = True
+    summary: pd.DataFrame,
+    gate_sentence: str = "",
+    gate_passed: bool = True,
+    *,
+    control: pd.DataFrame | None = None,
+    snr: float | None = None,
 ) -> FindingsPart:
     """Per regime target, where generated touch should help most: the largest rho, the fewest
     labels, the largest pool. V + T_gen (linear probe) against linear V, with the controls
@@ -103,18 +115,20 @@ def regime_findings(
     (`report.regime.ladder_verdict`) with the visibility gate's sentence `gate_sentence`. Every figure
     is the mean over the cell's replicates (seed × labelled draw) with how many replicates'
     CIs lie above or below 0, and each decision reads every replicate (`replicates_decision`):
-    one draw of the labelled rows decides nothing."""
+    one draw of the labelled rows decides nothing. `control`: the positive control's rows of
+    the curve against the pool size (rule regime_look_control, built at `snr`), where it ran."""
     from tacgen_lib.report.regime import ladder_verdict, pool_verdict, replicate_words, seed_view
 
     rows, decided = [], []
     if summary.empty:
         return FindingsPart(pd.DataFrame(rows, columns=FINDINGS_COLUMNS), decided)
     view = seed_view(summary)
+    control_view = seed_view(control) if control is not None and len(control) else None
 
     def pool_words(target: str) -> list[str]:  # the curve's verdict, where it has one
         if view["n_pool"].nunique() < 2:
             return []
-        return pool_verdict(view[view["target"] == target])
+        return pool_verdict(view[view["target"] == target], control_view, snr)
 
     rho_hi, rho_lo = view["rho"].max(), view["rho"].min()
     n_l, n_p = view["n_labelled"].min(), view["n_pool"].max()
@@ -160,7 +174,7 @@ def regime_findings(
                 "page": category("Where generated touch helps"),
             }
         )
-    decided += _ladder_decisions(view) + _pool_decisions(view)
+    decided += _ladder_decisions(view) + _pool_decisions(view, control_view)
     return FindingsPart(pd.DataFrame(rows, columns=FINDINGS_COLUMNS), decided)
 
 

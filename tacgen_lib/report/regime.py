@@ -340,13 +340,19 @@ def panel_sentences(view: pd.DataFrame) -> list[str]:
 
 
 def findings_notes(
-    view: pd.DataFrame, gates: Sequence[str] = (), gate_passed: bool = True
+    view: pd.DataFrame,
+    gates: Sequence[str] = (),
+    gate_passed: bool = True,
+    *,
+    control: pd.DataFrame | None = None,
+    snr: float | None = None,
 ) -> list[str]:
     """The page's sentences: the gate and the ladder's verdict (`ladder_verdict`), the
-    verdict against the pool size (`pool_verdict`), the hypotheses, one per panel."""
+    verdict against the pool size with its positive control where `control` holds it
+    (`pool_verdict`), the hypotheses, one per panel."""
     return [
         *ladder_verdict(view, gates, gate_passed),
-        *pool_verdict(view),
+        *pool_verdict(view, control, snr),
         *hypothesis_sentences(view),
         *panel_sentences(view),
     ]

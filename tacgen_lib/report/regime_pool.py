@@ -11,6 +11,12 @@ above 0 alone is looser than it reads on an R² target, where a negligible Delta
 paired CIs passes it at the smallest rho. The table shows both (the interval and how many
 replicates' CIs lie above / below 0). The curve is read at the smallest labelled set, where
 generated touch should help most, with the linear probe every rung of the ladder uses.
+
+The positive control (`generate.look_control`, rule regime_look_control) runs the same rungs
+but the diffusion generator's on touch that is the look's mean real touch plus noise at a
+stated signal-to-noise ratio: there the learnt rungs must begin to gain as the pool grows.
+Each function takes its `seed_view` as ``control`` and shows it apart from the rho grid
+(same rho as the grid's largest, other touch).
 """
 
 from __future__ import annotations
@@ -100,14 +106,54 @@ def _first_words(view, target, rho, n_l, rungs, what: str, largest: int) -> str:
     )
 
 
-def pool_verdict(view: pd.DataFrame) -> list[str]:
+def _control_words(
+    control: pd.DataFrame, target: str, n_l: int, pools: list[int], snr: float | None
+) -> str:
+    """The positive control's sentence for `target`: where a learnt rung first gains, and
+    each learnt rung's Delta at the smallest and the largest pool."""
+    rho = control["rho"].max()
+    built = "the look's mean real touch + noise" + (f" at SNR {snr:g}" if snr else "")
+    first = _first_words(control, target, rho, n_l, LEARNT_RUNGS, "learnt rung", pools[-1])
+    ends = []
+    for rung in LEARNT_RUNGS:
+        curve = _curve(control, target, rho, n_l, rung)
+        if len(curve) >= 2:
+            ends.append(
+                f"{RUNG_LABELS[rung]} {fmt.signed(curve['delta_vs_nonlinear_v'].iloc[0])} → "
+                f"{fmt.signed(curve['delta_vs_nonlinear_v'].iloc[-1])}"
+            )
+    found = first_gain(control, target, rho, n_l, LEARNT_RUNGS)
+    if found is not None:
+        reading = ""
+    elif first_gain(control, target, rho, n_l, ("look_oracle",)) is None:
+        reading = (
+            " On the control's touch the look oracle gains at no pool size either: the probe "
+            f"on {n_l} labels lacks the power to show a gain here, so the control says nothing "
+            "of the rungs at this N_L."
+        )
+    else:
+        reading = (
+            " The control fails: no learnt rung gains even where the effect is built in, so "
+            "the curve's 'none' above does not say the real touch lacks it."
+        )
+    return (
+        f"Positive control of the curve ({target}, ρ = {rho:g}, N_L = {n_l}, touch = {built}): "
+        f"{first}; Δ vs nonlinear V from N_P = {pools[0]} to {pools[-1]}: "
+        f"{'; '.join(ends) or 'one pool size'}.{reading}"
+    )
+
+
+def pool_verdict(
+    view: pd.DataFrame, control: pd.DataFrame | None = None, snr: float | None = None
+) -> list[str]:
     """The curve's verdict, per target at the largest rho and the smallest N_L: the smallest
     pool at which a learnt rung (`LEARNT_RUNGS`) and at which the diffusion model
     (`DIFFUSION_RUNGS`) gains over the replicates (`first_gain`), or that none does up to the
     largest pool; the look oracle's Delta at the largest pool as the reference (and that the
     curve cannot show anything where the oracle gains at no pool size); and whether the
-    smallest rho's curve stays flat (no rung gains there at any pool size). One sentence
-    saying so where the regime ran one pool size."""
+    smallest rho's curve stays flat (no rung gains there at any pool size); with `control`
+    (the positive control's `seed_view`, built at `snr`), where its learnt rungs first gain.
+    One sentence saying so where the regime ran one pool size."""
     pools = sorted(int(n) for n in view["n_pool"].unique())
     if len(pools) < 2:
         return [
@@ -120,9 +166,16 @@ def pool_verdict(view: pd.DataFrame) -> list[str]:
     for target in sorted(view["target"].unique()):
         where = f"{target}, ρ = {rho_hi:g}, N_L = {n_l}, N_P {pools[0]}–{pools[-1]}"
         oracle = _curve(view, target, rho_hi, n_l, "look_oracle")
+        # its looks get finer as the pool grows (docs/regime.md): both ends of its curve
         reference = (
             f"the look oracle − nonlinear V at N_P = {pools[-1]}: "
             f"{replicate_words(oracle.iloc[-1], 'nonlinear_v')}"
+            + (
+                f" (at N_P = {int(oracle['n_pool'].iloc[0])}: "
+                f"{fmt.signed(oracle['delta_vs_nonlinear_v'].iloc[0])})"
+                if len(oracle) > 1
+                else ""
+            )
             if not oracle.empty
             else "no look oracle ran"
         )
@@ -138,10 +191,12 @@ def pool_verdict(view: pd.DataFrame) -> list[str]:
             "cannot show what a generator would add."
         )
         out.append(f"Pool size ({where}): {learnt}; {diffusion}; {reference}.{void}")
+        if control is not None and target in set(control["target"]):
+            out.append(_control_words(control, target, n_l, pools, snr))
         if rho_lo == rho_hi:
             out.append(f"Pool size ({target}): one ρ ran, so the curve has no flat control.")
             continue
-        control = [
+        spoilers = [
             f"{RUNG_LABELS[rung]} at N_P = {int(r.n_pool)}"
             for rung in CURVE_RUNGS[1:]
             for _, r in _curve(view, target, rho_lo, n_l, rung).iterrows()
@@ -152,9 +207,9 @@ def pool_verdict(view: pd.DataFrame) -> list[str]:
             "material): "
             + (
                 "flat, no rung gains over nonlinear V over the replicates at any N_P."
-                if not control
+                if not spoilers
                 else "not flat: "
-                + "; ".join(control)
+                + "; ".join(spoilers)
                 + " gain over the replicates, a gain that is not the look's: the curve above "
                 "does not show what generated touch adds."
             )
@@ -162,22 +217,26 @@ def pool_verdict(view: pd.DataFrame) -> list[str]:
     return out
 
 
-def pool_table(view: pd.DataFrame) -> pd.DataFrame:
+def pool_table(view: pd.DataFrame, control: pd.DataFrame | None = None) -> pd.DataFrame:
     """Rung x pool size at the smallest and largest rho and N_L: each rung's (linear probe)
     mean Delta against nonlinear V with the replicates' interval read as one and how many
-    replicates' CIs lie above / below 0, one column per pool size."""
+    replicates' CIs lie above / below 0, one column per pool size; with `control` (the
+    positive control's `seed_view`), its rungs after each target's, touch 'look + noise'."""
     rhos = sorted(view["rho"].unique())
     ls = sorted(view["n_labelled"].unique())
     pools = sorted(int(n) for n in view["n_pool"].unique())
     out = []
     for target in sorted(view["target"].unique()):
-        for rho in sorted({rhos[0], rhos[-1]}):
+        panels = [(view, rho, "real") for rho in sorted({rhos[0], rhos[-1]})]
+        if control is not None and target in set(control["target"]):
+            panels.append((control, control["rho"].max(), "look + noise (control)"))
+        for source, rho, touch in panels:
             for n_l in sorted({ls[0], ls[-1]}):
                 for rung in CURVE_RUNGS:
-                    curve = _curve(view, target, rho, n_l, rung)
+                    curve = _curve(source, target, rho, n_l, rung)
                     if curve.empty:
                         continue
-                    row = {"target": target, "ρ": f"{rho:g}", "N_L": int(n_l)}
+                    row = {"target": target, "touch": touch, "ρ": f"{rho:g}", "N_L": int(n_l)}
                     row["rung"] = RUNG_LABELS[rung]
                     for n_p in pools:
                         at = curve[curve["n_pool"] == n_p]
@@ -195,57 +254,66 @@ def _cell(r: pd.Series) -> str:
     return f"{fmt.signed(r['delta_vs_nonlinear_v'])} {interval} {up}/{n} ↑, {down}/{n} ↓"
 
 
-def pool_curve_figure(view: pd.DataFrame) -> plt.Figure:
+def _pool_panel(ax, view: pd.DataFrame, target: str, rho: float, n_l: int, pools: list[int]):
+    """One panel of `pool_curve_figure`: each rung's curve at (target, rho, N_L)."""
+    ax.axhline(0.0, color="#444444", linewidth=0.8)
+    for k, rung in enumerate(CURVE_RUNGS):
+        curve = _curve(view, target, rho, n_l, rung)
+        if curve.empty:
+            continue
+        colour, style = _STYLE[rung]
+        # a small shift per rung keeps the bars of one pool size apart
+        x = curve["n_pool"].to_numpy(dtype=float) * 2.0 ** (0.05 * (k - 2.5))
+        y = curve["delta_vs_nonlinear_v"].to_numpy(dtype=float)
+        low = y - curve["rep_low_vs_nonlinear_v"].to_numpy(dtype=float)
+        high = curve["rep_high_vs_nonlinear_v"].to_numpy(dtype=float) - y
+        ax.errorbar(
+            x,
+            y,
+            yerr=[low, high],
+            color=colour,
+            linestyle=style,
+            capsize=2,
+            linewidth=1.2,
+            label=RUNG_LABELS[rung],
+        )
+        full = [gains(r) for _, r in curve.iterrows()]
+        ax.scatter(
+            x,
+            y,
+            s=22,
+            zorder=3,
+            edgecolors=colour,
+            facecolors=[colour if f else "white" for f in full],
+        )
+    ax.set_xscale("log", base=2)
+    ax.set_xlim(pools[0] / 1.5, pools[-1] * 1.5)
+    ax.set_xticks(pools, [str(n) for n in pools])
+    ax.minorticks_off()
+    ax.set_xlabel("N_P unlabelled pool rows")
+    ax.set_ylabel("Δ vs nonlinear V")
+    ax.grid(alpha=0.3)
+
+
+def pool_curve_figure(view: pd.DataFrame, control: pd.DataFrame | None = None) -> plt.Figure:
     """Delta against nonlinear V per rung against the pool size, at the smallest N_L, one
-    panel per target x (largest rho, smallest rho); bars: the replicates' interval read as
-    one; a filled marker: that interval above 0 (a gain)."""
+    panel per target x (largest rho, smallest rho, and the positive control where `control`
+    holds its `seed_view`); bars: the replicates' interval read as one; a filled marker: that
+    interval above 0 (a gain)."""
     targets = sorted(view["target"].unique())
     rhos = sorted(view["rho"].unique())
-    columns = [rhos[-1]] if rhos[0] == rhos[-1] else [rhos[-1], rhos[0]]
+    columns = [(view, r, "") for r in ([rhos[-1]] if rhos[0] == rhos[-1] else [rhos[-1], rhos[0]])]
+    if control is not None and len(control):
+        columns.append((control, control["rho"].max(), "positive control\nlook + noise, "))
     n_l = int(view["n_labelled"].min())
     pools = sorted(int(n) for n in view["n_pool"].unique())
-    fig, axes = panel_axes(len(targets), len(columns), (4.2, 3.0), legend_height=1.0)
+    # three panels across keep to the report viewer's width
+    width = 4.2 if len(columns) < 3 else 3.1
+    fig, axes = panel_axes(len(targets), len(columns), (width, 3.0), legend_height=1.0)
     for i, target in enumerate(targets):
-        for j, rho in enumerate(columns):
-            ax = axes[i][j]
-            ax.axhline(0.0, color="#444444", linewidth=0.8)
-            for k, rung in enumerate(CURVE_RUNGS):
-                curve = _curve(view, target, rho, n_l, rung)
-                if curve.empty:
-                    continue
-                colour, style = _STYLE[rung]
-                # a small shift per rung keeps the bars of one pool size apart
-                x = curve["n_pool"].to_numpy(dtype=float) * 2.0 ** (0.05 * (k - 2.5))
-                y = curve["delta_vs_nonlinear_v"].to_numpy(dtype=float)
-                low = y - curve["rep_low_vs_nonlinear_v"].to_numpy(dtype=float)
-                high = curve["rep_high_vs_nonlinear_v"].to_numpy(dtype=float) - y
-                ax.errorbar(
-                    x,
-                    y,
-                    yerr=[low, high],
-                    color=colour,
-                    linestyle=style,
-                    capsize=2,
-                    linewidth=1.2,
-                    label=RUNG_LABELS[rung],
-                )
-                full = [gains(r) for _, r in curve.iterrows()]
-                ax.scatter(
-                    x,
-                    y,
-                    s=22,
-                    zorder=3,
-                    edgecolors=colour,
-                    facecolors=[colour if f else "white" for f in full],
-                )
-            ax.set_xscale("log", base=2)
-            ax.set_xlim(pools[0] / 1.5, pools[-1] * 1.5)
-            ax.set_xticks(pools, [str(n) for n in pools])
-            ax.minorticks_off()
-            ax.set_xlabel("N_P unlabelled pool rows")
-            ax.set_ylabel("Δ vs nonlinear V")
-            ax.set_title(f"{target}, ρ = {rho:g}, N_L = {n_l}", fontsize=9)
-            ax.grid(alpha=0.3)
+        for j, (source, rho, what) in enumerate(columns):
+            _pool_panel(axes[i][j], source, target, rho, n_l, pools)
+            axes[i][j].set_title(f"{target}, {what}ρ = {rho:g}, N_L = {n_l}", fontsize=9)
     handles, labels = axes[0][0].get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside lower center", ncol=3, fontsize=9)
     if len(pools) < 2:

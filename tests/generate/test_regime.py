@@ -500,7 +500,17 @@ def test_vision_ceiling_is_perfect_at_rho_1_and_the_majority_at_rho_0():
     assert abs(_ceiling_accuracy(0.0) - majority) < 0.1
 
 
-def _evaluate(rho: float, *, n_labelled=(6, 40), t_gen_from_real: bool = False, workers=1, draws=2):
+def _evaluate(
+    rho: float,
+    *,
+    n_labelled=(6, 40),
+    t_gen_from_real: bool = False,
+    workers=1,
+    draws=2,
+    control: bool = False,
+):
+    """The regime's rows on `world`; with `control`, as the positive control runs them: no
+    generator (no gen_mean rung, no t_gen), no V ceiling, no generalised distillation."""
     manifest, splits, vision, tactile = world(rho=rho, seed=11)
     sets = draw_regime_sets(splits, "nat", n_labelled=max(n_labelled), n_pool=100, seed=0)
     ceiling_rows = manifest.set_index("sample_id")[["appearance_id", "shape", "scale"]]
@@ -522,7 +532,7 @@ def _evaluate(rho: float, *, n_labelled=(6, 40), t_gen_from_real: bool = False, 
         looks,
         sets.pool_ids(100),
         rows,
-        noisy,
+        None if control else noisy,
         regime=RegimeSettings(look_min_rows=1, knn_ks=(1, 2, 4, 8, 16, 32, 64)),
         seed=0,
     )
@@ -530,17 +540,18 @@ def _evaluate(rho: float, *, n_labelled=(6, 40), t_gen_from_real: bool = False, 
         targets,
         sets,
         RegimeSettings(n_labelled=n_labelled, n_pool=(100,), bootstrap=200, label_draws=draws),
-        VisibilitySettings(gammas=(0.5, 2.0), C=(1.0, 100.0)),
+        None if control else VisibilitySettings(gammas=(0.5, 2.0), C=(1.0, 100.0)),
         corpus="nat",
         rho=rho,
         seed=0,
         vision=vision,
         t_real=tactile,
-        t_gen=t_gen,
+        t_gen={} if control else t_gen,
         ladder={100: rungs.t_gen},
         gammas=[0.5, 2.0],
         n_classes=6,
         workers=workers,
+        distil=not control,
     )
 
 
@@ -561,6 +572,28 @@ def test_every_arm_of_every_cell_is_scored_and_reproducible():
     v = a[(a["arm"] == "v") & (a["probe"] == "linear")]
     assert (v["delta_vs_linear_v"] == 0).all() and (v["ci_low_vs_linear_v"] == 0).all()
     pd.testing.assert_frame_equal(a, _evaluate(1.0))  # the same computation twice: bit for bit
+
+
+def test_the_positive_control_fits_only_the_arms_it_has_inputs_for():
+    """No generator, no V ceiling, no distillation: the rungs that learn from the pool, V and
+    V + real T, every row scored, and the Deltas against the missing arms NaN, not 0; the
+    arms it shares with the full regime are the same fits on the same rows."""
+    from tacgen_lib.generate.ladder import LADDER
+
+    full, control = _evaluate(1.0), _evaluate(1.0, control=True)
+    kept = {("v", "linear"), ("v", "nonlinear"), ("v_treal", "linear")} | {
+        (r, p) for r in LADDER if r not in ("gen_mean", "v_tgen") for p in ("linear", "nonlinear")
+    }
+    assert set(zip(control["arm"], control["probe"], strict=True)) == kept
+    assert list(control.columns) == list(SUMMARY_COLUMNS) and control["row_id"].is_unique
+    assert np.isfinite(control["score"]).all()
+    assert control["delta_vs_distilled"].isna().all() and control["headroom_captured"].isna().all()
+    same = full[full["row_id"].isin(control["row_id"])].reset_index(drop=True)
+    shared = ["row_id", "score", "ci_low", "ci_high", "delta_vs_nonlinear_v", "gap_closed"]
+    pd.testing.assert_frame_equal(
+        control[shared].sort_values("row_id", ignore_index=True),
+        same[shared].sort_values("row_id", ignore_index=True),
+    )
 
 
 def test_forked_workers_give_the_rows_of_one_process_bit_for_bit():
@@ -840,6 +873,65 @@ def test_the_pool_verdict_names_the_smallest_pool_where_each_kind_of_rung_gains(
     assert {t.split(":")[0] for t in titles} == {"hardness, N_P = 256", "hardness, N_P = 16384"}
 
 
+def _control_view(above: dict[tuple, bool], pools: tuple[int, ...]) -> pd.DataFrame:
+    """The positive control's `seed_view`: the largest rho's rows of `_ladder_summary`
+    without the diffusion generator's rungs."""
+    from tacgen_lib.report.regime import seed_view
+
+    rows = _ladder_summary(above, pools)
+    keep = (rows["rho"] == 1.0) & ~rows["arm"].isin(["gen_mean", "v_tgen"])
+    return seed_view(rows[keep].reset_index(drop=True))
+
+
+def test_the_pool_page_shows_its_positive_control_apart_from_the_rho_grid():
+    """The control's sentence names where its learnt rungs first gain (or that the control
+    fails); its rows in the table say their touch; its panel is the figure's third column."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from tacgen_lib.report.regime import pool_curve_figure, pool_table, seed_view
+    from tacgen_lib.report.regime_pool import pool_verdict
+    from tacgen_lib.report.write import figure_problems
+
+    pools = (256, 1024, 4096)
+    view = seed_view(_ladder_summary({(1.0, "look_oracle"): True}, pools))
+    gaining = _control_view({(1.0, "look_oracle"): True, (1.0, "knn", 4096): True}, pools)
+    curve, said, flat = pool_verdict(view, gaining, 0.5)
+    assert "no learnt rung" in curve  # the real touch's curve is read as before
+    assert said.startswith("Positive control of the curve (hardness, ρ = 1, N_L = 8, touch = ")
+    assert "at SNR 0.5" in said and "first gains over nonlinear V" in said
+    assert "at N_P = 4096 (A1 kNN in V: " in said and "kNN in V +0.000 → +0.100" in said
+    assert "The control fails" not in said and flat.startswith("Pool-size control")
+    (_, failed, _) = pool_verdict(view, _control_view({(1.0, "look_oracle"): True}, pools), 0.5)
+    assert failed.endswith("does not say the real touch lacks it.")
+    # where even the oracle gains at no pool size on the control's touch, the probe lacks power
+    (_, powerless, _) = pool_verdict(view, _control_view({}, pools), 0.5)
+    assert powerless.endswith("so the control says nothing of the rungs at this N_L.")
+    # every target gets its own control sentence
+    both = seed_view(
+        pd.concat(
+            [
+                _ladder_summary({(1.0, "look_oracle"): True}, pools),
+                _ladder_summary({(1.0, "look_oracle"): True}, pools).assign(target="density"),
+            ]
+        )
+    )
+    twice = pd.concat([gaining, gaining.assign(target="density")], ignore_index=True)
+    notes = pool_verdict(both, twice, 0.5)
+    assert [n.split(" (")[0] for n in notes] == [
+        "Pool size",
+        "Positive control of the curve",
+        "Pool-size control",
+    ] * 2
+    table = pool_table(view, gaining)
+    control_rows = table[table["touch"] == "look + noise (control)"]
+    assert len(control_rows) == 2 * 4  # N_L x (the look oracle and three learnt rungs)
+    assert set(table.loc[table["touch"] == "real", "ρ"]) == {"0", "1"}
+    fig = pool_curve_figure(view, gaining)
+    assert len(fig.axes) == 3 and figure_problems(fig) == []
+    assert fig.axes[2].get_title().startswith("hardness, positive control\nlook + noise, ρ = 1")
+
+
 def test_the_findings_page_gives_the_pool_verdict_and_its_decisions_where_two_pools_ran():
     from tacgen_lib.report.findings import regime_findings
 
@@ -859,6 +951,12 @@ def test_the_findings_page_gives_the_pool_verdict_and_its_decisions_where_two_po
         for k in ("learnt", "diffusion")
     }
     assert all(v == "none up to 400" or v.startswith("N_P = 100 (") for v in pools.values())
+    # the positive control's rows (a second copy of the largest rho's) add its decision
+    control = two[(two["rho"] == 1.0) & ~two["arm"].isin(["gen_mean", "v_tgen"])]
+    found, decided = regime_findings(two, control=control, snr=1.0)
+    ids = {d["decision_id"] for d in decided}
+    assert {f"regime|{t}|pool_first_gain_control_learnt" for t in ("hardness", "log_mass")} <= ids
+    assert found["verdict"].str.contains("Positive control of the curve", regex=False).all()
     assert (
         found["verdict"]
         .str.contains("Pool size (hardness, ρ = 1, N_L = 6, N_P 100–400)", regex=False)

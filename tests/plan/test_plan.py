@@ -90,6 +90,28 @@ def test_every_stage_plan_builds_from_each_shipped_config(default, tiny):
         )
 
 
+def test_the_positive_control_runs_on_the_largest_rho_only_where_there_is_a_curve(default):
+    """regime_look_control: the largest rho's corpus, where two or more pool sizes make a
+    curve, a control SNR is set and that rho is above 0; none otherwise (the default, with
+    one pool size, keeps its budget)."""
+    from tacgen_lib.plan.regime import RegimePlan
+
+    def control(**regime) -> list[str]:
+        return RegimePlan({**default["regime"], **regime}).control_corpora
+
+    assert default["regime"]["look_control_snr"] is not None
+    assert RegimePlan(default["regime"]).control_corpora == []  # one pool size
+    assert control(n_pool=[256, 1024], rhos=[1, 0]) == ["sim_natural_r1"]
+    assert control(n_pool=[256, 1024], rhos=[0, 0.5]) == ["sim_natural_r05"]
+    assert control(n_pool=[256, 1024], rhos=[0]) == []
+    assert control(n_pool=[256, 1024], look_control_snr=None) == []
+    plan = RegimePlan({**default["regime"], "n_pool": [256, 1024], "seeds": [0, 1]})
+    assert plan.control_files("{corpus}/{seed}") == [
+        f"{plan.control_corpora[0]}/0",
+        f"{plan.control_corpora[0]}/1",
+    ]
+
+
 def test_every_corpus_gets_vision_and_its_tactile_variants(tiny):
     plans = StagePlans.from_config(tiny)
     edges = plans.features.corpus_feature_edges(tiny)

@@ -29,6 +29,14 @@ curves = frames(inp.curves)
 summary = rows[list(SUMMARY_COLUMNS)].sort_values("row_id", ignore_index=True)
 edges.write(out.evaluation, summary, key="row_id", producer=snakemake.rule)
 edges.write(out.summary, summary, key="row_id", producer=snakemake.rule)
+# the curve's positive control (rule regime_look_control), where it ran
+control = (
+    frames(inp.control, require={"row_id": "str", "score": "float"})[list(SUMMARY_COLUMNS)]
+    if inp.control
+    else pd.DataFrame(columns=list(SUMMARY_COLUMNS))
+).sort_values("row_id", ignore_index=True)
+edges.write(out.control, control, key="row_id", producer=snakemake.rule)
+control_view = report.seed_view(control) if len(control) else None
 view = report.seed_view(summary)
 best = curves.groupby(["corpus", "seed", "n_pool", "pairing"])["best_step"].first()
 # the gate of the regime's corpora: what V decodes of what their frames show, read on the rho
@@ -40,7 +48,11 @@ gates = [
     if c in checked
 ]
 notes = report.findings_notes(
-    view, [g.sentence() for g in gates], gate_passed=all(g.passed for g in gates)
+    view,
+    [g.sentence() for g in gates],
+    gate_passed=all(g.passed for g in gates),
+    control=control_view,
+    snr=snakemake.params.look_control_snr,
 )
 write_table(
     report.findings_table(notes),
@@ -86,7 +98,7 @@ write_table(
     ],
 )
 write_table(
-    report.pool_table(view),
+    report.pool_table(view, control_view),
     out.pool,
     title="Each rung against the pool size N_P: Δ vs nonlinear V (linear probe)",
     mono=(),
@@ -94,10 +106,13 @@ write_table(
         "Mean Δ over the replicates (seed × labelled draw), the replicates' interval read as one "
         "[low, high], and how many replicates' 95% CIs lie above (↑) or below (↓) 0; the same "
         "labelled and test rows at every pool size. A0 (the look oracle) is the reference; the "
-        "smallest ρ is the control, where no rung may gain.",
+        "smallest ρ is the control, where no rung may gain. Touch 'look + noise': the "
+        "positive control, every rung but the diffusion generator's on the look's mean real "
+        "touch plus noise (config regime.look_control_snr), where the learnt rungs must gain "
+        "as the pool grows.",
     ],
 )
-write_figure(report.pool_curve_figure(view), out.pool_curve)
+write_figure(report.pool_curve_figure(view, control_view), out.pool_curve)
 write_figure(report.heatmap_figure(view), out.heatmap)
 write_figure(report.curves_figure(view), out.curves)
 for note in notes:

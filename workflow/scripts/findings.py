@@ -43,6 +43,8 @@ if snakemake.params.regime:
             edges.read(snakemake.input.regime).frame,
             " ".join(g.sentence() for g in gates),
             gate_passed=all(g.passed for g in gates),
+            control=edges.read(snakemake.input.regime_control).frame,
+            snr=snakemake.params.look_control_snr,
         )
     )
 if snakemake.params.pixel:
