@@ -224,12 +224,16 @@ UNITS: dict[str, UnitRule] = {
         ),
     ),
     "regime_evaluate": UnitRule(
-        "(labelled + pool rows) × target × labelled size × pool size × labelled draw",
+        "(labelled + pool rows) × target × labelled size × labelled draw, summed over the pool sizes",
         lambda c, w: ("", regime_cell_rows(c)),
     ),
+    # the same script and cells on fewer arms (no ceilings, distillation or generator): priced
+    # as regime_evaluate's jobs, an upper bound (it runs only where a curve does, in no
+    # calibration run)
     "regime_look_control": UnitRule(
-        "(labelled + pool rows) × target × labelled size × pool size × labelled draw",
+        "(labelled + pool rows) × target × labelled size × labelled draw, summed over the pool sizes",
         lambda c, w: ("", regime_cell_rows(c)),
+        same_as="regime_evaluate",
     ),
     "visibility_check": UnitRule(
         "row of every simulated corpus (each factor's probes; the gate's factors' 2-layer probe)",
