@@ -185,6 +185,20 @@ def test_regime_summary_has_every_arm_of_every_cell(run_dir):
     findings = report_page(page / "findings.html")
     assert "visibility gate on sim_natural_r0" in findings and "Positive control" in findings
     assert "H1 (ρ = 0" in findings
+    # two pool sizes: the curve, its verdict and its positive control on the largest rho's
+    # corpus (rule regime_look_control: every arm but those needing a generator, a ceiling
+    # or distillation, on the look's mean touch plus noise)
+    assert "Pool size (hardness, ρ = 1" in findings
+    assert "Positive control of the curve (hardness, ρ = 1" in findings
+    control = edges.read(run_dir / "results/generate/regime/look_control.parquet").frame
+    assert list(control.columns) == list(SUMMARY_COLUMNS)
+    assert set(control["corpus"]) == {"sim_natural_r1"}
+    assert set(control["n_pool"]) == set(cfg["n_pool"]) and set(control["draw"]) == set(range(3))
+    assert not set(control["arm"]) & {"v_tgen", "gen_mean", "v_tgen_shuffled", "distilled"}
+    assert {"look_oracle", "knn", "ridge", "kernel_ridge", "v_treal"} <= set(control["arm"])
+    assert control["score"].notna().all()
+    pool = report_page(page / "pool.html")
+    assert "look + noise (control)" in pool
     # the visibility check: every simulated corpus, each factor it shows, both probes
     visibility = edges.read(run_dir / "results/features/visibility.parquet").frame
     # every simulated corpus; of the rho grid, its first corpus (the look -> frame process is
@@ -500,7 +514,7 @@ def test_bad_config_stops_with_the_key_named(tmp_path):
 
 def test_a_regime_that_cannot_be_drawn_stops_before_any_job_naming_the_sizes(tmp_path):
     work = copy_tree(tmp_path / "regime")
-    out = refused_dry_run(work, "  n_pool: [24]", "  n_pool: [48]")
+    out = refused_dry_run(work, "  n_pool: [12, 24]", "  n_pool: [12, 48]")
     assert "corpus 'sim_natural_r0' has 48 non-test rows (60 rows, 12 test)" in out
     assert "(16) and the largest pool (48) need 64 disjoint rows" in out
     assert not (work / "results").exists()

@@ -16,7 +16,9 @@ variance (that of mu over the non-test rows, summed over T's dimensions) is `snr
 noise's (d x sigma^2). Every arm of the regime then reads T_control where it read real T
 (`look_control_regime` in the rule regime_look_control), on the same labelled, pool and test
 rows: the rungs learnt from the pool must begin to gain as N_P grows, the effect being built
-in. A test row's mu is learnt from non-test rows only; its noise is its own.
+in. A test row's mu is learnt from non-test rows only; its noise is its own. A row whose look
+no reference row shows (a small corpus's rare look) takes the mean of every reference row
+(no signal), counted in ``n_unseen``.
 """
 
 from __future__ import annotations
@@ -43,11 +45,13 @@ class LookControl:
     signal_variance: float
     n_looks: int
     snr: float
+    n_unseen: int = 0
 
     def describe(self) -> str:
         return (
             f"T = look mean over {self.n_looks} looks + noise: signal variance "
-            f"{self.signal_variance:.4g} per dimension, sigma {self.sigma:.4g}, SNR {self.snr:g}"
+            f"{self.signal_variance:.4g} per dimension, sigma {self.sigma:.4g}, SNR {self.snr:g}; "
+            f"{self.n_unseen} rows of a look no reference row shows (given the reference mean)"
         )
 
 
@@ -66,9 +70,10 @@ def look_control_touch(
 
     looks: sample_id -> look key for every reference row and row. The noise is drawn in the
     order of the sorted sample_ids of `rows` from a generator seeded with `seed`, so a row's
-    noise does not depend on the order it is asked in. Raises ValueError when `snr` is not
-    positive, the reference is empty or shows one look, a row has no look or no real T, or
-    a row's look is held by no reference row (its mean would be unknown).
+    noise does not depend on the order it is asked in. A row whose look no reference row
+    shows gets the mean real T of every reference row (counted in ``n_unseen``). Raises
+    ValueError when `snr` is not positive, the reference is empty or shows one look, or a
+    row has no look or a reference row no real T.
     """
     if not float(snr) > 0.0:
         raise ValueError(f"look_control_touch: snr must be > 0, got {snr}")
@@ -83,12 +88,6 @@ def look_control_touch(
     t_ref = feature_block(t_real, reference, what="look_control_touch")
     keys = look.loc[reference].to_numpy()
     means = pd.DataFrame(t_ref).groupby(keys, sort=True).mean()
-    unknown = sorted(set(look.loc[rows]) - set(means.index))
-    if unknown:
-        raise ValueError(
-            f"look_control_touch: look {unknown[0]!r} of the rows asked for is held by no "
-            "reference row, so its mean touch is unknown"
-        )
     if means.shape[0] < 2:
         raise ValueError(
             f"look_control_touch: the reference rows show one look ({means.index[0]!r}): the "
@@ -104,6 +103,17 @@ def look_control_touch(
         )
     sigma = float(np.sqrt(signal_variance / float(snr)))
     noise = np.random.default_rng(int(seed)).standard_normal((len(rows), d))
-    mu_rows = means.loc[look.loc[rows].to_numpy()].to_numpy(np.float64)
+    overall = t_ref.mean(axis=0)
+    row_looks = look.loc[rows].to_numpy()
+    seen = np.isin(row_looks, means.index)
+    mu_rows = np.tile(overall, (len(rows), 1))
+    mu_rows[seen] = means.loc[row_looks[seen]].to_numpy(np.float64)
     t_control = {i: mu_rows[k] + sigma * noise[k] for k, i in enumerate(rows)}
-    return LookControl(t_control, sigma, signal_variance, int(means.shape[0]), float(snr))
+    return LookControl(
+        t_control,
+        sigma,
+        signal_variance,
+        int(means.shape[0]),
+        float(snr),
+        int((~seen).sum()),
+    )
