@@ -506,6 +506,7 @@ def _build_every_settings_object(cfg: dict) -> None:
 @example(
     where=("regime", "corpus", "scene"), value="0"
 )  # named as corpora.<regime corpus>: found once
+@example(where=("regime", "corpus"), value=None)  # found once: a TypeError, not the key
 def test_fuzzed_config_validates_or_names_the_key(where, value):
     from tacgen_lib.workflow_config import ConfigError, validate_config
 

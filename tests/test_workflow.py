@@ -70,6 +70,7 @@ def test_dry_run_plans_the_whole_dag(cold_dry_run):
         # regime
         "regime_generators",
         "regime_evaluate",
+        "regime_look_control",  # config/test.yaml runs two pool sizes: the curve's control
         "visibility_check",
         "aggregate_regime",
         # transfer to a second sensor
@@ -383,6 +384,7 @@ def test_changed_probe_param_reruns_only_the_probes(run_dir, tmp_path):
     # evidence its bootstrap count
     regime = {
         "regime_evaluate",
+        "regime_look_control",
         "visibility_check",
         "aggregate_regime",
         "language_evidence",

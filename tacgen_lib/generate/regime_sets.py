@@ -55,6 +55,11 @@ def regime_corpora(regime: Mapping[str, Any] | None) -> dict[str, dict[str, Any]
     Empty when the section is absent or ``rhos`` is empty."""
     if not regime or not regime.get("rhos"):
         return {}
+    if not isinstance(regime.get("corpus"), Mapping):
+        raise ValueError(
+            "regime.corpus: the regime's natural corpus must be a corpus declaration (a "
+            f"mapping of its keys), got {regime.get('corpus')!r}"
+        )
     base = dict(regime["corpus"])
     if base.get("design") != "natural" or base.get("kind") != "simulated":
         raise ValueError(

@@ -82,7 +82,7 @@ class RegimePlan:
         set, regime.n_pool has two or more sizes (a curve) and that rho is above 0 (its look
         says something of the material); else none."""
         s = self.settings
-        if not s or s.get("look_control_snr") is None or len(s["n_pool"]) < 2:
+        if not self.corpora or s.get("look_control_snr") is None or len(s["n_pool"]) < 2:
             return []
         rho, corpus = max((float(r), c) for c, r in zip(self.corpora, s["rhos"], strict=True))
         return [corpus] if rho > 0 else []

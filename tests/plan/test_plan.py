@@ -104,6 +104,7 @@ def test_the_positive_control_runs_on_the_largest_rho_only_where_there_is_a_curv
     assert control(n_pool=[256, 1024], rhos=[1, 0]) == ["sim_natural_r1"]
     assert control(n_pool=[256, 1024], rhos=[0, 0.5]) == ["sim_natural_r05"]
     assert control(n_pool=[256, 1024], rhos=[0]) == []
+    assert control(n_pool=[256, 1024], rhos=[]) == []  # no regime corpora at all
     assert control(n_pool=[256, 1024], look_control_snr=None) == []
     plan = RegimePlan({**default["regime"], "n_pool": [256, 1024], "seeds": [0, 1]})
     assert plan.control_files("{corpus}/{seed}") == [
