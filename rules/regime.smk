@@ -114,7 +114,6 @@ rule regime_look_control:
         probes=PROBE_SETTINGS,
         probe_seed=config["probes"]["seeds"][0],
         gammas=GENERATE["nonlinear_gammas"],
-        ceiling=None,  # the V ceiling does not depend on touch: regime_evaluate's
         cells=REGIME_CELLS,  # only their pool sizes: no generator is read
         look_control_snr=REGIME["look_control_snr"],
     script:

@@ -91,8 +91,10 @@ def first_gain(
     return None if found is None else found[:2]
 
 
-def _first_words(view, target, rho, n_l, rungs, what: str, largest: int) -> str:
-    found = _first_gain_row(view, target, rho, n_l, rungs)
+def _first_words(
+    found: tuple[int, str, pd.Series] | None, rungs: tuple[str, ...], what: str, largest: int
+) -> str:
+    """The verdict's words for `_first_gain_row`'s `found` among `rungs`."""
     if found is None:
         names = ", ".join(RUNG_LABELS[r] for r in rungs)
         return (
@@ -113,7 +115,8 @@ def _control_words(
     each learnt rung's Delta at the smallest and the largest pool."""
     rho = control["rho"].max()
     built = "the look's mean real touch + noise" + (f" at SNR {snr:g}" if snr else "")
-    first = _first_words(control, target, rho, n_l, LEARNT_RUNGS, "learnt rung", pools[-1])
+    found = _first_gain_row(control, target, rho, n_l, LEARNT_RUNGS)
+    first = _first_words(found, LEARNT_RUNGS, "learnt rung", pools[-1])
     ends = []
     for rung in LEARNT_RUNGS:
         curve = _curve(control, target, rho, n_l, rung)
@@ -122,7 +125,6 @@ def _control_words(
                 f"{RUNG_LABELS[rung]} {fmt.signed(curve['delta_vs_nonlinear_v'].iloc[0])} → "
                 f"{fmt.signed(curve['delta_vs_nonlinear_v'].iloc[-1])}"
             )
-    found = first_gain(control, target, rho, n_l, LEARNT_RUNGS)
     if found is not None:
         reading = ""
     elif first_gain(control, target, rho, n_l, ("look_oracle",)) is None:
@@ -179,10 +181,10 @@ def pool_verdict(
             if not oracle.empty
             else "no look oracle ran"
         )
-        learnt = _first_words(view, target, rho_hi, n_l, LEARNT_RUNGS, "learnt rung", pools[-1])
-        diffusion = _first_words(
-            view, target, rho_hi, n_l, DIFFUSION_RUNGS, "diffusion rung", pools[-1]
-        )
+        found = _first_gain_row(view, target, rho_hi, n_l, LEARNT_RUNGS)
+        learnt = _first_words(found, LEARNT_RUNGS, "learnt rung", pools[-1])
+        found = _first_gain_row(view, target, rho_hi, n_l, DIFFUSION_RUNGS)
+        diffusion = _first_words(found, DIFFUSION_RUNGS, "diffusion rung", pools[-1])
         # the reference must itself gain somewhere, else no rung could show what it adds
         void = (
             ""
