@@ -590,9 +590,15 @@ def test_the_positive_control_fits_only_the_arms_it_has_inputs_for():
     assert control["delta_vs_distilled"].isna().all() and control["headroom_captured"].isna().all()
     same = full[full["row_id"].isin(control["row_id"])].reset_index(drop=True)
     shared = ["row_id", "score", "ci_low", "ci_high", "delta_vs_nonlinear_v", "gap_closed"]
+    # the same fits, scored in a cell of fewer arms: the resampled scores are one matrix
+    # product over the cell's arms, whose rounding may follow the number of columns on
+    # other BLAS kernels, so the two agree within float rounding, not bit for bit
     pd.testing.assert_frame_equal(
         control[shared].sort_values("row_id", ignore_index=True),
         same[shared].sort_values("row_id", ignore_index=True),
+        check_exact=False,
+        rtol=1e-9,
+        atol=1e-12,
     )
 
 
