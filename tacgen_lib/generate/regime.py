@@ -28,7 +28,9 @@ arm on the same test rows:
   true label: the best a function of V reaches with every label, the bound that matters for
   every arm built on V. Its nonlinear probe is the visibility check's, the exact RBF-kernel
   probe (`fit_kernel_probe`: an SVM, kernel ridge for a continuous target), not the arms'
-  Nystroem map, whose rank (the feature width) caps it on every non-test row;
+  Nystroem map, whose rank (the feature width) caps it on every non-test row; above
+  ``regime.nystroem_above`` rows its kernel ridge takes ``regime.nystroem_rank`` Nystroem
+  features, as the kernel ridge rung does (the exact solve grows as the cube of the rows);
 - ``vision_ceiling`` / oracle: the probe on the true appearance class (one-hot) and the
   visible shape and size, fitted on every non-test row: the best any function of appearance
   reaches (an oracle no arm can use).
@@ -179,7 +181,7 @@ def evaluate_regime(
     # the ceilings of each target (fitted on every non-test row), then the cells
     ceilings = (
         fork_map(
-            lambda tgt: _ceilings(tgt, vision, n_classes, gammas=ceiling.gammas, C=ceiling.C),
+            lambda tgt: _ceilings(tgt, vision, n_classes, ceiling=ceiling, regime=regime),
             targets,
             workers,
         )
@@ -316,12 +318,14 @@ def _ceilings(
     vision: Mapping[str, np.ndarray],
     n_classes: int,
     *,
-    gammas: Sequence[float],
-    C: Sequence[float],
+    ceiling: VisibilitySettings,
+    regime: RegimeSettings,
 ) -> dict[tuple[str, str], SmallFit]:
     """The arms fitted once per target on every non-test row with its true label: the V
-    ceiling (the linear V probe, and the kernel probe with the grid `gammas` x `C`) and the
-    vision ceiling (the oracle probe on the true appearance class + visible shape and size)."""
+    ceiling (the linear V probe, and the kernel probe with the grid ``ceiling.gammas`` x
+    ``ceiling.C``, its kernel ridge on ``regime.nystroem_rank`` Nystroem features above
+    ``regime.nystroem_above`` rows as the kernel ridge rung's) and the vision ceiling (the
+    oracle probe on the true appearance class + visible shape and size)."""
     rows, ps = tgt.rows, replace(tgt.settings, cv_repeats=1)
     train = [str(i) for i in rows.train_ids]
     test = [str(i) for i in rows.test_ids]
@@ -335,6 +339,15 @@ def _ceilings(
     )
     return {
         ("v_ceiling", "linear"): fit_small_probe(v_tr, y, v_te, ps),
-        ("v_ceiling", "nonlinear"): fit_kernel_probe(v_tr, y, v_te, ps, gammas=gammas, C=C),
+        ("v_ceiling", "nonlinear"): fit_kernel_probe(
+            v_tr,
+            y,
+            v_te,
+            ps,
+            gammas=ceiling.gammas,
+            C=ceiling.C,
+            nystroem_above=regime.nystroem_above,
+            nystroem_rank=regime.nystroem_rank,
+        ),
         ("vision_ceiling", "oracle"): fit_small_probe(x_tr, y, x_te, ps),
     }

@@ -128,11 +128,18 @@ def fit_kernel_probe(
     *,
     gammas: Sequence[float],
     C: Sequence[float],
+    nystroem_above: int | None = None,
+    nystroem_rank: int = 0,
 ) -> SmallFit:
     """The exact RBF-kernel probe on standardised features (the train rows' mean and std): a
     logistic family's labels by a support-vector classifier (scikit-learn ``SVC``, one-vs-one,
     penalty ``C``), a ridge family's by kernel ridge (``KernelRidge``, penalty among the
-    family's lambdas). gamma = multiple / `median_sq_distance` of the train rows, the multiple
+    family's lambdas). Kernel ridge's exact solve grows as the cube of the train rows: with
+    `nystroem_above` set and more train rows than it, a ridge family's probe is ridge without
+    intercept on `nystroem_rank` RBF Nystroem features (scikit-learn's ``Nystroem``, landmark
+    rows drawn with ``settings.seed``; the same gamma), which is kernel ridge with that
+    low-rank kernel, so the same penalty means the same (as the regime's kernel ridge rung,
+    `generate.kernel_ridge_generator`). The SVM's solve grows as the square and stays exact. gamma = multiple / `median_sq_distance` of the train rows, the multiple
     among `gammas`; (penalty, multiple) by the mean held-out score (`metrics.score`: accuracy;
     R^2 for ridge) over the family's folds (`make_folds`: stratified for a logistic family, seeded by
     ``settings.seed``, ``settings.cv_repeats`` draws), the first of the grid's order on ties
@@ -140,9 +147,13 @@ def fit_kernel_probe(
     row. Deterministic: neither solver draws random numbers.
 
     Where CV cannot run on these labels (`_cv_impossible`) it is `fit_small_probe`'s fallback.
-    SmallFit.reg is the chosen C (or lambda), gamma_multiple the chosen multiple.
+    SmallFit.reg is the chosen C (or lambda), gamma_multiple the chosen multiple, source
+    ``cv`` (``cv, Nystroem rank R`` on Nystroem features).
     """
-    from sklearn.kernel_ridge import KernelRidge  # scikit-learn: only where fitted
+    from sklearn.kernel_approximation import Nystroem  # scikit-learn: only where fitted
+    from sklearn.kernel_ridge import KernelRidge
+    from sklearn.linear_model import Ridge
+    from sklearn.pipeline import make_pipeline
     from sklearn.svm import SVC
 
     y = np.asarray(y_train)
@@ -160,10 +171,17 @@ def fit_kernel_probe(
     splits = [(np.setdiff1d(np.arange(len(y)), ho, assume_unique=True), ho) for ho in folds]
     y_fit = labels if logistic else y.astype(np.float64)
     metric = "accuracy" if logistic else "r2"
+    low_rank = not logistic and nystroem_above is not None and len(y) > int(nystroem_above)
+    rank = min(int(nystroem_rank), len(y)) if low_rank else 0
 
     def model(pen: float, mult: float):
         if logistic:
             return SVC(C=pen, kernel="rbf", gamma=mult / med)
+        if rank:
+            features = Nystroem(
+                kernel="rbf", gamma=mult / med, n_components=rank, random_state=settings.seed
+            )
+            return make_pipeline(features, Ridge(alpha=pen, fit_intercept=False))
         return KernelRidge(alpha=pen, kernel="rbf", gamma=mult / med)
 
     def held_out(pen: float, mult: float) -> float:
@@ -178,4 +196,4 @@ def fit_kernel_probe(
     pen, mult = grid[int(np.argmax(cv))]  # the first maximum: the grid's order
     pred = model(pen, mult).fit(z_tr, y_fit).predict(z_te)
     pred = np.asarray(pred, dtype=object if logistic else np.float64)
-    return SmallFit(pred, pen, "cv", mult)
+    return SmallFit(pred, pen, f"cv, Nystroem rank {rank}" if rank else "cv", mult)

@@ -120,3 +120,87 @@ def test_labels_cv_cannot_split_fall_back_to_the_small_probe():
     ref = fit_small_probe(x[:30], lone, x[30:], settings)
     assert got.source == ref.source == "fixed C (a class with < 2 rows)"
     assert list(got.pred) == list(ref.pred)
+
+
+def _smooth(n: int, seed: int):
+    """A continuous target that only a nonlinear function of x carries."""
+    rng = np.random.default_rng(seed)
+    x = rng.normal(size=(n, 4))
+    return x, np.sin(2 * x[:, 0]) + x[:, 1] ** 2 + 0.1 * rng.normal(size=n)
+
+
+def test_above_the_threshold_kernel_ridge_is_the_low_rank_kernels_ridge():
+    """More train rows than nystroem_above: ridge on the Nystroem features, which is kernel
+    ridge with the low-rank kernel those features span (the same penalty means the same), so
+    it equals scikit-learn's KernelRidge on that precomputed kernel, within float rounding."""
+    from sklearn.kernel_approximation import Nystroem
+
+    x, y = _smooth(300, 6)
+    settings = small_probes("ridge", [0.01, 0.1, 1.0], [1.0], seed=2)
+    got = fit_kernel_probe(
+        x[:200],
+        y[:200],
+        x[200:],
+        settings,
+        gammas=GAMMAS,
+        C=C,
+        nystroem_above=150,
+        nystroem_rank=60,
+    )
+    exact = fit_kernel_probe(x[:200], y[:200], x[200:], settings, gammas=GAMMAS, C=C)
+    assert got.source == "cv, Nystroem rank 60" and exact.source == "cv"
+    mu, sd = x[:200].mean(0), x[:200].std(0)
+    z_tr, z_te = (x[:200] - mu) / sd, (x[200:] - mu) / sd
+    med = float(np.median(pdist(z_tr, "sqeuclidean")))
+    nys = Nystroem(
+        kernel="rbf", gamma=got.gamma_multiple / med, n_components=60, random_state=2
+    ).fit(z_tr)
+    phi_tr, phi_te = nys.transform(z_tr), nys.transform(z_te)
+    low_rank = KernelRidge(alpha=got.reg, kernel="precomputed").fit(phi_tr @ phi_tr.T, y[:200])
+    np.testing.assert_allclose(
+        got.pred.astype(float), low_rank.predict(phi_te @ phi_tr.T), rtol=1e-6, atol=1e-8
+    )
+    # at or below the threshold, and for a class label at any size, the exact kernel
+    same = fit_kernel_probe(
+        x[:200],
+        y[:200],
+        x[200:],
+        settings,
+        gammas=GAMMAS,
+        C=C,
+        nystroem_above=200,
+        nystroem_rank=60,
+    )
+    assert same.source == "cv" and list(same.pred) == list(exact.pred)
+    xr, yr = _ring()
+    svm = small_probes("logistic", [1.0], list(C), seed=3)
+    big = fit_kernel_probe(
+        xr[:180], yr[:180], xr[180:], svm, gammas=GAMMAS, C=C, nystroem_above=10, nystroem_rank=5
+    )
+    assert big.source == "cv"
+
+
+def test_the_nystroem_ceiling_tracks_the_exact_one_where_both_fit():
+    """The V ceiling's kernel ridge above nystroem_above: at a rank a quarter of the train
+    rows it scores within a few hundredths of R^2 of the exact kernel on the same rows, and
+    well above the linear probe (a bound that the approximation does not pull down to the
+    linear one)."""
+    from tacgen_lib.probes.metrics import score
+
+    x, y = _smooth(1200, 7)
+    settings = small_probes("ridge", [0.01, 0.1, 1.0], [1.0], seed=0)
+    exact = fit_kernel_probe(x[:900], y[:900], x[900:], settings, gammas=GAMMAS, C=C)
+    low = fit_kernel_probe(
+        x[:900],
+        y[:900],
+        x[900:],
+        settings,
+        gammas=GAMMAS,
+        C=C,
+        nystroem_above=512,
+        nystroem_rank=225,
+    )
+    linear = fit_small_probe(x[:900], y[:900], x[900:], settings)
+    r2 = lambda fit: score("r2", y[900:], fit.pred.astype(float))  # noqa: E731
+    assert abs(r2(low) - r2(exact)) < 0.03
+    assert r2(low) > r2(linear) + 0.3
