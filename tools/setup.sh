@@ -74,6 +74,12 @@ fi
 "$VENV/bin/python" tools/torch_build.py check --asked "$TORCH"
 "$VENV/bin/python" tools/torch_build.py gpu-check
 "$VENV/bin/python" tools/torch_build.py remember --venv "$VENV" "$TORCH"
+# 3. The project's own modules byte-compiled: the editable install leaves them as source, and
+#    every job's interpreter imports them (the preloaded interpreter holds third-party modules
+#    only, tacgen_lib/runtime/preload.py); where PYTHONDONTWRITEBYTECODE is set nothing caches
+#    them, so each job would compile what it imports again. Only files changed since are
+#    compiled; an edited module's stale cache is ignored by Python (checked against its source).
+"$VENV/bin/python" -m compileall -q tacgen_lib >/dev/null
 "$VENV/bin/python" - <<'PY'
 import sys
 import torch
