@@ -346,8 +346,7 @@ def _ceilings(
             ps,
             gammas=ceiling.gammas,
             C=ceiling.C,
-            nystroem_above=regime.nystroem_above,
-            nystroem_rank=regime.nystroem_rank,
+            nystroem=(regime.nystroem_above, regime.nystroem_rank),
         ),
         ("vision_ceiling", "oracle"): fit_small_probe(x_tr, y, x_te, ps),
     }

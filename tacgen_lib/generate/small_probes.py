@@ -128,15 +128,14 @@ def fit_kernel_probe(
     *,
     gammas: Sequence[float],
     C: Sequence[float],
-    nystroem_above: int | None = None,
-    nystroem_rank: int = 0,
+    nystroem: tuple[int, int] | None = None,
 ) -> SmallFit:
     """The exact RBF-kernel probe on standardised features (the train rows' mean and std): a
     logistic family's labels by a support-vector classifier (scikit-learn ``SVC``, one-vs-one,
     penalty ``C``), a ridge family's by kernel ridge (``KernelRidge``, penalty among the
     family's lambdas). Kernel ridge's exact solve grows as the cube of the train rows: with
-    `nystroem_above` set and more train rows than it, a ridge family's probe is ridge without
-    intercept on `nystroem_rank` RBF Nystroem features (scikit-learn's ``Nystroem``, landmark
+    `nystroem` = (above, rank) and more train rows than ``above``, a ridge family's probe is
+    ridge without intercept on ``rank`` RBF Nystroem features (scikit-learn's ``Nystroem``, landmark
     rows drawn with ``settings.seed``; the same gamma), which is kernel ridge with that
     low-rank kernel, so the same penalty means the same (as the regime's kernel ridge rung,
     `generate.kernel_ridge_generator`). The SVM's solve grows as the square and stays exact. gamma = multiple / `median_sq_distance` of the train rows, the multiple
@@ -171,8 +170,8 @@ def fit_kernel_probe(
     splits = [(np.setdiff1d(np.arange(len(y)), ho, assume_unique=True), ho) for ho in folds]
     y_fit = labels if logistic else y.astype(np.float64)
     metric = "accuracy" if logistic else "r2"
-    low_rank = not logistic and nystroem_above is not None and len(y) > int(nystroem_above)
-    rank = min(int(nystroem_rank), len(y)) if low_rank else 0
+    low_rank = not logistic and nystroem is not None and len(y) > int(nystroem[0])
+    rank = min(int(nystroem[1]), len(y)) if low_rank else 0
 
     def model(pen: float, mult: float):
         if logistic:

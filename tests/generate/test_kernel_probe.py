@@ -129,22 +129,22 @@ def _smooth(n: int, seed: int):
     return x, np.sin(2 * x[:, 0]) + x[:, 1] ** 2 + 0.1 * rng.normal(size=n)
 
 
-def _fit(x, y, n_train: int, settings, **nystroem):
+def _fit(x, y, n_train: int, settings, nystroem=None):
     """The kernel probe on the first `n_train` rows, predicting the rest."""
     return fit_kernel_probe(
-        x[:n_train], y[:n_train], x[n_train:], settings, gammas=GAMMAS, C=C, **nystroem
+        x[:n_train], y[:n_train], x[n_train:], settings, gammas=GAMMAS, C=C, nystroem=nystroem
     )
 
 
 def test_above_the_threshold_kernel_ridge_is_the_low_rank_kernels_ridge():
-    """More train rows than nystroem_above: ridge on the Nystroem features, which is kernel
+    """More train rows than the Nystroem threshold: ridge on the Nystroem features, which is kernel
     ridge with the low-rank kernel those features span (the same penalty means the same), so
     it equals scikit-learn's KernelRidge on that precomputed kernel, within float rounding."""
     from sklearn.kernel_approximation import Nystroem
 
     x, y = _smooth(300, 6)
     settings = small_probes("ridge", [0.01, 0.1, 1.0], [1.0], seed=2)
-    got = _fit(x, y, 200, settings, nystroem_above=150, nystroem_rank=60)
+    got = _fit(x, y, 200, settings, nystroem=(150, 60))
     exact = _fit(x, y, 200, settings)
     assert got.source == "cv, Nystroem rank 60" and exact.source == "cv"
     mu, sd = x[:200].mean(0), x[:200].std(0)
@@ -159,17 +159,17 @@ def test_above_the_threshold_kernel_ridge_is_the_low_rank_kernels_ridge():
         got.pred.astype(float), low_rank.predict(phi_te @ phi_tr.T), rtol=1e-6, atol=1e-8
     )
     # at or below the threshold, and for a class label at any size, the exact kernel
-    same = _fit(x, y, 200, settings, nystroem_above=200, nystroem_rank=60)
+    same = _fit(x, y, 200, settings, nystroem=(200, 60))
     assert same.source == "cv" and same.reg == exact.reg
     np.testing.assert_allclose(same.pred.astype(float), exact.pred.astype(float), rtol=1e-9)
     xr, yr = _ring()
     svm = small_probes("logistic", [1.0], list(C), seed=3)
-    big = _fit(xr, yr, 180, svm, nystroem_above=10, nystroem_rank=5)
+    big = _fit(xr, yr, 180, svm, nystroem=(10, 5))
     assert big.source == "cv"
 
 
 def test_the_nystroem_ceiling_tracks_the_exact_one_where_both_fit():
-    """The V ceiling's kernel ridge above nystroem_above: at a rank a quarter of the train
+    """The V ceiling's kernel ridge above regime.nystroem_above: at a rank a quarter of the train
     rows it scores within a few hundredths of R^2 of the exact kernel on the same rows, and
     well above the linear probe (a bound that the approximation does not pull down to the
     linear one)."""
@@ -178,7 +178,7 @@ def test_the_nystroem_ceiling_tracks_the_exact_one_where_both_fit():
     x, y = _smooth(1200, 7)
     settings = small_probes("ridge", [0.01, 0.1, 1.0], [1.0], seed=0)
     exact = _fit(x, y, 900, settings)
-    low = _fit(x, y, 900, settings, nystroem_above=512, nystroem_rank=225)
+    low = _fit(x, y, 900, settings, nystroem=(512, 225))
     linear = fit_small_probe(x[:900], y[:900], x[900:], settings)
     r2 = lambda fit: score("r2", y[900:], fit.pred.astype(float))  # noqa: E731
     assert abs(r2(low) - r2(exact)) < 0.03
