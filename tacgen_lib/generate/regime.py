@@ -30,7 +30,8 @@ arm on the same test rows:
   probe (`fit_kernel_probe`: an SVM, kernel ridge for a continuous target), not the arms'
   Nystroem map, whose rank (the feature width) caps it on every non-test row; above
   ``regime.nystroem_above`` rows its kernel ridge takes ``regime.nystroem_rank`` Nystroem
-  features, as the kernel ridge rung does (the exact solve grows as the cube of the rows);
+  features, as the kernel ridge rung does (the exact solve grows as the cube of the rows), and
+  its SVM's grid is chosen by CV on a draw of that many rows, then refitted on every row;
 - ``vision_ceiling`` / oracle: the probe on the true appearance class (one-hot) and the
   visible shape and size, fitted on every non-test row: the best any function of appearance
   reaches (an oracle no arm can use).
@@ -323,8 +324,9 @@ def _ceilings(
 ) -> dict[tuple[str, str], SmallFit]:
     """The arms fitted once per target on every non-test row with its true label: the V
     ceiling (the linear V probe, and the kernel probe with the grid ``ceiling.gammas`` x
-    ``ceiling.C``, its kernel ridge on ``regime.nystroem_rank`` Nystroem features above
-    ``regime.nystroem_above`` rows as the kernel ridge rung's) and the vision ceiling (the
+    ``ceiling.C``; above ``regime.nystroem_above`` rows its kernel ridge on
+    ``regime.nystroem_rank`` Nystroem features, as the kernel ridge rung's, and its SVM's grid
+    chosen on a draw of that many rows, `fit_kernel_probe`) and the vision ceiling (the
     oracle probe on the true appearance class + visible shape and size)."""
     rows, ps = tgt.rows, replace(tgt.settings, cv_repeats=1)
     train = [str(i) for i in rows.train_ids]
@@ -346,7 +348,7 @@ def _ceilings(
             ps,
             gammas=ceiling.gammas,
             C=ceiling.C,
-            nystroem=(regime.nystroem_above, regime.nystroem_rank),
+            large=(regime.nystroem_above, regime.nystroem_rank),
         ),
         ("vision_ceiling", "oracle"): fit_small_probe(x_tr, y, x_te, ps),
     }

@@ -128,26 +128,32 @@ def fit_kernel_probe(
     *,
     gammas: Sequence[float],
     C: Sequence[float],
-    nystroem: tuple[int, int] | None = None,
+    large: tuple[int, int] | None = None,
 ) -> SmallFit:
     """The exact RBF-kernel probe on standardised features (the train rows' mean and std): a
     logistic family's labels by a support-vector classifier (scikit-learn ``SVC``, one-vs-one,
     penalty ``C``), a ridge family's by kernel ridge (``KernelRidge``, penalty among the
-    family's lambdas). Kernel ridge's exact solve grows as the cube of the train rows: with
-    `nystroem` = (above, rank) and more train rows than ``above``, a ridge family's probe is
-    ridge without intercept on ``rank`` RBF Nystroem features (scikit-learn's ``Nystroem``, landmark
-    rows drawn with ``settings.seed``; the same gamma), which is kernel ridge with that
-    low-rank kernel, so the same penalty means the same (as the regime's kernel ridge rung,
-    `generate.kernel_ridge_generator`). The SVM's solve grows as the square and stays exact. gamma = multiple / `median_sq_distance` of the train rows, the multiple
+    family's lambdas). gamma = multiple / `median_sq_distance` of the train rows, the multiple
     among `gammas`; (penalty, multiple) by the mean held-out score (`metrics.score`: accuracy;
-    R^2 for ridge) over the family's folds (`make_folds`: stratified for a logistic family, seeded by
-    ``settings.seed``, ``settings.cv_repeats`` draws), the first of the grid's order on ties
-    (penalties ascending, then multiples ascending: the smoother fit). Refitted on every train
-    row. Deterministic: neither solver draws random numbers.
+    R^2 for ridge) over the family's folds (`make_folds`: stratified for a logistic family,
+    seeded by ``settings.seed``, ``settings.cv_repeats`` draws), the first of the grid's order
+    on ties (penalties ascending, then multiples ascending: the smoother fit). Refitted on
+    every train row. Deterministic: the solvers draw no random numbers.
+
+    `large` = (rows, rank) bounds the cost on more train rows than ``rows`` (the regime's V
+    ceiling on a large corpus): kernel ridge's exact solve grows as the cube of the rows, so a
+    ridge family's probe is then ridge without intercept on ``rank`` RBF Nystroem features
+    (scikit-learn's ``Nystroem``, landmark rows drawn with ``settings.seed``, the same gamma):
+    kernel ridge with that low-rank kernel, the same penalty meaning the same (as the regime's
+    kernel ridge rung, `generate.kernel_ridge_generator`). The SVM stays exact, but each of its
+    CV fits grows as the square of the rows or worse (a large C on labels V barely reads
+    converges slowly), so its grid is chosen by CV on a stratified draw of ``rows`` train rows
+    (seeded by ``settings.seed``) and the chosen SVM refitted on every train row.
 
     Where CV cannot run on these labels (`_cv_impossible`) it is `fit_small_probe`'s fallback.
     SmallFit.reg is the chosen C (or lambda), gamma_multiple the chosen multiple, source
-    ``cv`` (``cv, Nystroem rank R`` on Nystroem features).
+    ``cv``, ``cv, Nystroem rank R`` on Nystroem features, ``cv on R of N rows`` for an SVM
+    whose grid a draw of rows chose.
     """
     from sklearn.kernel_approximation import Nystroem  # scikit-learn: only where fitted
     from sklearn.kernel_ridge import KernelRidge
@@ -164,14 +170,17 @@ def fit_kernel_probe(
     penalties = sorted(float(c) for c in (C if logistic else settings.lambdas))
     multiples = sorted(float(g) for g in gammas)
     labels = y.astype(str) if logistic else None
-    folds = make_folds(
-        len(y), settings.folds, settings.seed, labels=labels, repeats=settings.cv_repeats
-    )
-    splits = [(np.setdiff1d(np.arange(len(y)), ho, assume_unique=True), ho) for ho in folds]
     y_fit = labels if logistic else y.astype(np.float64)
     metric = "accuracy" if logistic else "r2"
-    low_rank = not logistic and nystroem is not None and len(y) > int(nystroem[0])
-    rank = min(int(nystroem[1]), len(y)) if low_rank else 0
+    is_large = large is not None and len(y) > int(large[0])
+    rank = min(int(large[1]), len(y)) if is_large and not logistic else 0
+    cv_rows = _cv_draw(labels, int(large[0]), settings.seed) if is_large and logistic else None
+    splits = _cv_splits(len(y), settings, labels, cv_rows)
+    source = "cv"
+    if rank:
+        source = f"cv, Nystroem rank {rank}"
+    elif cv_rows is not None:
+        source = f"cv on {len(cv_rows)} of {len(y)} rows"
 
     def model(pen: float, mult: float):
         if logistic:
@@ -195,4 +204,32 @@ def fit_kernel_probe(
     pen, mult = grid[int(np.argmax(cv))]  # the first maximum: the grid's order
     pred = model(pen, mult).fit(z_tr, y_fit).predict(z_te)
     pred = np.asarray(pred, dtype=object if logistic else np.float64)
-    return SmallFit(pred, pen, f"cv, Nystroem rank {rank}" if rank else "cv", mult)
+    return SmallFit(pred, pen, source, mult)
+
+
+def _cv_draw(labels: np.ndarray, rows: int, seed: int) -> np.ndarray:
+    """A stratified draw of `rows` of the rows of `labels` (scikit-learn's
+    ``train_test_split``, seeded), in row order: the rows a large SVM's grid is chosen on."""
+    from sklearn.model_selection import train_test_split
+
+    drawn, _ = train_test_split(
+        np.arange(len(labels)), train_size=rows, stratify=labels, random_state=seed
+    )
+    return np.sort(drawn)
+
+
+def _cv_splits(
+    n: int, settings: ProbeSettings, labels: np.ndarray | None, rows: np.ndarray | None
+) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(fit rows, held-out rows) of the kernel probe's CV: the family's folds (`make_folds`)
+    of every one of the `n` rows, or of `rows` only where given (indices into the n)."""
+    idx = np.arange(n) if rows is None else rows
+    folds = make_folds(
+        len(idx),
+        settings.folds,
+        settings.seed,
+        labels=None if labels is None else labels[idx],
+        repeats=settings.cv_repeats,
+    )
+    every = np.arange(len(idx))
+    return [(idx[np.setdiff1d(every, ho, assume_unique=True)], idx[ho]) for ho in folds]

@@ -13,7 +13,9 @@ from sklearn.kernel_ridge import KernelRidge
 from sklearn.model_selection import GridSearchCV
 from sklearn.svm import SVC
 
+from tacgen_lib.generate.baselines import median_sq_distance, standardise
 from tacgen_lib.generate.small_probes import (
+    _cv_draw,
     fit_kernel_probe,
     fit_small_nonlinear,
     fit_small_probe,
@@ -129,10 +131,10 @@ def _smooth(n: int, seed: int):
     return x, np.sin(2 * x[:, 0]) + x[:, 1] ** 2 + 0.1 * rng.normal(size=n)
 
 
-def _fit(x, y, n_train: int, settings, nystroem=None):
+def _fit(x, y, n_train: int, settings, large=None):
     """The kernel probe on the first `n_train` rows, predicting the rest."""
     return fit_kernel_probe(
-        x[:n_train], y[:n_train], x[n_train:], settings, gammas=GAMMAS, C=C, nystroem=nystroem
+        x[:n_train], y[:n_train], x[n_train:], settings, gammas=GAMMAS, C=C, large=large
     )
 
 
@@ -144,7 +146,7 @@ def test_above_the_threshold_kernel_ridge_is_the_low_rank_kernels_ridge():
 
     x, y = _smooth(300, 6)
     settings = small_probes("ridge", [0.01, 0.1, 1.0], [1.0], seed=2)
-    got = _fit(x, y, 200, settings, nystroem=(150, 60))
+    got = _fit(x, y, 200, settings, large=(150, 60))
     exact = _fit(x, y, 200, settings)
     assert got.source == "cv, Nystroem rank 60" and exact.source == "cv"
     mu, sd = x[:200].mean(0), x[:200].std(0)
@@ -159,13 +161,32 @@ def test_above_the_threshold_kernel_ridge_is_the_low_rank_kernels_ridge():
         got.pred.astype(float), low_rank.predict(phi_te @ phi_tr.T), rtol=1e-6, atol=1e-8
     )
     # at or below the threshold, and for a class label at any size, the exact kernel
-    same = _fit(x, y, 200, settings, nystroem=(200, 60))
+    same = _fit(x, y, 200, settings, large=(200, 60))
     assert same.source == "cv" and same.reg == exact.reg
     np.testing.assert_allclose(same.pred.astype(float), exact.pred.astype(float), rtol=1e-9)
-    xr, yr = _ring()
-    svm = small_probes("logistic", [1.0], list(C), seed=3)
-    big = _fit(xr, yr, 180, svm, nystroem=(10, 5))
-    assert big.source == "cv"
+
+
+def test_a_large_svm_chooses_its_grid_on_a_draw_and_refits_on_every_row():
+    """More train rows than `large`'s rows: the SVM stays exact, its (C, gamma) chosen as
+    scikit-learn's grid search chooses them on a stratified draw of that many rows (the
+    family's folds of the draw), then refitted on every train row."""
+    x, y = _ring(n=240, seed=5)
+    settings = small_probes("logistic", [1.0], list(C), seed=3)
+    got = _fit(x, y, 180, settings, large=(120, 5))
+    assert got.source == "cv on 120 of 180 rows"
+    labels = y[:180].astype(str)
+    drawn = _cv_draw(labels, 120, 3)
+    assert len(set(drawn)) == 120 and set(labels[drawn]) == set(labels)
+    z_tr, z_te = standardise(x[:180], x[180:])
+    med = median_sq_distance(z_tr)
+    folds = make_folds(120, settings.folds, settings.seed, labels=labels[drawn])
+    cv = [(np.setdiff1d(np.arange(120), ho), ho) for ho in folds]
+    grid = {"C": list(C), "gamma": [g / med for g in GAMMAS]}
+    search = GridSearchCV(SVC(), grid, cv=cv, scoring="accuracy").fit(z_tr[drawn], labels[drawn])
+    assert got.reg == search.best_params_["C"]
+    assert got.gamma_multiple == pytest.approx(search.best_params_["gamma"] * med, rel=1e-12)
+    refit = SVC(C=got.reg, gamma=got.gamma_multiple / med).fit(z_tr, labels).predict(z_te)
+    assert list(got.pred) == list(refit)
 
 
 def test_the_nystroem_ceiling_tracks_the_exact_one_where_both_fit():
@@ -178,7 +199,7 @@ def test_the_nystroem_ceiling_tracks_the_exact_one_where_both_fit():
     x, y = _smooth(1200, 7)
     settings = small_probes("ridge", [0.01, 0.1, 1.0], [1.0], seed=0)
     exact = _fit(x, y, 900, settings)
-    low = _fit(x, y, 900, settings, nystroem=(512, 225))
+    low = _fit(x, y, 900, settings, large=(512, 225))
     linear = fit_small_probe(x[:900], y[:900], x[900:], settings)
     r2 = lambda fit: score("r2", y[900:], fit.pred.astype(float))  # noqa: E731
     assert abs(r2(low) - r2(exact)) < 0.03
