@@ -91,6 +91,22 @@ def median_sq_distance(z: np.ndarray) -> float:
     return med if med > 0 else 1.0
 
 
+def nystroem_ridge(gamma: float, lam: float, *, rank: int, seed: int):
+    """RBF kernel ridge with a low-rank kernel: ridge without intercept (penalty `lam`) on
+    `rank` RBF Nystroem features (landmark rows drawn with `seed`), a scikit-learn pipeline.
+    Ridge on the Nystroem map is kernel ridge with the kernel that map spans, so `lam` means
+    what KernelRidge's alpha means: the regime's kernel ridge rung and the V ceiling's kernel
+    ridge share it above their exact sizes."""
+    from sklearn.kernel_approximation import Nystroem  # scikit-learn: only where fitted
+    from sklearn.linear_model import Ridge
+    from sklearn.pipeline import make_pipeline
+
+    features = Nystroem(
+        kernel="rbf", gamma=float(gamma), n_components=int(rank), random_state=int(seed)
+    )
+    return make_pipeline(features, Ridge(alpha=float(lam), fit_intercept=False))
+
+
 @dataclass(frozen=True)
 class NonlinearFit:
     """The nonlinear V-only baseline's fit: the probe, its RBF gamma and the multiple of the

@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from tacgen_lib.generate.baselines import median_sq_distance, standardise
+from tacgen_lib.generate.baselines import median_sq_distance, nystroem_ridge, standardise
 from tacgen_lib.generate.blocks import feature_block
 from tacgen_lib.generate.regime_sets import RegimeSettings
 
@@ -77,27 +77,15 @@ def kernel_ridge_model(
     ridge (``nystroem_rank`` 0) or ridge on that many RBF Nystroem features (landmarks drawn
     with `seed`), T centred by its training mean (scikit-learn's TransformedTargetRegressor)."""
     from sklearn.compose import TransformedTargetRegressor
-    from sklearn.kernel_approximation import Nystroem
     from sklearn.kernel_ridge import KernelRidge
-    from sklearn.linear_model import Ridge
     from sklearn.pipeline import make_pipeline
     from sklearn.preprocessing import StandardScaler
 
     if int(nystroem_rank) == 0:
-        inner = make_pipeline(
-            StandardScaler(), KernelRidge(alpha=float(lam), kernel="rbf", gamma=float(gamma))
-        )
+        fit = KernelRidge(alpha=float(lam), kernel="rbf", gamma=float(gamma))
     else:
-        inner = make_pipeline(
-            StandardScaler(),
-            Nystroem(
-                kernel="rbf",
-                gamma=float(gamma),
-                n_components=int(nystroem_rank),
-                random_state=int(seed),
-            ),
-            Ridge(alpha=float(lam), fit_intercept=False),
-        )
+        fit = nystroem_ridge(gamma, lam, rank=int(nystroem_rank), seed=int(seed))
+    inner = make_pipeline(StandardScaler(), fit)
     return TransformedTargetRegressor(
         regressor=inner, transformer=StandardScaler(with_std=False), check_inverse=False
     )

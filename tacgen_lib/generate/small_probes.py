@@ -17,7 +17,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from tacgen_lib.generate.baselines import median_sq_distance, nonlinear_baseline, standardise
+from tacgen_lib.generate.baselines import (
+    median_sq_distance,
+    nonlinear_baseline,
+    nystroem_ridge,
+    standardise,
+)
 from tacgen_lib.probes.fit import fit_probe
 from tacgen_lib.probes.folds import make_folds
 from tacgen_lib.probes.metrics import score
@@ -155,10 +160,7 @@ def fit_kernel_probe(
     ``cv``, ``cv, Nystroem rank R`` on Nystroem features, ``cv on R of N rows`` for an SVM
     whose grid a draw of rows chose.
     """
-    from sklearn.kernel_approximation import Nystroem  # scikit-learn: only where fitted
-    from sklearn.kernel_ridge import KernelRidge
-    from sklearn.linear_model import Ridge
-    from sklearn.pipeline import make_pipeline
+    from sklearn.kernel_ridge import KernelRidge  # scikit-learn: only where fitted
     from sklearn.svm import SVC
 
     y = np.asarray(y_train)
@@ -186,10 +188,7 @@ def fit_kernel_probe(
         if logistic:
             return SVC(C=pen, kernel="rbf", gamma=mult / med)
         if rank:
-            features = Nystroem(
-                kernel="rbf", gamma=mult / med, n_components=rank, random_state=settings.seed
-            )
-            return make_pipeline(features, Ridge(alpha=pen, fit_intercept=False))
+            return nystroem_ridge(mult / med, pen, rank=rank, seed=settings.seed)
         return KernelRidge(alpha=pen, kernel="rbf", gamma=mult / med)
 
     def held_out(pen: float, mult: float) -> float:
