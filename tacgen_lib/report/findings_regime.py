@@ -67,18 +67,25 @@ def _ladder_decisions(view: pd.DataFrame) -> list[dict]:
 def _pool_decisions(view: pd.DataFrame, control: pd.DataFrame | None) -> list[dict]:
     """Per target, where two or more pool sizes ran: the smallest pool at which a learnt rung
     and at which the diffusion model gain over nonlinear V over the replicates
-    (`report.regime_pool.first_gain`, at the largest rho and the smallest N_L); and where
+    (`report.regime_pool.first_gain`, at the largest rho and the N_L the curve is read at,
+    `report.regime_pool.reading_n_labelled`); and where
     `control` (the positive control's `seed_view`) holds the target, the same for its learnt
     rungs."""
-    from tacgen_lib.report.regime_pool import DIFFUSION_RUNGS, LEARNT_RUNGS, first_gain
+    from tacgen_lib.report.regime_pool import (
+        DIFFUSION_RUNGS,
+        LEARNT_RUNGS,
+        first_gain,
+        reading_n_labelled,
+    )
 
     pools = sorted(int(n) for n in view["n_pool"].unique())
     if len(pools) < 2:
         return []
-    rho, n_l = view["rho"].max(), int(view["n_labelled"].min())
+    rho = view["rho"].max()
     out = []
     controlled = set(control["target"]) if control is not None else set()
     for target in sorted(view["target"].unique()):
+        n_l = reading_n_labelled(view, target, rho)
         curves = [("learnt", LEARNT_RUNGS, view, ""), ("diffusion", DIFFUSION_RUNGS, view, "")]
         if target in controlled:
             curves.append(("control_learnt", LEARNT_RUNGS, control, "; positive control"))

@@ -9,8 +9,10 @@ Delta against nonlinear V, read as one, lies above 0 (`regime_arms.gains`, the r
 ladder's verdict decides by): so every replicate's CI lies above 0 and the replicates agree. Every replicate's CI
 above 0 alone is looser than it reads on an R² target, where a negligible Delta with tight
 paired CIs passes it at the smallest rho. The table shows both (the interval and how many
-replicates' CIs lie above / below 0). The curve is read at the smallest labelled set, where
-generated touch should help most, with the linear probe every rung of the ladder uses.
+replicates' CIs lie above / below 0). The curve is read at the smallest labelled set at which
+the look oracle gains (`reading_n_labelled`): generated touch should help most where labels are
+few, but on too few the probe shows no gain at all, not even the oracle's; with the linear
+probe every rung of the ladder uses.
 
 The positive control (`generate.look_control`, rule regime_look_control) runs the same rungs
 but the diffusion generator's on touch that is the look's mean real touch plus noise at a
@@ -41,6 +43,7 @@ __all__ = [
     "pool_curve_figure",
     "pool_table",
     "pool_verdict",
+    "reading_n_labelled",
 ]
 
 #: Rungs that learn a V -> T map from the pool without diffusion (`generate.ladder.LADDER`).
@@ -89,6 +92,18 @@ def first_gain(
     ladder there); None where none does at any pool size."""
     found = _first_gain_row(view, target, rho, n_labelled, rungs)
     return None if found is None else found[:2]
+
+
+def reading_n_labelled(view: pd.DataFrame, target: str, rho: float) -> int:
+    """The labelled-set size the curve of `target` at `rho` is read at: the smallest N_L at
+    which the look oracle gains over nonlinear V over the replicates at some pool size (on
+    fewer labels the probe may lack the power to show any gain, so no rung could show one),
+    or the smallest N_L where it gains at none."""
+    sizes = sorted(int(n) for n in view.loc[view["target"] == target, "n_labelled"].unique())
+    for n_l in sizes:
+        if first_gain(view, target, rho, n_l, ("look_oracle",)) is not None:
+            return n_l
+    return sizes[0]
 
 
 def _first_words(
@@ -148,7 +163,8 @@ def _control_words(
 def pool_verdict(
     view: pd.DataFrame, control: pd.DataFrame | None = None, snr: float | None = None
 ) -> list[str]:
-    """The curve's verdict, per target at the largest rho and the smallest N_L: the smallest
+    """The curve's verdict, per target at the largest rho and the N_L it is read at
+    (`reading_n_labelled`: the smallest at which the look oracle gains): the smallest
     pool at which a learnt rung (`LEARNT_RUNGS`) and at which the diffusion model
     (`DIFFUSION_RUNGS`) gains over the replicates (`first_gain`), or that none does up to the
     largest pool; the look oracle's Delta at the largest pool as the reference (and that the
@@ -163,9 +179,10 @@ def pool_verdict(
             "two or more (regime.n_pool)."
         ]
     rhos = sorted(view["rho"].unique())
-    rho_hi, rho_lo, n_l = rhos[-1], rhos[0], int(view["n_labelled"].min())
+    rho_hi, rho_lo = rhos[-1], rhos[0]
     out = []
     for target in sorted(view["target"].unique()):
+        n_l = reading_n_labelled(view, target, rho_hi)
         where = f"{target}, ρ = {rho_hi:g}, N_L = {n_l}, N_P {pools[0]}–{pools[-1]}"
         oracle = _curve(view, target, rho_hi, n_l, "look_oracle")
         # its looks get finer as the pool grows (docs/regime.md): both ends of its curve
@@ -298,8 +315,8 @@ def _pool_panel(ax, view: pd.DataFrame, target: str, rho: float, n_l: int, pools
 
 
 def pool_curve_figure(view: pd.DataFrame, control: pd.DataFrame | None = None) -> plt.Figure:
-    """Delta against nonlinear V per rung against the pool size, at the smallest N_L, one
-    panel per target x (largest rho, smallest rho, and the positive control where `control`
+    """Delta against nonlinear V per rung against the pool size, at the N_L each target's curve
+    is read at (`reading_n_labelled`), one panel per target x (largest rho, smallest rho, and the positive control where `control`
     holds its `seed_view`); bars: the replicates' interval read as one; a filled marker: that
     interval above 0 (a gain)."""
     targets = sorted(view["target"].unique())
@@ -307,12 +324,12 @@ def pool_curve_figure(view: pd.DataFrame, control: pd.DataFrame | None = None) -
     columns = [(view, r, "") for r in ([rhos[-1]] if rhos[0] == rhos[-1] else [rhos[-1], rhos[0]])]
     if control is not None and len(control):
         columns.append((control, control["rho"].max(), "positive control\nlook + noise, "))
-    n_l = int(view["n_labelled"].min())
     pools = sorted(int(n) for n in view["n_pool"].unique())
     # three panels across keep to the report viewer's width
     width = 4.2 if len(columns) < 3 else 3.1
     fig, axes = panel_axes(len(targets), len(columns), (width, 3.0), legend_height=1.0)
     for i, target in enumerate(targets):
+        n_l = reading_n_labelled(view, target, rhos[-1])
         for j, (source, rho, what) in enumerate(columns):
             _pool_panel(axes[i][j], source, target, rho, n_l, pools)
             axes[i][j].set_title(f"{target}, {what}ρ = {rho:g}, N_L = {n_l}", fontsize=9)

@@ -879,6 +879,41 @@ def test_the_pool_verdict_names_the_smallest_pool_where_each_kind_of_rung_gains(
     assert {t.split(":")[0] for t in titles} == {"hardness, N_P = 256", "hardness, N_P = 16384"}
 
 
+def test_the_pool_curve_is_read_where_the_look_oracle_gains():
+    """On labelled sets too small for the probe to show even the look oracle's gain, no rung
+    could show one: the verdict, the figure and the findings' decisions read the curve at the
+    fewest labels on which the oracle gains (`reading_n_labelled`), and at the fewest where it
+    gains at none."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from tacgen_lib.report.findings_regime import _pool_decisions
+    from tacgen_lib.report.regime import pool_curve_figure, seed_view
+    from tacgen_lib.report.regime_pool import pool_verdict, reading_n_labelled
+
+    pools = (256, 1024, 4096)
+    above = {(1.0, "look_oracle"): True, (1.0, "kernel_ridge", 1024): True}
+    rows = _ladder_summary(above, pools)
+    # the gains at N_L = 64 and none at 8: the oracle has no power on the fewer labels
+    rows["n_labelled"] = rows["n_labelled"].map({8: 64, 64: 8})
+    view = seed_view(rows)
+    assert reading_n_labelled(view, "hardness", 1.0) == 64
+    curve = pool_verdict(view)[0]
+    assert (
+        "N_L = 64" in curve
+        and "first gains over nonlinear V over the replicates at N_P = 1024" in curve
+    )
+    titles = [ax.get_title() for ax in pool_curve_figure(view).axes]
+    assert all(t.endswith("N_L = 64") for t in titles), titles
+    learnt = [d for d in _pool_decisions(view, None) if d["decision_id"].endswith("learnt")]
+    assert len(learnt) == 1 and "N_L = 64" in learnt[0]["what"]
+    assert learnt[0]["decision"].startswith("N_P = 1024")
+    # no oracle gain at any N_L: the fewest labels, and the verdict says it cannot show a gain
+    void = seed_view(_ladder_summary({(1.0, "kernel_ridge", 1024): True}, pools))
+    assert reading_n_labelled(void, "hardness", 1.0) == 8
+    assert pool_verdict(void)[0].endswith("so the curve cannot show what a generator would add.")
+
+
 def _control_view(above: dict[tuple, bool], pools: tuple[int, ...]) -> pd.DataFrame:
     """The positive control's `seed_view`: the largest rho's rows of `_ladder_summary`
     without the diffusion generator's rungs."""
