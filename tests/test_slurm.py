@@ -1,7 +1,7 @@
 """The alignment fan-out through a REAL single-node SLURM cluster and profiles/slurm.
 
 Opt-in for pytest, because it installs Debian packages and starts daemons as root; `make test`
-(and so CI) opts in. About 2-3 minutes (measured 134 s, ~100 s of it the SLURM run):
+(and so CI) opts in. About 2 minutes, most of it the session's local run it starts from:
 
     TACGEN_SLURM_TEST=1 python -m pytest tests/test_slurm.py -v -s
 
@@ -11,8 +11,10 @@ SLURM_CONF, so the config must be at the default path; an existing file is backe
 back), starts munged, slurmctld and slurmd in the foreground as children of this test, takes
 the tiny workflow's upstream (corpus, features) from a copy of the session's local run of
 config/test.yaml (conftest.reference_run) with its align and generate outputs removed, then
-runs the alignment grid of config/test.yaml widened to 2 seeds through
-`--profile profiles/slurm` (every train_heads job an sbatch job; aggregate_align local). Without slurmdbd there is no accounting
+runs the alignment grid of config/test.yaml (one seed and tau on its two corpora) and one
+generator through `--profile profiles/slurm` (every train_heads and train_generator job an
+sbatch job; aggregate_align local), at the local run's thread counts, so that every edge the
+cluster makes must equal the local run's bit for bit. Without slurmdbd there is no accounting
 database, so the profile queries job status with squeue. Everything it started is stopped at
 the end (jobs cancelled, then slurmd, slurmctld, munged by their pids), also on failure or
 timeout. It skips, printing why, when it cannot run: not root, no apt-get, a SLURM already
@@ -33,16 +35,20 @@ from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from snakemake_run import SNAKEMAKE, copy_run, edge_hashes, planned_rules, smk
+import yaml
+from snakemake_run import SNAKEMAKE, copy_run, edge_hashes, planned_rules
 
 pytestmark = [pytest.mark.slurm, pytest.mark.workflow]
 
 RUN_TIMEOUT = 600  # seconds for the SLURM run itself; the test fails (and cleans up) after it
 SLURM_CONF = Path("/etc/slurm/slurm.conf")
-#: the grid fanned out: 2 seeds x test.yaml's tau on its 2 corpora (every sbatch job starts an
-#: interpreter and imports torch: a second tau would double the jobs and assert nothing new;
-#: the config check keeps both corpora and tau 0.07, whose heads the probe families read)
-GRID = {"seeds": [42, 43], "taus": [0.07]}
+#: the grid fanned out: test.yaml's own (one seed and tau on its 2 corpora; every sbatch job
+#: starts an interpreter and imports torch, so more cells would cost more and assert nothing
+#: new), so the session's local run holds every edge the cluster makes
+GRID = {"seeds": [42], "taus": [0.07]}
+#: the local run's threads for the jobs the cluster runs (the profile gives them 2): edges are
+#: bit-identical per thread count, so at these the cluster's must equal the local run's
+LOCAL_THREADS = ["--set-threads", "train_heads=1", "train_generator=1"]
 #: generate: one generator trained through SLURM beside the alignment grid.
 GENERATOR_WEIGHTS = "results/generate/sim_paired/seed~0/generator.arrow"
 
@@ -236,13 +242,12 @@ def test_align_grid_through_slurm_profile(reference_run, tmp_path):
 
     # the upstream (corpus, splits, features) is the session's local run of config/test.yaml
     # (conftest.reference_run); the stages the SLURM run makes start empty, so every grid cell
-    # and the generator are made here (the reference run's cell was trained at 1 thread anyway)
+    # and the generator are made here
     work = copy_run(reference_run, tmp_path / "wf")
     shutil.rmtree(work / "results/align")
     shutil.rmtree(work / "results/generate")
-    (work / "config/slurm_test.yaml").write_text(
-        f"align: {{seeds: {GRID['seeds']}, taus: {GRID['taus']}}}\n"
-    )
+    cfg = yaml.safe_load((work / "config/test.yaml").read_text())
+    assert {k: cfg["align"][k] for k in GRID} == GRID, cfg["align"]
     corpora = ["sim_paired", "sim_null"]
     n_cells = len(corpora) * len(GRID["seeds"]) * len(GRID["taus"])
     targets = [
@@ -251,13 +256,9 @@ def test_align_grid_through_slurm_profile(reference_run, tmp_path):
         GENERATOR_WEIGHTS,
     ]
     # (targets after an option: a bare word following --configfile would be read as a config)
-    planned = planned_rules(
-        work, "--cores", "2", *targets, "--configfile", "config/test.yaml", "config/slurm_test.yaml"
-    )
+    planned = planned_rules(work, "--cores", "2", *targets, "--configfile", "config/test.yaml")
     # nothing upstream reruns: only the grid, its aggregate and the generator are left to make
     assert planned == {"train_heads": n_cells, "aggregate_align": 1, "train_generator": 1}, planned
-    local = tmp_path / "local"  # the same grid run locally, for the edges' sake
-    shutil.copytree(work, local, symlinks=True)
 
     with single_node_slurm(tmp_path / "slurm") as state:
         cmd = [
@@ -265,9 +266,9 @@ def test_align_grid_through_slurm_profile(reference_run, tmp_path):
             *targets,  # generate: one train_generator job through SLURM
             "--profile",
             "profiles/slurm",
+            *LOCAL_THREADS,
             "--configfile",
             "config/test.yaml",
-            "config/slurm_test.yaml",
             "--slurm-init-seconds-before-status-checks",
             "1",
             "--slurm-no-account",
@@ -322,29 +323,13 @@ def test_align_grid_through_slurm_profile(reference_run, tmp_path):
         hashed.verify(work / "results/align" / cell / "metrics.parquet")
         hashed.verify(work / "results/align" / cell / "heads.pt")
     assert (work / "results/report/align/seeds.html").stat().st_size > 500
-    # the same grid run locally gives the same edges
-    # at the profile's thread counts: edges are bit-identical per thread count, and the
-    # profile gives train_heads and train_generator 2 threads where a local run gives 1
-    # (an option before the targets: right after smk's own --configfile they would be read as
-    # more config files, and the local run would build the whole DAG instead of the grid)
-    smk(
-        local,
-        "--cores",
-        "2",
-        *targets,
-        "--set-threads",
-        "train_heads=2",
-        "train_generator=2",
-        "--configfile",
-        "config/test.yaml",
-        "config/slurm_test.yaml",
-    )
-    # every edge the SLURM run made equals the local run's (the local run may also keep
-    # on-demand edges the SLURM run has already removed as temporary)
-    got, want = edge_hashes(work), edge_hashes(local)
+    # every edge the cluster made equals the session's local run's (same code, config and
+    # thread counts)
+    got, want = edge_hashes(work), edge_hashes(reference_run)
     for cell in summary["cell"]:
         for name in ("heads.pt", "metrics.parquet", "curve.parquet"):
             assert f"results/align/{cell}/{name}.sha256.json" in got, cell
+    assert f"{GENERATOR_WEIGHTS}.sha256.json" in got
     assert {k: v for k, v in got.items() if want.get(k) != v} == {}
     # generate: the train_generator job ran as an sbatch job with its resources
     gen_logs = list((work / ".snakemake/slurm_logs/rule_train_generator").rglob("*.log"))
