@@ -1,7 +1,7 @@
 """The alignment fan-out through a REAL single-node SLURM cluster and profiles/slurm.
 
 Opt-in for pytest, because it installs Debian packages and starts daemons as root; `make test`
-(and so CI) opts in. About 2 minutes, most of it the session's local run it starts from:
+(and so CI) opts in. Most of its time is the session's local run it starts from:
 
     TACGEN_SLURM_TEST=1 python -m pytest tests/test_slurm.py -v -s
 
