@@ -616,7 +616,8 @@ def test_runs_as_a_module_from_another_directory(tmp_path, cold_dry_run):
     directory holding a `Snakefile` whose `module` block points at this repository, and the
     user's `config/` (a full config and the scenes it names). The files the workflow reads
     from its own tree (schema, scripts, library) resolve against its source: the whole DAG is
-    planned there, and the corpus stage runs through to the splits."""
+    planned there, and one corpus is simulated and merged there (the user's scenes, the
+    workflow's scripts)."""
     repo = copy_tree(tmp_path / "repo")
     user = tmp_path / "user"
     (user / "config").mkdir(parents=True)
@@ -637,7 +638,7 @@ def test_runs_as_a_module_from_another_directory(tmp_path, cold_dry_run):
     planned = plan_of(dry)
     assert planned == plan_of(cold_dry_run), planned  # a plain dry run of test.yaml
     run = subprocess.run(
-        [*cmd, "results/corpus/splits.parquet"],
+        [*cmd, "results/corpus/sim_paired/samples.parquet"],
         cwd=user,
         capture_output=True,
         text=True,
@@ -647,7 +648,7 @@ def test_runs_as_a_module_from_another_directory(tmp_path, cold_dry_run):
 
     from tacgen_lib.io import hashed
 
-    hashed.verify(user / "results/corpus/splits.parquet")
+    hashed.verify(user / "results/corpus/sim_paired/samples.parquet")
     assert not (repo / "results").exists()  # everything lands in the user's directory
 
 
