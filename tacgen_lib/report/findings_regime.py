@@ -68,9 +68,8 @@ def _pool_decisions(view: pd.DataFrame, control: pd.DataFrame | None) -> list[di
     """Per target, where two or more pool sizes ran: the smallest pool at which a learnt rung
     and at which the diffusion model gain over nonlinear V over the replicates
     (`report.regime_pool.first_gain`, at the largest rho and the N_L the curve is read at,
-    `report.regime_pool.reading_n_labelled`); and where
-    `control` (the positive control's `seed_view`) holds the target, the same for its learnt
-    rungs."""
+    `report.regime_pool.reading_n_labelled`); and where `control` (the positive control's
+    `seed_view`) holds the target, the same for its learnt rungs."""
     from tacgen_lib.report.regime_pool import (
         DIFFUSION_RUNGS,
         LEARNT_RUNGS,

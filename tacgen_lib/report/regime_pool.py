@@ -316,9 +316,9 @@ def _pool_panel(ax, view: pd.DataFrame, target: str, rho: float, n_l: int, pools
 
 def pool_curve_figure(view: pd.DataFrame, control: pd.DataFrame | None = None) -> plt.Figure:
     """Delta against nonlinear V per rung against the pool size, at the N_L each target's curve
-    is read at (`reading_n_labelled`), one panel per target x (largest rho, smallest rho, and the positive control where `control`
-    holds its `seed_view`); bars: the replicates' interval read as one; a filled marker: that
-    interval above 0 (a gain)."""
+    is read at (`reading_n_labelled`), one panel per target x (largest rho, smallest rho, and
+    the positive control where `control` holds its `seed_view`); bars: the replicates'
+    interval read as one; a filled marker: that interval above 0 (a gain)."""
     targets = sorted(view["target"].unique())
     rhos = sorted(view["rho"].unique())
     columns = [(view, r, "") for r in ([rhos[-1]] if rhos[0] == rhos[-1] else [rhos[-1], rhos[0]])]
