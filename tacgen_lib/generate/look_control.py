@@ -16,9 +16,9 @@ variance (that of mu over the non-test rows, summed over T's dimensions) is `snr
 noise's (d x sigma^2). Every arm of the regime that reads no generator then reads T_control
 where it read real T (rule regime_look_control, `generate.regime.evaluate_regime`), on the
 same labelled, pool and test rows: the rungs learnt from the pool must begin to gain as N_P
-grows, the effect being built in. A test row's mu is learnt from non-test rows only; its noise is its own. A row whose look
-no reference row shows (a small corpus's rare look) takes the mean of every reference row
-(no signal), counted in ``n_unseen``.
+grows, the effect being built in. A test row's mu is learnt from non-test rows only; its noise
+is its own. A row whose look no reference row shows (a small corpus's rare look) takes the mean
+of every reference row (no signal), counted in ``n_unseen``.
 """
 
 from __future__ import annotations
