@@ -6,9 +6,9 @@ from it (`pool_verdict`), the table (`pool_table`) and the figure (`pool_curve_f
 
 A rung *gains* at a pool size where the replicates' (seed x labelled draw) interval of its
 Delta against nonlinear V, read as one, lies above 0 (`regime_arms.gains`, the rule the
-ladder's verdict decides by): so every replicate's CI lies above 0 and the replicates agree. Every replicate's CI
-above 0 alone is looser than it reads on an R² target, where a negligible Delta with tight
-paired CIs passes it at the smallest rho. The table shows both (the interval and how many
+ladder's verdict decides by): so every replicate's CI lies above 0 and the replicates agree.
+Every replicate's CI above 0 alone is looser than it reads on an R² target, where a negligible
+Delta with tight paired CIs passes it at the smallest rho. The table shows both (the interval and how many
 replicates' CIs lie above / below 0). The curve is read at the smallest labelled set at which
 the look oracle gains (`reading_n_labelled`): generated touch should help most where labels are
 few, but on too few the probe shows no gain at all, not even the oracle's; with the linear
@@ -237,8 +237,9 @@ def pool_verdict(
 
 
 def pool_table(view: pd.DataFrame, control: pd.DataFrame | None = None) -> pd.DataFrame:
-    """Rung x pool size at the smallest and largest rho and N_L: each rung's (linear probe)
-    mean Delta against nonlinear V with the replicates' interval read as one and how many
+    """Rung x pool size at the smallest and largest rho, and at the smallest and largest N_L
+    and the one each target's curve is read at (`reading_n_labelled`, whose figures the
+    verdict gives): each rung's (linear probe) mean Delta against nonlinear V with the replicates' interval read as one and how many
     replicates' CIs lie above / below 0, one column per pool size; with `control` (the
     positive control's `seed_view`), its rungs after each target's, touch 'look + noise'."""
     rhos = sorted(view["rho"].unique())
@@ -246,11 +247,12 @@ def pool_table(view: pd.DataFrame, control: pd.DataFrame | None = None) -> pd.Da
     pools = sorted(int(n) for n in view["n_pool"].unique())
     out = []
     for target in sorted(view["target"].unique()):
+        sizes = sorted({ls[0], reading_n_labelled(view, target, rhos[-1]), ls[-1]})
         panels = [(view, rho, "real") for rho in sorted({rhos[0], rhos[-1]})]
         if control is not None and target in set(control["target"]):
             panels.append((control, control["rho"].max(), "look + noise (control)"))
         for source, rho, touch in panels:
-            for n_l in sorted({ls[0], ls[-1]}):
+            for n_l in sizes:
                 for rung in CURVE_RUNGS:
                     curve = _curve(source, target, rho, n_l, rung)
                     if curve.empty:

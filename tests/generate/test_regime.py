@@ -883,12 +883,12 @@ def test_the_pool_curve_is_read_where_the_look_oracle_gains():
     """On labelled sets too small for the probe to show even the look oracle's gain, no rung
     could show one: the verdict, the figure and the findings' decisions read the curve at the
     fewest labels on which the oracle gains (`reading_n_labelled`), and at the fewest where it
-    gains at none."""
+    gains at none; the table shows that N_L beside the smallest and the largest."""
     import matplotlib
 
     matplotlib.use("Agg")
     from tacgen_lib.report.findings_regime import _pool_decisions
-    from tacgen_lib.report.regime import pool_curve_figure, seed_view
+    from tacgen_lib.report.regime import pool_curve_figure, pool_table, seed_view
     from tacgen_lib.report.regime_pool import pool_verdict, reading_n_labelled
 
     pools = (256, 1024, 4096)
@@ -908,6 +908,15 @@ def test_the_pool_curve_is_read_where_the_look_oracle_gains():
     learnt = [d for d in _pool_decisions(view, None) if d["decision_id"].endswith("learnt")]
     assert len(learnt) == 1 and "N_L = 64" in learnt[0]["what"]
     assert learnt[0]["decision"].startswith("N_P = 1024")
+    # a third, larger N_L without gains: the table keeps the N_L the verdict reads, between
+    # the smallest and the largest
+    third = pd.concat([rows, rows[rows["n_labelled"] == 8].assign(n_labelled=128)])
+    table = pool_table(seed_view(third.reset_index(drop=True)))
+    assert sorted(set(table["N_L"])) == [8, 64, 128]
+    at_64 = table[
+        (table["N_L"] == 64) & (table["ρ"] == "1") & (table["rung"] == "kernel ridge V→T")
+    ]
+    assert "3/3 ↑" in at_64["N_P = 1024"].item()
     # no oracle gain at any N_L: the fewest labels, and the verdict says it cannot show a gain
     void = seed_view(_ladder_summary({(1.0, "kernel_ridge", 1024): True}, pools))
     assert reading_n_labelled(void, "hardness", 1.0) == 8
