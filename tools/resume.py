@@ -10,7 +10,9 @@ stops with LockException or IncompleteFilesException. This tool:
    orphaned by a killed scheduler keeps writing its outputs, so it counts as alive too);
 2. removes the temporary files the dead run's atomic writers left under `results/` (a
    temporary file is never an edge: edges appear only by rename, `tacgen_lib.io.edges`);
-3. runs `snakemake --unlock ARGS`, then `snakemake --rerun-incomplete ARGS`.
+3. clears the dead run's lock as `snakemake --unlock` does (it removes `.snakemake/locks` of
+   the run's directory; a second Snakemake process only to do that costs a Snakefile parse),
+   then runs `snakemake --rerun-incomplete ARGS`.
 
 Usage (the Makefile passes --cores):  python tools/resume.py --cores 2 [snakemake args ...]
 Standard library only; the working directory is the workflow directory.
@@ -19,6 +21,7 @@ Standard library only; the working directory is the workflow directory.
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -112,11 +115,10 @@ def main(args: list[str]) -> int:
         path.unlink(missing_ok=True)
     if leftovers:
         print(f"resume: removed {len(leftovers)} temporary file(s) of the dead run", flush=True)
+    # what `snakemake --unlock` does (snakemake.persistence: the locks folder is removed); no
+    # Snakemake of the directory is alive (above), so every lock in it is stale
+    shutil.rmtree(_run_directory(args, workdir) / ".snakemake" / "locks", ignore_errors=True)
     snakemake = [sys.executable, "-m", "snakemake"]
-    unlock = subprocess.run([*snakemake, "--unlock", *args], cwd=workdir)
-    if unlock.returncode != 0:
-        print("resume: `snakemake --unlock` failed (see above)", file=sys.stderr)
-        return unlock.returncode
     print("resume: lock cleared; rerunning incomplete jobs and everything not yet made", flush=True)
     return subprocess.run([*snakemake, "--rerun-incomplete", *args], cwd=workdir).returncode
 

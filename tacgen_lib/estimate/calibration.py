@@ -29,7 +29,6 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-from scipy.optimize import nnls
 
 from tacgen_lib.estimate.dag import DagJob, dag_jobs
 from tacgen_lib.estimate.flops import flop_seconds
@@ -184,6 +183,8 @@ def fit_costs(points: pd.DataFrame, *, unshared: bool = True) -> dict[str, CostL
     units cannot separate overhead from per-unit cost (one size measured, or sizes too close
     for the timing noise): its line is flat at the mean (per-unit cost 0, `identified` False),
     so for larger jobs it is a lower bound, flagged in the estimate's table."""
+    from scipy.optimize import nnls
+
     lines: dict[str, CostLine] = {}
     pending = []
     if unshared and len(points):
