@@ -6,6 +6,7 @@ rho = 1 exactly, and every arm of every cell on a synthetic world."""
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 from dataclasses import replace
@@ -555,8 +556,19 @@ def _evaluate(
     )
 
 
+@functools.cache
+def _rows_of(rho: float) -> pd.DataFrame:
+    """`_evaluate(rho)` computed once per module for the tests that read its rows; a test of
+    reproducibility compares them with a computation of its own. Callers get a copy."""
+    return _evaluate(rho)
+
+
+def _regime_rows(rho: float) -> pd.DataFrame:
+    return _rows_of(rho).copy()
+
+
 def test_every_arm_of_every_cell_is_scored_and_reproducible():
-    a = _evaluate(1.0)
+    a = _regime_rows(1.0)
     assert list(a.columns) == list(SUMMARY_COLUMNS)
     assert len(a) == 2 * 2 * 2 * len(ARMS) and a["row_id"].is_unique  # targets x N_L x draws
     assert set(a["draw"]) == {0, 1}
@@ -580,7 +592,7 @@ def test_the_positive_control_fits_only_the_arms_it_has_inputs_for():
     arms it shares with the full regime are the same fits on the same rows."""
     from tacgen_lib.generate.ladder import LADDER
 
-    full, control = _evaluate(1.0), _evaluate(1.0, control=True)
+    full, control = _regime_rows(1.0), _evaluate(1.0, control=True)
     kept = {("v", "linear"), ("v", "nonlinear"), ("v_treal", "linear")} | {
         (r, p) for r in LADDER if r not in ("gen_mean", "v_tgen") for p in ("linear", "nonlinear")
     }
@@ -636,7 +648,7 @@ def test_findings_and_report_read_the_summary():
     from tacgen_lib.report import regime as rep
     from tacgen_lib.report.findings import regime_findings
 
-    summary = pd.concat([_evaluate(0.0), _evaluate(1.0)], ignore_index=True)
+    summary = pd.concat([_regime_rows(0.0), _regime_rows(1.0)], ignore_index=True)
     found, decided = regime_findings(summary)
     ids = {d["decision_id"] for d in decided}
     assert {"regime|hardness|v_tgen_vs_linear_v", "regime|hardness|positive_control"} <= ids
@@ -985,7 +997,7 @@ def test_the_pool_page_shows_its_positive_control_apart_from_the_rho_grid():
 def test_the_findings_page_gives_the_pool_verdict_and_its_decisions_where_two_pools_ran():
     from tacgen_lib.report.findings import regime_findings
 
-    one = pd.concat([_evaluate(0.0), _evaluate(1.0)], ignore_index=True)
+    one = pd.concat([_regime_rows(0.0), _regime_rows(1.0)], ignore_index=True)
     found, decided = regime_findings(one)
     assert not [d for d in decided if "pool_first_gain" in d["decision_id"]]
     assert not found["verdict"].str.contains("Pool size", regex=False).any()
