@@ -70,10 +70,11 @@ def running_jobs(work: Path, rules: list[str]) -> dict[str, list[int]]:
     return out
 
 
-def _scheduled(work: Path, rule: str) -> bool:
-    """Snakemake's own log of the newest run says a job of `rule` was started."""
+def _scheduled(work: Path, rules: list[str]) -> list[str]:
+    """Those of `rules` of which Snakemake's own log of the newest run says a job was started."""
     logs = sorted((work / ".snakemake/log").glob("*.snakemake.log"))
-    return bool(logs) and re.search(rf"(?m)^(local)?rule {rule}:", logs[-1].read_text()) is not None
+    text = logs[-1].read_text() if logs else ""
+    return [r for r in rules if re.search(rf"(?m)^(local)?rule {r}:", text) is not None]
 
 
 def _recorded(work: Path) -> bool:
@@ -98,9 +99,12 @@ def wait_for_any_job(
     ended first."""
     deadline = time.monotonic() + START_TIMEOUT
     while time.monotonic() < deadline:
-        running = running_jobs(work, rules)
-        for rule in rules:
-            if rule in running and _scheduled(work, rule) and _recorded(work):
+        # the processes are listed only once the log names a job of one of the rules (most
+        # polls read the log alone)
+        scheduled = _scheduled(work, rules)
+        running = running_jobs(work, scheduled) if scheduled else {}
+        for rule in scheduled:
+            if rule in running and _recorded(work):
                 return rule, running[rule]
         if proc.poll() is not None:
             return None
