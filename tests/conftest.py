@@ -40,6 +40,17 @@ def pytest_addoption(parser: pytest.Parser) -> None:
     )
 
 
+def pytest_configure(config: pytest.Config) -> None:
+    """numpy's OpenBLAS on one thread, as torch (`torch_threads`), unless the environment names
+    its count (the kernel variants run two, tools/kernel_variants.py): the tests' matrices are
+    small, and on a loaded 2-core machine a second OpenBLAS thread spin-waits after every call
+    it joins, taking CPU time from the other test processes and the workflow runs."""
+    if "OPENBLAS_NUM_THREADS" not in os.environ:
+        from threadpoolctl import threadpool_limits
+
+        threadpool_limits(limits=1, user_api="blas")
+
+
 def pytest_report_header(config: pytest.Config) -> str:
     """The kernels this session's numpy, OpenBLAS and torch use: a float comparison that holds
     on one set and not another is a defect of the test or the code (docs/tests.md)."""

@@ -19,7 +19,8 @@ round (`NOT_NUMERIC`, `NOT_NUMERIC_TESTS`), in a fresh process with some of thes
   .get_cpu_capability()`).
 - `NPY_DISABLE_CPU_FEATURES`: numpy's SIMD dispatch targets (those this numpy build dispatches
   to and this CPU has; numpy refuses names it does not dispatch).
-- threads: `--torch-threads` (tests/conftest.py) and `OMP_NUM_THREADS` / `OPENBLAS_NUM_THREADS`.
+- threads: `--torch-threads` (tests/conftest.py) and `OMP_NUM_THREADS` / `OPENBLAS_NUM_THREADS`;
+  how idle threads wait: `QUIET_WAITS`.
 
 Before the tests, each variant's process reports the kernels it got (`active_kernels`), and
 the tool stops if a variable did not take effect where this CPU allows the choice.
@@ -90,6 +91,13 @@ NOT_NUMERIC_TESTS = (
     "tests/test_device_check.py::test_the_run_mode_makes_one_copy_per_device",  # two dry runs
 )
 
+#: how a variant's idle threads wait. It runs beside the main suite, where a second thread
+#: spinning after every parallel region (OpenMP's default spin, OpenBLAS's busy-wait) takes
+#: the core the workflow runs need, and one put to sleep at once (OMP_WAIT_POLICY=PASSIVE)
+#: costs a wake-up per region: OpenMP (torch) spins for a short count, OpenBLAS for its
+#: shortest timeout (2**4 cycles), then both sleep
+QUIET_WAITS = {"GOMP_SPINCOUNT": "10000", "OPENBLAS_THREAD_TIMEOUT": "4"}
+
 #: name -> (environment, torch intra-op threads, what the variant stands for)
 VARIANTS: dict[str, tuple[dict[str, str], int, str]] = {
     "avx2-2threads": (
@@ -101,9 +109,7 @@ VARIANTS: dict[str, tuple[dict[str, str], int, str]] = {
             "NPY_DISABLE_CPU_FEATURES": "@avx512",
             "OMP_NUM_THREADS": "2",
             "OPENBLAS_NUM_THREADS": "2",
-            # threads that sleep while waiting: this variant runs beside the main suite, and
-            # OpenMP's spinning second thread would take the core the workflow runs need
-            "OMP_WAIT_POLICY": "PASSIVE",
+            **QUIET_WAITS,
         },
         2,
         "an EPYC without AVX-512 (every library on its AVX2 kernels), on two threads",
@@ -115,6 +121,8 @@ VARIANTS: dict[str, tuple[dict[str, str], int, str]] = {
             "ONEDNN_MAX_CPU_ISA": "SSE41",
             "ATEN_CPU_CAPABILITY": "default",
             "NPY_DISABLE_CPU_FEATURES": "@avx512",
+            "OPENBLAS_NUM_THREADS": "2",  # the main run's BLAS has one (tests/conftest.py)
+            **QUIET_WAITS,
         },
         1,
         "older kernels: AVX BLAS, SSE4.1 convolutions, torch's unvectorised default",
