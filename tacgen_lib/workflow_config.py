@@ -13,7 +13,7 @@ from pathlib import Path
 
 from tacgen_lib.corpus.keys import corpus_key_errors
 from tacgen_lib.features.settings import pretraining_corpora
-from tacgen_lib.generate.regime_sets import regime_corpora
+from tacgen_lib.generate.regime_sets import NATURAL_PREFIX, regime_corpora
 from tacgen_lib.io.config import ConfigError, load_yaml, validate_schema
 
 __all__ = ["ConfigError", "validate_config"]
@@ -97,15 +97,26 @@ def _check_simulated_corpora(config: dict, joined: dict, source: str) -> None:
                 )
 
 
+def _unknown_corpus(config: dict, source: str, key: str, name: str) -> ConfigError:
+    """The error for `key` naming undeclared corpus `name`. A regime corpus's name says which
+    rhos the regime declares: such a corpus exists only at a rho of regime.rhos (switching the
+    regime off, rhos [], leaves none for a key such as features.pretrain.corpus to name)."""
+    message = f"{source}: {key}: unknown corpus {name!r} (corpora: {', '.join(sorted(config['corpora']))})"
+    if str(name).startswith(NATURAL_PREFIX):
+        rhos = (config.get("regime") or {}).get("rhos")
+        message += (
+            f"; {name!r} is the name of the regime's natural corpus at a rho, which exists only "
+            f"where regime.rhos names that rho (regime.rhos: {rhos!r})"
+        )
+    return ConfigError(message)
+
+
 def _check_corpus_references(config: dict, source: str) -> None:
     """Every key that names a corpus names a declared one; every probe family's heads come
     from a corpus the alignment trains on."""
     for name in config["splits"]["by_scale"]:
         if name not in config["corpora"]:
-            raise ConfigError(
-                f"{source}: splits.by_scale.{name}: unknown corpus {name!r} "
-                f"(corpora: {', '.join(sorted(config['corpora']))})"
-            )
+            raise _unknown_corpus(config, source, f"splits.by_scale.{name}", name)
     corpora = set(config["corpora"])
     refs = [
         (f"features.pretrain.corpus[{i}]", c)
@@ -125,9 +136,7 @@ def _check_corpus_references(config: dict, source: str) -> None:
         ]
     for key, name in refs:
         if name not in corpora:
-            raise ConfigError(
-                f"{source}: {key}: unknown corpus {name!r} (corpora: {', '.join(sorted(corpora))})"
-            )
+            raise _unknown_corpus(config, source, key, name)
     for fam, spec in config["probes"]["families"].items():
         if spec["heads_from"] not in config["align"]["corpora"]:
             raise ConfigError(

@@ -507,6 +507,8 @@ def _build_every_settings_object(cfg: dict) -> None:
     where=("regime", "corpus", "scene"), value="0"
 )  # named as corpora.<regime corpus>: found once
 @example(where=("regime", "corpus"), value=None)  # found once: a TypeError, not the key
+# found once: the regime off, and the error named features.pretrain.corpus's regime corpus only
+@example(where=("regime", "rhos"), value=[])
 def test_fuzzed_config_validates_or_names_the_key(where, value):
     from tacgen_lib.workflow_config import ConfigError, validate_config
 
