@@ -555,6 +555,27 @@ def test_rendering_5000_tactile_and_rgb_frames_does_not_grow_rss():
     assert got["growth_mb"] < LEAK_BOUND_MB, got
 
 
+def test_resume_clears_the_lock_of_the_directory_snakemake_is_given(tmp_path):
+    """With --directory among the arguments, the workflow directory is that one: its stale
+    lock is cleared, the working directory's is not (`--version`: Snakemake starts, runs
+    nothing)."""
+    given, here = tmp_path / "given", tmp_path / "here"
+    for d in (given, here):
+        (d / ".snakemake/locks").mkdir(parents=True)
+        (d / ".snakemake/locks/0.input.lock").write_text("results/x\n")
+    proc = subprocess.run(
+        [*RESUME, "--directory", str(given), "--version"],
+        cwd=here,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert "resume: lock cleared" in proc.stdout
+    assert not (given / ".snakemake/locks").exists()
+    assert (here / ".snakemake/locks/0.input.lock").exists()
+
+
 def test_make_resume_runs_the_resume_tool():
     dry = subprocess.run(
         ["make", "-n", "-f", str(ROOT / "Makefile"), "resume", "ARGS=--configfile x.yaml"],

@@ -14,6 +14,9 @@ stops with LockException or IncompleteFilesException. This tool:
    the run's directory; a second Snakemake process only to do that costs a Snakefile parse),
    then runs `snakemake --rerun-incomplete ARGS`.
 
+"This directory" is the workflow directory: the working directory, or the one a
+`--directory` among the arguments names, as Snakemake reads it.
+
 Usage (the Makefile passes --cores):  python tools/resume.py --cores 2 [snakemake args ...]
 Standard library only; the working directory is the workflow directory.
 """
@@ -100,24 +103,25 @@ def stale_temporaries(workdir: str | os.PathLike) -> list[Path]:
 
 def main(args: list[str]) -> int:
     workdir = Path.cwd()
-    live = live_runs(workdir)
+    rundir = _run_directory(args, workdir)  # the workflow directory (--directory, else here)
+    live = live_runs(rundir)
     if live:
         lines = "\n".join(f"  pid {pid}: {cmd[:200]}" for pid, cmd in live)
         print(
-            f"resume: refused: a Snakemake run is still alive in {workdir}:\n{lines}\n"
+            f"resume: refused: a Snakemake run is still alive in {rundir}:\n{lines}\n"
             "Wait for it to finish, or stop it (kill <pid>) and run `make resume` again. "
             "Its lock is not stale, so it is left alone.",
             file=sys.stderr,
         )
         return 3
-    leftovers = stale_temporaries(workdir)
+    leftovers = stale_temporaries(rundir)
     for path in leftovers:
         path.unlink(missing_ok=True)
     if leftovers:
         print(f"resume: removed {len(leftovers)} temporary file(s) of the dead run", flush=True)
     # what `snakemake --unlock` does (snakemake.persistence: the locks folder is removed); no
     # Snakemake of the directory is alive (above), so every lock in it is stale
-    shutil.rmtree(_run_directory(args, workdir) / ".snakemake" / "locks", ignore_errors=True)
+    shutil.rmtree(rundir / ".snakemake" / "locks", ignore_errors=True)
     snakemake = [sys.executable, "-m", "snakemake"]
     print("resume: lock cleared; rerunning incomplete jobs and everything not yet made", flush=True)
     return subprocess.run([*snakemake, "--rerun-incomplete", *args], cwd=workdir).returncode
