@@ -98,10 +98,11 @@ def _check_simulated_corpora(config: dict, joined: dict, source: str) -> None:
 
 
 def _unknown_corpus(config: dict, source: str, key: str, name: str) -> ConfigError:
-    """The error for `key` naming undeclared corpus `name`. A regime corpus's name says which
-    rhos the regime declares: such a corpus exists only at a rho of regime.rhos (switching the
-    regime off, rhos [], leaves none for a key such as features.pretrain.corpus to name)."""
-    message = f"{source}: {key}: unknown corpus {name!r} (corpora: {', '.join(sorted(config['corpora']))})"
+    """The error for `key` naming undeclared corpus `name`; where `name` is a regime corpus's,
+    it adds the rhos the regime declares: such a corpus exists only at a rho of regime.rhos
+    (switching the regime off, rhos [], leaves none for features.pretrain.corpus to name)."""
+    known = ", ".join(sorted(config["corpora"]))
+    message = f"{source}: {key}: unknown corpus {name!r} (corpora: {known})"
     if str(name).startswith(NATURAL_PREFIX):
         rhos = (config.get("regime") or {}).get("rhos")
         message += (

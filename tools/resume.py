@@ -18,7 +18,7 @@ stops with LockException or IncompleteFilesException. This tool:
 `--directory` among the arguments names, as Snakemake reads it.
 
 Usage (the Makefile passes --cores):  python tools/resume.py --cores 2 [snakemake args ...]
-Standard library only; the working directory is the workflow directory.
+Standard library only.
 """
 
 from __future__ import annotations

@@ -8,8 +8,8 @@ A rung *gains* at a pool size where the replicates' (seed x labelled draw) inter
 Delta against nonlinear V, read as one, lies above 0 (`regime_arms.gains`, the rule the
 ladder's verdict decides by): so every replicate's CI lies above 0 and the replicates agree.
 Every replicate's CI above 0 alone is looser than it reads on an R² target, where a negligible
-Delta with tight paired CIs passes it at the smallest rho. The table shows both (the interval and how many
-replicates' CIs lie above / below 0). The curve is read at the smallest labelled set at which
+Delta with tight paired CIs passes it at the smallest rho. The table shows both (the interval
+and how many replicates' CIs lie above / below 0). The curve is read at the smallest labelled set at which
 the look oracle gains (`reading_n_labelled`): generated touch should help most where labels are
 few, but on too few the probe shows no gain at all, not even the oracle's; with the linear
 probe every rung of the ladder uses.
@@ -239,8 +239,9 @@ def pool_verdict(
 def pool_table(view: pd.DataFrame, control: pd.DataFrame | None = None) -> pd.DataFrame:
     """Rung x pool size at the smallest and largest rho, and at the smallest and largest N_L
     and the one each target's curve is read at (`reading_n_labelled`, whose figures the
-    verdict gives): each rung's (linear probe) mean Delta against nonlinear V with the replicates' interval read as one and how many
-    replicates' CIs lie above / below 0, one column per pool size; with `control` (the
+    verdict gives): each rung's (linear probe) mean Delta against nonlinear V with the
+    replicates' interval read as one and how many replicates' CIs lie above / below 0, one
+    column per pool size; with `control` (the
     positive control's `seed_view`), its rungs after each target's, touch 'look + noise'."""
     rhos = sorted(view["rho"].unique())
     ls = sorted(view["n_labelled"].unique())
